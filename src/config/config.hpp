@@ -1,0 +1,144 @@
+// The daemon's configuration as plain values with the datasheet's defaults. Loaded from one YAML
+// file by load_config(); every field here is documented in docs/configuration.md.
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/module_image.hpp"
+
+namespace ds1928 {
+
+enum class BusKind : uint8_t { Simulated, Powerlink, Canio };
+enum class MotionProfile : uint8_t { ConstantVelocity, Sine, Stop };
+
+// Module settings of X20DS1928.md §3, defaults = the datasheet's defaults unless noted.
+struct ModuleSettings {
+  // EnDatMode bits. The datasheet's default is 0 (interface disabled); the daemon defaults to
+  // enabled because a master that does not enable the encoder reads nothing.
+  bool endat_enable = true;
+  bool position_signed = false;
+  bool fast_clock_off = false;
+  bool sincos_unused = false;
+  uint16_t prescaler = 2;          // CfO_SystemCyclePrescaler, EnDat cycle = module cycle × this
+  uint8_t slframe_gen_id = 14;     // CfO_SlframeGenID: 9 fastest, 14 X2X-aligned (default)
+  uint8_t error_enable = 0xFF;     // ErrorEnableID_1710
+  uint16_t vss_min_mv = 800;       // SinCosVssMin 0..1500
+  uint16_t vss_max_mv = 1200;      // SinCosVssMax 0..1500
+  uint32_t quit_time_us = 100000;  // SinCosQuitTime 0..20 000 000
+  uint8_t output_mtu = 7;          // OutputMTU (Tx bytes), ≤15 (model 0) / ≤5 (model 254)
+  uint8_t input_mtu = 7;           // InputMTU (Rx bytes)
+  uint8_t flatstream_mode = 0;     // bit 0 MultiSegmentMTU, bit 1 large segments
+  uint8_t forward = 1;             // 1..7
+  uint16_t forward_delay_us = 0;   // ForwardDelay
+
+  [[nodiscard]] uint8_t endat_mode() const noexcept {
+    return static_cast<uint8_t>((endat_enable ? endat_mode::kEnable : 0) |
+                                (position_signed ? endat_mode::kSigned : 0) |
+                                (fast_clock_off ? endat_mode::kFastClockOff : 0) |
+                                (sincos_unused ? endat_mode::kSinCosUnused : 0));
+  }
+};
+
+struct AxisConfig {
+  std::string name;                 // shown in status; default "axis<N>"
+  uint8_t node = 1;                 // POWERLINK CN node id / CAN-I/O node number / sim node
+  uint8_t slot = 1;                 // module position behind the bus controller (1-based)
+  FunctionModel function_model = FunctionModel::Standard;
+  ModuleSettings module;
+  uint32_t command_timeout_ms = 2000;  // EnDat command over Flatstream
+  uint32_t flatstream_timeout_cycles = 200;  // per-sequence timeout
+};
+
+// Simulated node (also the test peer): motion and encoder of each simulated axis.
+struct SimAxisConfig {
+  MotionProfile profile = MotionProfile::ConstantVelocity;
+  double velocity_periods_per_s = 100.0;  // constant velocity
+  double amplitude_periods = 1000.0;      // sine
+  double frequency_hz = 0.5;              // sine
+  uint32_t module_cycle_us = 100;         // the module's system tick (X2X cycle)
+  std::string encoder_file;               // optional YAML description of the encoder memory
+  uint8_t inject_error_info = 0;          // ErrorInfo bits present from power-up
+};
+struct SimulatedBusConfig {
+  std::vector<SimAxisConfig> axes;  // one per configured axis; missing entries take defaults
+};
+
+// POWERLINK Controlled Node as the MN sees it.
+struct PowerlinkNodeConfig {
+  uint8_t node_id = 1;
+  std::optional<uint32_t> vendor_id;
+  std::optional<uint32_t> product_code;
+  std::optional<uint32_t> device_type;
+  uint32_t pres_timeout_us = 100;
+  bool mandatory = true;
+  uint32_t multiplex = 0;             // 0 = continuous, n = polled every n-th cycle
+  std::optional<uint16_t> preq_size;  // default: from IdentResponse PollOutSize / module list
+  std::optional<uint16_t> pres_size;  // default: from IdentResponse PollInSize / module list
+};
+struct DllThresholds {
+  uint32_t loss_of_pres = 15;
+  uint32_t cycle_time_exceeded = 15;
+  uint32_t late_pres = 15;
+};
+struct PowerlinkBusConfig {
+  std::string interface;                   // raw-socket interface, e.g. "eth1"
+  std::vector<PowerlinkNodeConfig> nodes;
+  DllThresholds thresholds;
+  uint32_t async_timeout_us = 50;          // wait for the invited ASnd
+  uint32_t sdo_timeout_ms = 500;
+  // PosTime relation: PosTime = low 32 bits of (SoC RelativeTime µs + offset).
+  int64_t nettime_offset_us = 0;
+  // Register → (index, subindex) overrides; default scheme in docs/powerlink.md.
+  std::map<uint16_t, std::pair<uint16_t, uint8_t>> sdo_overrides;
+};
+
+struct CanioBusConfig {
+  std::string interface = "can0";
+  uint32_t bitrate = 500000;  // informational: SocketCAN's bitrate is set with `ip link`
+  uint32_t response_timeout_us = 500;
+  bool little_endian = true;
+};
+
+struct ShmConfig {
+  std::string name = "/ds1928d";  // POSIX shm object name (/dev/shm/ds1928d)
+  uint32_t mode = 0640;           // owner rw, group read-only
+  std::string group;              // optional group owner
+};
+
+struct SocketConfig {
+  std::string path = "/run/ds1928d/control.sock";
+  uint32_t mode = 0660;
+  std::string group;
+  std::string privileged_group = "ds1928-admin";  // may send commands that change the encoder
+  uint32_t max_clients = 64;
+  uint32_t max_request_bytes = 4096;
+  uint32_t idle_timeout_ms = 60000;
+};
+
+struct CycleConfig {
+  uint32_t period_us = 1000;
+  int rt_priority = 80;          // SCHED_FIFO 1..99
+  int cpu = -1;                  // -1 = no affinity
+  uint32_t spin_us = 0;          // busy-wait this long before the deadline (0 = off)
+  bool hold_cpu_dma_latency = true;
+  bool lock_memory = true;
+};
+
+struct DaemonConfig {
+  std::string source_file;  // where it was loaded from (for messages)
+  CycleConfig cycle;
+  BusKind bus = BusKind::Simulated;
+  SimulatedBusConfig simulated;
+  PowerlinkBusConfig powerlink;
+  CanioBusConfig canio;
+  std::vector<AxisConfig> axes;
+  ShmConfig shm;
+  SocketConfig socket;
+  std::string log_level = "info";
+};
+
+}  // namespace ds1928

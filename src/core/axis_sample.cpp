@@ -1,0 +1,37 @@
+#include "core/axis_sample.hpp"
+
+namespace ds1928 {
+
+AxisSample decode_axis(const AxisIo& io, const AxisDecodeParams& params, const NetTimeRef& net_time,
+                       AxisDecodeState& state) noexcept {
+  AxisSample s;
+  s.fresh = io.inputs_fresh;
+  const ModuleInputs& in = io.inputs;
+  s.position_raw = (static_cast<uint64_t>(in.position_hw) << 32) | in.position_lw;
+  s.position_sdc = static_cast<int32_t>(in.position_lw);
+  s.periods = params.signed_format ? (static_cast<int64_t>(s.position_raw) >> 16)
+                                   : static_cast<int64_t>(s.position_raw >> 16);
+  s.fraction = static_cast<uint16_t>(s.position_raw & 0xFFFF);
+  s.fraction_valid = (s.position_raw & 0x7) == 0;
+  s.pos_cycle = in.pos_cycle;
+  s.error_info = in.error_info;
+  if (!io.inputs_fresh) {
+    // Last valid values are kept on the bus; they are not a new position.
+    return s;
+  }
+  if (params.has_pos_time && net_time.valid) {
+    s.pos_time_raw = in.pos_time_us;
+    s.pos_time_ns = net_time_to_monotonic_ns(in.pos_time_us, net_time);
+    s.time_source = TimeSource::NetTime;
+  } else {
+    s.pos_time_raw = 0;
+    s.pos_time_ns = io.rx_time_ns;
+    s.time_source = TimeSource::RxTimestamp;
+  }
+  s.new_position = !state.have_last || state.last_pos_cycle != in.pos_cycle;
+  state.last_pos_cycle = in.pos_cycle;
+  state.have_last = true;
+  return s;
+}
+
+}  // namespace ds1928

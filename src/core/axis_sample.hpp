@@ -1,0 +1,49 @@
+// One axis' decoded state for one cycle, and the pure decoding from the module image.
+#pragma once
+
+#include <cstdint>
+
+#include "core/bus.hpp"
+#include "core/module_image.hpp"
+
+namespace ds1928 {
+
+struct AxisSample {
+  uint64_t position_raw = 0;  // PositionHW:PositionLW
+  int32_t position_sdc = 0;   // low 32 bits read signed ("SDC" view)
+  int64_t periods = 0;        // whole sine periods, bits 63..16 (sign-extended in signed format)
+  uint16_t fraction = 0;      // fraction of one period, bits 15..0 (13-bit resolution)
+  bool fraction_valid = true; // false when one of the low 3 bits is set (violates the format)
+  uint32_t pos_time_raw = 0;  // PosTime as sent (NetTime µs, 32 bit)
+  int64_t pos_time_ns = 0;    // acquisition instant on CLOCK_MONOTONIC
+  TimeSource time_source = TimeSource::None;
+  int8_t pos_cycle = 0;
+  bool new_position = false;  // PosCycle changed since the previous fresh sample
+  uint8_t error_info = 0;
+  bool fresh = false;         // inputs arrived this cycle
+};
+
+// What the decoder remembers between cycles for one axis.
+struct AxisDecodeState {
+  int8_t last_pos_cycle = 0;
+  bool have_last = false;
+};
+
+struct AxisDecodeParams {
+  bool signed_format = false;  // EnDatMode bit 1
+  bool has_pos_time = true;    // function model 0 carries PosTime; 254 does not
+};
+
+// Pure: image + previous state + the bus' NetTime reference → sample. Updates `state`.
+[[nodiscard]] AxisSample decode_axis(const AxisIo& io, const AxisDecodeParams& params,
+                                     const NetTimeRef& net_time, AxisDecodeState& state) noexcept;
+
+// Maps a 32-bit NetTime stamp (µs) to CLOCK_MONOTONIC ns through `ref`, correct across the
+// 32-bit wrap for stamps within ±2^31 µs (35 min 47 s) of the reference.
+[[nodiscard]] constexpr int64_t net_time_to_monotonic_ns(uint32_t stamp_us,
+                                                         const NetTimeRef& ref) noexcept {
+  const auto offset_us = static_cast<int32_t>(stamp_us - static_cast<uint32_t>(ref.net_time_us));
+  return ref.monotonic_ns + static_cast<int64_t>(offset_us) * 1000;
+}
+
+}  // namespace ds1928

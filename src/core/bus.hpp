@@ -1,0 +1,98 @@
+// The per-cycle interface every bus (simulated, POWERLINK, CAN-I/O) offers the cycle engine.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <span>
+#include <string_view>
+#include <system_error>
+
+#include "core/module_image.hpp"
+
+namespace ds1928 {
+
+// Where a sample's time stamp comes from.
+enum class TimeSource : uint8_t {
+  None = 0,         // no stamp (inputs not fresh)
+  NetTime = 1,      // module's PosTime (NetTime µs), mapped to CLOCK_MONOTONIC
+  RxTimestamp = 2,  // master's reception time of the frame (CAN-I/O, function model 254)
+};
+
+// One axis' slot in the cycle: the cycle stages outputs, the exchange fills inputs.
+struct AxisIo {
+  ModuleOutputs outputs;        // sent during this cycle's exchange
+  ModuleInputs inputs;          // valid when inputs_fresh
+  bool inputs_fresh = false;    // this cycle's exchange delivered the module's inputs
+  int64_t rx_time_ns = 0;       // CLOCK_MONOTONIC reception time of the inputs
+};
+
+// The bus' NetTime at a reference instant. A module's 32-bit PosTime is unwrapped against it:
+// the stamp lies within ±35 min of the reference, so (int32)(stamp - low32(net_time_us)) is
+// the offset in µs.
+struct NetTimeRef {
+  uint64_t net_time_us = 0;  // NetTime at the reference, µs, never wraps
+  int64_t monotonic_ns = 0;  // the same instant on CLOCK_MONOTONIC
+  bool valid = false;
+};
+
+// What one exchange did, for statistics and the axis states.
+struct ExchangeResult {
+  NetTimeRef net_time;
+  bool bus_up = false;        // the bus is cycling (POWERLINK: MN operational for this CN set)
+  uint32_t frames_lost = 0;   // expected responses that did not arrive in this cycle
+};
+
+enum class BusState : uint8_t { Down = 0, Booting = 1, Operational = 2, Error = 3 };
+
+[[nodiscard]] constexpr std::string_view to_string(BusState s) noexcept {
+  switch (s) {
+    case BusState::Down: return "down";
+    case BusState::Booting: return "booting";
+    case BusState::Operational: return "operational";
+    case BusState::Error: return "error";
+  }
+  return "?";
+}
+
+// Acyclic register access (configuration, identification, EnDatAck). Submitted and collected on
+// the normal thread; drivers that need the cycle thread for it (POWERLINK SDO) queue internally.
+struct RegisterRequest {
+  uint32_t tag = 0;       // caller's correlation id
+  uint16_t axis = 0;
+  uint16_t reg = 0;       // datasheet register number (module_image.hpp, namespace reg)
+  uint8_t size = 1;       // 1, 2 or 4 bytes
+  bool write = false;
+  uint32_t value = 0;     // for writes
+};
+struct RegisterResult {
+  uint32_t tag = 0;
+  std::error_code error;  // empty on success
+  uint32_t value = 0;     // for reads
+};
+
+class BusDriver {
+ public:
+  virtual ~BusDriver() = default;
+  [[nodiscard]] virtual std::string_view name() const noexcept = 0;
+
+  // Normal thread, before the cycle thread starts: open sockets, apply power-up defaults.
+  [[nodiscard]] virtual std::error_code start() = 0;
+  // Normal thread, after the cycle thread stopped.
+  virtual void stop() noexcept = 0;
+
+  // Cycle thread, once per cycle: send every axis' staged outputs, collect inputs within the
+  // cycle budget. `cycle_start_ns` is the nominal start on CLOCK_MONOTONIC. Never allocates,
+  // never blocks beyond its own receive timeouts, never throws.
+  virtual ExchangeResult exchange(std::span<AxisIo> axes, int64_t cycle_start_ns,
+                                  uint64_t cycle_index) noexcept = 0;
+
+  // Any thread.
+  [[nodiscard]] virtual BusState state() const noexcept = 0;
+
+  // Normal thread. False when the driver's request queue is full.
+  [[nodiscard]] virtual bool submit(const RegisterRequest& request) noexcept = 0;
+  // Normal thread. True and fills `out` when a result is ready.
+  [[nodiscard]] virtual bool poll(RegisterResult& out) noexcept = 0;
+};
+
+}  // namespace ds1928
