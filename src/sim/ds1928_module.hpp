@@ -1,0 +1,50 @@
+// Simulated X20DS1928: the module's register set (function model 0 and 254) with an encoder
+// following a motion profile. Time-driven and single-threaded: the owner calls tick() at the
+// module's system tick and exchanges the cyclic image; no clocks or threads inside.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <system_error>
+
+#include "config/config.hpp"
+#include "core/module_image.hpp"
+
+namespace ds1928::sim {
+
+class Ds1928Module {
+ public:
+  Ds1928Module(FunctionModel model, const SimAxisConfig& sim);
+  ~Ds1928Module();
+  Ds1928Module(const Ds1928Module&) = delete;
+  Ds1928Module& operator=(const Ds1928Module&) = delete;
+
+  // Power-up: every acyclic register takes its bus-controller default (EnDat disabled).
+  void power_up() noexcept;
+
+  // Advance the module to `monotonic_ns`; `net_time_us` is the NetTime at that instant. Runs the
+  // EnDat cycle (module cycle × prescaler), stamps PosTime, steps the Flatstream module channel.
+  void tick(int64_t monotonic_ns, uint64_t net_time_us) noexcept;
+
+  // Cyclic image as the bus carries it.
+  void apply_outputs(const ModuleOutputs& outputs) noexcept;
+  [[nodiscard]] ModuleInputs inputs() const noexcept;
+
+  // Acyclic registers (configuration, identification, EnDatAck). `size` in bytes: 1, 2 or 4.
+  [[nodiscard]] std::error_code write_register(uint16_t reg, uint8_t size, uint32_t value) noexcept;
+  [[nodiscard]] std::error_code read_register(uint16_t reg, uint8_t size, uint32_t& value) const noexcept;
+
+  // Fault injection: ErrorInfo bits that appear now and stay until acknowledged (AckErrorInfo).
+  void inject_error(uint8_t error_info_bits) noexcept;
+
+  [[nodiscard]] FunctionModel function_model() const noexcept;
+
+ private:
+  struct State;
+  std::unique_ptr<State> state_;
+};
+
+// Applies a configured axis' ModuleSettings through write_register (what a master does at boot).
+[[nodiscard]] std::error_code configure_module(Ds1928Module& module, const ModuleSettings& settings);
+
+}  // namespace ds1928::sim
