@@ -42,6 +42,10 @@ class SpscQueue {
     return out;
   }
 
+  // Producer side: true when the next try_push would fail.
+  [[nodiscard]] bool full() const noexcept {
+    return head_.load(std::memory_order_relaxed) - tail_.load(std::memory_order_acquire) == Capacity;
+  }
   [[nodiscard]] bool empty() const noexcept {
     return head_.load(std::memory_order_acquire) == tail_.load(std::memory_order_acquire);
   }

@@ -1,0 +1,283 @@
+#include "sim/ds1928_module.hpp"
+
+#include <cmath>
+#include <numbers>
+
+#include "sim/sim_error.hpp"
+
+namespace ds1928::sim {
+
+namespace {
+
+// Acyclic registers with their bus-controller defaults (X20DS1928.md §3). EnDatMode = 0: the
+// encoder interface starts disabled, so a master that configures nothing reads nothing.
+struct Registers {
+  uint8_t slframe_gen_id = 14;
+  uint16_t prescaler = 2;
+  uint8_t error_enable = 0xFF;
+  uint8_t sincos_enable = 1;
+  uint8_t sincos_ref_source = 1;
+  uint16_t vss_min_mv = 800;
+  uint16_t vss_max_mv = 1200;
+  uint32_t quit_time_us = 100000;
+  uint8_t endat_mode = 0;
+  uint8_t output_mtu = 7;
+  uint8_t input_mtu = 7;
+  uint8_t flatstream_mode = 0;
+  uint8_t forward = 1;
+  uint16_t forward_delay_us = 0;
+  uint16_t endat_error = 0;
+  uint16_t endat_warning = 0;
+};
+
+[[nodiscard]] uint8_t max_mtu(FunctionModel model) noexcept {
+  return model == FunctionModel::Standard ? 15 : 5;
+}
+
+}  // namespace
+
+struct Ds1928Module::State {
+  FunctionModel model;
+  SimAxisConfig sim;
+  Registers regs;
+  ModuleInputs in;
+  ModuleOutputs out;
+  uint8_t latched_errors = 0;   // present until acknowledged
+  uint8_t prev_ack = 0;         // AckErrorInfo acts on rising edges
+  bool started = false;
+  int64_t origin_ns = 0;        // motion profile time zero
+  int64_t next_tick_ns = 0;     // next module system tick
+  uint64_t ticks = 0;           // module system ticks since power-up
+};
+
+Ds1928Module::Ds1928Module(FunctionModel model, const SimAxisConfig& sim)
+    : state_(std::make_unique<State>()) {
+  state_->model = model;
+  state_->sim = sim;
+  if (state_->sim.module_cycle_us == 0) state_->sim.module_cycle_us = 100;
+  power_up();
+}
+
+Ds1928Module::~Ds1928Module() = default;
+
+FunctionModel Ds1928Module::function_model() const noexcept { return state_->model; }
+
+void Ds1928Module::power_up() noexcept {
+  State& s = *state_;
+  s.regs = Registers{};
+  s.in = ModuleInputs{};
+  s.out = ModuleOutputs{};
+  s.latched_errors = s.sim.inject_error_info;
+  s.prev_ack = 0;
+  s.started = false;
+  s.ticks = 0;
+}
+
+void Ds1928Module::inject_error(uint8_t bits) noexcept { state_->latched_errors |= bits; }
+
+namespace {
+
+[[nodiscard]] double profile_position(const SimAxisConfig& sim, double t_s) noexcept {
+  switch (sim.profile) {
+    case MotionProfile::ConstantVelocity: return sim.velocity_periods_per_s * t_s;
+    case MotionProfile::Sine:
+      return sim.amplitude_periods * std::sin(2.0 * std::numbers::pi * sim.frequency_hz * t_s);
+    case MotionProfile::Stop: return 0.0;
+  }
+  return 0.0;
+}
+
+// Sin/cos fixed point: bits 63..16 whole periods, bits 15..0 fraction with 13-bit resolution
+// (the low 3 bits are always 0). Two's complement carries negative positions.
+[[nodiscard]] uint64_t to_fixed_point(double periods) noexcept {
+  const auto scaled = static_cast<int64_t>(std::floor(periods * 65536.0));
+  return static_cast<uint64_t>(scaled) & ~uint64_t{7};
+}
+
+}  // namespace
+
+void Ds1928Module::tick(int64_t monotonic_ns, uint64_t net_time_us) noexcept {
+  State& s = *state_;
+  const int64_t tick_ns = int64_t{s.sim.module_cycle_us} * 1000;
+  if (!s.started) {
+    s.started = true;
+    s.origin_ns = monotonic_ns;
+    s.next_tick_ns = monotonic_ns;
+  }
+  // Catch up every system tick up to now; a long gap (power-cycled bus, stopped debugger) does
+  // not replay thousands of ticks: at most one EnDat cycle's worth matters.
+  if (monotonic_ns - s.next_tick_ns > 64 * tick_ns) {
+    const int64_t skip = (monotonic_ns - s.next_tick_ns) / tick_ns - 64;
+    s.next_tick_ns += skip * tick_ns;
+    s.ticks += static_cast<uint64_t>(skip);
+  }
+  while (s.next_tick_ns <= monotonic_ns) {
+    const int64_t at_ns = s.next_tick_ns;
+    s.next_tick_ns += tick_ns;
+    ++s.ticks;
+    if (s.model == FunctionModel::Standard) s.in.sdc_life_count = static_cast<int8_t>(s.in.sdc_life_count + 1);
+    const uint16_t prescaler = s.regs.prescaler == 0 ? 1 : s.regs.prescaler;
+    if (s.ticks % prescaler != 0) continue;
+    // One EnDat cycle: acquire a position when the interface is enabled.
+    if ((s.regs.endat_mode & endat_mode::kEnable) == 0) continue;
+    const double t_s = static_cast<double>(at_ns - s.origin_ns) * 1e-9;
+    const uint64_t raw = to_fixed_point(profile_position(s.sim, t_s));
+    s.in.position_hw = static_cast<uint32_t>(raw >> 32);
+    s.in.position_lw = static_cast<uint32_t>(raw);
+    // PosTime = NetTime of the acquisition instant (µs).
+    const int64_t behind_us = (monotonic_ns - at_ns) / 1000;
+    if (s.model == FunctionModel::Standard)
+      s.in.pos_time_us = static_cast<uint32_t>(net_time_us - static_cast<uint64_t>(behind_us));
+    s.in.pos_cycle = static_cast<int8_t>(s.in.pos_cycle + 1);
+  }
+  s.in.error_info = static_cast<uint8_t>(s.latched_errors & s.regs.error_enable & ~0x02);
+}
+
+void Ds1928Module::apply_outputs(const ModuleOutputs& outputs) noexcept {
+  State& s = *state_;
+  s.out = outputs;
+  const uint8_t rising = static_cast<uint8_t>(outputs.ack_error_info & ~s.prev_ack);
+  s.prev_ack = outputs.ack_error_info;
+  s.latched_errors = static_cast<uint8_t>(s.latched_errors & ~rising);
+  s.in.error_info = static_cast<uint8_t>(s.latched_errors & s.regs.error_enable & ~0x02);
+}
+
+ModuleInputs Ds1928Module::inputs() const noexcept { return state_->in; }
+
+std::error_code Ds1928Module::write_register(uint16_t r, uint8_t size, uint32_t v) noexcept {
+  Registers& g = state_->regs;
+  auto want = [&](uint8_t expected) { return size == expected; };
+  auto in_range = [&](uint32_t lo, uint32_t hi) { return v >= lo && v <= hi; };
+  switch (r) {
+    case reg::kSlframeGenId:
+      if (!want(1)) return make_error_code(SimErrc::wrong_size);
+      g.slframe_gen_id = static_cast<uint8_t>(v);
+      return {};
+    case reg::kSystemCyclePrescaler:
+      if (!want(2)) return make_error_code(SimErrc::wrong_size);
+      if (!in_range(2, 0xFFFF)) return make_error_code(SimErrc::out_of_range);
+      g.prescaler = static_cast<uint16_t>(v);
+      return {};
+    case reg::kErrorEnable:
+      if (!want(1)) return make_error_code(SimErrc::wrong_size);
+      g.error_enable = static_cast<uint8_t>(v);
+      return {};
+    case reg::kSinCosEnable:
+    case reg::kSinCosRefSource:
+      if (!want(1)) return make_error_code(SimErrc::wrong_size);
+      if (v != 1) return make_error_code(SimErrc::out_of_range);  // must always be 1
+      return {};
+    case reg::kSinCosVssMin:
+    case reg::kSinCosVssMax:
+      if (!want(2)) return make_error_code(SimErrc::wrong_size);
+      if (!in_range(0, 1500)) return make_error_code(SimErrc::out_of_range);
+      (r == reg::kSinCosVssMin ? g.vss_min_mv : g.vss_max_mv) = static_cast<uint16_t>(v);
+      return {};
+    case reg::kSinCosQuitTime:
+      if (!want(4)) return make_error_code(SimErrc::wrong_size);
+      if (!in_range(0, 20'000'000)) return make_error_code(SimErrc::out_of_range);
+      g.quit_time_us = v;
+      return {};
+    case reg::kEnDatMode:
+      if (!want(1)) return make_error_code(SimErrc::wrong_size);
+      if (v > 0x0F) return make_error_code(SimErrc::out_of_range);
+      g.endat_mode = static_cast<uint8_t>(v);
+      return {};
+    case reg::kEnDatAck:
+      if (!want(1)) return make_error_code(SimErrc::wrong_size);
+      if (v & 0x01) {
+        g.endat_error = 0;
+        g.endat_warning = 0;
+      }
+      return {};
+    case reg::kOutputMtu:
+    case reg::kInputMtu:
+      if (!want(1)) return make_error_code(SimErrc::wrong_size);
+      if (!in_range(2, max_mtu(state_->model))) return make_error_code(SimErrc::out_of_range);
+      (r == reg::kOutputMtu ? g.output_mtu : g.input_mtu) = static_cast<uint8_t>(v);
+      return {};
+    case reg::kFlatstreamMode:
+      if (!want(1)) return make_error_code(SimErrc::wrong_size);
+      if (v > 3) return make_error_code(SimErrc::out_of_range);
+      g.flatstream_mode = static_cast<uint8_t>(v);
+      return {};
+    case reg::kForward:
+      if (!want(1)) return make_error_code(SimErrc::wrong_size);
+      if (!in_range(1, 7)) return make_error_code(SimErrc::out_of_range);
+      g.forward = static_cast<uint8_t>(v);
+      return {};
+    case reg::kForwardDelay:
+      if (!want(2)) return make_error_code(SimErrc::wrong_size);
+      g.forward_delay_us = static_cast<uint16_t>(v);
+      return {};
+    default: break;
+  }
+  uint32_t ignored = 0;
+  if (!read_register(r, size, ignored)) return make_error_code(SimErrc::read_only);
+  return make_error_code(SimErrc::unknown_register);
+}
+
+std::error_code Ds1928Module::read_register(uint16_t r, uint8_t size, uint32_t& v) const noexcept {
+  const Registers& g = state_->regs;
+  struct Entry {
+    uint16_t reg;
+    uint8_t size;
+    uint32_t value;
+  };
+  const Entry table[] = {
+      {reg::kSlframeGenId, 1, g.slframe_gen_id},
+      {reg::kSystemCyclePrescaler, 2, g.prescaler},
+      {reg::kErrorEnable, 1, g.error_enable},
+      {reg::kSinCosEnable, 1, g.sincos_enable},
+      {reg::kSinCosRefSource, 1, g.sincos_ref_source},
+      {reg::kSinCosVssMin, 2, g.vss_min_mv},
+      {reg::kSinCosVssMax, 2, g.vss_max_mv},
+      {reg::kSinCosQuitTime, 4, g.quit_time_us},
+      {reg::kEnDatMode, 1, g.endat_mode},
+      {reg::kEnDatAck, 1, 0},
+      {reg::kEnDatError, 2, g.endat_error},
+      {reg::kEnDatWarning, 2, g.endat_warning},
+      {reg::kOutputMtu, 1, g.output_mtu},
+      {reg::kInputMtu, 1, g.input_mtu},
+      {reg::kFlatstreamMode, 1, g.flatstream_mode},
+      {reg::kForward, 1, g.forward},
+      {reg::kForwardDelay, 2, g.forward_delay_us},
+  };
+  for (const Entry& e : table) {
+    if (e.reg != r) continue;
+    if (e.size != size) return make_error_code(SimErrc::wrong_size);
+    v = e.value;
+    return {};
+  }
+  return make_error_code(SimErrc::unknown_register);
+}
+
+std::error_code configure_module(Ds1928Module& m, const ModuleSettings& s) {
+  struct Write {
+    uint16_t reg;
+    uint8_t size;
+    uint32_t value;
+  };
+  const Write writes[] = {
+      {reg::kSlframeGenId, 1, s.slframe_gen_id},
+      {reg::kSystemCyclePrescaler, 2, s.prescaler},
+      {reg::kErrorEnable, 1, s.error_enable},
+      {reg::kSinCosEnable, 1, 1},
+      {reg::kSinCosRefSource, 1, 1},
+      {reg::kSinCosVssMin, 2, s.vss_min_mv},
+      {reg::kSinCosVssMax, 2, s.vss_max_mv},
+      {reg::kSinCosQuitTime, 4, s.quit_time_us},
+      {reg::kOutputMtu, 1, s.output_mtu},
+      {reg::kInputMtu, 1, s.input_mtu},
+      {reg::kFlatstreamMode, 1, s.flatstream_mode},
+      {reg::kForward, 1, s.forward},
+      {reg::kForwardDelay, 2, s.forward_delay_us},
+      {reg::kEnDatMode, 1, s.endat_mode()},  // last: enable the encoder once everything is set
+  };
+  for (const Write& w : writes) {
+    if (auto ec = m.write_register(w.reg, w.size, w.value)) return ec;
+  }
+  return {};
+}
+
+}  // namespace ds1928::sim

@@ -1,0 +1,78 @@
+#include "sim/simulated_bus.hpp"
+
+#include <ctime>
+
+namespace ds1928::sim {
+
+SimulatedBus::SimulatedBus(const DaemonConfig& config) {
+  for (std::size_t i = 0; i < config.axes.size(); ++i) {
+    const SimAxisConfig sim =
+        i < config.simulated.axes.size() ? config.simulated.axes[i] : SimAxisConfig{};
+    modules_.push_back(std::make_unique<Ds1928Module>(config.axes[i].function_model, sim));
+    settings_.push_back(config.axes[i].module);
+  }
+}
+
+std::error_code SimulatedBus::start() {
+  // What a master does at boot: power-up defaults, then write the configured settings.
+  for (std::size_t i = 0; i < modules_.size(); ++i) {
+    modules_[i]->power_up();
+    if (auto ec = configure_module(*modules_[i], settings_[i])) {
+      state_.store(BusState::Error, std::memory_order_release);
+      return ec;
+    }
+  }
+  state_.store(BusState::Operational, std::memory_order_release);
+  return {};
+}
+
+void SimulatedBus::stop() noexcept { state_.store(BusState::Down, std::memory_order_release); }
+
+ExchangeResult SimulatedBus::exchange(std::span<AxisIo> axes, int64_t /*cycle_start_ns*/,
+                                      uint64_t /*cycle_index*/) noexcept {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);  // vDSO: no kernel entry
+  const int64_t now_ns = int64_t{ts.tv_sec} * 1'000'000'000 + ts.tv_nsec;
+  // The simulated node's NetTime is CLOCK_MONOTONIC in µs: the mapping back is exact.
+  const uint64_t net_us = static_cast<uint64_t>(now_ns / 1000);
+
+  // Acyclic accesses run between cycles on this thread, which owns the modules.
+  while (!results_.full()) {
+    auto request = requests_.try_pop();
+    if (!request) break;
+    RegisterResult result;
+    result.tag = request->tag;
+    if (request->axis >= modules_.size()) {
+      result.error = std::make_error_code(std::errc::no_such_device);
+    } else if (request->write) {
+      result.error = modules_[request->axis]->write_register(request->reg, request->size, request->value);
+    } else {
+      result.error = modules_[request->axis]->read_register(request->reg, request->size, result.value);
+    }
+    (void)results_.try_push(result);  // room was checked above
+  }
+
+  const std::size_t n = std::min(axes.size(), modules_.size());
+  for (std::size_t i = 0; i < n; ++i) {
+    modules_[i]->apply_outputs(axes[i].outputs);
+    modules_[i]->tick(now_ns, net_us);
+    axes[i].inputs = modules_[i]->inputs();
+    axes[i].inputs_fresh = true;
+    axes[i].rx_time_ns = now_ns;
+  }
+  ExchangeResult r;
+  r.bus_up = true;
+  r.net_time = NetTimeRef{net_us, static_cast<int64_t>(net_us) * 1000, true};
+  return r;
+}
+
+bool SimulatedBus::submit(const RegisterRequest& request) noexcept { return requests_.try_push(request); }
+
+bool SimulatedBus::poll(RegisterResult& out) noexcept {
+  auto r = results_.try_pop();
+  if (!r) return false;
+  out = *r;
+  return true;
+}
+
+}  // namespace ds1928::sim

@@ -1,0 +1,41 @@
+// The in-process bus: the daemon's default when no hardware is configured. It owns one simulated
+// X20DS1928 per axis and offers exactly the per-cycle interface of the real buses.
+#pragma once
+
+#include <memory>
+#include <vector>
+
+#include "config/config.hpp"
+#include "core/bus.hpp"
+#include "core/spsc_queue.hpp"
+#include "sim/ds1928_module.hpp"
+
+namespace ds1928::sim {
+
+class SimulatedBus final : public BusDriver {
+ public:
+  explicit SimulatedBus(const DaemonConfig& config);
+
+  [[nodiscard]] std::string_view name() const noexcept override { return "simulated"; }
+  [[nodiscard]] std::error_code start() override;
+  void stop() noexcept override;
+  ExchangeResult exchange(std::span<AxisIo> axes, int64_t cycle_start_ns,
+                          uint64_t cycle_index) noexcept override;
+  [[nodiscard]] BusState state() const noexcept override {
+    return state_.load(std::memory_order_acquire);
+  }
+  [[nodiscard]] bool submit(const RegisterRequest& request) noexcept override;
+  [[nodiscard]] bool poll(RegisterResult& out) noexcept override;
+
+  // Test hooks: reach a module between cycles (only while the cycle thread is not running).
+  [[nodiscard]] Ds1928Module& module(std::size_t axis) { return *modules_.at(axis); }
+
+ private:
+  std::vector<std::unique_ptr<Ds1928Module>> modules_;
+  std::vector<ModuleSettings> settings_;
+  std::atomic<BusState> state_{BusState::Down};
+  SpscQueue<RegisterRequest, 64> requests_;
+  SpscQueue<RegisterResult, 64> results_;
+};
+
+}  // namespace ds1928::sim
