@@ -1,0 +1,108 @@
+#include "core/rt_setup.hpp"
+
+#include <fcntl.h>
+#include <pthread.h>
+#include <sched.h>
+#include <sys/mman.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
+#include <ctime>
+
+namespace ds1928::rt {
+
+int64_t now_ns() noexcept {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<int64_t>(ts.tv_sec) * kNsPerSec + ts.tv_nsec;
+}
+
+namespace {
+timespec to_timespec(int64_t ns) noexcept {
+  timespec ts{};
+  ts.tv_sec = static_cast<time_t>(ns / kNsPerSec);
+  ts.tv_nsec = static_cast<long>(ns % kNsPerSec);
+  return ts;
+}
+}  // namespace
+
+int64_t sleep_until(int64_t deadline_ns, int64_t spin_ns) noexcept {
+  const int64_t wake_ns = spin_ns > 0 ? deadline_ns - spin_ns : deadline_ns;
+  const timespec ts = to_timespec(wake_ns);
+  // EINTR: a signal handler ran; the deadline is absolute, so just go back to sleep.
+  while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
+  }
+  int64_t now = now_ns();
+  while (now < deadline_ns) now = now_ns();
+  return now;
+}
+
+SetupStep set_fifo_priority(int priority) noexcept {
+  sched_param param{};
+  param.sched_priority = priority;
+  return SetupStep{pthread_setschedparam(pthread_self(), SCHED_FIFO, &param)};
+}
+
+SetupStep pin_to_cpu(int cpu) noexcept {
+  if (cpu < 0 || cpu >= CPU_SETSIZE) return SetupStep{EINVAL};
+  cpu_set_t set;
+  CPU_ZERO(&set);
+  CPU_SET(cpu, &set);
+  return SetupStep{pthread_setaffinity_np(pthread_self(), sizeof(set), &set)};
+}
+
+SetupStep lock_all_memory() noexcept {
+  if (mlockall(MCL_CURRENT | MCL_FUTURE) != 0) return SetupStep{errno};
+  return {};
+}
+
+bool cpu_usable(int cpu) noexcept {
+  if (cpu < 0 || cpu >= CPU_SETSIZE) return false;
+  cpu_set_t set;
+  CPU_ZERO(&set);
+  if (sched_getaffinity(0, sizeof(set), &set) != 0) return false;
+  return CPU_ISSET(cpu, &set);
+}
+
+// noinline keeps the frame where the caller expects it: the pages touched here are the ones the
+// caller's callees will use.
+__attribute__((noinline)) void prefault_stack(std::size_t bytes) noexcept {
+  constexpr std::size_t kPage = 4096;
+  constexpr std::size_t kMax = 1024 * 1024;
+  if (bytes > kMax) bytes = kMax;
+  auto* area = static_cast<volatile unsigned char*>(__builtin_alloca(bytes));
+  for (std::size_t i = 0; i < bytes; i += kPage) area[i] = 0;
+}
+
+CpuDmaLatencyHold::State CpuDmaLatencyHold::acquire(const char* path) noexcept {
+  release();
+  fd_ = ::open(path, O_WRONLY | O_CLOEXEC);
+  if (fd_ < 0) {
+    error_ = errno;
+    state_ = error_ == ENOENT ? State::Absent : State::Failed;
+    return state_;
+  }
+  // The PM QoS file takes a binary 32-bit value in µs; the request lasts while the fd is open.
+  const int32_t zero = 0;
+  if (::write(fd_, &zero, sizeof(zero)) != static_cast<ssize_t>(sizeof(zero))) {
+    error_ = errno;
+    ::close(fd_);
+    fd_ = -1;
+    state_ = State::Failed;
+    return state_;
+  }
+  error_ = 0;
+  state_ = State::Held;
+  return state_;
+}
+
+void CpuDmaLatencyHold::release() noexcept {
+  if (fd_ >= 0) ::close(fd_);
+  fd_ = -1;
+  if (state_ == State::Held) state_ = State::Off;
+}
+
+std::string errno_text(int error) { return std::strerror(error); }
+
+}  // namespace ds1928::rt

@@ -1,0 +1,69 @@
+// The pieces of real-time setup the cycle engine is made of: clock, absolute sleep, scheduling,
+// CPU affinity, memory locking, stack pre-faulting and the /dev/cpu_dma_latency request. Each
+// is a small function so tests and the benchmark can use the same calls the engine uses.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <string>
+
+namespace ds1928::rt {
+
+inline constexpr int64_t kNsPerSec = 1'000'000'000;
+
+// CLOCK_MONOTONIC in ns (vDSO: no system call).
+[[nodiscard]] int64_t now_ns() noexcept;
+
+// Sleeps until the absolute CLOCK_MONOTONIC instant `deadline_ns` (TIMER_ABSTIME, restarted
+// after signals). With spin_ns > 0 it sleeps until deadline − spin_ns and busy-waits on the
+// clock for the rest, trading CPU time for the kernel's wake-up latency. Returns the instant
+// it observed when it stopped waiting.
+int64_t sleep_until(int64_t deadline_ns, int64_t spin_ns = 0) noexcept;
+
+// Result of one setup step: 0 or the errno of the failing call.
+struct SetupStep {
+  int error = 0;
+  [[nodiscard]] bool ok() const noexcept { return error == 0; }
+};
+
+// SCHED_FIFO at `priority` for the calling thread.
+[[nodiscard]] SetupStep set_fifo_priority(int priority) noexcept;
+// Pins the calling thread to `cpu`.
+[[nodiscard]] SetupStep pin_to_cpu(int cpu) noexcept;
+// mlockall(MCL_CURRENT | MCL_FUTURE): process-wide, never undone (a daemon that locked its
+// memory once wants it locked for its lifetime).
+[[nodiscard]] SetupStep lock_all_memory() noexcept;
+// Touches `bytes` of the calling thread's stack so that the first deep call on the RT path does
+// not page-fault.
+void prefault_stack(std::size_t bytes) noexcept;
+// Whether `cpu` exists and the process may run on it.
+[[nodiscard]] bool cpu_usable(int cpu) noexcept;
+
+// Holds /dev/cpu_dma_latency open with 0 written, which keeps the CPUs out of deep idle states
+// for as long as the file stays open (the PM QoS interface cyclictest uses). A missing file is
+// not an error (state() == Absent).
+class CpuDmaLatencyHold {
+ public:
+  enum class State : uint8_t { Off, Held, Absent, Failed };
+
+  CpuDmaLatencyHold() = default;
+  ~CpuDmaLatencyHold() { release(); }
+  CpuDmaLatencyHold(const CpuDmaLatencyHold&) = delete;
+  CpuDmaLatencyHold& operator=(const CpuDmaLatencyHold&) = delete;
+
+  // Opens the file and writes 0. Returns the new state; on Failed, error() is the errno.
+  State acquire(const char* path = "/dev/cpu_dma_latency") noexcept;
+  void release() noexcept;
+  [[nodiscard]] State state() const noexcept { return state_; }
+  [[nodiscard]] int error() const noexcept { return error_; }
+
+ private:
+  int fd_ = -1;
+  State state_ = State::Off;
+  int error_ = 0;
+};
+
+// "Operation not permitted" etc., without the allocation-free constraint (normal thread only).
+[[nodiscard]] std::string errno_text(int error);
+
+}  // namespace ds1928::rt
