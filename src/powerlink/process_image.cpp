@@ -1,0 +1,88 @@
+#include "powerlink/process_image.hpp"
+
+#include <algorithm>
+#include <cstring>
+
+#include "powerlink/frames.hpp"
+
+namespace ds1928::powerlink {
+
+Result<NodeImageLayout> make_layout(std::span<const ModuleSpec> modules) noexcept {
+  if (modules.size() > kMaxModulesPerNode) return MnError::kInvalidLayout;
+  std::array<ModuleSpec, kMaxModulesPerNode> sorted{};
+  std::copy(modules.begin(), modules.end(), sorted.begin());
+  std::sort(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(modules.size()),
+            [](const ModuleSpec& a, const ModuleSpec& b) { return a.slot < b.slot; });
+  NodeImageLayout layout;
+  std::size_t pres = 0;
+  std::size_t preq = 0;
+  for (std::size_t i = 0; i < modules.size(); ++i) {
+    const ModuleSpec& s = sorted[i];
+    if (s.slot == 0 || (i > 0 && sorted[i - 1].slot == s.slot)) return MnError::kInvalidLayout;
+    if (s.input_mtu > kMaxFlatstreamMtu || s.output_mtu > kMaxFlatstreamMtu)
+      return MnError::kInvalidLayout;
+    layout.modules[i] = {s.slot, s.input_mtu, s.output_mtu, static_cast<uint16_t>(pres),
+                         static_cast<uint16_t>(preq)};
+    pres += pres_module_size(s.input_mtu);
+    preq += preq_module_size(s.output_mtu);
+  }
+  if (pres > kMaxIsoPayload || preq > kMaxIsoPayload) return MnError::kInvalidLayout;
+  layout.count = modules.size();
+  layout.pres_size = static_cast<uint16_t>(pres);
+  layout.preq_size = static_cast<uint16_t>(preq);
+  return layout;
+}
+
+bool write_inputs(std::span<uint8_t> payload, const ModuleMapping& m,
+                  const ModuleInputs& in) noexcept {
+  if (m.pres_offset + pres_module_size(m.input_mtu) > payload.size()) return false;
+  uint8_t* p = payload.data() + m.pres_offset;
+  store_le32(p, in.position_hw);
+  store_le32(p + 4, in.position_lw);
+  store_le32(p + 8, in.pos_time_us);
+  p[12] = static_cast<uint8_t>(in.pos_cycle);
+  p[13] = static_cast<uint8_t>(in.sdc_life_count);
+  p[14] = in.error_info;
+  p[15] = in.input_sequence;
+  std::memcpy(p + kPresModuleFixedSize, in.rx_bytes.data(), m.input_mtu);
+  return true;
+}
+
+bool read_inputs(std::span<const uint8_t> payload, const ModuleMapping& m,
+                 ModuleInputs& in) noexcept {
+  if (m.pres_offset + pres_module_size(m.input_mtu) > payload.size()) return false;
+  const uint8_t* p = payload.data() + m.pres_offset;
+  in.position_hw = load_le32(p);
+  in.position_lw = load_le32(p + 4);
+  in.pos_time_us = load_le32(p + 8);
+  in.pos_cycle = static_cast<int8_t>(p[12]);
+  in.sdc_life_count = static_cast<int8_t>(p[13]);
+  in.error_info = p[14];
+  in.input_sequence = p[15];
+  in.rx_bytes.fill(0);
+  std::memcpy(in.rx_bytes.data(), p + kPresModuleFixedSize, m.input_mtu);
+  return true;
+}
+
+bool write_outputs(std::span<uint8_t> payload, const ModuleMapping& m,
+                   const ModuleOutputs& out) noexcept {
+  if (m.preq_offset + preq_module_size(m.output_mtu) > payload.size()) return false;
+  uint8_t* p = payload.data() + m.preq_offset;
+  p[0] = out.output_sequence;
+  std::memcpy(p + 1, out.tx_bytes.data(), m.output_mtu);
+  p[1 + m.output_mtu] = out.ack_error_info;
+  return true;
+}
+
+bool read_outputs(std::span<const uint8_t> payload, const ModuleMapping& m,
+                  ModuleOutputs& out) noexcept {
+  if (m.preq_offset + preq_module_size(m.output_mtu) > payload.size()) return false;
+  const uint8_t* p = payload.data() + m.preq_offset;
+  out.output_sequence = p[0];
+  out.tx_bytes.fill(0);
+  std::memcpy(out.tx_bytes.data(), p + 1, m.output_mtu);
+  out.ack_error_info = p[1 + m.output_mtu];
+  return true;
+}
+
+}  // namespace ds1928::powerlink
