@@ -1,0 +1,1123 @@
+// YAML → DaemonConfig with complete diagnostics. The document is read into plain structs by a
+// small "section" reader that knows which keys it was asked for, so every key left over is an
+// unknown key; each value is parsed by hand (not yaml-cpp's as<T>) to get precise messages for
+// hex numbers, octal modes, quoted numbers and out-of-range values.
+#include "config/config_loader.hpp"
+
+#include <unistd.h>
+#include <yaml-cpp/yaml.h>
+
+#include <algorithm>
+#include <array>
+#include <cctype>
+#include <charconv>
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <initializer_list>
+#include <limits>
+#include <map>
+#include <optional>
+#include <set>
+#include <sstream>
+#include <utility>
+
+namespace ds1928 {
+namespace {
+
+struct Loc {
+  int line = 0;
+  int column = 0;
+};
+
+Loc loc_of(const YAML::Mark& m) {
+  if (m.is_null() || m.line < 0) return {};
+  return {m.line + 1, m.column + 1};
+}
+
+std::string where(Loc l) { return "line " + std::to_string(l.line); }
+
+class Diagnostics {
+ public:
+  explicit Diagnostics(std::string file) : file_(std::move(file)) {}
+
+  void error(Loc at, std::string key, std::string message) {
+    errors_.push_back(ConfigError{file_, at.line, at.column, std::move(key), std::move(message)});
+  }
+  [[nodiscard]] bool empty() const noexcept { return errors_.empty(); }
+  [[nodiscard]] std::vector<ConfigError> take() {
+    std::stable_sort(errors_.begin(), errors_.end(), [](const auto& a, const auto& b) {
+      return std::pair(a.line, a.column) < std::pair(b.line, b.column);
+    });
+    return std::move(errors_);
+  }
+
+ private:
+  std::string file_;
+  std::vector<ConfigError> errors_;
+};
+
+// ---------------------------------------------------------------------------------------------
+// Scalar parsing
+
+std::string describe(const YAML::Node& n) {
+  switch (n.Type()) {
+    case YAML::NodeType::Map:
+      return "a map";
+    case YAML::NodeType::Sequence:
+      return "a list";
+    case YAML::NodeType::Null:
+    case YAML::NodeType::Undefined:
+      return "an empty value";
+    case YAML::NodeType::Scalar:
+      break;
+  }
+  return n.Tag() == "?" ? "'" + n.Scalar() + "'" : "the string \"" + n.Scalar() + "\"";
+}
+
+bool is_plain(const YAML::Node& n) { return n.IsScalar() && n.Tag() == "?"; }
+
+struct IntParse {
+  enum class Status { Ok, Syntax, LeadingZero, Overflow } status = Status::Syntax;
+  int64_t value = 0;
+};
+
+// Decimal or 0x hex, optional sign. A leading zero is refused because YAML 1.1 would read it
+// as octal and a reader of the file cannot tell which was meant.
+IntParse parse_integer(std::string_view s) {
+  IntParse r;
+  bool negative = false;
+  if (!s.empty() && (s.front() == '+' || s.front() == '-')) {
+    negative = s.front() == '-';
+    s.remove_prefix(1);
+  }
+  int base = 10;
+  if (s.size() > 2 && s[0] == '0' && (s[1] == 'x' || s[1] == 'X')) {
+    base = 16;
+    s.remove_prefix(2);
+  } else if (s.size() > 1 && s[0] == '0') {
+    r.status = std::all_of(s.begin(), s.end(), [](char c) { return c >= '0' && c <= '9'; })
+                   ? IntParse::Status::LeadingZero
+                   : IntParse::Status::Syntax;
+    return r;
+  }
+  if (s.empty()) return r;
+  uint64_t magnitude = 0;
+  const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), magnitude, base);
+  if (end != s.data() + s.size()) return r;
+  constexpr uint64_t kMaxPositive = static_cast<uint64_t>(std::numeric_limits<int64_t>::max());
+  if (ec == std::errc::result_out_of_range || magnitude > kMaxPositive + (negative ? 1 : 0)) {
+    r.status = IntParse::Status::Overflow;
+    return r;
+  }
+  if (ec != std::errc{}) return r;
+  r.status = IntParse::Status::Ok;
+  r.value = negative ? static_cast<int64_t>(0 - magnitude) : static_cast<int64_t>(magnitude);
+  return r;
+}
+
+std::optional<double> parse_real(std::string_view s) {
+  if (!s.empty() && s.front() == '+') s.remove_prefix(1);
+  double v = 0;
+  const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
+  if (ec != std::errc{} || end != s.data() + s.size() || !std::isfinite(v)) return std::nullopt;
+  return v;
+}
+
+std::optional<bool> parse_bool(std::string s) {
+  std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return std::tolower(c); });
+  if (s == "true" || s == "yes" || s == "on") return true;
+  if (s == "false" || s == "no" || s == "off") return false;
+  return std::nullopt;
+}
+
+std::string range_text(int64_t lo, int64_t hi) {
+  return std::to_string(lo) + ".." + std::to_string(hi);
+}
+
+std::string real_text(double v) {
+  std::array<char, 64> buf{};
+  const auto [end, ec] = std::to_chars(buf.data(), buf.data() + buf.size(), v);
+  return ec == std::errc{} ? std::string(buf.data(), end) : std::string("?");
+}
+
+size_t edit_distance(std::string_view a, std::string_view b) {
+  std::vector<size_t> row(b.size() + 1);
+  for (size_t j = 0; j <= b.size(); ++j) row[j] = j;
+  for (size_t i = 1; i <= a.size(); ++i) {
+    size_t diagonal = row[0];
+    row[0] = i;
+    for (size_t j = 1; j <= b.size(); ++j) {
+      const size_t up = row[j];
+      const bool same = std::tolower(static_cast<unsigned char>(a[i - 1])) ==
+                        std::tolower(static_cast<unsigned char>(b[j - 1]));
+      row[j] = std::min({row[j] + 1, row[j - 1] + 1, diagonal + (same ? 0 : 1)});
+      diagonal = up;
+    }
+  }
+  return row[b.size()];
+}
+
+// The closest candidate when it is plausibly a typo of `word`.
+std::optional<std::string> closest(std::string_view word, const std::vector<std::string>& options) {
+  std::optional<std::string> best;
+  size_t best_distance = std::numeric_limits<size_t>::max();
+  for (const auto& o : options) {
+    const size_t d = edit_distance(word, o);
+    if (d < best_distance) {
+      best_distance = d;
+      best = o;
+    }
+  }
+  const size_t limit = std::max<size_t>(2, std::min(word.size(), best ? best->size() : 0) / 3);
+  if (!best || best_distance > limit) return std::nullopt;
+  return best;
+}
+
+std::string join(const std::vector<std::string>& items) {
+  std::string out;
+  for (const auto& i : items) out += (out.empty() ? "" : ", ") + i;
+  return out;
+}
+
+// ---------------------------------------------------------------------------------------------
+// One YAML map of settings. Every accessor registers its key as known; finish() reports the rest.
+
+class Section {
+ public:
+  Section(Diagnostics& diag, const YAML::Node& node, std::string path, Loc at)
+      : diag_(&diag), path_(std::move(path)), at_(at) {
+    if (!node.IsDefined() || node.IsNull()) return;
+    if (!node.IsMap()) {
+      diag_->error(at_, path_, "expected a map of settings, got " + describe(node));
+      return;
+    }
+    for (auto it = node.begin(); it != node.end(); ++it) {
+      const Loc key_at = loc_of(it->first.Mark());
+      if (!it->first.IsScalar()) {
+        diag_->error(key_at, path_, "a key must be a plain name, got " + describe(it->first));
+        continue;
+      }
+      const std::string key = it->first.Scalar();
+      if (const auto found = entries_.find(key); found != entries_.end()) {
+        diag_->error(key_at, child(key),
+                     "duplicate key (first given at " + where(found->second.key_at) + ")");
+        continue;
+      }
+      entries_.emplace(key, Entry{key_at, it->second});
+    }
+  }
+  Section(const Section&) = delete;
+  Section& operator=(const Section&) = delete;
+
+  [[nodiscard]] std::string child(std::string_view key) const {
+    return path_.empty() ? std::string(key) : path_ + "." + std::string(key);
+  }
+  [[nodiscard]] const std::string& path() const noexcept { return path_; }
+  [[nodiscard]] Loc at() const noexcept { return at_; }
+  [[nodiscard]] Diagnostics& diag() const noexcept { return *diag_; }
+
+  // Registers `key` as known; the value node when the key is present.
+  const YAML::Node* find(std::string_view key) {
+    known_.emplace_back(key);
+    const auto it = entries_.find(std::string(key));
+    return it == entries_.end() ? nullptr : &it->second.value;
+  }
+  [[nodiscard]] bool has(std::string_view key) const {
+    return entries_.count(std::string(key)) != 0;
+  }
+
+  // Where the value of `key` is (the key itself for an empty value, the map when absent).
+  [[nodiscard]] Loc value_at(std::string_view key) const {
+    const auto it = entries_.find(std::string(key));
+    if (it == entries_.end()) return at_;
+    const YAML::Node& v = it->second.value;
+    if (!v.IsDefined() || v.IsNull()) return it->second.key_at;
+    const Loc l = loc_of(v.Mark());
+    return l.line == 0 ? it->second.key_at : l;
+  }
+
+  void error(std::string_view key, std::string message) {
+    diag_->error(value_at(key), child(key), std::move(message));
+  }
+
+  // A nested map; an absent key gives an empty section (all defaults).
+  [[nodiscard]] Section section(std::string_view key) {
+    const YAML::Node* v = find(key);
+    return Section(*diag_, v ? *v : YAML::Node(YAML::NodeType::Undefined), child(key),
+                   value_at(key));
+  }
+
+  template <class T>
+  bool integer(std::string_view key, T& out, int64_t lo, int64_t hi, std::string_view note = {}) {
+    int64_t v = 0;
+    if (!integer_value(key, v, lo, hi, note)) return false;
+    out = static_cast<T>(v);
+    return true;
+  }
+
+  template <class T>
+  bool optional_integer(std::string_view key, std::optional<T>& out, int64_t lo, int64_t hi) {
+    const YAML::Node* v = find(key);
+    if (!v || v->IsNull()) return false;
+    T value{};
+    if (!integer(key, value, lo, hi)) return false;
+    out = value;
+    return true;
+  }
+
+  bool real(std::string_view key, double& out, double lo, double hi) {
+    const YAML::Node* v = find(key);
+    if (!v) return false;
+    const std::string expected = "a number in " + real_text(lo) + ".." + real_text(hi);
+    if (!is_plain(*v)) {
+      error(key, "expected " + expected + ", got " + describe(*v));
+      return false;
+    }
+    const auto parsed = parse_real(v->Scalar());
+    if (!parsed) {
+      error(key, "expected " + expected + ", got " + describe(*v));
+      return false;
+    }
+    if (*parsed < lo || *parsed > hi) {
+      error(key, v->Scalar() + " is out of range " + real_text(lo) + ".." + real_text(hi));
+      return false;
+    }
+    out = *parsed;
+    return true;
+  }
+
+  bool boolean(std::string_view key, bool& out) {
+    const YAML::Node* v = find(key);
+    if (!v) return false;
+    const auto parsed = is_plain(*v) ? parse_bool(v->Scalar()) : std::nullopt;
+    if (!parsed) {
+      error(key, "expected true or false, got " + describe(*v));
+      return false;
+    }
+    out = *parsed;
+    return true;
+  }
+
+  // A string; an empty value gives "". `max_length` counts bytes.
+  bool text(std::string_view key, std::string& out, size_t max_length = 4096) {
+    const YAML::Node* v = find(key);
+    if (!v) return false;
+    if (v->IsNull()) {
+      out.clear();
+      return true;
+    }
+    if (!v->IsScalar()) {
+      error(key, "expected a string, got " + describe(*v));
+      return false;
+    }
+    if (v->Scalar().size() > max_length) {
+      error(key, "is " + std::to_string(v->Scalar().size()) + " characters long; at most " +
+                     std::to_string(max_length) + " are allowed");
+      return false;
+    }
+    out = v->Scalar();
+    return true;
+  }
+
+  // One of a fixed set of words.
+  template <class E>
+  bool choice(std::string_view key, E& out,
+              std::initializer_list<std::pair<std::string_view, E>> options) {
+    const YAML::Node* v = find(key);
+    if (!v) return false;
+    std::vector<std::string> names;
+    for (const auto& [name, value] : options) {
+      if (v->IsScalar() && v->Scalar() == name) {
+        out = value;
+        return true;
+      }
+      names.emplace_back(name);
+    }
+    std::string message = describe(*v) + " is not allowed; expected one of: " + join(names);
+    if (v->IsScalar()) {
+      if (const auto hint = closest(v->Scalar(), names)) message += " (did you mean '" + *hint + "'?)";
+    }
+    error(key, std::move(message));
+    return false;
+  }
+
+  // A file mode, always read as octal like chmod does: "0640", 0640, 640 or 0o640.
+  bool mode(std::string_view key, uint32_t& out) {
+    const YAML::Node* v = find(key);
+    if (!v) return false;
+    std::string_view s = v->IsScalar() ? std::string_view(v->Scalar()) : std::string_view{};
+    if (s.size() > 2 && s[0] == '0' && (s[1] == 'o' || s[1] == 'O')) s.remove_prefix(2);
+    uint32_t value = 0;
+    const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), value, 8);
+    if (s.empty() || ec != std::errc{} || end != s.data() + s.size()) {
+      error(key, "expected an octal file mode such as \"0640\", got " + describe(*v));
+      return false;
+    }
+    if (value > 0777) {
+      error(key, v->Scalar() + " is out of range 0000..0777 (permission bits only)");
+      return false;
+    }
+    out = value;
+    return true;
+  }
+
+  // The items of a list with their paths; an absent or empty key gives none.
+  struct Item {
+    YAML::Node node;
+    std::string path;
+    Loc at;
+  };
+  std::vector<Item> list(std::string_view key) {
+    std::vector<Item> items;
+    const YAML::Node* v = find(key);
+    if (!v || v->IsNull()) return items;
+    if (!v->IsSequence()) {
+      error(key, "expected a list, got " + describe(*v));
+      return items;
+    }
+    size_t i = 0;
+    for (const auto& n : *v) {
+      Loc l = loc_of(n.Mark());
+      if (l.line == 0 || n.IsNull()) l = value_at(key);
+      items.push_back({n, child(key) + "[" + std::to_string(i++) + "]", l});
+    }
+    return items;
+  }
+
+  void finish() {
+    for (const auto& [key, entry] : entries_) {
+      if (std::find(known_.begin(), known_.end(), key) != known_.end()) continue;
+      std::string message = "unknown key '" + key + "'";
+      if (const auto hint = closest(key, known_)) {
+        message += " (did you mean '" + *hint + "'?)";
+      } else {
+        message += "; allowed keys here: " + join(known_);
+      }
+      diag_->error(entry.key_at, child(key), std::move(message));
+    }
+  }
+
+ private:
+  struct Entry {
+    Loc key_at;
+    YAML::Node value;
+  };
+
+  bool integer_value(std::string_view key, int64_t& out, int64_t lo, int64_t hi,
+                     std::string_view note) {
+    const YAML::Node* v = find(key);
+    if (!v) return false;
+    const std::string suffix = note.empty() ? std::string() : " " + std::string(note);
+    const std::string expected = "an integer in " + range_text(lo, hi) + suffix;
+    if (!is_plain(*v)) {
+      std::string message = "expected " + expected + ", got " + describe(*v);
+      if (v->IsScalar() && parse_integer(v->Scalar()).status == IntParse::Status::Ok) {
+        message += " (write the number without quotes)";
+      }
+      error(key, std::move(message));
+      return false;
+    }
+    const IntParse parsed = parse_integer(v->Scalar());
+    switch (parsed.status) {
+      case IntParse::Status::Ok:
+        break;
+      case IntParse::Status::LeadingZero:
+        error(key, "'" + v->Scalar() +
+                       "' has a leading zero; write a decimal number without it, or 0x hex");
+        return false;
+      case IntParse::Status::Overflow:
+        error(key, v->Scalar() + " is out of range " + range_text(lo, hi) + suffix);
+        return false;
+      case IntParse::Status::Syntax:
+        error(key, "expected " + expected + " (decimal or 0x hex), got " + describe(*v));
+        return false;
+    }
+    if (parsed.value < lo || parsed.value > hi) {
+      error(key, v->Scalar() + " is out of range " + range_text(lo, hi) + suffix);
+      return false;
+    }
+    out = parsed.value;
+    return true;
+  }
+
+  Diagnostics* diag_;
+  std::string path_;
+  Loc at_;
+  std::map<std::string, Entry> entries_;
+  std::vector<std::string> known_;
+};
+
+// ---------------------------------------------------------------------------------------------
+// Sections
+
+constexpr int64_t kU8 = 0xFF;
+constexpr int64_t kU16 = 0xFFFF;
+constexpr int64_t kU32 = 0xFFFFFFFF;
+
+bool valid_name_char(char c) {
+  return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == '.';
+}
+
+// Unix group names as useradd accepts them; empty = leave the group alone.
+void group_name(Section& s, std::string_view key, std::string& out) {
+  std::string group;
+  if (!s.text(key, group, 32)) return;
+  const bool ok = group.empty() ||
+                  ((std::islower(static_cast<unsigned char>(group[0])) || group[0] == '_') &&
+                   std::all_of(group.begin(), group.end(), [](char c) {
+                     return std::islower(static_cast<unsigned char>(c)) ||
+                            std::isdigit(static_cast<unsigned char>(c)) || c == '_' || c == '-';
+                   }));
+  if (!ok) {
+    s.error(key, "'" + group + "' is not a valid group name (lower-case letters, digits, _ and -)");
+    return;
+  }
+  out = group;
+}
+
+void parse_cycle(Section s, CycleConfig& c) {
+  s.integer("period_us", c.period_us, 100, 100000, "µs");
+  s.integer("rt_priority", c.rt_priority, 1, 99, "(SCHED_FIFO)");
+  s.integer("cpu", c.cpu, -1, 1023, "(-1 = no affinity)");
+  s.integer("spin_us", c.spin_us, 0, 100000, "µs");
+  s.boolean("hold_cpu_dma_latency", c.hold_cpu_dma_latency);
+  s.boolean("lock_memory", c.lock_memory);
+  s.finish();
+}
+
+void parse_module(Section s, ModuleSettings& m, FunctionModel fm) {
+  s.boolean("endat_enable", m.endat_enable);
+  s.boolean("position_signed", m.position_signed);
+  s.boolean("fast_clock_off", m.fast_clock_off);
+  s.boolean("sincos_unused", m.sincos_unused);
+  s.integer("prescaler", m.prescaler, 2, kU16,
+            "(the EnDat cycle must be at least twice the module cycle)");
+  if (s.integer("slframe_gen_id", m.slframe_gen_id, 0, kU8) && m.slframe_gen_id != 9 &&
+      m.slframe_gen_id != 14) {
+    s.error("slframe_gen_id", std::to_string(m.slframe_gen_id) +
+                                  " is not allowed; expected 9 (fastest response) or 14 "
+                                  "(aligned to the X2X cycle)");
+  }
+  s.integer("error_enable", m.error_enable, 0, kU8);
+  const bool have_min = s.integer("vss_min_mv", m.vss_min_mv, 0, 1500, "mV");
+  const bool have_max = s.integer("vss_max_mv", m.vss_max_mv, 0, 1500, "mV");
+  if ((have_min || have_max) && m.vss_min_mv > m.vss_max_mv) {
+    s.error(have_min ? "vss_min_mv" : "vss_max_mv",
+            "vss_min_mv (" + std::to_string(m.vss_min_mv) + ") must not exceed vss_max_mv (" +
+                std::to_string(m.vss_max_mv) + ")");
+  }
+  s.integer("quit_time_us", m.quit_time_us, 0, 20000000, "µs");
+  const bool standard = fm == FunctionModel::Standard;
+  const int64_t max_mtu = standard ? 15 : 5;
+  const char* note = standard ? "for function model 0" : "for function model 254";
+  s.integer("output_mtu", m.output_mtu, 1, max_mtu, note);
+  s.integer("input_mtu", m.input_mtu, 1, max_mtu, note);
+  // The struct defaults fit function model 0; under 254 only 5 Tx/Rx bytes exist.
+  if (!standard && !s.has("output_mtu")) m.output_mtu = std::min<uint8_t>(m.output_mtu, 5);
+  if (!standard && !s.has("input_mtu")) m.input_mtu = std::min<uint8_t>(m.input_mtu, 5);
+  s.integer("flatstream_mode", m.flatstream_mode, 0, 3,
+            "(bit 0 multi-segment MTU, bit 1 large segments)");
+  s.integer("forward", m.forward, 1, 7);
+  s.integer("forward_delay_us", m.forward_delay_us, 0, kU16, "µs");
+  s.finish();
+}
+
+struct AxisSite {
+  Loc at;
+  Loc name_at;
+  Loc node_at;
+  std::string path;
+};
+
+void parse_axis(Section s, AxisConfig& a, BusKind bus, size_t index) {
+  a.name = "axis" + std::to_string(index);
+  a.slot = static_cast<uint8_t>(std::min<size_t>(index + 1, 253));
+  a.function_model = bus == BusKind::Canio ? FunctionModel::BusController : FunctionModel::Standard;
+  if (s.text("name", a.name, 31)) {
+    if (a.name.empty() || !std::all_of(a.name.begin(), a.name.end(), valid_name_char)) {
+      s.error("name", "'" + a.name +
+                          "' is not a valid axis name: 1..31 characters of letters, digits, _ - .");
+    }
+  }
+  s.integer("node", a.node, 1, bus == BusKind::Powerlink ? 239 : kU8);
+  s.integer("slot", a.slot, 1, 253);
+  int64_t fm = 0;
+  if (s.integer("function_model", fm, 0, kU8)) {
+    if (fm != 0 && fm != 254) {
+      s.error("function_model",
+              std::to_string(fm) + " is not allowed; expected 0 (standard) or 254 (bus controller)");
+    } else if (bus == BusKind::Powerlink && fm != 0) {
+      s.error("function_model", "254 is not allowed on bus powerlink; modules behind a POWERLINK "
+                                "bus controller run function model 0");
+    } else if (bus == BusKind::Canio && fm != 254) {
+      s.error("function_model", "0 is not allowed on bus canio; modules behind a CAN-I/O bus "
+                                "controller run function model 254");
+    } else {
+      a.function_model = static_cast<FunctionModel>(fm);
+    }
+  }
+  parse_module(s.section("module"), a.module, a.function_model);
+  s.integer("command_timeout_ms", a.command_timeout_ms, 1, 600000, "ms");
+  s.integer("flatstream_timeout_cycles", a.flatstream_timeout_cycles, 1, 1000000);
+  s.finish();
+}
+
+void parse_sim_axis(Section s, SimAxisConfig& a, const std::filesystem::path& base_dir) {
+  s.choice("profile", a.profile,
+           {{"constant_velocity", MotionProfile::ConstantVelocity},
+            {"sine", MotionProfile::Sine},
+            {"stop", MotionProfile::Stop}});
+  s.real("velocity_periods_per_s", a.velocity_periods_per_s, -1e9, 1e9);
+  s.real("amplitude_periods", a.amplitude_periods, 0, 1e12);
+  s.real("frequency_hz", a.frequency_hz, 0, 1000);
+  s.integer("module_cycle_us", a.module_cycle_us, 100, 100000, "µs");
+  if (s.text("encoder_file", a.encoder_file) && !a.encoder_file.empty()) {
+    std::filesystem::path p(a.encoder_file);
+    if (p.is_relative()) p = base_dir / p;
+    std::error_code ec;
+    if (!std::filesystem::is_regular_file(p, ec)) {
+      s.error("encoder_file", "no such file: " + p.string());
+    } else {
+      a.encoder_file = p.lexically_normal().string();
+    }
+  }
+  s.integer("inject_error_info", a.inject_error_info, 0, kU8);
+  s.finish();
+}
+
+bool valid_interface_name(const std::string& name) {
+  // IFNAMSIZ - 1 bytes, no '/', no white space.
+  return !name.empty() && name.size() <= 15 && name != "." && name != ".." &&
+         std::none_of(name.begin(), name.end(), [](char c) {
+           return c == '/' || c == ':' || std::isspace(static_cast<unsigned char>(c));
+         });
+}
+
+struct PowerlinkSites {
+  bool present = false;
+  std::map<uint8_t, Loc> nodes;     // node id → where it is listed
+  std::vector<Loc> pres_timeout_at;  // per nodes[] entry
+};
+
+void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites) {
+  if (s.text("interface", p.interface, 15) && !p.interface.empty() &&
+      !valid_interface_name(p.interface)) {
+    s.error("interface", "'" + p.interface + "' is not a network interface name");
+  }
+  for (auto& item : s.list("nodes")) {
+    Section n(s.diag(), item.node, item.path, item.at);
+    PowerlinkNodeConfig node;
+    if (!n.has("node_id")) {
+      s.diag().error(item.at, n.child("node_id"), "missing required key (CN node id 1..239)");
+    }
+    const bool have_id = n.integer("node_id", node.node_id, 1, 239, "(POWERLINK CN)");
+    n.optional_integer("vendor_id", node.vendor_id, 0, kU32);
+    n.optional_integer("product_code", node.product_code, 0, kU32);
+    n.optional_integer("device_type", node.device_type, 0, kU32);
+    n.integer("pres_timeout_us", node.pres_timeout_us, 1, 100000, "µs");
+    sites.pres_timeout_at.push_back(n.value_at("pres_timeout_us"));
+    n.boolean("mandatory", node.mandatory);
+    n.integer("multiplex", node.multiplex, 0, 255, "(0 = every cycle)");
+    n.optional_integer("preq_size", node.preq_size, 0, 1490);
+    n.optional_integer("pres_size", node.pres_size, 0, 1490);
+    if (have_id) {
+      if (const auto prev = sites.nodes.find(node.node_id); prev != sites.nodes.end()) {
+        n.error("node_id", "node " + std::to_string(node.node_id) + " is listed twice (also at " +
+                               where(prev->second) + ")");
+      } else {
+        sites.nodes.emplace(node.node_id, n.value_at("node_id"));
+      }
+    }
+    n.finish();
+    p.nodes.push_back(node);
+  }
+  Section t = s.section("thresholds");
+  t.integer("loss_of_pres", p.thresholds.loss_of_pres, 0, kU32, "(0 = disabled)");
+  t.integer("cycle_time_exceeded", p.thresholds.cycle_time_exceeded, 0, kU32, "(0 = disabled)");
+  t.integer("late_pres", p.thresholds.late_pres, 0, kU32, "(0 = disabled)");
+  t.finish();
+  s.integer("async_timeout_us", p.async_timeout_us, 1, 100000, "µs");
+  s.integer("sdo_timeout_ms", p.sdo_timeout_ms, 1, 60000, "ms");
+  s.integer("nettime_offset_us", p.nettime_offset_us, std::numeric_limits<int64_t>::min(),
+            std::numeric_limits<int64_t>::max());
+  std::map<uint16_t, Loc> overridden;
+  for (auto& item : s.list("sdo_overrides")) {
+    Section o(s.diag(), item.node, item.path, item.at);
+    uint16_t reg = 0;
+    uint16_t index = 0;
+    uint8_t subindex = 0;
+    for (const char* required : {"register", "index"}) {
+      if (!o.has(required)) {
+        s.diag().error(item.at, o.child(required), "missing required key");
+      }
+    }
+    const bool have_reg = o.integer("register", reg, 0, kU16, "(X20DS1928 register number)");
+    const bool have_index = o.integer("index", index, 1, kU16);
+    o.integer("subindex", subindex, 0, kU8);
+    if (have_reg && have_index) {
+      if (const auto prev = overridden.find(reg); prev != overridden.end()) {
+        o.error("register", "register " + std::to_string(reg) + " is overridden twice (also at " +
+                                where(prev->second) + ")");
+      } else {
+        overridden.emplace(reg, o.value_at("register"));
+        p.sdo_overrides[reg] = {index, subindex};
+      }
+    }
+    o.finish();
+  }
+  s.finish();
+}
+
+void parse_canio(Section s, CanioBusConfig& c) {
+  if (s.text("interface", c.interface, 15) && !valid_interface_name(c.interface)) {
+    s.error("interface", "'" + c.interface + "' is not a network interface name");
+  }
+  if (s.integer("bitrate", c.bitrate, 0, kU32, "bit/s")) {
+    constexpr std::array<uint32_t, 9> kRates{10000,  20000,  50000,  100000, 125000,
+                                             250000, 500000, 800000, 1000000};
+    if (std::find(kRates.begin(), kRates.end(), c.bitrate) == kRates.end()) {
+      s.error("bitrate", std::to_string(c.bitrate) +
+                             " is not a CAN bit rate; expected one of 10000, 20000, 50000, 100000, "
+                             "125000, 250000, 500000, 800000, 1000000");
+    }
+  }
+  s.integer("response_timeout_us", c.response_timeout_us, 1, 100000, "µs");
+  s.choice("byte_order", c.little_endian, {{"little", true}, {"big", false}});
+  s.finish();
+}
+
+void parse_shm(Section s, ShmConfig& c) {
+  if (s.text("name", c.name, 255)) {
+    const bool ok = c.name.size() >= 2 && c.name[0] == '/' &&
+                    c.name.find('/', 1) == std::string::npos && c.name != "/." && c.name != "/..";
+    if (!ok) {
+      s.error("name", "'" + c.name +
+                          "' is not a shared-memory name: '/' followed by 1..254 characters "
+                          "without '/'");
+    }
+  }
+  s.mode("mode", c.mode);
+  group_name(s, "group", c.group);
+  s.finish();
+}
+
+void parse_socket(Section s, SocketConfig& c) {
+  if (s.text("path", c.path, 107) && (c.path.empty() || c.path[0] != '/' || c.path.back() == '/')) {
+    s.error("path", "'" + c.path + "' is not an absolute file path");
+  }
+  s.mode("mode", c.mode);
+  group_name(s, "group", c.group);
+  group_name(s, "privileged_group", c.privileged_group);
+  s.integer("max_clients", c.max_clients, 1, 1024);
+  s.integer("max_request_bytes", c.max_request_bytes, 256, 1048576, "bytes");
+  s.integer("idle_timeout_ms", c.idle_timeout_ms, 0, 86400000, "ms (0 = never)");
+  s.finish();
+}
+
+// ---------------------------------------------------------------------------------------------
+
+// Re-locates a cross-field error on the key it names, when that key is written in the file.
+Loc locate(const YAML::Node& root, std::initializer_list<std::string_view> keys) {
+  YAML::Node n = root;
+  Loc best = loc_of(root.Mark());
+  for (const auto key : keys) {
+    if (!n.IsMap()) break;
+    YAML::Node next;
+    for (auto it = n.begin(); it != n.end(); ++it) {
+      if (it->first.IsScalar() && it->first.Scalar() == key) {
+        next = it->second;
+        best = loc_of(it->second.IsNull() ? it->first.Mark() : it->second.Mark());
+        break;
+      }
+    }
+    if (!next.IsDefined()) break;
+    n = next;
+  }
+  return best;
+}
+
+void check_cross_fields(Diagnostics& diag, const DaemonConfig& c, const std::vector<AxisSite>& axes,
+                        const PowerlinkSites& pl_sites, Loc spin_at, Loc canio_timeout_at) {
+  std::map<std::string, size_t> names;
+  std::map<std::pair<uint8_t, uint8_t>, size_t> places;
+  for (size_t i = 0; i < axes.size() && i < c.axes.size(); ++i) {
+    const AxisConfig& a = c.axes[i];
+    const AxisSite& site = axes[i];
+    if (const auto [it, fresh] = names.emplace(a.name, i); !fresh) {
+      diag.error(site.name_at, site.path + ".name",
+                 "axis name '" + a.name + "' is already used by axes[" +
+                     std::to_string(it->second) + "] (" + where(axes[it->second].at) + ")");
+    }
+    if (const auto [it, fresh] = places.emplace(std::pair(a.node, a.slot), i); !fresh) {
+      diag.error(site.at, site.path,
+                 "node " + std::to_string(a.node) + " slot " + std::to_string(a.slot) +
+                     " is already used by axes[" + std::to_string(it->second) + "] (" +
+                     where(axes[it->second].at) + ")");
+    }
+    if (c.bus == BusKind::Powerlink && pl_sites.present && pl_sites.nodes.count(a.node) == 0) {
+      std::vector<std::string> listed;
+      for (const auto& [id, at] : pl_sites.nodes) listed.push_back(std::to_string(id));
+      diag.error(site.node_at, site.path + ".node",
+                 "node " + std::to_string(a.node) + " is not listed in powerlink.nodes (listed: " +
+                     (listed.empty() ? std::string("none") : join(listed)) + ")");
+    }
+  }
+  if (c.cycle.spin_us >= c.cycle.period_us) {
+    diag.error(spin_at, "cycle.spin_us",
+               "spin_us (" + std::to_string(c.cycle.spin_us) +
+                   ") must be less than cycle.period_us (" + std::to_string(c.cycle.period_us) +
+                   ")");
+  }
+  if (c.bus == BusKind::Powerlink) {
+    for (size_t i = 0; i < c.powerlink.nodes.size() && i < pl_sites.pres_timeout_at.size(); ++i) {
+      const auto& n = c.powerlink.nodes[i];
+      if (n.pres_timeout_us >= c.cycle.period_us) {
+        diag.error(pl_sites.pres_timeout_at[i],
+                   "powerlink.nodes[" + std::to_string(i) + "].pres_timeout_us",
+                   "pres_timeout_us (" + std::to_string(n.pres_timeout_us) +
+                       ") must be less than cycle.period_us (" +
+                       std::to_string(c.cycle.period_us) + ")");
+      }
+    }
+  }
+  if (c.bus == BusKind::Canio && c.canio.response_timeout_us >= c.cycle.period_us) {
+    diag.error(canio_timeout_at, "canio.response_timeout_us",
+               "response_timeout_us (" + std::to_string(c.canio.response_timeout_us) +
+                   ") must be less than cycle.period_us (" + std::to_string(c.cycle.period_us) +
+                   ")");
+  }
+}
+
+DaemonConfig parse_document(Diagnostics& diag, const YAML::Node& doc, const std::string& name,
+                            const std::filesystem::path& base_dir) {
+  DaemonConfig c;
+  c.source_file = name;
+  Section root(diag, doc, "", Loc{1, 1});
+
+  root.choice("bus", c.bus,
+              {{"simulated", BusKind::Simulated},
+               {"powerlink", BusKind::Powerlink},
+               {"canio", BusKind::Canio}});
+  root.choice("log_level", c.log_level,
+              {{"trace", std::string("trace")},
+               {"debug", std::string("debug")},
+               {"info", std::string("info")},
+               {"warn", std::string("warn")},
+               {"error", std::string("error")},
+               {"critical", std::string("critical")},
+               {"off", std::string("off")}});
+  parse_cycle(root.section("cycle"), c.cycle);
+
+  PowerlinkSites pl_sites;
+  const bool have_powerlink = root.has("powerlink");
+  pl_sites.present = have_powerlink;
+  const bool have_canio = root.has("canio");
+  parse_powerlink(root.section("powerlink"), c.powerlink, pl_sites);
+  parse_canio(root.section("canio"), c.canio);
+  if (c.bus == BusKind::Powerlink && !have_powerlink) {
+    root.error("bus", "bus is 'powerlink' but the file has no powerlink section (interface, nodes)");
+  } else if (c.bus == BusKind::Powerlink && c.powerlink.interface.empty()) {
+    diag.error(root.value_at("powerlink"), "powerlink.interface",
+               "missing: bus powerlink needs the network interface of the POWERLINK segment");
+  }
+  if (c.bus == BusKind::Canio && !have_canio) {
+    root.error("bus", "bus is 'canio' but the file has no canio section (interface, bitrate)");
+  }
+
+  std::vector<AxisSite> axis_sites;
+  const auto axis_items = root.list("axes");
+  for (size_t i = 0; i < axis_items.size(); ++i) {
+    const auto& item = axis_items[i];
+    AxisConfig axis;
+    parse_axis(Section(diag, item.node, item.path, item.at), axis, c.bus, i);
+    const Loc name_at = item.node.IsMap() ? locate(item.node, {"name"}) : item.at;
+    const Loc node_at = item.node.IsMap() ? locate(item.node, {"node"}) : item.at;
+    axis_sites.push_back({item.at, name_at, node_at, item.path});
+    c.axes.push_back(std::move(axis));
+  }
+  if (c.axes.empty()) {
+    if (c.bus == BusKind::Simulated) {
+      AxisConfig axis;
+      axis.name = "axis0";
+      c.axes.push_back(axis);
+    } else {
+      root.error("axes", std::string("at least one axis is needed on bus ") +
+                             std::string(to_string(c.bus)));
+    }
+  } else if (c.axes.size() > kMaxAxes) {
+    root.error("axes", std::to_string(c.axes.size()) + " axes configured; at most " +
+                           std::to_string(kMaxAxes) + " are supported");
+  }
+
+  {
+    Section sim = root.section("simulated");
+    const auto sim_items = sim.list("axes");
+    for (const auto& item : sim_items) {
+      SimAxisConfig axis;
+      parse_sim_axis(Section(diag, item.node, item.path, item.at), axis, base_dir);
+      c.simulated.axes.push_back(std::move(axis));
+    }
+    if (sim_items.size() > c.axes.size()) {
+      sim.error("axes", std::to_string(sim_items.size()) + " entries but only " +
+                            std::to_string(c.axes.size()) +
+                            " axes are configured (simulated.axes[i] describes axes[i])");
+    }
+    sim.finish();
+    // Consumers index simulated.axes by axis: one entry per axis, defaults for the rest.
+    c.simulated.axes.resize(std::max(c.axes.size(), c.simulated.axes.size()));
+  }
+
+  parse_shm(root.section("shm"), c.shm);
+  parse_socket(root.section("socket"), c.socket);
+  root.finish();
+
+  check_cross_fields(diag, c, axis_sites, pl_sites, locate(doc, {"cycle", "spin_us"}),
+                     locate(doc, {"canio", "response_timeout_us"}));
+  return c;
+}
+
+ConfigResult load_text(std::string_view text, const std::string& name,
+                       const std::filesystem::path& base_dir) {
+  Diagnostics diag(name);
+  std::vector<YAML::Node> docs;
+  try {
+    docs = YAML::LoadAll(std::string(text));
+  } catch (const YAML::Exception& e) {
+    diag.error(loc_of(e.mark), "", "YAML syntax error: " + e.msg);
+    return ConfigResult(diag.take());
+  }
+  if (docs.size() > 1) {
+    diag.error(loc_of(docs[1].Mark()), "",
+               "the file holds " + std::to_string(docs.size()) + " YAML documents; one is expected");
+    return ConfigResult(diag.take());
+  }
+  DaemonConfig config;
+  try {
+    config = parse_document(diag, docs.empty() ? YAML::Node() : docs.front(), name, base_dir);
+  } catch (const std::exception& e) {
+    // yaml-cpp may throw on exotic documents (e.g. unusual aliases); never let that escape.
+    diag.error({}, "", std::string("cannot interpret the document: ") + e.what());
+  }
+  if (!diag.empty()) return ConfigResult(diag.take());
+  return ConfigResult(std::move(config));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Dump
+
+std::string quote(std::string_view s) {
+  std::string out = "\"";
+  for (const char ch : s) {
+    const auto c = static_cast<unsigned char>(ch);
+    if (c == '"' || c == '\\') {
+      out += '\\';
+      out += ch;
+    } else if (c < 0x20) {
+      static constexpr char kHex[] = "0123456789abcdef";
+      out += "\\x";
+      out += kHex[c >> 4];
+      out += kHex[c & 0xF];
+    } else {
+      out += ch;
+    }
+  }
+  return out + "\"";
+}
+
+std::string octal(uint32_t mode) {
+  std::array<char, 16> buf{};
+  const auto [end, ec] = std::to_chars(buf.data(), buf.data() + buf.size(), mode, 8);
+  std::string digits(buf.data(), ec == std::errc{} ? end : buf.data());
+  while (digits.size() < 3) digits.insert(digits.begin(), '0');
+  return "\"0" + digits + "\"";
+}
+
+std::string hex(uint64_t v) {
+  std::array<char, 24> buf{};
+  const auto [end, ec] = std::to_chars(buf.data(), buf.data() + buf.size(), v, 16);
+  return "0x" + std::string(buf.data(), ec == std::errc{} ? end : buf.data());
+}
+
+const char* yes(bool b) { return b ? "true" : "false"; }
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+
+std::string ConfigError::to_string() const {
+  std::string out = file;
+  if (line > 0) out += ":" + std::to_string(line) + ":" + std::to_string(column);
+  out += ": ";
+  if (!key.empty()) out += key + ": ";
+  return out + message;
+}
+
+const std::vector<ConfigError>& ConfigResult::errors() const noexcept {
+  static const std::vector<ConfigError> kNone;
+  const auto* e = std::get_if<std::vector<ConfigError>>(&value_);
+  return e ? *e : kNone;
+}
+
+std::string ConfigResult::error_report() const {
+  std::string out;
+  for (const auto& e : errors()) out += e.to_string() + "\n";
+  return out;
+}
+
+ConfigResult load_config(const std::string& path) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec)) {
+    return ConfigResult(std::vector{ConfigError{path, 0, 0, "", "is a directory, not a file"}});
+  }
+  std::ifstream in(path, std::ios::binary);
+  if (!in) {
+    return ConfigResult(std::vector{ConfigError{path, 0, 0, "", "cannot open the file"}});
+  }
+  std::ostringstream text;
+  text << in.rdbuf();
+  if (in.bad()) {
+    return ConfigResult(std::vector{ConfigError{path, 0, 0, "", "cannot read the file"}});
+  }
+  return load_text(text.str(), path, std::filesystem::path(path).parent_path());
+}
+
+ConfigResult load_config_from_string(std::string_view text, const std::string& name) {
+  return load_text(text, name, std::filesystem::path(name).parent_path());
+}
+
+std::string_view to_string(BusKind bus) noexcept {
+  switch (bus) {
+    case BusKind::Simulated:
+      return "simulated";
+    case BusKind::Powerlink:
+      return "powerlink";
+    case BusKind::Canio:
+      return "canio";
+  }
+  return "?";
+}
+
+std::string_view to_string(MotionProfile profile) noexcept {
+  switch (profile) {
+    case MotionProfile::ConstantVelocity:
+      return "constant_velocity";
+    case MotionProfile::Sine:
+      return "sine";
+    case MotionProfile::Stop:
+      return "stop";
+  }
+  return "?";
+}
+
+std::string fallback_socket_path(std::string_view configured_path) {
+  std::string file(configured_path.substr(configured_path.find_last_of('/') + 1));
+  if (file.empty()) file = "control.sock";
+  if (const char* xdg = std::getenv("XDG_RUNTIME_DIR"); xdg && *xdg == '/') {
+    return std::string(xdg) + "/ds1928d/" + file;
+  }
+  return "/tmp/ds1928d-" + std::to_string(::getuid()) + "/" + file;
+}
+
+std::string dump_config(const DaemonConfig& c) {
+  std::ostringstream o;
+  o << "# effective configuration";
+  if (!c.source_file.empty()) o << " of " << c.source_file;
+  o << "\nlog_level: " << c.log_level << "\n";
+  o << "cycle:\n"
+    << "  period_us: " << c.cycle.period_us << "\n"
+    << "  rt_priority: " << c.cycle.rt_priority << "\n"
+    << "  cpu: " << c.cycle.cpu << "\n"
+    << "  spin_us: " << c.cycle.spin_us << "\n"
+    << "  hold_cpu_dma_latency: " << yes(c.cycle.hold_cpu_dma_latency) << "\n"
+    << "  lock_memory: " << yes(c.cycle.lock_memory) << "\n";
+  o << "bus: " << to_string(c.bus) << "\n";
+  o << "simulated:\n  axes:" << (c.simulated.axes.empty() ? " []" : "") << "\n";
+  for (const auto& a : c.simulated.axes) {
+    o << "    - profile: " << to_string(a.profile) << "\n"
+      << "      velocity_periods_per_s: " << real_text(a.velocity_periods_per_s) << "\n"
+      << "      amplitude_periods: " << real_text(a.amplitude_periods) << "\n"
+      << "      frequency_hz: " << real_text(a.frequency_hz) << "\n"
+      << "      module_cycle_us: " << a.module_cycle_us << "\n"
+      << "      encoder_file: " << quote(a.encoder_file) << "\n"
+      << "      inject_error_info: " << hex(a.inject_error_info) << "\n";
+  }
+  const auto& p = c.powerlink;
+  o << "powerlink:\n"
+    << "  interface: " << quote(p.interface) << "\n"
+    << "  nodes:" << (p.nodes.empty() ? " []" : "") << "\n";
+  const auto opt = [](const auto& v) { return v ? hex(*v) : std::string(); };
+  const auto opt_dec = [](const auto& v) { return v ? std::to_string(*v) : std::string(); };
+  for (const auto& n : p.nodes) {
+    o << "    - node_id: " << +n.node_id << "\n"
+      << "      vendor_id: " << opt(n.vendor_id) << "\n"
+      << "      product_code: " << opt(n.product_code) << "\n"
+      << "      device_type: " << opt(n.device_type) << "\n"
+      << "      pres_timeout_us: " << n.pres_timeout_us << "\n"
+      << "      mandatory: " << yes(n.mandatory) << "\n"
+      << "      multiplex: " << n.multiplex << "\n"
+      << "      preq_size: " << opt_dec(n.preq_size) << "\n"
+      << "      pres_size: " << opt_dec(n.pres_size) << "\n";
+  }
+  o << "  thresholds:\n"
+    << "    loss_of_pres: " << p.thresholds.loss_of_pres << "\n"
+    << "    cycle_time_exceeded: " << p.thresholds.cycle_time_exceeded << "\n"
+    << "    late_pres: " << p.thresholds.late_pres << "\n"
+    << "  async_timeout_us: " << p.async_timeout_us << "\n"
+    << "  sdo_timeout_ms: " << p.sdo_timeout_ms << "\n"
+    << "  nettime_offset_us: " << p.nettime_offset_us << "\n"
+    << "  sdo_overrides:" << (p.sdo_overrides.empty() ? " []" : "") << "\n";
+  for (const auto& [reg, target] : p.sdo_overrides) {
+    o << "    - {register: " << reg << ", index: " << hex(target.first)
+      << ", subindex: " << hex(target.second) << "}\n";
+  }
+  o << "canio:\n"
+    << "  interface: " << quote(c.canio.interface) << "\n"
+    << "  bitrate: " << c.canio.bitrate << "\n"
+    << "  response_timeout_us: " << c.canio.response_timeout_us << "\n"
+    << "  byte_order: " << (c.canio.little_endian ? "little" : "big") << "\n";
+  o << "axes:\n";
+  for (const auto& a : c.axes) {
+    const auto& m = a.module;
+    o << "  - name: " << quote(a.name) << "\n"
+      << "    node: " << +a.node << "\n"
+      << "    slot: " << +a.slot << "\n"
+      << "    function_model: " << +static_cast<uint8_t>(a.function_model) << "\n"
+      << "    command_timeout_ms: " << a.command_timeout_ms << "\n"
+      << "    flatstream_timeout_cycles: " << a.flatstream_timeout_cycles << "\n"
+      << "    module:\n"
+      << "      endat_enable: " << yes(m.endat_enable) << "\n"
+      << "      position_signed: " << yes(m.position_signed) << "\n"
+      << "      fast_clock_off: " << yes(m.fast_clock_off) << "\n"
+      << "      sincos_unused: " << yes(m.sincos_unused) << "\n"
+      << "      prescaler: " << m.prescaler << "\n"
+      << "      slframe_gen_id: " << +m.slframe_gen_id << "\n"
+      << "      error_enable: " << hex(m.error_enable) << "\n"
+      << "      vss_min_mv: " << m.vss_min_mv << "\n"
+      << "      vss_max_mv: " << m.vss_max_mv << "\n"
+      << "      quit_time_us: " << m.quit_time_us << "\n"
+      << "      output_mtu: " << +m.output_mtu << "\n"
+      << "      input_mtu: " << +m.input_mtu << "\n"
+      << "      flatstream_mode: " << +m.flatstream_mode << "\n"
+      << "      forward: " << +m.forward << "\n"
+      << "      forward_delay_us: " << m.forward_delay_us << "\n";
+  }
+  const auto& s = c.shm;
+  o << "shm:\n"
+    << "  name: " << quote(s.name) << "\n"
+    << "  mode: " << octal(s.mode) << "\n"
+    << "  group: " << quote(s.group) << "\n";
+  const auto& k = c.socket;
+  o << "socket:\n"
+    << "  path: " << quote(k.path) << "\n"
+    << "  mode: " << octal(k.mode) << "\n"
+    << "  group: " << quote(k.group) << "\n"
+    << "  privileged_group: " << quote(k.privileged_group) << "\n"
+    << "  max_clients: " << k.max_clients << "\n"
+    << "  max_request_bytes: " << k.max_request_bytes << "\n"
+    << "  idle_timeout_ms: " << k.idle_timeout_ms << "\n";
+  return o.str();
+}
+
+}  // namespace ds1928
