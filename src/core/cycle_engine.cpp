@@ -15,14 +15,20 @@ class CycleCategory final : public std::error_category {
   [[nodiscard]] const char* name() const noexcept override { return "ds1928.cycle"; }
   [[nodiscard]] std::string message(int ev) const override {
     switch (static_cast<CycleErrc>(ev)) {
-      case CycleErrc::AlreadyRunning: return "the cycle engine is already running";
-      case CycleErrc::InvalidPeriod: return "cycle.period_us must be 1..1000000";
-      case CycleErrc::InvalidPriority: return "cycle.rt_priority must be 1..99";
+      case CycleErrc::AlreadyRunning:
+        return "the cycle engine is already running";
+      case CycleErrc::InvalidPeriod:
+        return "cycle.period_us must be 1..1000000";
+      case CycleErrc::InvalidPriority:
+        return "cycle.rt_priority must be 1..99";
       case CycleErrc::InvalidCpu:
         return "cycle.cpu must be -1 or a CPU this process is allowed to run on";
-      case CycleErrc::InvalidSpin: return "cycle.spin_us must be shorter than cycle.period_us";
-      case CycleErrc::ThreadStartFailed: return "the cycle thread could not be created";
-      case CycleErrc::AffinityFailed: return "the cycle thread could not be pinned to its CPU";
+      case CycleErrc::InvalidSpin:
+        return "cycle.spin_us must be shorter than cycle.period_us";
+      case CycleErrc::ThreadStartFailed:
+        return "the cycle thread could not be created";
+      case CycleErrc::AffinityFailed:
+        return "the cycle thread could not be pinned to its CPU";
     }
     return "unknown cycle engine error";
   }
@@ -42,7 +48,9 @@ std::error_code make_error_code(CycleErrc e) noexcept {
 CycleEngine::CycleEngine(const CycleConfig& config, CycleTask& task) noexcept
     : config_(config), task_(task), period_ns_(int64_t{config.period_us} * 1000) {}
 
-CycleEngine::~CycleEngine() { stop(); }
+CycleEngine::~CycleEngine() {
+  stop();
+}
 
 std::error_code CycleEngine::validate(const CycleConfig& config) noexcept {
   if (config.period_us == 0 || config.period_us > 1'000'000) return CycleErrc::InvalidPeriod;
@@ -52,12 +60,17 @@ std::error_code CycleEngine::validate(const CycleConfig& config) noexcept {
   return {};
 }
 
-CycleStartResult CycleEngine::start() { return launch(0); }
+CycleStartResult CycleEngine::start() {
+  return launch(0);
+}
 
 CycleStartResult CycleEngine::run_cycles(uint64_t cycles) {
   if (cycles == 0) return {};
   auto result = launch(cycles);
-  if (result) stop();
+  if (result) {
+    thread_.join();  // the thread leaves its loop after `cycles` cycles
+    dma_latency_.release();
+  }
   return result;
 }
 
@@ -148,8 +161,7 @@ void CycleEngine::cycle_loop() noexcept {
 
     stats_.apply_pending_reset();
     stats_.record_cycle(woke - start, end - woke);
-    cycle_count_.store(cycle_count_.load(std::memory_order_relaxed) + 1,
-                       std::memory_order_relaxed);
+    cycle_count_.store(cycle_count_.load(std::memory_order_relaxed) + 1, std::memory_order_relaxed);
 
     ++index;
     const int64_t next = t0 + static_cast<int64_t>(index) * period;
@@ -188,12 +200,17 @@ void CycleEngine::compose_status() {
     s += ", memory not locked (lock_memory off)";
   }
   switch (dma_latency_.state()) {
-    case rt::CpuDmaLatencyHold::State::Held: s += ", cpu_dma_latency held at 0"; break;
-    case rt::CpuDmaLatencyHold::State::Absent: s += ", no /dev/cpu_dma_latency"; break;
+    case rt::CpuDmaLatencyHold::State::Held:
+      s += ", cpu_dma_latency held at 0";
+      break;
+    case rt::CpuDmaLatencyHold::State::Absent:
+      s += ", no /dev/cpu_dma_latency";
+      break;
     case rt::CpuDmaLatencyHold::State::Failed:
       s += ", /dev/cpu_dma_latency not held (" + rt::errno_text(dma_latency_.error()) + ")";
       break;
-    case rt::CpuDmaLatencyHold::State::Off: break;
+    case rt::CpuDmaLatencyHold::State::Off:
+      break;
   }
   if (config_.spin_us > 0) s += ", spin " + std::to_string(config_.spin_us) + " us";
   if (!rt_ok) s += "; cycle timing is best effort";

@@ -72,9 +72,9 @@ class LatencyHistogram {
 
 // Everything the engine reports, as plain values.
 struct CycleStatsSnapshot {
-  uint64_t cycles = 0;          // cycles run since the last reset
-  uint64_t overruns = 0;        // cycles whose work ran past the next cycle start
-  uint64_t skipped_cycles = 0;  // grid slots left out to get back onto the timeline
+  uint64_t cycles = 0;            // cycles run since the last reset
+  uint64_t overruns = 0;          // cycles whose work ran past the next cycle start
+  uint64_t skipped_cycles = 0;    // grid slots left out to get back onto the timeline
   uint64_t reset_generation = 0;  // how many resets the cycle thread has applied
   HistogramSummary wake_latency;  // woke − nominal start
   HistogramSummary work;          // duration of CycleTask::run_cycle (the exchange and its work)

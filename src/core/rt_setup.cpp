@@ -103,6 +103,8 @@ void CpuDmaLatencyHold::release() noexcept {
   if (state_ == State::Held) state_ = State::Off;
 }
 
-std::string errno_text(int error) { return std::strerror(error); }
+std::string errno_text(int error) {
+  return std::strerror(error);
+}
 
 }  // namespace ds1928::rt
