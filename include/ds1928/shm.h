@@ -1,0 +1,432 @@
+/* ds1928d shared memory: layout and a header-only reader, usable from C11 and C++.
+ *
+ * The daemon publishes one record per axis every cycle into the POSIX shared memory object
+ * <name> (default "/ds1928d", i.e. /dev/shm/ds1928d) and signals each publication through a
+ * second, small object <name>.wait that readers may write (they register there while they
+ * sleep). The protocol is described in docs/shared-memory.md; in short:
+ *
+ *  - Every field that changes after start-up is accessed atomically (the functions below use
+ *    the GCC/Clang __atomic builtins, available in C and C++). Fields are plain integers so
+ *    that any language can map the layout.
+ *  - A record is a seqlock: `seq` is odd while the daemon writes it. A reader copies the data
+ *    between two equal, even loads of `seq`. The daemon never waits for a reader.
+ *  - `check` is a hash of the other data words: a reader that skipped the seqlock protocol (or
+ *    a test) can tell a torn copy from a consistent one.
+ *  - A new `generation` at every daemon start tells a restarted daemon from the old one; the
+ *    publication time that stops advancing tells a dead one.
+ *  - Waiting for the next publication is a futex on `ds1928_shm_wait_area.futex`; a reader
+ *    registers in a "factor slot" so that it is woken only on the cycles it asked for, and the
+ *    daemon makes the wake-up system call only when someone is registered.
+ *
+ * Requires Linux and GCC or Clang; in strict ISO C mode (-std=c11) define _DEFAULT_SOURCE
+ * before including system headers (syscall() is an extension). */
+#ifndef DS1928_SHM_H
+#define DS1928_SHM_H
+
+#include <errno.h>
+#include <fcntl.h>
+#include <limits.h>
+#include <linux/futex.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <string.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <sys/syscall.h>
+#include <time.h>
+#include <unistd.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define DS1928_SHM_MAGIC UINT64_C(0x4d48533832393144)      /* "D1928SHM" in memory order */
+#define DS1928_SHM_WAIT_MAGIC UINT64_C(0x5449415738323944) /* "D928WAIT" in memory order */
+#define DS1928_SHM_ABI_VERSION 1u
+#define DS1928_SHM_DEFAULT_NAME "/ds1928d"
+#define DS1928_SHM_WAIT_SUFFIX ".wait"
+#define DS1928_SHM_WAIT_SLOTS 16u
+
+/* Daemon state in the header. */
+enum ds1928_daemon_state {
+  DS1928_DAEMON_STARTING = 0, /* object created, no cycle published yet */
+  DS1928_DAEMON_RUNNING = 1,  /* cycling */
+  DS1928_DAEMON_STOPPING = 2, /* shutting down, publications may stop at any time */
+  DS1928_DAEMON_STOPPED = 3   /* exited cleanly; this object is no longer updated */
+};
+
+/* Validity of one axis record. */
+enum ds1928_axis_validity {
+  DS1928_AXIS_VALID = 0,        /* fresh inputs this cycle, no module error */
+  DS1928_AXIS_STALE = 1,        /* no fresh inputs this cycle: the data is the last good one */
+  DS1928_AXIS_BUS_DOWN = 2,     /* the bus is not cycling */
+  DS1928_AXIS_MODULE_ERROR = 3  /* fresh inputs, but ErrorInfo reports an error */
+};
+
+/* Time source of pos_time_ns (core/bus.hpp TimeSource). */
+enum ds1928_time_source {
+  DS1928_TIME_NONE = 0,
+  DS1928_TIME_NETTIME = 1,     /* module's PosTime (NetTime), mapped to CLOCK_MONOTONIC */
+  DS1928_TIME_RX_TIMESTAMP = 2 /* master's reception time of the inputs */
+};
+
+/* ds1928_axis_data.flags */
+#define DS1928_AXIS_NEW_POSITION 0x01u   /* PosCycle changed: a new EnDat position this cycle */
+#define DS1928_AXIS_FRACTION_VALID 0x02u /* the fraction's low 3 bits are zero */
+#define DS1928_AXIS_FRESH 0x04u          /* inputs arrived this cycle */
+
+/* Payload of one axis record: what a reader gets. 9 words of 64 bits. */
+struct ds1928_axis_data {
+  uint64_t position_raw; /* PositionHW:PositionLW, 64-bit sin/cos fixed point */
+  int64_t periods;       /* whole sine periods (bits 63..16, sign-extended if signed format) */
+  int64_t pos_time_ns;   /* acquisition instant, CLOCK_MONOTONIC ns (0 if none) */
+  int64_t publish_ns;    /* CLOCK_MONOTONIC ns when the daemon published this record */
+  uint64_t cycle;        /* daemon cycle index of the publication */
+  int32_t position_sdc;  /* low 32 bits read signed ("SDC" view) */
+  uint32_t pos_time_raw; /* PosTime as sent (NetTime µs, 32 bit) */
+  uint32_t endat_error;  /* EnDat error word (register 4352) as last read by the daemon */
+  uint32_t endat_warning;/* EnDat warning word (register 4353) as last read by the daemon */
+  uint16_t fraction;     /* fraction of one period (bits 15..0) */
+  uint8_t time_source;   /* enum ds1928_time_source */
+  int8_t pos_cycle;      /* PosCycle */
+  uint8_t error_info;    /* ErrorInfo bits (261) */
+  uint8_t validity;      /* enum ds1928_axis_validity */
+  uint8_t flags;         /* DS1928_AXIS_* flags */
+  uint8_t reserved;
+  uint64_t check;        /* ds1928_shm_check() of the 8 words above */
+};
+
+#define DS1928_AXIS_DATA_WORDS 9u
+
+/* One axis record: a seqlock around the payload, two cache lines. */
+struct ds1928_shm_axis {
+  uint64_t seq; /* atomic; odd while the daemon writes */
+  union {
+    struct ds1928_axis_data data;
+    uint64_t words[DS1928_AXIS_DATA_WORDS]; /* accessed word by word, atomically */
+  } u;
+  uint64_t reserved[6];
+};
+
+/* The object starts with this header; the records follow at offset header_size. */
+struct ds1928_shm_header {
+  /* Constant after creation. */
+  uint64_t magic;           /* DS1928_SHM_MAGIC, stored last (release) at creation */
+  uint32_t abi_version;     /* DS1928_SHM_ABI_VERSION */
+  uint32_t header_size;     /* sizeof(struct ds1928_shm_header) */
+  uint32_t record_size;     /* sizeof(struct ds1928_shm_axis) */
+  uint32_t axis_count;      /* records that follow */
+  uint64_t generation;      /* new at every daemon start (CLOCK_REALTIME ns of the start) */
+  uint64_t cycle_period_ns; /* the daemon's cycle period */
+  int32_t daemon_pid;       /* for messages */
+  uint32_t reserved0;
+  uint64_t reserved1[2];
+  /* Second cache line: changes at run time (all atomic). */
+  uint32_t daemon_state;    /* enum ds1928_daemon_state */
+  uint32_t reserved2;
+  uint64_t last_cycle;      /* cycle index of the last publication */
+  int64_t last_publish_ns;  /* CLOCK_MONOTONIC ns of the last publication (0 = none yet) */
+  uint64_t publish_count;   /* publications since start */
+  uint64_t reserved3[4];
+};
+
+/* <name>.wait: written by readers (registration) and by the daemon (futex word). */
+struct ds1928_shm_wait_slot {
+  uint32_t factor;  /* 0 = free; else woken on publications whose cycle index is a multiple */
+  uint32_t waiters; /* readers asleep (or about to sleep) in this slot */
+};
+struct ds1928_shm_wait_area {
+  uint64_t magic;      /* DS1928_SHM_WAIT_MAGIC, stored last at creation */
+  uint64_t generation; /* same as the data object's header */
+  uint64_t reserved0[6];
+  uint32_t futex;      /* changes (+1) at every publication and when the daemon stops */
+  uint32_t reserved1[15];
+  struct ds1928_shm_wait_slot slots[DS1928_SHM_WAIT_SLOTS]; /* bit i of the futex bitset = slot i */
+};
+
+#if defined(__cplusplus)
+static_assert(sizeof(struct ds1928_axis_data) == 8 * DS1928_AXIS_DATA_WORDS, "axis data layout");
+static_assert(sizeof(struct ds1928_shm_axis) == 128, "axis record layout");
+static_assert(sizeof(struct ds1928_shm_header) == 128, "header layout");
+static_assert(sizeof(struct ds1928_shm_wait_area) == 256, "wait area layout");
+#else
+_Static_assert(sizeof(struct ds1928_axis_data) == 8 * DS1928_AXIS_DATA_WORDS, "axis data layout");
+_Static_assert(sizeof(struct ds1928_shm_axis) == 128, "axis record layout");
+_Static_assert(sizeof(struct ds1928_shm_header) == 128, "header layout");
+_Static_assert(sizeof(struct ds1928_shm_wait_area) == 256, "wait area layout");
+#endif
+
+/* Results of the functions below besides 0 and -errno. */
+#define DS1928_SHM_TIMEOUT 1 /* ds1928_shm_wait: deadline passed */
+#define DS1928_SHM_STOPPED 2 /* ds1928_shm_wait: the daemon stopped (object no longer updated) */
+
+/* Check value over the first 8 payload words: a torn copy fails it with near certainty. */
+static inline uint64_t ds1928_shm_check(const struct ds1928_axis_data* d) {
+  const uint64_t* w = (const uint64_t*)(const void*)d;
+  uint64_t h = UINT64_C(0x6a09e667f3bcc909);
+  for (unsigned i = 0; i + 1 < DS1928_AXIS_DATA_WORDS; ++i) {
+    h = (h ^ w[i]) * UINT64_C(0x9e3779b97f4a7c15);
+    h ^= h >> 29;
+  }
+  return h;
+}
+
+static inline int64_t ds1928_shm_now_ns(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec;
+}
+
+static inline void ds1928_shm_cpu_relax(void) {
+#if defined(__x86_64__) || defined(__i386__)
+  __builtin_ia32_pause();
+#elif defined(__aarch64__)
+  __asm__ __volatile__("yield");
+#endif
+}
+
+static inline const struct ds1928_shm_axis* ds1928_shm_axis_record(
+    const struct ds1928_shm_header* h, uint32_t axis) {
+  return (const struct ds1928_shm_axis*)(const void*)((const char*)h + h->header_size +
+                                                     (size_t)axis * h->record_size);
+}
+
+/* Consistent copy of one record. Returns 0, -EINVAL for a bad axis, or -EBUSY when the record
+ * stayed locked for ~1 ms of retries (only possible if the daemon died in the middle of a
+ * write). */
+static inline int ds1928_shm_read_axis(const struct ds1928_shm_header* h, uint32_t axis,
+                                       struct ds1928_axis_data* out) {
+  if (axis >= h->axis_count) return -EINVAL;
+  const struct ds1928_shm_axis* rec = ds1928_shm_axis_record(h, axis);
+  uint64_t* dst = (uint64_t*)(void*)out;
+  for (unsigned attempt = 0; attempt < 100000u; ++attempt) {
+    const uint64_t s1 = __atomic_load_n(&rec->seq, __ATOMIC_ACQUIRE);
+    if (s1 & 1u) {
+      ds1928_shm_cpu_relax();
+      continue;
+    }
+    for (unsigned i = 0; i < DS1928_AXIS_DATA_WORDS; ++i)
+      dst[i] = __atomic_load_n(&rec->u.words[i], __ATOMIC_RELAXED);
+    __atomic_thread_fence(__ATOMIC_ACQUIRE);
+    if (__atomic_load_n(&rec->seq, __ATOMIC_RELAXED) == s1) return 0;
+  }
+  return -EBUSY;
+}
+
+static inline uint32_t ds1928_shm_daemon_state(const struct ds1928_shm_header* h) {
+  return __atomic_load_n(&h->daemon_state, __ATOMIC_ACQUIRE);
+}
+static inline uint64_t ds1928_shm_last_cycle(const struct ds1928_shm_header* h) {
+  return __atomic_load_n(&h->last_cycle, __ATOMIC_ACQUIRE);
+}
+static inline int64_t ds1928_shm_last_publish_ns(const struct ds1928_shm_header* h) {
+  return __atomic_load_n(&h->last_publish_ns, __ATOMIC_ACQUIRE);
+}
+static inline uint64_t ds1928_shm_publish_count(const struct ds1928_shm_header* h) {
+  return __atomic_load_n(&h->publish_count, __ATOMIC_ACQUIRE);
+}
+
+/* "Nothing seen yet": the starting value for ds1928_shm_wait's *seen_cycle before the first
+ * publication. */
+#define DS1928_SHM_NO_CYCLE UINT64_MAX
+
+/* The starting value of ds1928_shm_wait's *seen_cycle: the last published cycle, so that the
+ * first wait returns at the next publication. */
+static inline uint64_t ds1928_shm_wait_start(const struct ds1928_shm_header* h) {
+  return ds1928_shm_publish_count(h) != 0 ? ds1928_shm_last_cycle(h) : DS1928_SHM_NO_CYCLE;
+}
+
+/* True when a publication with a cycle index that is a multiple of `every` happened after
+ * `seen_cycle` (a multiple lies in (seen_cycle, last]; with DS1928_SHM_NO_CYCLE: the last
+ * publication's index is a multiple). */
+static inline int ds1928_shm_due(const struct ds1928_shm_header* h, uint64_t seen_cycle,
+                                 uint32_t every, uint64_t* last) {
+  if (ds1928_shm_publish_count(h) == 0) return 0;
+  const uint64_t cycle = ds1928_shm_last_cycle(h);
+  *last = cycle;
+  if (seen_cycle == DS1928_SHM_NO_CYCLE) return cycle % every == 0;
+  return cycle > seen_cycle && cycle / every > seen_cycle / every;
+}
+
+/* True while the daemon publishes: not stopped, and the last publication is younger than
+ * `missed_cycles` cycle periods (at least 100 ms, to ride over scheduling hiccups). A daemon
+ * that is still starting counts as alive for the same time after creation is seen. */
+static inline int ds1928_shm_daemon_alive(const struct ds1928_shm_header* h, int64_t now_ns,
+                                          uint32_t missed_cycles) {
+  if (ds1928_shm_daemon_state(h) == DS1928_DAEMON_STOPPED) return 0;
+  const int64_t last = ds1928_shm_last_publish_ns(h);
+  if (last == 0) return 1;
+  int64_t tolerance = (int64_t)h->cycle_period_ns * (int64_t)missed_cycles;
+  if (tolerance < 100000000) tolerance = 100000000;
+  return now_ns - last <= tolerance;
+}
+
+/* A mapped daemon instance. */
+struct ds1928_shm_reader {
+  const struct ds1928_shm_header* header; /* NULL when closed */
+  size_t size;
+  struct ds1928_shm_wait_area* wait; /* NULL when <name>.wait could not be opened read-write */
+  uint64_t generation;
+};
+
+static inline void ds1928_shm_reader_close(struct ds1928_shm_reader* r) {
+  if (r->header) munmap((void*)(uintptr_t)r->header, r->size);
+  if (r->wait) munmap(r->wait, sizeof(struct ds1928_shm_wait_area));
+  r->header = NULL;
+  r->wait = NULL;
+  r->size = 0;
+  r->generation = 0;
+}
+
+/* Maps <name> read-only and <name>.wait read-write (optional: without it ds1928_shm_wait
+ * returns -ENOTSUP). Returns 0; -errno of shm_open/mmap (-ENOENT: no daemon); -EAGAIN while the
+ * daemon is still creating the object; -EPROTO for a foreign object or another ABI version. */
+static inline int ds1928_shm_reader_open(struct ds1928_shm_reader* r, const char* name) {
+  r->header = NULL;
+  r->wait = NULL;
+  r->size = 0;
+  r->generation = 0;
+  int fd = shm_open(name, O_RDONLY | O_CLOEXEC, 0);
+  if (fd < 0) return -errno;
+  struct stat st;
+  if (fstat(fd, &st) != 0) {
+    int e = -errno;
+    close(fd);
+    return e;
+  }
+  if ((size_t)st.st_size < sizeof(struct ds1928_shm_header)) {
+    close(fd);
+    return -EAGAIN; /* created, not yet sized */
+  }
+  void* p = mmap(NULL, (size_t)st.st_size, PROT_READ, MAP_SHARED, fd, 0);
+  close(fd);
+  if (p == MAP_FAILED) return -errno;
+  const struct ds1928_shm_header* h = (const struct ds1928_shm_header*)p;
+  r->header = h;
+  r->size = (size_t)st.st_size;
+  const uint64_t magic = __atomic_load_n(&h->magic, __ATOMIC_ACQUIRE);
+  if (magic == 0) {
+    ds1928_shm_reader_close(r);
+    return -EAGAIN;
+  }
+  if (magic != DS1928_SHM_MAGIC || h->abi_version != DS1928_SHM_ABI_VERSION ||
+      h->header_size < sizeof(struct ds1928_shm_header) ||
+      h->record_size < sizeof(struct ds1928_shm_axis) ||
+      (uint64_t)h->header_size + (uint64_t)h->axis_count * h->record_size > r->size) {
+    ds1928_shm_reader_close(r);
+    return -EPROTO;
+  }
+  r->generation = h->generation;
+
+  char wait_name[NAME_MAX + 1];
+  const size_t len = strlen(name);
+  if (len + sizeof(DS1928_SHM_WAIT_SUFFIX) <= sizeof(wait_name)) {
+    memcpy(wait_name, name, len);
+    memcpy(wait_name + len, DS1928_SHM_WAIT_SUFFIX, sizeof(DS1928_SHM_WAIT_SUFFIX));
+    int wfd = shm_open(wait_name, O_RDWR | O_CLOEXEC, 0);
+    if (wfd >= 0) {
+      void* w = mmap(NULL, sizeof(struct ds1928_shm_wait_area), PROT_READ | PROT_WRITE,
+                     MAP_SHARED, wfd, 0);
+      close(wfd);
+      if (w != MAP_FAILED) {
+        struct ds1928_shm_wait_area* wa = (struct ds1928_shm_wait_area*)w;
+        if (__atomic_load_n(&wa->magic, __ATOMIC_ACQUIRE) == DS1928_SHM_WAIT_MAGIC &&
+            wa->generation == r->generation) {
+          r->wait = wa;
+        } else {
+          munmap(w, sizeof(struct ds1928_shm_wait_area));
+        }
+      }
+    }
+  }
+  return 0;
+}
+
+/* For a reader whose daemon looks dead or stopped: maps <name> again. Returns 1 when a new
+ * daemon generation is now mapped, 0 when the name still holds the same generation (or the new
+ * one is not ready yet), -errno when the name cannot be opened (the old mapping is kept). */
+static inline int ds1928_shm_reader_reopen(struct ds1928_shm_reader* r, const char* name) {
+  struct ds1928_shm_reader fresh;
+  int rc = ds1928_shm_reader_open(&fresh, name);
+  if (rc == -EAGAIN) return 0;
+  if (rc != 0) return rc;
+  if (fresh.generation == r->generation) {
+    ds1928_shm_reader_close(&fresh);
+    return 0;
+  }
+  ds1928_shm_reader_close(r);
+  *r = fresh;
+  return 1;
+}
+
+/* Claims (or finds) the wait slot for `factor`; falls back to a factor-1 slot filtered by the
+ * reader when all slots hold other factors. Returns the slot index or -1. */
+static inline int ds1928_shm_wait_slot_for(struct ds1928_shm_wait_area* w, uint32_t factor) {
+  for (unsigned pass = 0; pass < 2; ++pass) {
+    for (unsigned i = 0; i < DS1928_SHM_WAIT_SLOTS; ++i) {
+      uint32_t f = __atomic_load_n(&w->slots[i].factor, __ATOMIC_ACQUIRE);
+      if (f == factor) return (int)i;
+      if (f == 0) {
+        uint32_t expected = 0;
+        if (__atomic_compare_exchange_n(&w->slots[i].factor, &expected, factor, 0,
+                                        __ATOMIC_SEQ_CST, __ATOMIC_ACQUIRE) ||
+            expected == factor)
+          return (int)i;
+      }
+    }
+    if (factor == 1) break;
+    factor = 1;
+  }
+  return -1;
+}
+
+/* Waits for the next publication whose cycle index is a multiple of `every` (1 = every
+ * publication, like an application cycle factor). `*seen_cycle` is the cycle index the caller
+ * last consumed (ds1928_shm_wait_start() at the start, then the value this function stores);
+ * returns at once when a matching publication already happened after it.
+ * `deadline_ns` is absolute CLOCK_MONOTONIC. Returns 0 (and updates *seen_cycle to the last
+ * published cycle), DS1928_SHM_TIMEOUT, DS1928_SHM_STOPPED, -ENOTSUP without a wait area,
+ * -EINTR on a signal. */
+static inline int ds1928_shm_wait(const struct ds1928_shm_reader* r, uint64_t* seen_cycle,
+                                  uint32_t every, int64_t deadline_ns) {
+  const struct ds1928_shm_header* h = r->header;
+  struct ds1928_shm_wait_area* w = r->wait;
+  if (!w) return -ENOTSUP;
+  if (every == 0) every = 1;
+  const int slot = ds1928_shm_wait_slot_for(w, every);
+  if (slot < 0) return -ENOTSUP;
+  const uint32_t mask = 1u << (unsigned)slot;
+  int rc = 0;
+  for (;;) {
+    /* Register before looking: the daemon stores the futex word, then reads the waiter counts
+     * (both sequentially consistent), so either it sees us or we see its new value. */
+    __atomic_fetch_add(&w->slots[slot].waiters, 1u, __ATOMIC_SEQ_CST);
+    const uint32_t val = __atomic_load_n(&w->futex, __ATOMIC_SEQ_CST);
+    uint64_t cycle = 0;
+    if (ds1928_shm_due(h, *seen_cycle, every, &cycle)) {
+      *seen_cycle = cycle;
+      rc = 0;
+    } else if (ds1928_shm_daemon_state(h) == DS1928_DAEMON_STOPPED) {
+      rc = DS1928_SHM_STOPPED;
+    } else {
+      struct timespec ts;
+      ts.tv_sec = (time_t)(deadline_ns / 1000000000);
+      ts.tv_nsec = (long)(deadline_ns % 1000000000);
+      long k = syscall(SYS_futex, &w->futex, FUTEX_WAIT_BITSET, val, &ts, NULL, mask);
+      int e = k == 0 ? 0 : errno;
+      __atomic_fetch_sub(&w->slots[slot].waiters, 1u, __ATOMIC_SEQ_CST);
+      if (e == ETIMEDOUT) return DS1928_SHM_TIMEOUT;
+      if (e == EINTR) return -EINTR;
+      if (e != 0 && e != EAGAIN) return -e;
+      continue; /* woken or the word changed: look again */
+    }
+    __atomic_fetch_sub(&w->slots[slot].waiters, 1u, __ATOMIC_SEQ_CST);
+    return rc;
+  }
+}
+
+#ifdef __cplusplus
+} /* extern "C" */
+#endif
+
+#endif /* DS1928_SHM_H */

@@ -1,0 +1,302 @@
+// Shared memory: layout, publisher life cycle, consistent reads, waiting, restart and death.
+#include "ds1928/shm.hpp"
+
+#include <sys/stat.h>
+
+#include <catch2/catch.hpp>
+#include <thread>
+
+#include "shm/shm_error.hpp"
+#include "shm_test_util.hpp"
+#include "support/alloc_counter.hpp"
+
+using namespace ds1928;
+using namespace ds1928::shm;
+using namespace ds1928::shm::test;
+
+namespace {
+
+mode_t object_mode(const std::string& name) {
+  struct stat st {};
+  if (stat(("/dev/shm" + name).c_str(), &st) != 0) return 0;
+  return st.st_mode & 07777;
+}
+
+}  // namespace
+
+TEST_CASE("publisher creates the objects with the configured mode and removes them") {
+  const auto name = unique_name("mode");
+  ShmConfig cfg = config_for(name);
+  cfg.mode = 0640;
+  {
+    Publisher pub;
+    REQUIRE_FALSE(pub.open(cfg, 3, 1'000'000));
+    CHECK(object_mode(name) == 0640);
+    CHECK(object_mode(name + ".wait") == 0660);  // readers register there
+
+    ShmReader reader;
+    REQUIRE_FALSE(reader.open(name));
+    const auto& h = reader.header();
+    CHECK(h.magic == DS1928_SHM_MAGIC);
+    CHECK(h.abi_version == DS1928_SHM_ABI_VERSION);
+    CHECK(h.header_size == sizeof(ds1928_shm_header));
+    CHECK(h.record_size == sizeof(ds1928_shm_axis));
+    CHECK(h.axis_count == 3);
+    CHECK(h.cycle_period_ns == 1'000'000);
+    CHECK(h.daemon_pid == getpid());
+    CHECK(h.generation == pub.generation());
+    CHECK(reader.daemon_state() == DS1928_DAEMON_STARTING);
+    CHECK(reader.can_wait());
+
+    ds1928_axis_data d{};
+    REQUIRE_FALSE(reader.read(2, d));
+    CHECK(d.validity == DS1928_AXIS_BUS_DOWN);  // nothing published yet
+    CHECK(reader.read(3, d) == std::errc::invalid_argument);
+  }
+  CHECK(object_mode(name) == 0);
+  CHECK(object_mode(name + ".wait") == 0);
+}
+
+TEST_CASE("publisher rejects bad parameters with precise errors") {
+  Publisher pub;
+  CHECK(pub.open(config_for("no-slash"), 1, 1000) == ShmError::kInvalidName);
+  CHECK(pub.open(config_for("/a/b"), 1, 1000) == ShmError::kInvalidName);
+  CHECK(pub.open(config_for("/" + std::string(300, 'x')), 1, 1000) == ShmError::kInvalidName);
+  CHECK(pub.open(config_for(unique_name("bad")), 0, 1000) == ShmError::kNoAxes);
+  CHECK(pub.open(config_for(unique_name("bad")), kMaxAxes + 1, 1000) == ShmError::kTooManyAxes);
+  ShmConfig cfg = config_for(unique_name("bad"));
+  cfg.group = "no-such-group-ds1928";
+  CHECK(pub.open(cfg, 1, 1000) == ShmError::kUnknownGroup);
+  CHECK_FALSE(pub.is_open());
+}
+
+TEST_CASE("a reader gets exactly what was published, field by field") {
+  const auto name = unique_name("fields");
+  Publisher pub;
+  REQUIRE_FALSE(pub.open(config_for(name), 2, 500'000));
+  ShmReader reader;
+  REQUIRE_FALSE(reader.open(name));
+
+  AxisStatus a0 = status_for(41, 0);
+  a0.sample.position_raw = 0x0123'4567'89ab'cde8ull;
+  a0.sample.position_sdc = static_cast<int32_t>(0x89ab'cde8u);
+  a0.sample.periods = -5;
+  a0.sample.fraction = 0xcde8;
+  a0.sample.fraction_valid = false;
+  a0.sample.time_source = TimeSource::RxTimestamp;
+  a0.sample.pos_cycle = -3;
+  a0.sample.new_position = true;
+  a0.sample.error_info = error_info::kEnDatComError;
+  a0.endat_error = 0xbeef;
+  a0.endat_warning = 0x12;
+  a0.validity = classify(a0.sample, true);
+  const AxisStatus a1 = status_for(41, 1);
+  const AxisStatus all[] = {a0, a1};
+  const int64_t before = now_ns();
+  pub.publish(41, all);
+
+  ds1928_axis_data d{};
+  REQUIRE_FALSE(reader.read(0, d));
+  CHECK(d.position_raw == 0x0123'4567'89ab'cde8ull);
+  CHECK(d.position_sdc == static_cast<int32_t>(0x89ab'cde8u));
+  CHECK(d.periods == -5);
+  CHECK(d.fraction == 0xcde8);
+  CHECK(d.time_source == DS1928_TIME_RX_TIMESTAMP);
+  CHECK(d.pos_cycle == -3);
+  CHECK(d.flags == (DS1928_AXIS_NEW_POSITION | DS1928_AXIS_FRESH));
+  CHECK(d.error_info == error_info::kEnDatComError);
+  CHECK(d.endat_error == 0xbeef);
+  CHECK(d.endat_warning == 0x12);
+  CHECK(d.validity == DS1928_AXIS_MODULE_ERROR);
+  CHECK(d.cycle == 41);
+  CHECK(d.publish_ns >= before);
+  CHECK(d.check == ds1928_shm_check(&d));
+  REQUIRE_FALSE(reader.read(1, d));
+  CHECK(consistent(d, 1));
+  CHECK(d.flags == (DS1928_AXIS_NEW_POSITION | DS1928_AXIS_FRACTION_VALID | DS1928_AXIS_FRESH));
+
+  CHECK(reader.daemon_state() == DS1928_DAEMON_RUNNING);
+  CHECK(ds1928_shm_last_cycle(&reader.header()) == 41);
+  CHECK(ds1928_shm_publish_count(&reader.header()) == 1);
+  CHECK(ds1928_shm_last_publish_ns(&reader.header()) == d.publish_ns);
+  CHECK(reader.daemon_alive());
+
+  d.periods ^= 1;  // the check value catches a changed word
+  CHECK(d.check != ds1928_shm_check(&d));
+}
+
+TEST_CASE("validity classification follows bus, freshness, ErrorInfo") {
+  AxisSample s;
+  s.fresh = true;
+  CHECK(classify(s, true) == AxisValidity::Valid);
+  CHECK(classify(s, false) == AxisValidity::BusDown);
+  s.error_info = error_info::kPositionError;
+  CHECK(classify(s, true) == AxisValidity::ModuleError);
+  s.fresh = false;
+  CHECK(classify(s, true) == AxisValidity::Stale);
+}
+
+TEST_CASE("publishing allocates nothing, takes no mutex, and makes no futex call without waiters") {
+  const auto name = unique_name("rt");
+  Publisher pub;
+  REQUIRE_FALSE(pub.open(config_for(name), 4, 100'000));
+  std::vector<AxisStatus> st(4);
+  ds1928::test::HeapCounts counts;
+  {
+    ds1928::test::ScopedCounting scope;
+    for (uint64_t c = 1; c <= 10'000; ++c) {
+      for (uint32_t a = 0; a < 4; ++a) st[a] = status_for(c, a);
+      pub.publish(c, st);
+    }
+    counts = scope.stop();
+  }
+  CHECK(counts.allocations() == 0);
+  CHECK(counts.mutex_locks == 0);
+  CHECK(pub.wake_calls() == 0);
+}
+
+TEST_CASE("a waiting reader is woken at every publication, and with a factor only on multiples") {
+  const auto name = unique_name("factor");
+  Publisher pub;
+  REQUIRE_FALSE(pub.open(config_for(name), 1, 1'000'000));
+  ShmReader reader;
+  REQUIRE_FALSE(reader.open(name));
+  const uint32_t every = GENERATE(1u, 4u);
+  const uint64_t cycles = 200;
+
+  std::vector<uint64_t> woke;
+  std::atomic<bool> ready{false};
+  std::thread waiter([&] {
+    uint64_t seen = reader.wait_start();
+    ready = true;
+    std::error_code ec;
+    while (reader.wait(seen, every, now_ns() + 2'000'000'000, ec) == ShmWait::Published) {
+      woke.push_back(seen);
+      if (seen >= cycles) break;
+    }
+  });
+  while (!ready) std::this_thread::yield();
+  std::vector<AxisStatus> st(1);
+  timespec next{};
+  clock_gettime(CLOCK_MONOTONIC, &next);
+  for (uint64_t c = 1; c <= cycles; ++c) {
+    st[0] = status_for(c, 0);
+    // Give the waiter time to go back to sleep: the test is about who gets woken.
+    next.tv_nsec += 1'000'000;
+    if (next.tv_nsec >= 1'000'000'000) {
+      next.tv_nsec -= 1'000'000'000;
+      ++next.tv_sec;
+    }
+    clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &next, nullptr);
+    pub.publish(c, st);
+  }
+  waiter.join();
+
+  REQUIRE_FALSE(woke.empty());
+  CHECK(woke.back() == cycles);
+  const uint64_t expected = cycles / every;
+  // Under load the waiter may oversleep a publication (it then returns at once with the newer
+  // one), so allow a few merged wake-ups, but never a wake-up off the asked rate.
+  CHECK(woke.size() >= expected * 95 / 100);
+  CHECK(woke.size() <= expected);
+  size_t on_multiple = 0;
+  for (size_t i = 0; i < woke.size(); ++i) {
+    if (woke[i] % every == 0) ++on_multiple;
+    if (i > 0) CHECK(woke[i] / every > woke[i - 1] / every);
+  }
+  CHECK(on_multiple >= woke.size() * 95 / 100);
+  // The daemon side issued one wake-up per due publication, not one per cycle.
+  CHECK(pub.wake_calls() <= expected + 2);
+  CHECK(pub.wake_calls() >= expected * 80 / 100);
+}
+
+TEST_CASE("a waiter times out when publications stop and returns 'stopped' when the daemon exits") {
+  const auto name = unique_name("stop");
+  WriterProcess writer;
+  // 100 cycles at 1 ms, then alive but silent for 400 ms (hung), then exits without close.
+  writer.start(name, 1, 1'000'000, 100, false, 400);
+  REQUIRE(writer.running());
+  ShmReader reader;
+  REQUIRE_FALSE(reader.open(name));
+  uint64_t seen = reader.wait_start();
+  std::error_code ec;
+  int published = 0;
+  ShmWait r;
+  int64_t t0 = 0;
+  for (;;) {
+    t0 = now_ns();
+    r = reader.wait(seen, 1, t0 + 50'000'000, ec);
+    if (r != ShmWait::Published) break;
+    ++published;
+  }
+  const int64_t waited = now_ns() - t0;
+  CHECK_FALSE(ec);
+  CHECK(r == ShmWait::Timeout);
+  CHECK(seen == 100);
+  CHECK(published >= 90);
+  CHECK(waited >= 50'000'000);
+  CHECK(waited < 150'000'000);
+  // 100 ms tolerance: the daemon counts as dead once 100 ms passed since the last publication.
+  usleep(120'000);
+  CHECK_FALSE(reader.daemon_alive());
+  CHECK(reader.daemon_state() == DS1928_DAEMON_RUNNING);  // it never said goodbye
+  writer.join();
+  shm_unlink(name.c_str());
+  shm_unlink((name + ".wait").c_str());
+
+  // A clean stop wakes a sleeping waiter at once.
+  const auto name2 = unique_name("stop2");
+  Publisher pub;
+  REQUIRE_FALSE(pub.open(config_for(name2), 1, 1'000'000));
+  ShmReader reader2;
+  REQUIRE_FALSE(reader2.open(name2));
+  std::atomic<int> result{-1};
+  std::thread waiter([&] {
+    uint64_t s = reader2.wait_start();
+    std::error_code e;
+    result = static_cast<int>(reader2.wait(s, 1, now_ns() + 5'000'000'000, e));
+  });
+  usleep(50'000);
+  const int64_t t1 = now_ns();
+  pub.close();
+  waiter.join();
+  CHECK(result == static_cast<int>(ShmWait::Stopped));
+  CHECK(now_ns() - t1 < 1'000'000'000);
+  CHECK_FALSE(reader2.daemon_alive());
+}
+
+TEST_CASE("a reader detects a restarted daemon by its generation") {
+  const auto name = unique_name("restart");
+  auto first = std::make_unique<Publisher>();
+  REQUIRE_FALSE(first->open(config_for(name), 1, 1'000'000));
+  ShmReader reader;
+  REQUIRE_FALSE(reader.open(name));
+  const uint64_t gen1 = reader.generation();
+  CHECK_FALSE(reader.reopen());  // same daemon
+  first.reset();
+  CHECK(reader.daemon_state() == DS1928_DAEMON_STOPPED);  // the old mapping stays readable
+  CHECK_FALSE(reader.reopen());                           // nobody there yet
+
+  Publisher second;
+  REQUIRE_FALSE(second.open(config_for(name), 2, 1'000'000));
+  REQUIRE(reader.reopen());
+  CHECK(reader.generation() != gen1);
+  CHECK(reader.generation() == second.generation());
+  CHECK(reader.axis_count() == 2);
+  CHECK(reader.daemon_state() == DS1928_DAEMON_STARTING);
+}
+
+TEST_CASE("a second daemon cannot take over a live daemon's name, but replaces a dead one's") {
+  const auto name = unique_name("inuse");
+  {
+    WriterProcess live;
+    live.start(name, 1, 1'000'000, 0, true);  // publishes until killed
+    REQUIRE(live.running());
+    Publisher pub;
+    CHECK(pub.open(config_for(name), 1, 1'000'000) == ShmError::kNameInUse);
+    live.stop();  // killed: its object stays behind
+  }
+  Publisher pub;
+  CHECK_FALSE(pub.open(config_for(name), 1, 1'000'000));
+  CHECK(pub.is_open());
+}
