@@ -61,6 +61,7 @@ class SdoClient {
   void send_frame(bool with_command, const SdoCommand& cmd) noexcept;
   void send_ack() noexcept;
   void start_command(int64_t now_ns) noexcept;
+  void send_command() noexcept;
   void send_next_write_segment() noexcept;
   void finish(std::error_code ec, std::span<const uint8_t> data) noexcept;
 
