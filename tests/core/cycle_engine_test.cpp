@@ -59,6 +59,7 @@ struct RecordingTask : CycleTask {
     if (ctx.index == sleep_at_index && sleep_ns > 0) {
       const timespec ts{0, static_cast<long>(sleep_ns)};
       nanosleep(&ts, nullptr);
+      slept_until_ns = rt::now_ns();
     }
   }
   std::vector<Entry> entries;
@@ -66,6 +67,7 @@ struct RecordingTask : CycleTask {
   int64_t work_ns = 0;
   uint64_t sleep_at_index = ~uint64_t{0};
   int64_t sleep_ns = 0;
+  int64_t slept_until_ns = 0;
 };
 
 }  // namespace
@@ -120,14 +122,19 @@ TEST_CASE("cycle timeline is absolute: work does not shift later cycles", "[cycl
     REQUIRE(x.entered_ns >= x.ctx.woke_ns);
     lateness.push_back(x.entered_ns - x.ctx.start_ns);
   }
-  // The first and last cycles are (last.index − first.index) periods apart by the task's own
-  // clock, give or take one cycle's wake-up latency — not 400 × 300 µs = 120 ms more.
-  const auto& first = e.front();
-  const auto& last = e.back();
-  const int64_t nominal = static_cast<int64_t>(last.ctx.index - first.ctx.index) * kPeriod;
-  const int64_t measured = last.entered_ns - first.entered_ns;
-  INFO("nominal " << nominal << " ns, measured " << measured << " ns");
-  CHECK(std::llabs(measured - nominal) < 2'000'000);
+  // Against the task's own clock, cycle i runs (index_i − index_0) periods after cycle 0, give
+  // or take its wake-up latency — it does not drift by the 300 µs of work per cycle (which
+  // would be 90 ms by the last quarter). The median over the last quarter ignores a single
+  // late wake-up on a loaded machine.
+  std::vector<int64_t> offsets;
+  for (std::size_t i = kCycles * 3 / 4; i < kCycles; ++i) {
+    const int64_t nominal = static_cast<int64_t>(e[i].ctx.index - e[0].ctx.index) * kPeriod;
+    offsets.push_back(e[i].entered_ns - e[0].entered_ns - nominal);
+  }
+  std::nth_element(offsets.begin(), offsets.begin() + offsets.size() / 2, offsets.end());
+  const int64_t drift = offsets[offsets.size() / 2];
+  INFO("median offset over the last quarter: " << drift << " ns");
+  CHECK(std::llabs(drift) < 1'000'000);
   std::nth_element(lateness.begin(), lateness.begin() + kCycles / 2, lateness.end());
   CHECK(lateness[kCycles / 2] < 500'000);
 
@@ -138,7 +145,7 @@ TEST_CASE("cycle timeline is absolute: work does not shift later cycles", "[cycl
   CHECK(s.work.p50_ns < 1'000'000);
   // With no overrun the grid is contiguous; with one (a heavily loaded machine) the gaps are
   // exactly the skipped cycles.
-  CHECK(last.ctx.index - first.ctx.index + 1 == kCycles + s.skipped_cycles);
+  CHECK(e.back().ctx.index - e.front().ctx.index + 1 == kCycles + s.skipped_cycles);
 }
 
 TEST_CASE("overrun is counted and the timeline skips forward on the grid", "[cycle_engine]") {
@@ -166,12 +173,15 @@ TEST_CASE("overrun is counted and the timeline skips forward on the grid", "[cyc
     }
   }
   REQUIRE(pos5 + 1 < kCycles);
-  // The cycle after the long one is the first slot still in the future: 8 (9 only if the wake
-  // of cycle 5 itself was more than half a period late).
+  // The cycle after the long one is the first grid slot still in the future when the long one
+  // ended: 8 normally (9 or later only if cycle 5 itself woke or slept late).
   const uint64_t after = e[pos5 + 1].ctx.index;
+  const int64_t ended = task.slept_until_ns;
+  INFO("cycle after 5: " << after << ", cycle 5 ended " << ended - t0 << " ns after t0");
   CHECK(after >= 8);
-  CHECK(after <= 9);
-  // It did not start before its slot and woke close to it: the skip lands on the grid.
+  CHECK(t0 + static_cast<int64_t>(after) * kPeriod > ended);
+  // 200 µs allows for the engine's clock read coming a moment after the task's.
+  CHECK(t0 + static_cast<int64_t>(after - 1) * kPeriod <= ended + 200'000);
   CHECK(e[pos5 + 1].ctx.woke_ns >= t0 + static_cast<int64_t>(after) * kPeriod);
 
   const auto s = engine->stats_snapshot();
@@ -200,11 +210,14 @@ TEST_CASE("stats reset requested from another thread is applied by the cycle thr
   CHECK(before.cycles >= 200);
   CHECK(before.reset_generation == 0);
 
+  const uint64_t count_at_request = engine->cycle_count();
   engine->request_stats_reset();
   REQUIRE(wait_for([&] { return engine->stats_snapshot().reset_generation == 1; }));
-  const uint64_t count_at_reset = engine->cycle_count();
   const auto after = engine->stats_snapshot();
-  CHECK(after.cycles < 50);  // restarted from zero a few cycles ago
+  const uint64_t count_at_reset = engine->cycle_count();
+  // Restarted from zero after the request: it cannot hold more cycles than ran since then.
+  CHECK(after.cycles <= count_at_reset - count_at_request);
+  CHECK(after.cycles < before.cycles);
   CHECK(after.wake_latency.count == after.cycles);
 
   REQUIRE(wait_for([&] { return engine->cycle_count() >= count_at_reset + 100; }));
