@@ -1,0 +1,44 @@
+// ds1928d: real-time master of X20DS1928 EnDat encoder modules.
+#include <spdlog/spdlog.h>
+
+#include <CLI/CLI.hpp>
+#include <cstdio>
+#include <iostream>
+
+#include "config/config_loader.hpp"
+#include "daemon.hpp"
+
+int main(int argc, char** argv) {
+  CLI::App app{"ds1928d — real-time master of X20DS1928 EnDat encoder modules"};
+  std::string config_path = "/etc/ds1928d/ds1928d.yaml";
+  std::string check_path;
+  bool print_config = false;
+  app.add_option("-c,--config", config_path, "configuration file (YAML)");
+  app.add_option("--check-config", check_path,
+                 "validate FILE without touching the bus; exit 0 when valid, 2 otherwise");
+  app.add_flag("--print-config", print_config,
+               "with --check-config: print the effective configuration (all defaults filled in)");
+  app.set_version_flag("--version", "ds1928d 0.1.0");
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e) == 0 ? 0 : 2;
+  }
+
+  const std::string& path = check_path.empty() ? config_path : check_path;
+  auto loaded = ds1928::load_config(path);
+  if (!loaded) {
+    std::fprintf(stderr, "%s", loaded.error_report().c_str());
+    std::fprintf(stderr, "%s: %zu error(s)\n", path.c_str(), loaded.errors().size());
+    return 2;
+  }
+  if (!check_path.empty()) {
+    const auto& c = loaded.config();
+    if (print_config) std::cout << ds1928::dump_config(c);
+    std::printf("%s: ok (bus %s, %zu axis(es), cycle %u µs)\n", path.c_str(),
+                std::string(ds1928::to_string(c.bus)).c_str(), c.axes.size(), c.cycle.period_us);
+    return 0;
+  }
+  ds1928::Daemon daemon(std::move(loaded).config());
+  return daemon.run();
+}
