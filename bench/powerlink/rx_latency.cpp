@@ -103,12 +103,11 @@ int run_echo(pl::RawLink& link, uint8_t node, uint32_t period_us, uint32_t guard
       now = pl::monotonic_now_ns();
     }
     const auto r = link.receive(rx, now + (predictive ? 2LL * guard_us * 1000 : 100'000'000));
-    if (!r) {
-      std::fprintf(stderr, "echo: receive: %s\n", r.error().message().c_str());
-      if (!link.link_up()) return 1;
+    if (r.error) {
+      std::fprintf(stderr, "echo: receive: %s\n", r.error.message().c_str());
       continue;
     }
-    const std::size_t n = *r;
+    const std::size_t n = r.length;
     if (n == 0) continue;
     if (n < 24 || rx[14] != 0x03 || rx[15] != node) continue;
     last_request = pl::monotonic_now_ns();
@@ -152,10 +151,10 @@ int run_ping(pl::RawLink& link, uint8_t node, uint32_t count, uint32_t period_us
     bool got = false;
     while (!got) {
       const auto r = link.receive(rx, deadline);
-      if (!r || *r == 0) break;
-      if (*r >= 28 && rx[14] == 0x04 && rx[16] == node && pl::load_le32(rx.data() + 24) == i) {
+      if (r.error || r.length == 0) break;
+      if (r.length >= 28 && rx[14] == 0x04 && rx[16] == node && pl::load_le32(rx.data() + 24) == i) {
         got = true;
-        if (i >= 100) rtt.push_back(pl::monotonic_now_ns() - t0);
+        if (i >= 100) rtt.push_back(r.rx_time_ns - t0);
       }
     }
     if (!got && i >= 100) ++lost;

@@ -285,17 +285,17 @@ bool RawLink::ring_ready() const noexcept {
   return (__atomic_load_n(&hdr->tp_status, __ATOMIC_ACQUIRE) & TP_STATUS_USER) != 0;
 }
 
-ReceiveResult RawLink::receive(std::span<uint8_t> buffer, int64_t deadline_ns) noexcept {
-  if (fd_ < 0) return ReceiveResult{RawLinkErrc::kNotOpen};
+Received RawLink::receive(std::span<uint8_t> buffer, int64_t deadline_ns) noexcept {
+  if (fd_ < 0) return Received{0, 0, make_error_code(RawLinkErrc::kNotOpen)};
   switch (options_.rx_mode) {
     case RxMode::Ring: return receive_ring(buffer, deadline_ns);
     case RxMode::BusyPoll: return receive_socket(buffer, deadline_ns, false);
     case RxMode::Blocking: return receive_socket(buffer, deadline_ns, true);
   }
-  return ReceiveResult{RawLinkErrc::kNotOpen};
+  return Received{0, 0, make_error_code(RawLinkErrc::kNotOpen)};
 }
 
-ReceiveResult RawLink::receive_ring(std::span<uint8_t> buffer, int64_t deadline_ns) noexcept {
+Received RawLink::receive_ring(std::span<uint8_t> buffer, int64_t deadline_ns) noexcept {
   // Polls the head slot's status word: no syscall while waiting, and the check costs a cache
   // line that the kernel writes when it fills the slot.
   auto* hdr = reinterpret_cast<tpacket2_hdr*>(
@@ -305,7 +305,7 @@ ReceiveResult RawLink::receive_ring(std::span<uint8_t> buffer, int64_t deadline_
     // Reading the clock every poll would dominate the loop; every 16th is fine-grained enough.
     if ((++spins & 15u) == 0 && monotonic_now_ns() >= deadline_ns) {
       if (__atomic_load_n(&hdr->tp_status, __ATOMIC_ACQUIRE) & TP_STATUS_USER) break;
-      return ReceiveResult{std::size_t{0}};
+      return Received{};
     }
     cpu_relax();
   }
@@ -318,12 +318,12 @@ ReceiveResult RawLink::receive_ring(std::span<uint8_t> buffer, int64_t deadline_
   ++stats_.rx_frames;
   if (copied < len) {
     ++stats_.rx_truncated;
-    return ReceiveResult{RawLinkErrc::kBufferTooSmall};
+    return Received{copied, monotonic_now_ns(), make_error_code(RawLinkErrc::kBufferTooSmall)};
   }
-  return ReceiveResult{copied};
+  return Received{copied, monotonic_now_ns(), {}};
 }
 
-ReceiveResult RawLink::receive_socket(std::span<uint8_t> buffer, int64_t deadline_ns,
+Received RawLink::receive_socket(std::span<uint8_t> buffer, int64_t deadline_ns,
                                       bool block) noexcept {
   for (;;) {
     const ssize_t n = recv(fd_, buffer.data(), buffer.size(), MSG_DONTWAIT | MSG_TRUNC);
@@ -331,30 +331,31 @@ ReceiveResult RawLink::receive_socket(std::span<uint8_t> buffer, int64_t deadlin
       ++stats_.rx_frames;
       if (static_cast<std::size_t>(n) > buffer.size()) {
         ++stats_.rx_truncated;
-        return ReceiveResult{RawLinkErrc::kBufferTooSmall};
+        return Received{buffer.size(), monotonic_now_ns(),
+                        make_error_code(RawLinkErrc::kBufferTooSmall)};
       }
-      return ReceiveResult{static_cast<std::size_t>(n)};
+      return Received{static_cast<std::size_t>(n), monotonic_now_ns(), {}};
     }
     const int e = errno;
     if (e == EINTR) continue;
     if (e != EAGAIN && e != EWOULDBLOCK) {
       if (is_link_loss(e)) set_up(false);
-      return ReceiveResult{errno_code(e)};
+      return Received{0, 0, errno_code(e)};
     }
     const int64_t now = monotonic_now_ns();
-    if (now >= deadline_ns) return ReceiveResult{std::size_t{0}};
+    if (now >= deadline_ns) return Received{};
     if (block) {
       pollfd pfd{fd_, POLLIN, 0};
       const timespec timeout = to_timespec(deadline_ns - now);
       const int r = ppoll(&pfd, 1, &timeout, nullptr);
-      if (r == 0) return ReceiveResult{std::size_t{0}};
+      if (r == 0) return Received{};
       if (r > 0 && (pfd.revents & POLLERR) != 0 && (pfd.revents & POLLIN) == 0) {
         int err = 0;
         socklen_t len = sizeof err;
         getsockopt(fd_, SOL_SOCKET, SO_ERROR, &err, &len);
         if (err != 0) {
           if (is_link_loss(err)) set_up(false);
-          return ReceiveResult{errno_code(err)};
+          return Received{0, 0, errno_code(err)};
         }
       }
     } else {

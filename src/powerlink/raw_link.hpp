@@ -83,10 +83,10 @@ class RawLink final : public Link {
 
   // Link interface. send() pads frames shorter than 60 bytes with zeros (a veth does not pad).
   [[nodiscard]] std::error_code send(std::span<const uint8_t> frame) noexcept override;
-  // Waits for one POWERLINK frame until `deadline_ns` (CLOCK_MONOTONIC). Returns the frame
-  // length, 0 when the deadline passed, or an error (link loss).
-  [[nodiscard]] ReceiveResult receive(std::span<uint8_t> buffer,
-                                      int64_t deadline_ns) noexcept override;
+  // Waits for one POWERLINK frame until `deadline_ns` (CLOCK_MONOTONIC): its length, length 0
+  // when the deadline passed, or an error (link loss, truncated frame). rx_time_ns is taken when
+  // the frame is picked up.
+  [[nodiscard]] Received receive(std::span<uint8_t> buffer, int64_t deadline_ns) noexcept override;
   [[nodiscard]] bool link_up() const noexcept override {
     return up_.load(std::memory_order_relaxed);
   }
@@ -105,9 +105,9 @@ class RawLink final : public Link {
   void read_kernel_drops() noexcept;
 
  private:
-  [[nodiscard]] ReceiveResult receive_ring(std::span<uint8_t> buffer, int64_t deadline_ns) noexcept;
-  [[nodiscard]] ReceiveResult receive_socket(std::span<uint8_t> buffer, int64_t deadline_ns,
-                                             bool block) noexcept;
+  [[nodiscard]] Received receive_ring(std::span<uint8_t> buffer, int64_t deadline_ns) noexcept;
+  [[nodiscard]] Received receive_socket(std::span<uint8_t> buffer, int64_t deadline_ns,
+                                        bool block) noexcept;
   [[nodiscard]] bool ring_ready() const noexcept;
   void set_up(bool up) noexcept;
   void move_from(RawLink& other) noexcept;

@@ -1,0 +1,655 @@
+#include "sim/powerlink_cn.hpp"
+
+#include <time.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <climits>
+#include <cstring>
+
+#include "sim/sim_error.hpp"
+
+namespace ds1928::sim {
+
+namespace pl = ds1928::powerlink;
+using pl::NmtState;
+
+namespace {
+
+// SDO abort codes (powerlink.md §4).
+constexpr uint32_t kAbortNoObject = 0x06020000;
+constexpr uint32_t kAbortNoSubindex = 0x06090011;
+constexpr uint32_t kAbortReadOnly = 0x06010002;
+constexpr uint32_t kAbortTypeLength = 0x06070010;
+constexpr uint32_t kAbortOutOfRange = 0x06090030;
+constexpr uint32_t kAbortGeneral = 0x08000000;
+
+// Error codes logged in the StatusResponse history (DS 301 DLL error codes).
+constexpr uint16_t kErrorLossOfSoc = 0x8245;
+constexpr uint16_t kErrorLossOfPReq = 0x8242;
+constexpr uint16_t kErrorEntryTypeHistory = 0x1001;  // mode history, profile DLL
+
+constexpr uint8_t kPriorityGeneric = 3;
+
+[[nodiscard]] uint32_t abort_for(std::error_code ec) noexcept {
+  if (ec == SimErrc::unknown_register) return kAbortNoObject;
+  if (ec == SimErrc::read_only) return kAbortReadOnly;
+  if (ec == SimErrc::wrong_size) return kAbortTypeLength;
+  if (ec == SimErrc::out_of_range) return kAbortOutOfRange;
+  return kAbortGeneral;
+}
+
+[[nodiscard]] bool is_cycling(NmtState s) noexcept {
+  return s == NmtState::kPreOperational2 || s == NmtState::kReadyToOperate ||
+         s == NmtState::kOperational || s == NmtState::kStopped;
+}
+
+}  // namespace
+
+// The bus controller's object dictionary as the SDO server sees it: identity objects and the
+// module registers through the (index, subindex) ↔ register mapping.
+class PowerlinkCn::Objects final : public pl::SdoObjectAccess {
+ public:
+  explicit Objects(PowerlinkCn& cn) : cn_(cn) {}
+
+  uint32_t read_object(uint16_t index, uint8_t subindex, std::span<uint8_t> out,
+                       std::size_t& size) noexcept override {
+    uint32_t value = 0;
+    uint8_t width = 4;
+    if (index == 0x1000) {
+      if (subindex != 0) return kAbortNoSubindex;
+      value = cn_.config_.device_type;
+    } else if (index == 0x1018) {
+      switch (subindex) {
+        case 0: value = 4; width = 1; break;
+        case 1: value = cn_.config_.vendor_id; break;
+        case 2: value = cn_.config_.product_code; break;
+        case 3: value = cn_.config_.revision_no; break;
+        case 4: value = cn_.config_.serial_no; break;
+        default: return kAbortNoSubindex;
+      }
+    } else {
+      Ds1928Module* module = nullptr;
+      uint16_t reg = 0;
+      if (const uint32_t abort = locate(index, subindex, module, reg)) return abort;
+      width = pl::register_size(reg).value_or(4);
+      if (auto ec = module->read_register(reg, width, value)) return abort_for(ec);
+    }
+    if (out.size() < width) return kAbortGeneral;
+    for (uint8_t i = 0; i < width; ++i) out[i] = static_cast<uint8_t>(value >> (8 * i));
+    size = width;
+    return 0;
+  }
+
+  uint32_t write_object(uint16_t index, uint8_t subindex,
+                        std::span<const uint8_t> data) noexcept override {
+    if (index == 0x1000 || index == 0x1018) return kAbortReadOnly;
+    Ds1928Module* module = nullptr;
+    uint16_t reg = 0;
+    if (const uint32_t abort = locate(index, subindex, module, reg)) return abort;
+    const uint8_t width = pl::register_size(reg).value_or(static_cast<uint8_t>(data.size()));
+    if (data.size() != width || (width != 1 && width != 2 && width != 4)) return kAbortTypeLength;
+    uint32_t value = 0;
+    for (std::size_t i = 0; i < data.size(); ++i) value |= static_cast<uint32_t>(data[i]) << (8 * i);
+    if (auto ec = module->write_register(reg, width, value)) return abort_for(ec);
+    return 0;
+  }
+
+ private:
+  uint32_t locate(uint16_t index, uint8_t subindex, Ds1928Module*& module,
+                  uint16_t& reg) const noexcept {
+    const auto address = cn_.mapping_.register_for(pl::SdoObject{index, subindex});
+    if (!address) return kAbortNoObject;
+    for (const HostedModule& m : cn_.modules_) {
+      if (m.slot == address->slot) {
+        module = m.module.get();
+        reg = address->reg;
+        return 0;
+      }
+    }
+    return kAbortNoObject;  // no module in that slot
+  }
+
+  PowerlinkCn& cn_;
+};
+
+// NMT table: what each state does with the cyclic frames. ASnd (NMT commands, SDO) is handled
+// the same in every powered state.
+const PowerlinkCn::StateHandler& PowerlinkCn::handler() const noexcept {
+  static const StateHandler kTable[] = {
+      {NmtState::kNotActive, &PowerlinkCn::soc_activate, &PowerlinkCn::preq_ignore,
+       &PowerlinkCn::soa_activate},
+      {NmtState::kPreOperational1, &PowerlinkCn::soc_pre_op1, &PowerlinkCn::preq_ignore,
+       &PowerlinkCn::soa_answer},
+      {NmtState::kPreOperational2, &PowerlinkCn::soc_cycling, &PowerlinkCn::preq_answer,
+       &PowerlinkCn::soa_answer},
+      {NmtState::kReadyToOperate, &PowerlinkCn::soc_cycling, &PowerlinkCn::preq_answer,
+       &PowerlinkCn::soa_answer},
+      {NmtState::kOperational, &PowerlinkCn::soc_cycling, &PowerlinkCn::preq_answer,
+       &PowerlinkCn::soa_answer},
+      // STOPPED: no PRes, only the asynchronous services.
+      {NmtState::kStopped, &PowerlinkCn::soc_cycling, &PowerlinkCn::preq_ignore,
+       &PowerlinkCn::soa_answer},
+  };
+  static const StateHandler kSilent{NmtState::kOff, nullptr, &PowerlinkCn::preq_ignore,
+                                    &PowerlinkCn::soa_ignore};
+  for (const StateHandler& h : kTable)
+    if (h.state == state_) return h;
+  return kSilent;
+}
+
+PowerlinkCn::PowerlinkCn(const PowerlinkCnConfig& config, FrameSink send)
+    : config_(config), send_(std::move(send)), mapping_(config.sdo_overrides),
+      rng_(config.faults.seed) {
+  std::vector<pl::ModuleSpec> specs;
+  for (const PowerlinkCnModuleConfig& m : config_.modules) {
+    specs.push_back(pl::ModuleSpec{m.slot, m.input_mtu, m.output_mtu});
+    HostedModule hosted;
+    hosted.slot = m.slot;
+    hosted.module = std::make_unique<Ds1928Module>(FunctionModel::Standard, m.sim);
+    modules_.push_back(std::move(hosted));
+  }
+  auto layout = pl::make_layout(specs);
+  if (layout) {
+    layout_ = *layout;
+  } else {
+    // An impossible module list leaves an empty image: the node still boots (and says so in
+    // its IdentResponse sizes), which is what a misconfigured bus controller does.
+    layout_ = pl::NodeImageLayout{};
+  }
+  for (HostedModule& m : modules_) m.mapping = layout_.find(m.slot);
+
+  objects_ = std::make_unique<Objects>(*this);
+  pl::SdoServerConfig sdo_config;
+  sdo_config.own_node = config_.node_id;
+  sdo_config.own_mac = config_.mac;
+  sdo_ = std::make_unique<pl::SdoServer>(
+      sdo_config, *objects_, [this](std::span<const uint8_t> frame) { queue_async(frame); });
+  boot(0);
+}
+
+PowerlinkCn::~PowerlinkCn() = default;
+
+void PowerlinkCn::set_faults(const PowerlinkCnFaults& faults) noexcept {
+  config_.faults = faults;
+  rng_.seed(faults.seed);
+}
+
+void PowerlinkCn::enter(NmtState next, int64_t now_ns) noexcept {
+  if (next == state_) return;
+  const NmtState from = state_;
+  state_ = next;
+  if (listener_) listener_(from, next, now_ns);
+}
+
+void PowerlinkCn::boot(int64_t now_ns) noexcept {
+  // Power-up runs through the reset states to NOT_ACTIVE without waiting for anything.
+  enter(NmtState::kInitialising, now_ns);
+  reset(pl::NmtCommandId::kSwReset, now_ns);
+}
+
+void PowerlinkCn::reset(pl::NmtCommandId command, int64_t now_ns) noexcept {
+  ++stats_.resets;
+  switch (command) {
+    case pl::NmtCommandId::kResetNode:
+    case pl::NmtCommandId::kSwReset:
+      // Reset application: the modules take their bus-controller defaults again.
+      enter(NmtState::kResetApplication, now_ns);
+      for (HostedModule& m : modules_) m.module->power_up();
+      [[fallthrough]];
+    case pl::NmtCommandId::kResetCommunication:
+      enter(NmtState::kResetCommunication, now_ns);
+      break;
+    case pl::NmtCommandId::kResetConfiguration:
+      enter(NmtState::kResetConfiguration, now_ns);
+      break;
+    default:
+      break;
+  }
+  sdo_->reset();
+  async_head_ = 0;
+  async_count_ = 0;
+  have_soc_ = false;
+  period_ns_ = 0;
+  last_soc_ns_ = 0;
+  cycles_since_preq_ = 0;
+  preq_interval_ = 0;
+  loss_of_preq_counter_ = 0;
+  pres_pending_ = false;
+  error_count_ = 0;
+  exception_new_ = false;
+  enter(NmtState::kNotActive, now_ns);
+}
+
+void PowerlinkCn::power_cycle(int64_t now_ns) noexcept {
+  ++stats_.power_cycles;
+  powered_ = false;
+  power_on_at_ns_ = now_ns + config_.power_off_ns;
+  pres_pending_ = false;
+  enter(NmtState::kOff, now_ns);
+}
+
+int64_t PowerlinkCn::next_deadline_ns() const noexcept {
+  int64_t next = INT64_MAX;
+  if (!powered_) next = power_on_at_ns_;
+  if (pres_pending_) next = std::min(next, pres_due_ns_);
+  return next;
+}
+
+void PowerlinkCn::tick(int64_t now_ns) noexcept {
+  if (!powered_) {
+    if (now_ns < power_on_at_ns_) return;
+    powered_ = true;
+    boot(now_ns);
+    return;
+  }
+  if (pres_pending_ && now_ns >= pres_due_ns_) {
+    pres_pending_ = false;
+    emit({pres_frame_.data(), pres_pending_len_});
+    ++stats_.pres_sent;
+  }
+  if (have_soc_ && is_cycling(state_)) {
+    // Loss of SoC: the MN stopped cycling (or the link is gone); fall back and wait to be
+    // booted again.
+    const int64_t timeout =
+        std::max<int64_t>(config_.soc_timeout_min_ns,
+                          static_cast<int64_t>(config_.soc_loss_periods) * period_ns_);
+    if (now_ns - last_soc_ns_ > timeout) {
+      ++stats_.loss_of_soc;
+      log_error(kErrorLossOfSoc, now_ns);
+      have_soc_ = false;
+      period_ns_ = 0;
+      preq_interval_ = 0;
+      enter(NmtState::kPreOperational1, now_ns);
+    }
+  }
+  sdo_->tick(now_ns);
+  tick_modules(now_ns);
+}
+
+void PowerlinkCn::receive(std::span<const uint8_t> frame, int64_t now_ns) noexcept {
+  if (!powered_) {
+    tick(now_ns);
+    if (!powered_) return;
+  }
+  auto parsed = pl::parse_frame(frame);
+  if (!parsed) {
+    ++stats_.bad_frames;
+    return;
+  }
+  const pl::Frame& f = *parsed;
+  const StateHandler& h = handler();
+  if (const auto* soc = std::get_if<pl::Soc>(&f.message)) {
+    ++stats_.soc;
+    if (h.on_soc != nullptr) (this->*h.on_soc)(*soc, now_ns);
+  } else if (const auto* preq = std::get_if<pl::PReq>(&f.message)) {
+    if (f.header.dst_node != config_.node_id) return;
+    ++stats_.preq;
+    (this->*h.on_preq)(*preq, now_ns);
+  } else if (const auto* soa = std::get_if<pl::SoA>(&f.message)) {
+    ++stats_.soa;
+    (this->*h.on_soa)(*soa, now_ns);
+  } else if (std::holds_alternative<pl::Asnd>(f.message)) {
+    if (f.header.dst_node != config_.node_id && f.header.dst_node != pl::kNodeBroadcast) return;
+    if (f.header.src_node != pl::kNodeMn) return;
+    on_asnd(f, now_ns);
+  }
+  // PRes of other nodes: nothing to consume.
+}
+
+// ---- SoC ----------------------------------------------------------------------------------
+
+void PowerlinkCn::note_soc_timing(const pl::Soc& soc, int64_t now_ns) noexcept {
+  if (have_soc_) {
+    const int64_t gap = now_ns - last_soc_ns_;
+    // Smooth the learned period; a gap of more than 4 periods is a pause, not a period.
+    if (period_ns_ == 0) {
+      period_ns_ = gap;
+    } else if (gap < 4 * period_ns_) {
+      period_ns_ += (gap - period_ns_) / 8;
+    }
+  }
+  have_soc_ = true;
+  last_soc_ns_ = now_ns;
+  soc_relative_us_ = soc.relative_time_us;
+}
+
+void PowerlinkCn::soc_activate(const pl::Soc& soc, int64_t now_ns) noexcept {
+  enter(NmtState::kPreOperational1, now_ns);
+  soc_pre_op1(soc, now_ns);
+}
+
+void PowerlinkCn::soc_pre_op1(const pl::Soc& soc, int64_t now_ns) noexcept {
+  note_soc_timing(soc, now_ns);
+  enter(NmtState::kPreOperational2, now_ns);
+}
+
+void PowerlinkCn::soc_cycling(const pl::Soc& soc, int64_t now_ns) noexcept {
+  note_soc_timing(soc, now_ns);
+  tick_modules(now_ns);
+  // Loss of PReq: polled before (interval learned) but not within that interval this time.
+  if (loss_of_preq_counter_ > 0) --loss_of_preq_counter_;
+  if (preq_interval_ != 0) {
+    ++cycles_since_preq_;
+    if (cycles_since_preq_ > preq_interval_) {
+      ++stats_.loss_of_preq;
+      cycles_since_preq_ = 0;
+      loss_of_preq_counter_ += 8;
+      if (config_.loss_of_preq_threshold != 0 &&
+          loss_of_preq_counter_ >= config_.loss_of_preq_threshold) {
+        loss_of_preq_counter_ = 0;
+        log_error(kErrorLossOfPReq, now_ns);
+      }
+    }
+  }
+}
+
+// ---- PReq / PRes ----------------------------------------------------------------------------
+
+void PowerlinkCn::preq_answer(const pl::PReq& preq, int64_t now_ns) noexcept {
+  if (preq_interval_ == 0 || cycles_since_preq_ == 0) {
+    preq_interval_ = std::max<uint32_t>(1, cycles_since_preq_);
+  } else {
+    preq_interval_ = cycles_since_preq_;
+  }
+  cycles_since_preq_ = 0;
+  // Outputs are applied only when the MN says they are valid and the node is operational.
+  if (preq.ready && state_ == NmtState::kOperational) {
+    for (HostedModule& m : modules_) {
+      if (m.mapping == nullptr) continue;
+      ModuleOutputs out;
+      if (pl::read_outputs(preq.payload, *m.mapping, out)) m.module->apply_outputs(out);
+    }
+  }
+  send_pres(now_ns);
+}
+
+void PowerlinkCn::send_pres(int64_t now_ns) noexcept {
+  tick_modules(now_ns);
+  const PowerlinkCnFaults& faults = config_.faults;
+  if (faults.drop_pres > 0.0 && uniform_(rng_) < faults.drop_pres) {
+    ++stats_.pres_dropped;
+    return;
+  }
+  std::array<uint8_t, pl::kMaxIsoPayload> payload{};
+  std::size_t size = layout_.pres_size;
+  for (const HostedModule& m : modules_) {
+    if (m.mapping == nullptr) continue;
+    (void)pl::write_inputs(std::span<uint8_t>(payload.data(), size), *m.mapping,
+                           m.module->inputs());
+  }
+  if (faults.pres_size_delta != 0) {
+    const long wrong = static_cast<long>(size) + faults.pres_size_delta;
+    size = static_cast<std::size_t>(std::clamp<long>(wrong, 0, pl::kMaxIsoPayload));
+  }
+  pl::PRes pres;
+  pres.nmt_state = state_;
+  pres.ready = state_ == NmtState::kOperational;
+  pres.exception_new = exception_new_;
+  pres.request_count = request_count();
+  pres.priority = pres.request_count != 0 ? kPriorityGeneric : 0;
+  pres.payload = std::span<const uint8_t>(payload.data(), size);
+  auto len = pl::build_pres(tx_, pl::pres_header(config_.mac, config_.node_id), pres);
+  if (!len) return;
+  if (faults.delay_pres > 0.0 && faults.delay_pres_ns > 0 && uniform_(rng_) < faults.delay_pres) {
+    ++stats_.pres_delayed;
+    std::memcpy(pres_frame_.data(), tx_.data(), *len);
+    pres_pending_len_ = *len;
+    pres_due_ns_ = now_ns + faults.delay_pres_ns;
+    pres_pending_ = true;
+    return;
+  }
+  emit({tx_.data(), *len});
+  ++stats_.pres_sent;
+}
+
+// ---- SoA / ASnd -----------------------------------------------------------------------------
+
+void PowerlinkCn::soa_activate(const pl::SoA& soa, int64_t now_ns) noexcept {
+  enter(NmtState::kPreOperational1, now_ns);
+  soa_answer(soa, now_ns);
+}
+
+void PowerlinkCn::soa_answer(const pl::SoA& soa, int64_t now_ns) noexcept {
+  (void)now_ns;
+  if (soa.target != config_.node_id) return;
+  switch (soa.service) {
+    case pl::RequestedService::kIdentRequest: send_ident_response(); break;
+    case pl::RequestedService::kStatusRequest: send_status_response(); break;
+    case pl::RequestedService::kUnspecifiedInvite:
+      if (async_count_ != 0) {
+        emit({async_frames_[async_head_].data(), async_len_[async_head_]});
+        ++stats_.asnd_sent;
+        async_head_ = (async_head_ + 1) % kAsyncSlots;
+        --async_count_;
+      }
+      break;
+    default:
+      // NMTRequestInvite / SyncRequest: this node has no NMT requests and no sync support.
+      break;
+  }
+}
+
+void PowerlinkCn::on_asnd(const pl::Frame& frame, int64_t now_ns) noexcept {
+  const auto& asnd = std::get<pl::Asnd>(frame.message);
+  if (const auto* cmd = std::get_if<pl::NmtCommand>(&asnd.body)) {
+    ++stats_.nmt_commands;
+    on_nmt_command(cmd->command, now_ns);
+  } else if (const auto* sdo = std::get_if<pl::Sdo>(&asnd.body)) {
+    if (state_ == NmtState::kNotActive) return;  // SDO needs PRE_OPERATIONAL_1 or later
+    ++stats_.sdo_frames_in;
+    sdo_->receive(*sdo, now_ns);
+  }
+}
+
+void PowerlinkCn::on_nmt_command(uint8_t command, int64_t now_ns) noexcept {
+  using C = pl::NmtCommandId;
+  switch (static_cast<C>(command)) {
+    case C::kStartNode:
+      if (state_ == NmtState::kReadyToOperate) enter(NmtState::kOperational, now_ns);
+      break;
+    case C::kStopNode:
+      if (is_cycling(state_)) enter(NmtState::kStopped, now_ns);
+      break;
+    case C::kEnterPreOperational2:
+      if (state_ == NmtState::kOperational || state_ == NmtState::kReadyToOperate ||
+          state_ == NmtState::kStopped) {
+        enter(NmtState::kPreOperational2, now_ns);
+      }
+      break;
+    case C::kEnableReadyToOperate:
+      if (state_ == NmtState::kPreOperational2) enter(NmtState::kReadyToOperate, now_ns);
+      break;
+    case C::kResetNode:
+    case C::kSwReset:
+    case C::kResetCommunication:
+    case C::kResetConfiguration:
+      reset(static_cast<C>(command), now_ns);
+      break;
+    default:
+      break;  // not a command for a CN in this state: ignored, as the standard says
+  }
+}
+
+void PowerlinkCn::send_ident_response() noexcept {
+  pl::IdentResponse ident;
+  ident.nmt_state = state_;
+  ident.exception_new = exception_new_;
+  ident.request_count = request_count();
+  ident.priority = ident.request_count != 0 ? kPriorityGeneric : 0;
+  ident.mtu = 300;
+  ident.poll_in_size = layout_.pres_size;
+  ident.poll_out_size = layout_.preq_size;
+  ident.response_time_ns = config_.response_time_ns;
+  ident.device_type = config_.device_type;
+  ident.vendor_id = config_.vendor_id;
+  ident.product_code = config_.product_code;
+  ident.revision_no = config_.revision_no;
+  ident.serial_no = config_.serial_no;
+  // Feature flags: SDO by ASnd (bit 2) and NMT Info services (bit 3) — no PDO over SDO, no PRC.
+  ident.feature_flags = (1u << 2) | (1u << 3);
+  ident.ip_address = 192u | (168u << 8) | (100u << 16) | (static_cast<uint32_t>(config_.node_id) << 24);
+  ident.subnet_mask = 0x00FFFFFF;
+  ident.default_gateway = 192u | (168u << 8) | (100u << 16) | (254u << 24);
+  const char name[] = "ds1928-sim";
+  std::memcpy(ident.host_name.data(), name, sizeof name - 1);
+  auto len = pl::build_ident_response(
+      tx_, pl::asnd_header(config_.mac, config_.node_id, pl::kNodeMn), ident);
+  if (!len) return;
+  emit({tx_.data(), *len});
+  ++stats_.asnd_sent;
+}
+
+void PowerlinkCn::send_status_response() noexcept {
+  pl::StatusResponse status;
+  status.nmt_state = state_;
+  status.exception_new = exception_new_;
+  status.request_count = request_count();
+  status.priority = status.request_count != 0 ? kPriorityGeneric : 0;
+  status.static_error_bits = error_count_ != 0 ? 1 : 0;  // bit 0: generic error present
+  auto len = pl::build_status_response(
+      tx_, pl::asnd_header(config_.mac, config_.node_id, pl::kNodeMn), status,
+      std::span<const pl::ErrorEntry>(errors_.data(), error_count_));
+  if (!len) return;
+  emit({tx_.data(), *len});
+  ++stats_.asnd_sent;
+  // The history went out: the MN has it.
+  error_count_ = 0;
+}
+
+void PowerlinkCn::queue_async(std::span<const uint8_t> frame) noexcept {
+  if (async_count_ == kAsyncSlots || frame.size() > pl::kMaxFrameSize) return;  // SDO retries
+  const std::size_t slot = (async_head_ + async_count_) % kAsyncSlots;
+  std::memcpy(async_frames_[slot].data(), frame.data(), frame.size());
+  async_len_[slot] = frame.size();
+  ++async_count_;
+}
+
+uint8_t PowerlinkCn::request_count() const noexcept {
+  return static_cast<uint8_t>(std::min<std::size_t>(async_count_, 7));
+}
+
+void PowerlinkCn::log_error(uint16_t code, int64_t now_ns) noexcept {
+  pl::ErrorEntry e;
+  e.type = kErrorEntryTypeHistory;
+  e.code = code;
+  const uint64_t net_us = net_time_us_at(now_ns);
+  e.timestamp = (net_us / 1'000'000) | (((net_us % 1'000'000) * 1000) << 32);
+  if (error_count_ == kErrorSlots) {
+    std::move(errors_.begin() + 1, errors_.end(), errors_.begin());
+    --error_count_;
+  }
+  errors_[error_count_++] = e;
+  exception_new_ = !exception_new_;
+}
+
+// ---- Time and modules ---------------------------------------------------------------------
+
+uint64_t PowerlinkCn::net_time_us_at(int64_t now_ns) const noexcept {
+  if (!have_soc_ && last_soc_ns_ == 0) return static_cast<uint64_t>(now_ns / 1000);
+  const int64_t since = std::max<int64_t>(0, now_ns - last_soc_ns_);
+  return pl::net_time_us(soc_relative_us_, config_.nettime_offset_us) +
+         static_cast<uint64_t>(since / 1000);
+}
+
+void PowerlinkCn::tick_modules(int64_t now_ns) noexcept {
+  const uint64_t net = net_time_us_at(now_ns);
+  for (HostedModule& m : modules_) m.module->tick(now_ns, net);
+}
+
+void PowerlinkCn::emit(std::span<const uint8_t> frame) noexcept {
+  if (send_) send_(frame);
+}
+
+// ---- Loop -----------------------------------------------------------------------------------
+
+PowerlinkCnLoop::PowerlinkCnLoop(pl::Link& link, std::function<bool(int64_t)> wait_readable,
+                                 std::span<PowerlinkCn* const> nodes, Options options)
+    : link_(link), wait_readable_(std::move(wait_readable)), nodes_(nodes.begin(), nodes.end()),
+      options_(options) {}
+
+namespace {
+[[nodiscard]] int64_t now_monotonic_ns() noexcept {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
+void sleep_until_ns(int64_t t) noexcept {
+  const timespec ts{static_cast<time_t>(t / 1'000'000'000), static_cast<long>(t % 1'000'000'000)};
+  while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
+  }
+}
+}  // namespace
+
+void PowerlinkCnLoop::Rhythm::note(int64_t t) noexcept {
+  if (last != 0) {
+    const int64_t gap = t - last;
+    if (period == 0 || gap > 4 * period) {
+      period = gap;
+    } else {
+      period += (gap - period) / 8;
+    }
+  }
+  last = t;
+}
+
+int64_t PowerlinkCnLoop::next_cycle_start(int64_t now) const noexcept {
+  if (soc_.valid(now)) return soc_.last + soc_.period;
+  if (soa_.valid(now)) return soa_.last + soa_.period;
+  return 0;
+}
+
+bool PowerlinkCnLoop::run_once() noexcept {
+  int64_t now = now_monotonic_ns();
+  int64_t node_deadline = INT64_MAX;
+  for (PowerlinkCn* n : nodes_) node_deadline = std::min(node_deadline, n->next_deadline_ns());
+
+  const int64_t next_start = next_cycle_start(now);
+  if (next_start != 0 && cycle_done_) {
+    // Idle phase: this cycle's frames are handled; frames that still come (an ASnd from the MN
+    // after its SoA) wait in the ring until the wake-up.
+    const int64_t wake = std::min({next_start - options_.guard_ns, node_deadline,
+                                   now + options_.idle_wait_ns});
+    if (wake > now) sleep_until_ns(wake);
+    now = now_monotonic_ns();
+  } else if (next_start == 0 && node_deadline > now) {
+    // No rhythm known (MN silent or just starting): block until something comes.
+    (void)wait_readable_(std::min(node_deadline, now + options_.idle_wait_ns));
+    now = now_monotonic_ns();
+  }
+  cycle_done_ = false;
+
+  // Busy phase: poll until this cycle's SoA went by (or a bounded window passed).
+  const int64_t period = soc_.valid(now) ? soc_.period : soa_.valid(now) ? soa_.period : 0;
+  const int64_t end = now + (period > 0 ? period + options_.guard_ns : options_.idle_wait_ns);
+  bool ok = true;
+  while (!cycle_done_ && now < end) {
+    const pl::Received r = link_.receive(rx_, std::min(end, node_deadline));
+    now = r.rx_time_ns != 0 ? r.rx_time_ns : now_monotonic_ns();
+    if (r.error && r.length == 0) {
+      ok = false;
+      break;
+    }
+    if (r.length > 14) {
+      const std::span<const uint8_t> frame(rx_.data(), r.length);
+      for (PowerlinkCn* n : nodes_) n->receive(frame, now);
+      if (rx_[12] == 0x88 && rx_[13] == 0xAB) {
+        const uint8_t type = rx_[14] & 0x7F;
+        if (type == 0x01) soc_.note(now);
+        if (type == 0x05) {
+          soa_.note(now);
+          cycle_done_ = true;  // after the SoA only the invited ASnd follows
+        }
+      }
+    }
+    node_deadline = INT64_MAX;
+    for (PowerlinkCn* n : nodes_) {
+      if (n->next_deadline_ns() <= now) n->tick(now);
+      node_deadline = std::min(node_deadline, n->next_deadline_ns());
+    }
+  }
+  for (PowerlinkCn* n : nodes_) n->tick(now);
+  return ok;
+}
+
+}  // namespace ds1928::sim

@@ -1,0 +1,251 @@
+// Simulated POWERLINK bus controller (Controlled Node) hosting simulated X20DS1928 modules.
+//
+// PowerlinkCn is the pure protocol core (Lely style): frames in through receive(frame, now),
+// time through tick(now), frames out through the send callback. It runs in-process against the
+// Managing Node in unit tests, or on a raw socket through PowerlinkCnLoop.
+//
+// NMT (EPSG DS 301 CN states, powerlink.md §5):
+//   power-up → INITIALISING → RESET_APPLICATION → RESET_COMMUNICATION → NOT_ACTIVE
+//   NOT_ACTIVE --SoA/SoC--> PRE_OPERATIONAL_1 --SoC--> PRE_OPERATIONAL_2
+//   --NMTEnableReadyToOperate--> READY_TO_OPERATE --NMTStartNode--> OPERATIONAL
+//   loss of SoC in PRE_OPERATIONAL_2 and above → PRE_OPERATIONAL_1; reset commands → the
+//   matching RESET_* state → NOT_ACTIVE.
+// Process image: powerlink/process_image.hpp's default layout, fixed at construction from the
+// modules' MTUs, reported as PollInSize/PollOutSize in the IdentResponse.
+// NetTime: a module's NetTime at instant t is low32(RelativeTime of the last SoC + offset) plus
+// the time elapsed since that SoC arrived — the relation the MN maps PosTime back with.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <random>
+#include <span>
+#include <string_view>
+#include <vector>
+
+#include "config/config.hpp"
+#include "powerlink/frames.hpp"
+#include "powerlink/link.hpp"
+#include "powerlink/process_image.hpp"
+#include "powerlink/sdo.hpp"
+#include "powerlink/sdo_mapping.hpp"
+#include "sim/ds1928_module.hpp"
+
+namespace ds1928::sim {
+
+struct PowerlinkCnModuleConfig {
+  uint8_t slot = 1;
+  SimAxisConfig sim;
+  uint8_t input_mtu = 7;   // Rx bytes room in the PRes (fixed PDO mapping of the bus controller)
+  uint8_t output_mtu = 7;  // Tx bytes room in the PReq
+};
+
+// Fault injection. Probabilities are per PRes.
+struct PowerlinkCnFaults {
+  double drop_pres = 0.0;            // PRes not sent
+  double delay_pres = 0.0;           // PRes sent `delay_pres_ns` late
+  int64_t delay_pres_ns = 0;
+  int pres_size_delta = 0;           // PRes payload this many bytes longer (or shorter)
+  uint64_t seed = 1;
+};
+
+struct PowerlinkCnConfig {
+  uint8_t node_id = 1;
+  powerlink::MacAddress mac{0x02, 0x00, 0x00, 0x00, 0x19, 0x28};
+  // Identification (IdentResponse, objects 0x1000 / 0x1018).
+  uint32_t device_type = 0x00000191;  // DS 401 generic I/O
+  uint32_t vendor_id = 0x0000001A;
+  uint32_t product_code = 0x00001928;
+  uint32_t revision_no = 0x00010000;
+  uint32_t serial_no = 1;
+  uint32_t response_time_ns = 10'000;  // reported PRes response time
+  std::vector<PowerlinkCnModuleConfig> modules{PowerlinkCnModuleConfig{}};
+  powerlink::SdoMapping::Overrides sdo_overrides;
+  int64_t nettime_offset_us = 0;
+  // No SoC for this many learned cycle periods (at least soc_timeout_min_ns) = loss of SoC.
+  uint32_t soc_loss_periods = 5;
+  int64_t soc_timeout_min_ns = 5'000'000;
+  uint32_t loss_of_preq_threshold = 15;  // DLL threshold counter (+8 per event, −1 per cycle)
+  int64_t power_off_ns = 300'000'000;    // how long a power cycle keeps the node silent
+  PowerlinkCnFaults faults;
+};
+
+struct PowerlinkCnStats {
+  uint64_t soc = 0;
+  uint64_t preq = 0;
+  uint64_t pres_sent = 0;
+  uint64_t pres_dropped = 0;
+  uint64_t pres_delayed = 0;
+  uint64_t soa = 0;
+  uint64_t asnd_sent = 0;
+  uint64_t nmt_commands = 0;
+  uint64_t sdo_frames_in = 0;
+  uint64_t loss_of_soc = 0;
+  uint64_t loss_of_preq = 0;
+  uint64_t power_cycles = 0;
+  uint64_t resets = 0;
+  uint64_t bad_frames = 0;  // rejected by the codec
+};
+
+class PowerlinkCn {
+ public:
+  using FrameSink = std::function<void(std::span<const uint8_t> frame)>;
+  using StateListener =
+      std::function<void(powerlink::NmtState from, powerlink::NmtState to, int64_t now_ns)>;
+
+  PowerlinkCn(const PowerlinkCnConfig& config, FrameSink send);
+  ~PowerlinkCn();
+  PowerlinkCn(const PowerlinkCn&) = delete;
+  PowerlinkCn& operator=(const PowerlinkCn&) = delete;
+
+  // A received Ethernet frame (any POWERLINK frame on the wire; the CN picks what is its own).
+  void receive(std::span<const uint8_t> frame, int64_t now_ns) noexcept;
+  // Timeouts (loss of SoC, power-on), delayed PRes, module ticks. Call at least every ms.
+  void tick(int64_t now_ns) noexcept;
+  // Earliest instant tick() has work to do (delayed PRes, end of power-off); INT64_MAX if none.
+  [[nodiscard]] int64_t next_deadline_ns() const noexcept;
+
+  // Fault injection: the node loses power now and boots again after config.power_off_ns.
+  void power_cycle(int64_t now_ns) noexcept;
+  void set_faults(const PowerlinkCnFaults& faults) noexcept;
+
+  [[nodiscard]] powerlink::NmtState nmt_state() const noexcept { return state_; }
+  [[nodiscard]] uint8_t node_id() const noexcept { return config_.node_id; }
+  [[nodiscard]] const PowerlinkCnStats& stats() const noexcept { return stats_; }
+  [[nodiscard]] const powerlink::NodeImageLayout& layout() const noexcept { return layout_; }
+  [[nodiscard]] std::size_t module_count() const noexcept { return modules_.size(); }
+  [[nodiscard]] Ds1928Module& module(std::size_t i) noexcept { return *modules_[i].module; }
+  // Learned SoC period (0 until two SoCs arrived).
+  [[nodiscard]] int64_t cycle_period_ns() const noexcept { return period_ns_; }
+  void set_state_listener(StateListener listener) { listener_ = std::move(listener); }
+
+ private:
+  struct HostedModule {
+    uint8_t slot = 1;
+    std::unique_ptr<Ds1928Module> module;
+    const powerlink::ModuleMapping* mapping = nullptr;
+  };
+  class Objects;
+
+  // NMT as a table of small handlers.
+  struct StateHandler {
+    powerlink::NmtState state;
+    void (PowerlinkCn::*on_soc)(const powerlink::Soc&, int64_t);
+    void (PowerlinkCn::*on_preq)(const powerlink::PReq&, int64_t);
+    void (PowerlinkCn::*on_soa)(const powerlink::SoA&, int64_t);
+  };
+  [[nodiscard]] const StateHandler& handler() const noexcept;
+  void enter(powerlink::NmtState next, int64_t now_ns) noexcept;
+  void boot(int64_t now_ns) noexcept;
+  void reset(powerlink::NmtCommandId command, int64_t now_ns) noexcept;
+
+  // Handlers.
+  void soc_activate(const powerlink::Soc& soc, int64_t now_ns) noexcept;
+  void soc_pre_op1(const powerlink::Soc& soc, int64_t now_ns) noexcept;
+  void soc_cycling(const powerlink::Soc& soc, int64_t now_ns) noexcept;
+  void preq_ignore(const powerlink::PReq&, int64_t) noexcept {}
+  void preq_answer(const powerlink::PReq& preq, int64_t now_ns) noexcept;
+  void soa_activate(const powerlink::SoA& soa, int64_t now_ns) noexcept;
+  void soa_answer(const powerlink::SoA& soa, int64_t now_ns) noexcept;
+  void soa_ignore(const powerlink::SoA&, int64_t) noexcept {}
+
+  void on_asnd(const powerlink::Frame& frame, int64_t now_ns) noexcept;
+  void on_nmt_command(uint8_t command, int64_t now_ns) noexcept;
+  void note_soc_timing(const powerlink::Soc& soc, int64_t now_ns) noexcept;
+  void tick_modules(int64_t now_ns) noexcept;
+  [[nodiscard]] uint64_t net_time_us_at(int64_t now_ns) const noexcept;
+  void send_pres(int64_t now_ns) noexcept;
+  void send_ident_response() noexcept;
+  void send_status_response() noexcept;
+  void queue_async(std::span<const uint8_t> frame) noexcept;
+  [[nodiscard]] uint8_t request_count() const noexcept;
+  void log_error(uint16_t code, int64_t now_ns) noexcept;
+  void emit(std::span<const uint8_t> frame) noexcept;
+
+  PowerlinkCnConfig config_;
+  FrameSink send_;
+  StateListener listener_;
+  powerlink::NmtState state_ = powerlink::NmtState::kOff;
+  std::vector<HostedModule> modules_;
+  powerlink::NodeImageLayout layout_;
+  powerlink::SdoMapping mapping_;
+  std::unique_ptr<Objects> objects_;
+  std::unique_ptr<powerlink::SdoServer> sdo_;
+  PowerlinkCnStats stats_;
+  std::mt19937_64 rng_;
+  std::uniform_real_distribution<double> uniform_{0.0, 1.0};
+
+  // Cycle timing.
+  int64_t last_soc_ns_ = 0;
+  int64_t period_ns_ = 0;
+  uint64_t soc_relative_us_ = 0;
+  bool have_soc_ = false;
+  // Loss of PReq: cycles since the last PReq vs. the learned multiplex interval.
+  uint32_t cycles_since_preq_ = 0;
+  uint32_t preq_interval_ = 0;  // 0 = not polled yet
+  uint32_t loss_of_preq_counter_ = 0;
+  // Power.
+  bool powered_ = true;
+  int64_t power_on_at_ns_ = 0;
+  // Delayed PRes.
+  bool pres_pending_ = false;
+  int64_t pres_due_ns_ = 0;
+  std::size_t pres_pending_len_ = 0;
+  std::array<uint8_t, powerlink::kMaxFrameSize> pres_frame_{};
+  // Async send queue (SDO answers), sent one per UnspecifiedInvite.
+  static constexpr std::size_t kAsyncSlots = 8;
+  std::array<std::array<uint8_t, powerlink::kMaxFrameSize>, kAsyncSlots> async_frames_{};
+  std::array<std::size_t, kAsyncSlots> async_len_{};
+  std::size_t async_head_ = 0;
+  std::size_t async_count_ = 0;
+  // Error history for the StatusResponse (EN toggles on every new entry).
+  static constexpr std::size_t kErrorSlots = 4;
+  std::array<powerlink::ErrorEntry, kErrorSlots> errors_{};
+  std::size_t error_count_ = 0;
+  bool exception_new_ = false;
+  // PReq payload buffer for the outputs and frame scratch.
+  std::array<uint8_t, powerlink::kMaxFrameSize> tx_{};
+};
+
+// Drives a set of PowerlinkCn from one link. Polls with the link's receive in the cycle's busy
+// phase and sleeps in its idle phase: after a SoA it sleeps until `guard_ns` before the next
+// SoC is due (a SCHED_FIFO task that spins all the time is throttled by the kernel and starves
+// the other core's work), and blocks in wait_readable() when no cycle rhythm is known.
+class PowerlinkCnLoop {
+ public:
+  struct Options {
+    int64_t guard_ns = 80'000;  // start polling this long before the next SoC is due
+    int64_t idle_wait_ns = 1'000'000;
+  };
+  PowerlinkCnLoop(powerlink::Link& link, std::function<bool(int64_t)> wait_readable,
+                  std::span<PowerlinkCn* const> nodes, Options options);
+  // One pass: receives what is there (polling until the phase's deadline) and ticks the nodes.
+  // Returns false on a link error that is not a timeout.
+  bool run_once() noexcept;
+
+ private:
+  // Arrival rhythm of one frame type (SoC in full cycles, SoA in the reduced cycle).
+  struct Rhythm {
+    int64_t last = 0;
+    int64_t period = 0;
+    void note(int64_t t) noexcept;
+    [[nodiscard]] bool valid(int64_t now) const noexcept {
+      return period > 0 && now - last < 3 * period;
+    }
+  };
+  [[nodiscard]] int64_t next_cycle_start(int64_t now) const noexcept;
+
+  powerlink::Link& link_;
+  std::function<bool(int64_t)> wait_readable_;
+  std::vector<PowerlinkCn*> nodes_;
+  Options options_;
+  Rhythm soc_;
+  Rhythm soa_;
+  bool cycle_done_ = false;  // SoA seen: idle phase until the next cycle start
+  std::array<uint8_t, powerlink::kMaxFrameSize> rx_{};
+};
+
+}  // namespace ds1928::sim

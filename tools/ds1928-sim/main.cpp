@@ -1,0 +1,271 @@
+// ds1928-sim: standalone simulated node, the test peer of ds1928d.
+//   ds1928-sim powerlink --iface IF --node N [--modules K] [--drop-pres P] [--delay-pres-us U]
+//                        [--power-cycle-after S] [--config FILE] ...
+// runs POWERLINK Controlled Node(s) with simulated X20DS1928 modules on a raw socket and prints
+// every NMT state change. SIGUSR1 power-cycles the node(s); SIGINT/SIGTERM stop.
+// Further buses (CAN-I/O) become further subcommands.
+#include <sched.h>
+#include <sys/mman.h>
+#include <time.h>
+
+#include <CLI/CLI.hpp>
+#include <atomic>
+#include <csignal>
+#include <cstdio>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "config/config_loader.hpp"
+#include "powerlink/raw_link.hpp"
+#include "sim/powerlink_cn.hpp"
+
+namespace pl = ds1928::powerlink;
+namespace sim = ds1928::sim;
+
+namespace {
+
+std::atomic<bool> g_stop{false};
+std::atomic<bool> g_power_cycle{false};
+void on_stop(int) { g_stop.store(true); }
+void on_usr1(int) { g_power_cycle.store(true); }
+
+struct PowerlinkOptions {
+  std::string iface;
+  int node = 1;
+  int count = 1;
+  int modules = 1;
+  double drop_pres = 0.0;
+  uint32_t delay_pres_us = 0;
+  double delay_pres_prob = 1.0;
+  int wrong_pres_size = 0;
+  double power_cycle_after_s = 0.0;
+  uint32_t power_off_ms = 300;
+  std::string config_file;
+  std::string rx_mode = "ring";
+  int rt_priority = 60;
+  int cpu = -1;
+  uint64_t seed = 1;
+  uint32_t guard_us = 80;
+  double duration_s = 0.0;
+  bool quiet = false;
+};
+
+[[nodiscard]] int64_t now_ns() {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
+
+// SCHED_FIFO and locked memory when permitted; the simulator still runs (slower) without.
+void try_realtime(int priority, int cpu) {
+  if (cpu >= 0) {
+    cpu_set_t set;
+    CPU_ZERO(&set);
+    CPU_SET(cpu, &set);
+    if (sched_setaffinity(0, sizeof set, &set) != 0) std::perror("ds1928-sim: CPU affinity");
+  }
+  if (priority <= 0) return;
+  sched_param sp{};
+  sp.sched_priority = priority;
+  if (sched_setscheduler(0, SCHED_FIFO, &sp) != 0) {
+    std::fprintf(stderr, "ds1928-sim: SCHED_FIFO not permitted, running with normal priority\n");
+    return;
+  }
+  if (mlockall(MCL_CURRENT | MCL_FUTURE) != 0) std::perror("ds1928-sim: mlockall");
+}
+
+// Node configuration from the daemon's YAML: the axes on this node become its modules (slot,
+// MTUs, simulated motion), identity expectations and SDO overrides are taken over so the MN's
+// checks pass.
+[[nodiscard]] bool apply_config_file(const std::string& file, uint8_t node,
+                                     sim::PowerlinkCnConfig& cn) {
+  auto result = ds1928::load_config(file);
+  if (!result) {
+    std::fprintf(stderr, "%s", result.error_report().c_str());
+    return false;
+  }
+  const ds1928::DaemonConfig& config = result.config();
+  cn.modules.clear();
+  for (std::size_t i = 0; i < config.axes.size(); ++i) {
+    const ds1928::AxisConfig& axis = config.axes[i];
+    if (axis.node != node) continue;
+    sim::PowerlinkCnModuleConfig m;
+    m.slot = axis.slot;
+    m.input_mtu = axis.module.input_mtu;
+    m.output_mtu = axis.module.output_mtu;
+    if (i < config.simulated.axes.size()) m.sim = config.simulated.axes[i];
+    cn.modules.push_back(m);
+  }
+  for (const ds1928::PowerlinkNodeConfig& n : config.powerlink.nodes) {
+    if (n.node_id != node) continue;
+    if (n.vendor_id) cn.vendor_id = *n.vendor_id;
+    if (n.product_code) cn.product_code = *n.product_code;
+    if (n.device_type) cn.device_type = *n.device_type;
+  }
+  cn.sdo_overrides = config.powerlink.sdo_overrides;
+  cn.nettime_offset_us = config.powerlink.nettime_offset_us;
+  return true;
+}
+
+[[nodiscard]] pl::RxMode parse_rx_mode(const std::string& s) {
+  if (s == "busy-poll") return pl::RxMode::BusyPoll;
+  if (s == "blocking") return pl::RxMode::Blocking;
+  return pl::RxMode::Ring;
+}
+
+int run_powerlink(const PowerlinkOptions& o) {
+  pl::RawLink link;
+  pl::RawLinkOptions link_options;
+  link_options.interface = o.iface;
+  link_options.rx_mode = parse_rx_mode(o.rx_mode);
+  if (auto ec = link.open(link_options)) {
+    std::fprintf(stderr, "ds1928-sim: cannot open %s: %s\n", o.iface.c_str(),
+                 ec.message().c_str());
+    return 2;
+  }
+
+  std::vector<std::unique_ptr<sim::PowerlinkCn>> nodes;
+  std::vector<sim::PowerlinkCn*> node_ptrs;
+  const int64_t start = now_ns();
+  for (int k = 0; k < o.count; ++k) {
+    const auto node_id = static_cast<uint8_t>(o.node + k);
+    sim::PowerlinkCnConfig cn;
+    cn.node_id = node_id;
+    cn.mac = link.mac();
+    cn.serial_no = node_id;
+    cn.modules.clear();
+    for (int m = 0; m < o.modules; ++m) {
+      sim::PowerlinkCnModuleConfig module;
+      module.slot = static_cast<uint8_t>(m + 1);
+      cn.modules.push_back(module);
+    }
+    if (!o.config_file.empty() && !apply_config_file(o.config_file, node_id, cn)) return 1;
+    cn.power_off_ns = static_cast<int64_t>(o.power_off_ms) * 1'000'000;
+    cn.faults.drop_pres = o.drop_pres;
+    cn.faults.delay_pres_ns = static_cast<int64_t>(o.delay_pres_us) * 1000;
+    cn.faults.delay_pres = o.delay_pres_us > 0 ? o.delay_pres_prob : 0.0;
+    cn.faults.pres_size_delta = o.wrong_pres_size;
+    cn.faults.seed = o.seed + static_cast<uint64_t>(k);
+    auto node = std::make_unique<sim::PowerlinkCn>(
+        cn, [&link](std::span<const uint8_t> frame) { (void)link.send(frame); });
+    if (!o.quiet) {
+      node->set_state_listener([node_id, start](pl::NmtState from, pl::NmtState to, int64_t t) {
+        std::printf("%10.6f node %u: %s -> %s\n",
+                    static_cast<double>((t > 0 ? t : now_ns()) - start) / 1e9, node_id,
+                    std::string(pl::to_string(from)).c_str(), std::string(pl::to_string(to)).c_str());
+        std::fflush(stdout);
+      });
+    }
+    std::printf("node %u: %zu module(s), PRes payload %u bytes, PReq payload %u bytes, MAC "
+                "%02x:%02x:%02x:%02x:%02x:%02x on %s (%s)\n",
+                node_id, node->module_count(), node->layout().pres_size, node->layout().preq_size,
+                cn.mac[0], cn.mac[1], cn.mac[2], cn.mac[3], cn.mac[4], cn.mac[5], o.iface.c_str(),
+                pl::to_string(link.rx_mode()));
+    node_ptrs.push_back(node.get());
+    nodes.push_back(std::move(node));
+  }
+  std::fflush(stdout);
+
+  try_realtime(o.rt_priority, o.cpu);
+  sim::PowerlinkCnLoop::Options loop_options;
+  loop_options.guard_ns = static_cast<int64_t>(o.guard_us) * 1000;
+  sim::PowerlinkCnLoop loop(
+      link, [&link](int64_t deadline) { return link.wait_readable(deadline); }, node_ptrs,
+      loop_options);
+
+  const int64_t power_cycle_at =
+      o.power_cycle_after_s > 0 ? start + static_cast<int64_t>(o.power_cycle_after_s * 1e9) : 0;
+  bool power_cycled = false;
+  const int64_t stop_at = o.duration_s > 0 ? start + static_cast<int64_t>(o.duration_s * 1e9) : 0;
+  bool link_was_up = link.link_up();
+  while (!g_stop.load(std::memory_order_relaxed)) {
+    if (!loop.run_once()) {
+      // Link error (interface gone or down): say so once per transition, keep trying.
+      timespec ts{0, 10'000'000};
+      nanosleep(&ts, nullptr);
+    }
+    const int64_t now = now_ns();
+    if ((power_cycle_at != 0 && !power_cycled && now >= power_cycle_at) ||
+        g_power_cycle.exchange(false)) {
+      power_cycled = true;
+      std::printf("%10.6f power cycle\n", static_cast<double>(now - start) / 1e9);
+      std::fflush(stdout);
+      for (auto* n : node_ptrs) n->power_cycle(now);
+    }
+    if (link.link_up() != link_was_up) {
+      link_was_up = link.link_up();
+      std::printf("%10.6f link %s\n", static_cast<double>(now - start) / 1e9,
+                  link_was_up ? "up" : "down");
+      std::fflush(stdout);
+    }
+    if (stop_at != 0 && now >= stop_at) break;
+  }
+  for (auto* n : node_ptrs) {
+    const sim::PowerlinkCnStats& s = n->stats();
+    std::printf("node %u stats: soc=%llu preq=%llu pres=%llu dropped=%llu delayed=%llu soa=%llu "
+                "asnd=%llu nmt=%llu sdo_in=%llu loss_soc=%llu loss_preq=%llu resets=%llu "
+                "bad=%llu state=%s\n",
+                n->node_id(), static_cast<unsigned long long>(s.soc),
+                static_cast<unsigned long long>(s.preq),
+                static_cast<unsigned long long>(s.pres_sent),
+                static_cast<unsigned long long>(s.pres_dropped),
+                static_cast<unsigned long long>(s.pres_delayed),
+                static_cast<unsigned long long>(s.soa),
+                static_cast<unsigned long long>(s.asnd_sent),
+                static_cast<unsigned long long>(s.nmt_commands),
+                static_cast<unsigned long long>(s.sdo_frames_in),
+                static_cast<unsigned long long>(s.loss_of_soc),
+                static_cast<unsigned long long>(s.loss_of_preq),
+                static_cast<unsigned long long>(s.resets),
+                static_cast<unsigned long long>(s.bad_frames),
+                std::string(pl::to_string(n->nmt_state())).c_str());
+  }
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"ds1928-sim: simulated X20DS1928 node for ds1928d"};
+  app.require_subcommand(1);
+
+  PowerlinkOptions o;
+  CLI::App* plk = app.add_subcommand("powerlink", "POWERLINK Controlled Node on a raw socket");
+  plk->add_option("--iface", o.iface, "Ethernet interface")->required();
+  plk->add_option("--node", o.node, "node id (first of --count nodes)")->check(CLI::Range(1, 239));
+  plk->add_option("--count", o.count, "simulate nodes N .. N+count-1 on the same port")
+      ->check(CLI::Range(1, 64));
+  plk->add_option("--modules", o.modules, "X20DS1928 modules per node (slots 1..K)")
+      ->check(CLI::Range(0, 16));
+  plk->add_option("--drop-pres", o.drop_pres, "probability that a PRes is not sent")
+      ->check(CLI::Range(0.0, 1.0));
+  plk->add_option("--delay-pres-us", o.delay_pres_us, "send PRes this much late");
+  plk->add_option("--delay-pres-prob", o.delay_pres_prob,
+                  "probability that a PRes is delayed (with --delay-pres-us)")
+      ->check(CLI::Range(0.0, 1.0));
+  plk->add_option("--wrong-pres-size", o.wrong_pres_size,
+                  "PRes payload this many bytes longer (negative: shorter)");
+  plk->add_option("--power-cycle-after", o.power_cycle_after_s,
+                  "power-cycle the node(s) once after S seconds (SIGUSR1: now)");
+  plk->add_option("--power-off-ms", o.power_off_ms, "how long a power cycle keeps the node off");
+  plk->add_option("--config", o.config_file,
+                  "daemon YAML: modules (axes on this node), identity, SDO overrides");
+  plk->add_option("--rx-mode", o.rx_mode, "ring | busy-poll | blocking")
+      ->check(CLI::IsMember({"ring", "busy-poll", "blocking"}));
+  plk->add_option("--rt-priority", o.rt_priority, "SCHED_FIFO priority (0: normal scheduling)")
+      ->check(CLI::Range(0, 99));
+  plk->add_option("--cpu", o.cpu, "pin to this CPU");
+  plk->add_option("--seed", o.seed, "fault injection random seed");
+  plk->add_option("--guard-us", o.guard_us, "start polling this long before the next SoC");
+  plk->add_option("--duration", o.duration_s, "stop after S seconds (0: until SIGTERM)");
+  plk->add_flag("--quiet", o.quiet, "do not print NMT state changes");
+
+  CLI11_PARSE(app, argc, argv);
+  std::signal(SIGINT, on_stop);
+  std::signal(SIGTERM, on_stop);
+  std::signal(SIGUSR1, on_usr1);
+  setvbuf(stdout, nullptr, _IOLBF, 0);
+  if (plk->parsed()) return run_powerlink(o);
+  return 1;
+}
