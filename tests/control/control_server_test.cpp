@@ -1,0 +1,363 @@
+// The control socket with a real Unix socket: framing, errors, limits, peers, asynchronous
+// replies, disconnects.
+#include <sys/stat.h>
+
+#include <atomic>
+#include <catch2/catch.hpp>
+#include <mutex>
+#include <vector>
+
+#include "control_test_util.hpp"
+
+using namespace ds1928;
+using namespace ds1928::control;
+using namespace ds1928::control::test;
+using json = nlohmann::json;
+
+namespace {
+
+SocketConfig config_for(const char* what) {
+  SocketConfig c;
+  c.path = temp_socket_path(what);
+  c.mode = 0660;
+  c.max_clients = 8;
+  c.max_request_bytes = 256;
+  c.idle_timeout_ms = 5000;
+  return c;
+}
+
+// "echo": replies with its peer and arguments; "axis": takes a typed argument.
+void add_test_commands(Server& server) {
+  server.add_command("echo", [](const Request& req, Reply reply) {
+    reply.ok({{"pid", req.peer().pid},
+              {"uid", req.peer().uid},
+              {"gid", req.peer().gid},
+              {"text", req.opt_string("text").value_or("")}});
+  });
+  server.add_command("axis", [](const Request& req, Reply reply) {
+    const auto axis = req.get_uint("axis", 3);
+    const auto bits = req.opt_uint("bits", 0xff).value_or(0);
+    const bool verbose = req.opt_bool("verbose").value_or(false);
+    reply.ok({{"axis", axis}, {"bits", bits}, {"verbose", verbose}});
+  });
+}
+
+}  // namespace
+
+TEST_CASE("a command gets its peer's credentials and its reply echoes the id") {
+  ServerThread t(config_for("basic"));
+  add_test_commands(t.server());
+  REQUIRE_FALSE(t.start());
+  struct stat st {};
+  REQUIRE(stat(t.server().path().c_str(), &st) == 0);
+  CHECK(S_ISSOCK(st.st_mode));
+  CHECK((st.st_mode & 0777) == 0660);
+
+  LineClient c(t.server().path());
+  REQUIRE(c.connected());
+  const json r = c.request({{"cmd", "echo"}, {"text", "hi"}, {"id", 42}});
+  CHECK(r["ok"] == true);
+  CHECK(r["id"] == 42);
+  CHECK(r["text"] == "hi");
+  CHECK(r["pid"] == getpid());
+  CHECK(r["uid"] == getuid());
+  CHECK(r["gid"] == getgid());
+  const json r2 = c.request({{"cmd", "echo"}, {"id", "abc"}});
+  CHECK(r2["id"] == "abc");
+  const json r3 = c.request({{"cmd", "echo"}});
+  CHECK_FALSE(r3.contains("id"));
+}
+
+TEST_CASE("malformed JSON, non-objects and a missing cmd get precise errors; the line survives") {
+  ServerThread t(config_for("badjson"));
+  add_test_commands(t.server());
+  REQUIRE_FALSE(t.start());
+  LineClient c(t.server().path());
+
+  c.send_raw("{\"cmd\": \"echo\",\n");
+  json r = c.reply();
+  CHECK(r["ok"] == false);
+  CHECK(error_code_of(r) == "bad_json");
+  CHECK_THAT(error_message_of(r), Catch::Contains("column"));
+
+  c.send_raw("[1,2]\n");
+  r = c.reply();
+  CHECK(error_code_of(r) == "bad_json");
+  CHECK_THAT(error_message_of(r), Catch::Contains("array"));
+
+  r = c.request({{"text", "no command"}, {"id", 7}});
+  CHECK(error_code_of(r) == "bad_argument");
+  CHECK_THAT(error_message_of(r), Catch::Contains("'cmd'"));
+  CHECK(r["id"] == 7);
+  r = c.request({{"cmd", 12}});
+  CHECK(error_code_of(r) == "bad_argument");
+  CHECK_THAT(error_message_of(r), Catch::Contains("expected string"));
+
+  c.send_raw("\n\r\n");  // empty lines are skipped, not answered
+  r = c.request({{"cmd", "echo"}, {"text", "still here"}});
+  CHECK(r["ok"] == true);
+  CHECK(r["text"] == "still here");
+}
+
+TEST_CASE("unknown commands are named in the error") {
+  ServerThread t(config_for("unknown"));
+  add_test_commands(t.server());
+  REQUIRE_FALSE(t.start());
+  LineClient c(t.server().path());
+  const json r = c.request({{"cmd", "reboot"}, {"id", 1}});
+  CHECK(r["ok"] == false);
+  CHECK(error_code_of(r) == "unknown_command");
+  CHECK_THAT(error_message_of(r), Catch::Contains("'reboot'") && Catch::Contains("echo"));
+  CHECK(r["id"] == 1);
+}
+
+TEST_CASE("wrong argument types and ranges name the argument and the expected type") {
+  ServerThread t(config_for("args"));
+  add_test_commands(t.server());
+  REQUIRE_FALSE(t.start());
+  LineClient c(t.server().path());
+
+  json r = c.request({{"cmd", "axis"}, {"axis", 2}, {"bits", 255}, {"verbose", true}});
+  CHECK(r["ok"] == true);
+  CHECK(r["axis"] == 2);
+  CHECK(r["bits"] == 255);
+  CHECK(r["verbose"] == true);
+
+  struct Case {
+    json body;
+    const char* needle;
+  };
+  const std::vector<Case> cases = {
+      {{{"cmd", "axis"}}, "'axis' (unsigned integer) is required"},
+      {{{"cmd", "axis"}, {"axis", "1"}}, "'axis': expected unsigned integer 0..3, got string"},
+      {{{"cmd", "axis"}, {"axis", -1}}, "'axis': expected unsigned integer 0..3, got -1"},
+      {{{"cmd", "axis"}, {"axis", 4}}, "'axis': expected unsigned integer 0..3, got 4"},
+      {{{"cmd", "axis"}, {"axis", 1.5}}, "'axis': expected unsigned integer 0..3, got number"},
+      {{{"cmd", "axis"}, {"axis", 0}, {"bits", 256}}, "'bits': expected unsigned integer 0..255"},
+      {{{"cmd", "axis"}, {"axis", 0}, {"verbose", 1}}, "'verbose': expected boolean"},
+      {{{"cmd", "echo"}, {"text", json::array()}}, "'text': expected string, got array"},
+  };
+  for (const auto& k : cases) {
+    r = c.request(k.body);
+    INFO(k.body.dump() << " -> " << r.dump());
+    CHECK(r["ok"] == false);
+    CHECK(error_code_of(r) == "bad_argument");
+    CHECK_THAT(error_message_of(r), Catch::Contains(k.needle));
+  }
+}
+
+TEST_CASE("oversized requests: a long line is refused, an endless one closes the connection") {
+  ServerThread t(config_for("large"));  // 256-byte requests
+  add_test_commands(t.server());
+  REQUIRE_FALSE(t.start());
+  LineClient c(t.server().path());
+  const std::string big = json{{"cmd", "echo"}, {"text", std::string(300, 'x')}}.dump();
+  // Sent in one piece with its newline: refused, and the next request is still served.
+  c.send_raw(big + "\n" + json{{"cmd", "echo"}, {"text", "ok"}}.dump() + "\n");
+  json r = c.reply();
+  CHECK(error_code_of(r) == "request_too_large");
+  CHECK_THAT(error_message_of(r), Catch::Contains("256"));
+  r = c.reply();
+  CHECK(r["ok"] == true);
+  CHECK(r["text"] == "ok");
+
+  // No newline in sight after the limit: the server answers and hangs up.
+  LineClient d(t.server().path());
+  d.send_raw(std::string(1000, 'y'));
+  r = d.reply();
+  CHECK(error_code_of(r) == "request_too_large");
+  CHECK(d.at_eof());
+  CHECK(t.wait_clients(1));  // only c is left
+}
+
+TEST_CASE("100 concurrent clients are all served") {
+  SocketConfig cfg = config_for("many");
+  cfg.max_clients = 128;
+  ServerThread t(cfg);
+  add_test_commands(t.server());
+  REQUIRE_FALSE(t.start());
+
+  std::vector<std::unique_ptr<LineClient>> clients;
+  for (int i = 0; i < 100; ++i) clients.push_back(std::make_unique<LineClient>(t.server().path()));
+  for (auto& c : clients) REQUIRE(c->connected());
+  REQUIRE(t.wait_clients(100));
+  // All requests are in flight before the first reply is read.
+  for (int i = 0; i < 100; ++i)
+    clients[i]->send_raw(json{{"cmd", "echo"}, {"text", std::to_string(i)}, {"id", i}}.dump() +
+                         "\n");
+  std::atomic<int> good{0};
+  std::vector<std::thread> readers;
+  for (int part = 0; part < 4; ++part) {
+    readers.emplace_back([&, part] {
+      for (int i = part; i < 100; i += 4) {
+        const json r = clients[i]->reply();
+        if (r.is_object() && r["ok"] == true && r["id"] == i && r["text"] == std::to_string(i))
+          ++good;
+      }
+    });
+  }
+  for (auto& th : readers) th.join();
+  CHECK(good == 100);
+  clients.clear();
+  CHECK(t.wait_clients(0));
+}
+
+TEST_CASE("clients beyond the limit get too_many_clients and are dropped") {
+  SocketConfig cfg = config_for("limit");
+  cfg.max_clients = 2;
+  ServerThread t(cfg);
+  add_test_commands(t.server());
+  REQUIRE_FALSE(t.start());
+  LineClient a(t.server().path()), b(t.server().path());
+  REQUIRE(t.wait_clients(2));
+  LineClient c(t.server().path());
+  const json r = c.reply();
+  CHECK(error_code_of(r) == "too_many_clients");
+  CHECK(c.at_eof());
+  CHECK(a.request({{"cmd", "echo"}})["ok"] == true);
+  a.close();
+  REQUIRE(t.wait_clients(1));
+  LineClient d(t.server().path());
+  CHECK(d.request({{"cmd", "echo"}})["ok"] == true);
+}
+
+TEST_CASE("an idle client gets idle_timeout and is closed") {
+  SocketConfig cfg = config_for("idle");
+  cfg.idle_timeout_ms = 150;
+  ServerThread t(cfg);
+  add_test_commands(t.server());
+  REQUIRE_FALSE(t.start());
+  LineClient c(t.server().path());
+  CHECK(c.request({{"cmd", "echo"}})["ok"] == true);  // activity re-arms the timer
+  const auto t0 = std::chrono::steady_clock::now();
+  const json r = c.reply();
+  const auto waited = std::chrono::steady_clock::now() - t0;
+  CHECK(error_code_of(r) == "idle_timeout");
+  CHECK(waited >= std::chrono::milliseconds(100));
+  CHECK(c.at_eof());
+  CHECK(t.wait_clients(0));
+}
+
+TEST_CASE("a client that disconnects mid-request is dropped without harm") {
+  ServerThread t(config_for("midreq"));
+  std::atomic<int> calls{0};
+  t.server().add_command("echo", [&](const Request&, Reply reply) {
+    ++calls;
+    reply.ok();
+  });
+  REQUIRE_FALSE(t.start());
+  {
+    LineClient c(t.server().path());
+    REQUIRE(t.wait_clients(1));
+    c.send_raw("{\"cmd\":\"ec");  // half a request, then gone
+  }
+  CHECK(t.wait_clients(0));
+  CHECK(calls == 0);
+  LineClient d(t.server().path());
+  CHECK(d.request({{"cmd", "echo"}})["ok"] == true);
+  CHECK(calls == 1);
+}
+
+TEST_CASE(
+    "asynchronous replies: completed later from another thread, or cancelled by a disconnect") {
+  ServerThread t(config_for("async"));
+  std::mutex mutex;
+  std::vector<Reply> parked;
+  std::atomic<int> cancel_callbacks{0};
+  t.server().add_command("slow", [&](const Request&, Reply reply) {
+    reply.on_cancel([&] { ++cancel_callbacks; });
+    std::lock_guard lock(mutex);
+    parked.push_back(std::move(reply));
+  });
+  t.server().add_command("drop", [](const Request&, Reply) {});
+  t.server().add_command("throw", [](const Request&, Reply) { throw std::runtime_error("boom"); });
+  REQUIRE_FALSE(t.start());
+
+  auto take = [&]() -> std::optional<Reply> {
+    for (int i = 0; i < 400; ++i) {
+      {
+        std::lock_guard lock(mutex);
+        if (!parked.empty()) {
+          Reply r = parked.back();
+          parked.pop_back();
+          return r;
+        }
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+    return std::nullopt;
+  };
+
+  // Completed from another thread 50 ms later; requests behind it wait their turn.
+  LineClient c(t.server().path());
+  c.send_raw(json{{"cmd", "slow"}, {"id", 1}}.dump() + "\n" +
+             json{{"cmd", "drop"}, {"id", 2}}.dump() + "\n");
+  auto reply = take();
+  REQUIRE(reply);
+  std::thread later([r = *reply] {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    r.ok({{"value", 5}});
+    r.error("late", "second completion is ignored");
+  });
+  json r = c.reply();
+  later.join();
+  CHECK(r["ok"] == true);
+  CHECK(r["id"] == 1);
+  CHECK(r["value"] == 5);
+  // A handler that drops its reply: the client still gets an answer.
+  r = c.reply();
+  CHECK(error_code_of(r) == "internal");
+  CHECK(r["id"] == 2);
+  r = c.request({{"cmd", "throw"}});
+  CHECK(error_code_of(r) == "internal");
+  CHECK_THAT(error_message_of(r), Catch::Contains("boom"));
+
+  // The client leaves while its command is still running.
+  auto d = std::make_unique<LineClient>(t.server().path());
+  d->send_raw(json{{"cmd", "slow"}}.dump() + "\n");
+  reply = take();
+  REQUIRE(reply);
+  CHECK_FALSE(reply->cancelled());
+  d.reset();
+  for (int i = 0; i < 400 && !reply->cancelled(); ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  CHECK(reply->cancelled());
+  reply->ok({{"value", 1}});  // harmless
+  CHECK(t.wait_clients(1));
+  for (int i = 0; i < 400 && cancel_callbacks == 0; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  CHECK(cancel_callbacks == 1);
+  CHECK(c.request({{"cmd", "drop"}})["ok"] == false);  // c is unaffected
+}
+
+TEST_CASE("the server replaces a stale socket file and refuses a live one") {
+  SocketConfig cfg = config_for("stale");
+  ServerThread first(cfg);
+  add_test_commands(first.server());
+  REQUIRE_FALSE(first.start());
+  {
+    boost::asio::io_context io;
+    Server second(io, cfg);
+    CHECK(second.start() == std::errc::address_in_use);
+  }
+  LineClient c(cfg.path);
+  CHECK(c.request({{"cmd", "echo"}})["ok"] == true);  // the failed start removed nothing
+
+  // A leftover file of a dead server (bound, never listened on) is replaced.
+  boost::asio::io_context io;
+  const std::string path = temp_socket_path("leftover");
+  std::filesystem::create_directories(std::filesystem::path(path).parent_path());
+  {
+    boost::asio::local::stream_protocol::acceptor dead(io);
+    dead.open();
+    dead.bind(path);
+  }
+  REQUIRE(std::filesystem::exists(path));
+  SocketConfig cfg2 = cfg;
+  cfg2.path = path;
+  ServerThread t(cfg2);
+  add_test_commands(t.server());
+  REQUIRE_FALSE(t.start());
+  LineClient d(path);
+  CHECK(d.request({{"cmd", "echo"}})["ok"] == true);
+}
