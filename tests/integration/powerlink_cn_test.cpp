@@ -1,0 +1,367 @@
+// The simulated Controlled Node's protocol core, driven in memory with frames the codec builds
+// (what an MN sends) and checked on what it answers. No sockets, no sleeps: time is an argument.
+#include <catch2/catch.hpp>
+#include <deque>
+#include <vector>
+
+#include "powerlink/frames.hpp"
+#include "powerlink/process_image.hpp"
+#include "powerlink/sdo.hpp"
+#include "powerlink/sdo_mapping.hpp"
+#include "sim/powerlink_cn.hpp"
+
+namespace pl = ds1928::powerlink;
+namespace sim = ds1928::sim;
+using pl::NmtState;
+
+namespace {
+
+constexpr pl::MacAddress kMnMac{0x02, 0, 0, 0, 0, 0xF0};
+constexpr int64_t kCycle = 1'000'000;  // 1 ms
+
+struct Harness {
+  std::deque<std::vector<uint8_t>> out;  // frames the CN sent
+  std::vector<std::pair<NmtState, NmtState>> transitions;
+  sim::PowerlinkCn cn;
+  int64_t now = 1'000'000'000;
+  uint64_t relative_us = 0;
+  std::array<uint8_t, pl::kMaxFrameSize> buf{};
+
+  explicit Harness(const sim::PowerlinkCnConfig& config)
+      : cn(config, [this](std::span<const uint8_t> f) { out.emplace_back(f.begin(), f.end()); }) {
+    cn.set_state_listener(
+        [this](NmtState from, NmtState to, int64_t) { transitions.emplace_back(from, to); });
+  }
+
+  void deliver(pl::Result<std::size_t> len) {
+    REQUIRE(len.has_value());
+    cn.receive(std::span<const uint8_t>(buf.data(), *len), now);
+  }
+  void soa(pl::RequestedService service, uint8_t target, NmtState mn = NmtState::kPreOperational1) {
+    pl::SoA s;
+    s.mn_nmt_state = mn;
+    s.service = service;
+    s.target = target;
+    deliver(pl::build_soa(buf, pl::soa_header(kMnMac), s));
+  }
+  void soc() {
+    pl::Soc s;
+    s.relative_time_us = relative_us;
+    deliver(pl::build_soc(buf, pl::soc_header(kMnMac), s));
+  }
+  void preq(uint8_t node, std::span<const uint8_t> payload, bool ready) {
+    pl::PReq p;
+    p.ready = ready;
+    p.payload = payload;
+    deliver(pl::build_preq(buf, pl::preq_header(kMnMac, cn_mac(), node), p));
+  }
+  void nmt(pl::NmtCommandId id, uint8_t node) {
+    pl::NmtCommand c;
+    c.command = static_cast<uint8_t>(id);
+    deliver(pl::build_nmt_command(buf, pl::asnd_header(kMnMac, pl::kNodeMn, node), c));
+  }
+  void advance(int64_t ns) {
+    now += ns;
+    relative_us += static_cast<uint64_t>(ns / 1000);
+    cn.tick(now);
+  }
+  // One full cycle: SoC, PReq to `node`, SoA (no service).
+  void cycle(uint8_t node, std::span<const uint8_t> preq_payload, bool ready) {
+    soc();
+    preq(node, preq_payload, ready);
+    soa(pl::RequestedService::kNone, 0, NmtState::kPreOperational2);
+    advance(kCycle);
+  }
+  static pl::MacAddress cn_mac() { return sim::PowerlinkCnConfig{}.mac; }
+  std::vector<uint8_t> pop() {
+    REQUIRE_FALSE(out.empty());
+    auto f = std::move(out.front());
+    out.pop_front();
+    return f;
+  }
+};
+
+sim::PowerlinkCnConfig two_module_config() {
+  sim::PowerlinkCnConfig c;
+  c.node_id = 7;
+  c.modules.clear();
+  sim::PowerlinkCnModuleConfig m1;
+  m1.slot = 1;
+  m1.input_mtu = 7;
+  m1.output_mtu = 7;
+  sim::PowerlinkCnModuleConfig m2 = m1;
+  m2.slot = 2;
+  m2.input_mtu = 15;
+  m2.output_mtu = 3;
+  c.modules = {m1, m2};
+  return c;
+}
+
+// Brings the node from power-up to PRE_OPERATIONAL_2 and returns the IdentResponse it sent.
+pl::IdentResponse boot_to_pre_op2(Harness& h, uint8_t node) {
+  h.soa(pl::RequestedService::kIdentRequest, node);
+  REQUIRE(h.cn.nmt_state() == NmtState::kPreOperational1);
+  auto frame = h.pop();
+  auto asnd = pl::parse_asnd(frame);
+  REQUIRE(asnd.has_value());
+  const auto* ident = std::get_if<pl::IdentResponse>(&asnd->body);
+  REQUIRE(ident != nullptr);
+  h.advance(kCycle);
+  h.soc();
+  REQUIRE(h.cn.nmt_state() == NmtState::kPreOperational2);
+  return *ident;
+}
+
+}  // namespace
+
+TEST_CASE("CN boots NOT_ACTIVE to PRE_OPERATIONAL_2 and identifies with its image sizes") {
+  Harness h(two_module_config());
+  REQUIRE(h.cn.nmt_state() == NmtState::kNotActive);
+  // An SoA for another node activates but is not answered.
+  h.soa(pl::RequestedService::kIdentRequest, 9);
+  CHECK(h.cn.nmt_state() == NmtState::kPreOperational1);
+  CHECK(h.out.empty());
+  const pl::IdentResponse ident = boot_to_pre_op2(h, 7);
+  const auto expected = pl::make_layout(std::array{pl::ModuleSpec{1, 7, 7}, pl::ModuleSpec{2, 15, 3}});
+  REQUIRE(expected.has_value());
+  CHECK(ident.poll_in_size == expected->pres_size);
+  CHECK(ident.poll_out_size == expected->preq_size);
+  CHECK(ident.poll_in_size == (16 + 7) + (16 + 15));
+  CHECK(ident.poll_out_size == (2 + 7) + (2 + 3));
+  CHECK(ident.nmt_state == NmtState::kPreOperational1);
+  CHECK(ident.vendor_id == sim::PowerlinkCnConfig{}.vendor_id);
+  const std::vector<std::pair<NmtState, NmtState>> path{
+      {NmtState::kNotActive, NmtState::kPreOperational1},
+      {NmtState::kPreOperational1, NmtState::kPreOperational2}};
+  CHECK(std::vector(h.transitions.end() - 2, h.transitions.end()) == path);
+}
+
+TEST_CASE("CN answers its PReq with a PRes carrying the modules' inputs, RD only when operational") {
+  Harness h(two_module_config());
+  boot_to_pre_op2(h, 7);
+  std::vector<uint8_t> preq_payload(h.cn.layout().preq_size, 0);
+  h.preq(7, preq_payload, false);
+  auto pres = pl::parse_pres(h.pop());
+  REQUIRE(pres.has_value());
+  CHECK(pres->nmt_state == NmtState::kPreOperational2);
+  CHECK_FALSE(pres->ready);
+  CHECK(pres->payload.size() == h.cn.layout().pres_size);
+  // PReq for another node: no answer.
+  h.preq(8, preq_payload, false);
+  CHECK(h.out.empty());
+
+  h.nmt(pl::NmtCommandId::kStartNode, 7);  // not allowed from PRE_OPERATIONAL_2
+  CHECK(h.cn.nmt_state() == NmtState::kPreOperational2);
+  h.nmt(pl::NmtCommandId::kEnableReadyToOperate, 7);
+  CHECK(h.cn.nmt_state() == NmtState::kReadyToOperate);
+  h.nmt(pl::NmtCommandId::kStartNode, 7);
+  CHECK(h.cn.nmt_state() == NmtState::kOperational);
+
+  h.preq(7, preq_payload, true);
+  pres = pl::parse_pres(h.pop());
+  REQUIRE(pres.has_value());
+  CHECK(pres->ready);
+  CHECK(pres->nmt_state == NmtState::kOperational);
+  ds1928::ModuleInputs in;
+  const auto* m1 = h.cn.layout().find(1);
+  REQUIRE(m1 != nullptr);
+  REQUIRE(pl::read_inputs(pres->payload, *m1, in));
+  const ds1928::ModuleInputs direct = h.cn.module(0).inputs();
+  CHECK(in.position_hw == direct.position_hw);
+  CHECK(in.position_lw == direct.position_lw);
+  CHECK(in.pos_time_us == direct.pos_time_us);
+}
+
+TEST_CASE("CN modules take NetTime from the SoC RelativeTime") {
+  sim::PowerlinkCnConfig config;
+  config.node_id = 3;
+  Harness h(config);
+  boot_to_pre_op2(h, 3);
+  h.relative_us = 0x1'2345'6789ULL;  // beyond 32 bits: PosTime is the low word
+  std::vector<uint8_t> preq_payload(h.cn.layout().preq_size, 0);
+  // Enable the encoder through the register so that the module stamps positions.
+  REQUIRE_FALSE(h.cn.module(0).write_register(ds1928::reg::kEnDatMode, 1,
+                                              ds1928::endat_mode::kEnable));
+  for (int i = 0; i < 20; ++i) {
+    h.soc();
+    h.preq(3, preq_payload, false);
+    h.out.clear();
+    h.advance(kCycle);
+  }
+  h.soc();
+  h.preq(3, preq_payload, false);
+  auto pres = pl::parse_pres(h.pop());
+  REQUIRE(pres.has_value());
+  ds1928::ModuleInputs in;
+  REQUIRE(pl::read_inputs(pres->payload, *h.cn.layout().find(1), in));
+  const auto soc_low = static_cast<uint32_t>(h.relative_us);
+  // The stamp is the NetTime of the module's last EnDat cycle: at or shortly before this SoC.
+  const auto age = static_cast<int32_t>(soc_low - in.pos_time_us);
+  CHECK(age >= 0);
+  CHECK(age < 2000);
+}
+
+TEST_CASE("CN SDO server maps objects onto the module registers") {
+  sim::PowerlinkCnConfig config;
+  config.node_id = 5;
+  Harness h(config);
+  boot_to_pre_op2(h, 5);
+
+  std::deque<std::vector<uint8_t>> client_out;
+  std::error_code done_ec = make_error_code(pl::SdoError::kTimeout);
+  std::vector<uint8_t> done_data;
+  bool done = false;
+  pl::SdoClientConfig cc;
+  cc.node = 5;
+  cc.own_mac = kMnMac;
+  pl::SdoClient client(
+      cc, [&](std::span<const uint8_t> f) { client_out.emplace_back(f.begin(), f.end()); },
+      [&](std::error_code ec, std::span<const uint8_t> data) {
+        done = true;
+        done_ec = ec;
+        done_data.assign(data.begin(), data.end());
+      });
+  // Shuttle: client frames go to the CN directly (MN's own async slot); CN answers go out only
+  // when invited.
+  auto run = [&] {
+    for (int round = 0; round < 50 && !done; ++round) {
+      while (!client_out.empty()) {
+        auto f = std::move(client_out.front());
+        client_out.pop_front();
+        h.cn.receive(f, h.now);
+      }
+      h.soa(pl::RequestedService::kUnspecifiedInvite, 5, NmtState::kPreOperational2);
+      while (!h.out.empty()) {
+        auto f = h.pop();
+        auto asnd = pl::parse_asnd(f);
+        REQUIRE(asnd.has_value());
+        if (const auto* sdo = std::get_if<pl::Sdo>(&asnd->body)) client.receive(*sdo, h.now);
+      }
+      h.advance(kCycle);
+      client.tick(h.now);
+    }
+  };
+  const pl::SdoMapping mapping;
+  const auto mode_obj = mapping.object_for(1, ds1928::reg::kEnDatMode);
+  REQUIRE(mode_obj.has_value());
+  const uint8_t mode_value = ds1928::endat_mode::kEnable | ds1928::endat_mode::kSigned;
+  REQUIRE_FALSE(client.write(mode_obj->index, mode_obj->subindex,
+                             std::span<const uint8_t>(&mode_value, 1), h.now));
+  run();
+  REQUIRE(done);
+  CHECK_FALSE(done_ec);
+  uint32_t reg_value = 0;
+  REQUIRE_FALSE(h.cn.module(0).read_register(ds1928::reg::kEnDatMode, 1, reg_value));
+  CHECK(reg_value == mode_value);
+
+  done = false;
+  REQUIRE_FALSE(client.read(0x1018, 1, h.now));
+  run();
+  REQUIRE(done);
+  CHECK_FALSE(done_ec);
+  REQUIRE(done_data.size() == 4);
+  CHECK(pl::load_le32(done_data.data()) == config.vendor_id);
+
+  // Slot 2 does not exist on this node: the server aborts with "object does not exist".
+  done = false;
+  const auto missing = mapping.object_for(2, ds1928::reg::kEnDatMode);
+  REQUIRE(missing.has_value());
+  REQUIRE_FALSE(client.read(missing->index, missing->subindex, h.now));
+  run();
+  REQUIRE(done);
+  CHECK(done_ec == pl::make_sdo_abort_error(0x06020000));
+}
+
+TEST_CASE("CN loss of SoC falls back to PRE_OPERATIONAL_1 and logs it in the StatusResponse") {
+  sim::PowerlinkCnConfig config;
+  config.node_id = 2;
+  Harness h(config);
+  boot_to_pre_op2(h, 2);
+  std::vector<uint8_t> preq_payload(h.cn.layout().preq_size, 0);
+  for (int i = 0; i < 5; ++i) h.cycle(2, preq_payload, false);
+  h.out.clear();
+  h.advance(config.soc_timeout_min_ns + kCycle);
+  CHECK(h.cn.nmt_state() == NmtState::kPreOperational1);
+  CHECK(h.cn.stats().loss_of_soc == 1);
+  h.soa(pl::RequestedService::kStatusRequest, 2);
+  auto asnd = pl::parse_asnd(h.pop());
+  REQUIRE(asnd.has_value());
+  const auto* status = std::get_if<pl::StatusResponse>(&asnd->body);
+  REQUIRE(status != nullptr);
+  REQUIRE(status->entry_count() == 1);
+  CHECK(status->entry(0).code == 0x8245);
+  CHECK(status->exception_new);
+}
+
+TEST_CASE("CN reset and power cycle bring it back to NOT_ACTIVE with module defaults") {
+  sim::PowerlinkCnConfig config;
+  config.node_id = 4;
+  config.power_off_ns = 50'000'000;
+  Harness h(config);
+  boot_to_pre_op2(h, 4);
+  REQUIRE_FALSE(h.cn.module(0).write_register(ds1928::reg::kEnDatMode, 1, 1));
+  h.nmt(pl::NmtCommandId::kResetCommunication, 4);
+  CHECK(h.cn.nmt_state() == NmtState::kNotActive);
+  uint32_t v = 0;
+  REQUIRE_FALSE(h.cn.module(0).read_register(ds1928::reg::kEnDatMode, 1, v));
+  CHECK(v == 1);  // reset communication keeps the application's configuration
+  boot_to_pre_op2(h, 4);
+  h.nmt(pl::NmtCommandId::kResetNode, 4);
+  CHECK(h.cn.nmt_state() == NmtState::kNotActive);
+  REQUIRE_FALSE(h.cn.module(0).read_register(ds1928::reg::kEnDatMode, 1, v));
+  CHECK(v == 0);  // reset node resets the application: bus-controller defaults
+
+  boot_to_pre_op2(h, 4);
+  h.cn.power_cycle(h.now);
+  CHECK(h.cn.nmt_state() == NmtState::kOff);
+  h.soa(pl::RequestedService::kIdentRequest, 4);
+  CHECK(h.out.empty());  // no power, no answer
+  h.advance(config.power_off_ns + 1);
+  CHECK(h.cn.nmt_state() == NmtState::kNotActive);
+  CHECK(h.cn.stats().power_cycles == 1);
+}
+
+TEST_CASE("CN fault injection: dropped, delayed and wrongly sized PRes") {
+  sim::PowerlinkCnConfig config;
+  config.node_id = 6;
+  config.faults.drop_pres = 0.25;
+  config.faults.seed = 42;
+  Harness h(config);
+  boot_to_pre_op2(h, 6);
+  std::vector<uint8_t> preq_payload(h.cn.layout().preq_size, 0);
+  int answered = 0;
+  constexpr int kRequests = 2000;
+  for (int i = 0; i < kRequests; ++i) {
+    h.preq(6, preq_payload, false);
+    answered += static_cast<int>(h.out.size());
+    h.out.clear();
+  }
+  const double loss = 1.0 - static_cast<double>(answered) / kRequests;
+  CHECK(loss > 0.20);
+  CHECK(loss < 0.30);
+  CHECK(h.cn.stats().pres_dropped == static_cast<uint64_t>(kRequests - answered));
+
+
+  sim::PowerlinkCnFaults faults;
+  faults.delay_pres = 1.0;
+  faults.delay_pres_ns = 300'000;
+  h.cn.set_faults(faults);
+  h.preq(6, preq_payload, false);
+  CHECK(h.out.empty());
+  CHECK(h.cn.next_deadline_ns() == h.now + 300'000);
+  h.now += 299'000;
+  h.cn.tick(h.now);
+  CHECK(h.out.empty());
+  h.now += 1'000;
+  h.cn.tick(h.now);
+  REQUIRE(h.out.size() == 1);
+  CHECK(pl::parse_pres(h.pop()).has_value());
+
+  faults = {};
+  faults.pres_size_delta = 4;
+  h.cn.set_faults(faults);
+  h.preq(6, preq_payload, false);
+  auto pres = pl::parse_pres(h.pop());
+  REQUIRE(pres.has_value());
+  CHECK(pres->payload.size() == h.cn.layout().pres_size + 4u);
+}
