@@ -1,0 +1,223 @@
+// The POWERLINK Managing Node as a pure protocol core: it decides what every frame of a cycle
+// carries and reacts to what comes back, but does no I/O and reads no clock. The driver
+// (PowerlinkBus) owns the timing: it asks for the SoC, the PReq of each isochronous CN, the SoA
+// and the MN's own ASnd, sends them, and hands every received frame and every timeout back.
+//
+// NMT boot of each CN (docs/powerlink.md §Boot) is a table of small state handlers:
+//   Identify → WaitPreOp2 → Configure (SDO) → WaitReadyToOperate → WaitOperational → Operational
+//   and Reset (after loss / power-cycle / timeout) → Identify again.
+// Everything is preallocated at construction; the per-cycle calls never allocate.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <string_view>
+#include <system_error>
+#include <vector>
+
+#include "config/config.hpp"
+#include "powerlink/frames.hpp"
+#include "powerlink/process_image.hpp"
+#include "powerlink/sdo.hpp"
+#include "powerlink/sdo_mapping.hpp"
+
+namespace ds1928::powerlink {
+
+enum class CnBootState : uint8_t {
+  kIdentify,            // IdentRequests until an IdentResponse matches the configuration
+  kWaitPreOp2,          // StatusRequests until the CN reports PRE_OPERATIONAL_2
+  kConfigure,           // in the isochronous phase; SDO writes of the module settings
+  kWaitReadyToOperate,  // NMTEnableReadyToOperate sent
+  kWaitOperational,     // NMTStartNode sent
+  kOperational,
+  kReset,               // NMTResetNode sent; waits before identifying again
+};
+[[nodiscard]] std::string_view to_string(CnBootState s) noexcept;
+
+// DLL error threshold counter: +8 per cycle with the error, −1 per cycle without; fires (and
+// restarts at 0) when it reaches the threshold. Threshold 0 disables it.
+struct DllCounter {
+  uint32_t value = 0;
+  uint32_t events = 0;  // cycles with the error
+  uint32_t fired = 0;   // threshold reached
+  [[nodiscard]] bool step(bool error, uint32_t threshold) noexcept;
+};
+
+struct CnStatus {
+  uint8_t node = 0;
+  CnBootState boot = CnBootState::kIdentify;
+  NmtState nmt = NmtState::kNotActive;  // last reported by the CN
+  bool in_isochronous = false;
+  bool identified = false;
+  MacAddress mac{};
+  uint32_t vendor_id = 0;
+  uint32_t product_code = 0;
+  uint16_t preq_size = 0;  // payload sizes in use
+  uint16_t pres_size = 0;
+  DllCounter loss_of_pres;
+  DllCounter late_pres;
+  uint32_t pres_received = 0;
+  uint32_t pres_size_mismatches = 0;  // PRes payload size differed from pres_size
+  uint16_t last_pres_size = 0;
+  uint32_t status_error_entries = 0;  // error entries seen in StatusResponses
+  uint16_t last_error_code = 0;       // code of the last such entry
+  uint32_t boots = 0;                 // times the CN reached OPERATIONAL
+  uint32_t resets = 0;                // NMTResetNode sent
+  uint32_t sdo_errors = 0;
+  std::error_code last_error;
+};
+
+struct MnCounters {
+  uint64_t cycles = 0;
+  DllCounter cycle_time_exceeded;
+  uint32_t unexpected_frames = 0;  // frames that fit no expected slot
+  uint32_t invalid_frames = 0;     // rejected by the codec
+  uint32_t async_timeouts = 0;     // invited ASnd did not come
+};
+
+struct MnConfig {
+  PowerlinkBusConfig bus;
+  std::vector<AxisConfig> axes;  // modules per CN (node, slot) and their settings
+  uint32_t cycle_us = 1000;
+  MacAddress mac{};
+  // NMT timeouts (powerlink.md §5).
+  uint32_t pre_op1_timeout_ms = 500;   // reduced cycle before the MN starts full cycles
+  uint32_t boot_step_timeout_ms = 5000;  // a CN stuck in a boot step is reset
+  uint32_t reset_wait_ms = 100;          // after NMTResetNode, before identifying again
+  uint32_t status_request_every = 8;     // cycles between StatusRequests to a booting CN
+};
+
+// A register access the MN turns into an SDO transfer (configuration, identification, EnDatAck).
+struct SdoRegisterOp {
+  uint32_t tag = 0;
+  uint8_t node = 0;
+  uint8_t slot = 1;
+  uint16_t reg = 0;
+  uint8_t size = 1;
+  bool write = false;
+  uint32_t value = 0;
+};
+struct SdoRegisterResult {
+  uint32_t tag = 0;
+  std::error_code error;
+  uint32_t value = 0;
+};
+
+class ManagingNode {
+ public:
+  // Throws std::system_error (MnError::kInvalidLayout / kNodeNotConfigured) on a configuration
+  // that cannot run: called at start, never on the cycle path.
+  explicit ManagingNode(const MnConfig& config);
+  ~ManagingNode();
+  ManagingNode(const ManagingNode&) = delete;
+  ManagingNode& operator=(const ManagingNode&) = delete;
+
+  // ---- One cycle, in this order ----
+  // `now_ns`: the cycle's nominal start (CLOCK_MONOTONIC); `net_time`: wall clock for the SoC.
+  void begin_cycle(int64_t now_ns, NetTime net_time) noexcept;
+  // False in PRE_OPERATIONAL_1: a reduced cycle has no SoC and no PReq/PRes.
+  [[nodiscard]] bool full_cycle() const noexcept;
+  [[nodiscard]] Result<std::size_t> build_soc(std::span<uint8_t> out) const noexcept;
+  // Nodes to poll this cycle (continuous and the multiplexed ones due), in node order.
+  [[nodiscard]] std::span<const uint8_t> isochronous_nodes() const noexcept;
+  [[nodiscard]] Result<std::size_t> build_preq(uint8_t node, std::span<uint8_t> out) noexcept;
+  [[nodiscard]] uint32_t pres_timeout_us(uint8_t node) const noexcept;
+  // The PRes of `node` did not arrive in time.
+  void on_pres_timeout(uint8_t node) noexcept;
+  [[nodiscard]] Result<std::size_t> build_soa(std::span<uint8_t> out) noexcept;
+  // After the SoA: the frame the MN invited itself to send (NMT command or SDO), if any.
+  [[nodiscard]] Result<std::size_t> build_mn_asnd(std::span<uint8_t> out) noexcept;
+  // True when the SoA invited a CN to send: the driver waits async_timeout for it.
+  [[nodiscard]] bool awaiting_asnd() const noexcept { return awaiting_asnd_; }
+  void on_async_timeout() noexcept;
+  // Any received frame (PRes, ASnd, foreign traffic). Returns the parse error for statistics.
+  std::error_code on_frame(std::span<const uint8_t> frame) noexcept;
+  // `cycle_time_exceeded`: the driver's exchange ran past the period.
+  void end_cycle(bool cycle_time_exceeded) noexcept;
+
+  // ---- Process data (valid between begin_cycle and build_preq / after on_frame) ----
+  [[nodiscard]] std::span<uint8_t> preq_payload(uint8_t node) noexcept;
+  [[nodiscard]] std::span<const uint8_t> pres_payload(uint8_t node) const noexcept;
+  // The PRes of `node` arrived in this cycle (with a usable size).
+  [[nodiscard]] bool pres_fresh(uint8_t node) const noexcept;
+  [[nodiscard]] const NodeImageLayout* layout(uint8_t node) const noexcept;
+  // NetTime of this cycle's SoC (RelativeTime µs + offset), µs.
+  [[nodiscard]] uint64_t net_time_us() const noexcept;
+  [[nodiscard]] uint64_t relative_time_us() const noexcept { return relative_time_us_; }
+
+  // ---- Acyclic ----
+  // False when the node is unknown or its queue is full.
+  [[nodiscard]] bool submit(const SdoRegisterOp& op) noexcept;
+  [[nodiscard]] bool poll(SdoRegisterResult& out) noexcept;
+
+  // ---- State ----
+  [[nodiscard]] NmtState mn_state() const noexcept { return mn_state_; }
+  [[nodiscard]] std::span<const CnStatus> nodes() const noexcept;
+  [[nodiscard]] const CnStatus* node(uint8_t id) const noexcept;
+  [[nodiscard]] const MnCounters& counters() const noexcept { return counters_; }
+  // Every configured mandatory CN is OPERATIONAL.
+  [[nodiscard]] bool all_operational() const noexcept;
+
+ private:
+  struct Cn;
+  struct Handler;
+  static const Handler kHandlers[];
+
+  Cn* find(uint8_t node) noexcept;
+  const Cn* find(uint8_t node) const noexcept;
+  void enter(Cn& cn, CnBootState state) noexcept;
+  void reset_node(Cn& cn, std::error_code reason) noexcept;
+  void queue_nmt(Cn& cn, NmtCommandId command) noexcept;
+  void handle_pres(Cn& cn, const PRes& pres, std::span<const uint8_t> frame) noexcept;
+  void handle_asnd(const FrameHeader& h, const Asnd& asnd) noexcept;
+  void reported_state(Cn& cn, NmtState state) noexcept;
+  void start_next_sdo(Cn& cn) noexcept;
+  void sdo_done(Cn& cn, std::error_code ec, std::span<const uint8_t> data) noexcept;
+  void update_mn_state() noexcept;
+  [[nodiscard]] int64_t ms(uint32_t v) const noexcept { return static_cast<int64_t>(v) * 1'000'000; }
+
+  // State handlers (one row each in kHandlers).
+  void on_enter_identify(Cn& cn) noexcept;
+  void on_enter_wait_preop2(Cn& cn) noexcept;
+  void on_enter_configure(Cn& cn) noexcept;
+  void on_enter_ready(Cn& cn) noexcept;
+  void on_enter_wait_operational(Cn& cn) noexcept;
+  void on_enter_operational(Cn& cn) noexcept;
+  void on_enter_reset(Cn& cn) noexcept;
+  void on_state_identify(Cn& cn, NmtState s) noexcept;
+  void on_state_wait_preop2(Cn& cn, NmtState s) noexcept;
+  void on_state_configure(Cn& cn, NmtState s) noexcept;
+  void on_state_ready(Cn& cn, NmtState s) noexcept;
+  void on_state_wait_operational(Cn& cn, NmtState s) noexcept;
+  void on_state_operational(Cn& cn, NmtState s) noexcept;
+  void on_state_reset(Cn& cn, NmtState s) noexcept;
+  void on_timeout_reset(Cn& cn) noexcept;
+  void on_timeout_boot(Cn& cn) noexcept;
+
+  MnConfig config_;
+  SdoMapping mapping_;
+  std::vector<std::unique_ptr<Cn>> cns_;
+  std::vector<CnStatus> status_view_;
+  std::vector<uint8_t> iso_list_;
+  std::size_t iso_count_ = 0;
+  NmtState mn_state_ = NmtState::kPreOperational1;
+  int64_t now_ns_ = 0;
+  int64_t start_ns_ = -1;
+  int64_t mn_state_since_ns_ = 0;
+  uint64_t relative_time_us_ = 0;
+  NetTime net_time_{};
+  MnCounters counters_;
+  // Async slot of this cycle.
+  RequestedService soa_service_ = RequestedService::kNone;
+  uint8_t soa_target_ = 0;
+  bool awaiting_asnd_ = false;
+  Cn* mn_asnd_from_ = nullptr;  // whose outbox the MN sends after the SoA
+  std::size_t async_rr_ = 0;    // round-robin position among the CNs
+  std::array<SdoRegisterResult, 64> results_{};
+  std::size_t results_head_ = 0;
+  std::size_t results_count_ = 0;
+};
+
+}  // namespace ds1928::powerlink

@@ -1,0 +1,175 @@
+#include "powerlink/powerlink_bus.hpp"
+
+#include <time.h>
+
+namespace ds1928::powerlink {
+namespace {
+
+int64_t monotonic_ns() noexcept {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
+
+NetTime wall_clock() noexcept {
+  timespec ts{};
+  clock_gettime(CLOCK_REALTIME, &ts);
+  return {static_cast<uint32_t>(ts.tv_sec), static_cast<uint32_t>(ts.tv_nsec)};
+}
+
+}  // namespace
+
+PowerlinkBus::PowerlinkBus(const MnConfig& config, std::unique_ptr<Link> link)
+    : PowerlinkBus(config, *link) {
+  owned_link_ = std::move(link);
+}
+
+PowerlinkBus::PowerlinkBus(const MnConfig& config, Link& link)
+    : config_(config), link_(link), mn_(config), clock_(&monotonic_ns) {
+  axis_map_.resize(config_.axes.size());
+  rx_time_.resize(config_.axes.size());
+  for (std::size_t i = 0; i < config_.axes.size(); ++i) {
+    const AxisConfig& a = config_.axes[i];
+    const NodeImageLayout* layout = mn_.layout(a.node);
+    if (!layout) continue;  // axis on an unconfigured node: never fresh
+    if (const ModuleMapping* m = layout->find(a.slot)) axis_map_[i] = {a.node, *m, true};
+  }
+}
+
+std::error_code PowerlinkBus::start() {
+  if (!link_.link_up()) return MnError::kLinkDown;
+  state_.store(BusState::Booting, std::memory_order_relaxed);
+  return {};
+}
+
+void PowerlinkBus::stop() noexcept { state_.store(BusState::Down, std::memory_order_relaxed); }
+
+void PowerlinkBus::send(Result<std::size_t> len) noexcept {
+  if (len && *len > 0) (void)link_.send(std::span<const uint8_t>(tx_.data(), *len));
+}
+
+void PowerlinkBus::drain(int64_t deadline_ns) noexcept {
+  for (;;) {
+    Received r = link_.receive(rx_, deadline_ns);
+    if (r.length == 0 || r.error) return;
+    (void)mn_.on_frame(std::span<const uint8_t>(rx_.data(), r.length));
+  }
+}
+
+ExchangeResult PowerlinkBus::exchange(std::span<AxisIo> axes, int64_t cycle_start_ns,
+                                      uint64_t) noexcept {
+  ExchangeResult result;
+  for (AxisIo& io : axes) io.inputs_fresh = false;
+  if (!link_.link_up()) {
+    state_.store(BusState::Error, std::memory_order_relaxed);
+    publish_status();
+    return result;
+  }
+  // Register requests from the normal thread become SDO transfers.
+  while (auto req = requests_.try_pop()) {
+    RegisterResult failed{req->tag, make_error_code(MnError::kNodeNotConfigured), 0};
+    if (req->axis >= axis_map_.size() || !axis_map_[req->axis].valid) {
+      (void)results_.try_push(failed);
+      continue;
+    }
+    const AxisMap& am = axis_map_[req->axis];
+    SdoRegisterOp op{req->tag, am.node, am.mapping.slot, req->reg, req->size, req->write, req->value};
+    if (!mn_.submit(op)) {
+      failed.error = make_error_code(MnError::kQueueFull);
+      (void)results_.try_push(failed);
+    }
+  }
+
+  mn_.begin_cycle(cycle_start_ns, wall_clock());
+  const std::size_t n_axes = std::min(axes.size(), axis_map_.size());
+  for (std::size_t i = 0; i < n_axes; ++i) {
+    const AxisMap& am = axis_map_[i];
+    if (am.valid) (void)write_outputs(mn_.preq_payload(am.node), am.mapping, axes[i].outputs);
+    rx_time_[i] = 0;
+  }
+  if (mn_.full_cycle()) send(mn_.build_soc(tx_));
+  for (uint8_t node : mn_.isochronous_nodes()) {
+    const CnStatus* st = mn_.node(node);
+    const uint32_t before = st->pres_received;
+    send(mn_.build_preq(node, tx_));
+    const int64_t deadline = clock_() + static_cast<int64_t>(mn_.pres_timeout_us(node)) * 1000;
+    for (;;) {
+      Received r = link_.receive(rx_, deadline);
+      if (r.length == 0 || r.error) {
+        mn_.on_pres_timeout(node);
+        ++result.frames_lost;
+        break;
+      }
+      (void)mn_.on_frame(std::span<const uint8_t>(rx_.data(), r.length));
+      if (st->pres_received != before) {
+        const int64_t t = r.rx_time_ns ? r.rx_time_ns : clock_();
+        for (std::size_t i = 0; i < n_axes; ++i)
+          if (axis_map_[i].node == node) rx_time_[i] = t;
+        break;
+      }
+    }
+  }
+  send(mn_.build_soa(tx_));
+  send(mn_.build_mn_asnd(tx_));
+  if (mn_.awaiting_asnd()) {
+    const int64_t deadline = clock_() + static_cast<int64_t>(config_.bus.async_timeout_us) * 1000;
+    while (mn_.awaiting_asnd()) {
+      Received r = link_.receive(rx_, deadline);
+      if (r.length == 0 || r.error) {
+        mn_.on_async_timeout();
+        break;
+      }
+      (void)mn_.on_frame(std::span<const uint8_t>(rx_.data(), r.length));
+    }
+  }
+  drain(0);  // late and foreign frames
+  const int64_t period_ns = static_cast<int64_t>(config_.cycle_us) * 1000;
+  mn_.end_cycle(clock_() - cycle_start_ns > period_ns);
+
+  for (std::size_t i = 0; i < n_axes; ++i) {
+    const AxisMap& am = axis_map_[i];
+    if (!am.valid || !mn_.pres_fresh(am.node)) continue;
+    const CnStatus* st = mn_.node(am.node);
+    if (st->boot != CnBootState::kOperational) continue;
+    if (read_inputs(mn_.pres_payload(am.node), am.mapping, axes[i].inputs)) {
+      axes[i].inputs_fresh = true;
+      axes[i].rx_time_ns = rx_time_[i];
+    }
+  }
+  SdoRegisterResult r;
+  while (mn_.poll(r)) (void)results_.try_push({r.tag, r.error, r.value});
+
+  result.net_time = {mn_.net_time_us(), cycle_start_ns, mn_.full_cycle()};
+  result.bus_up = mn_.all_operational();
+  state_.store(result.bus_up ? BusState::Operational : BusState::Booting, std::memory_order_relaxed);
+  publish_status();
+  return result;
+}
+
+void PowerlinkBus::publish_status() noexcept {
+  // Never blocks the cycle: when a reader holds the lock, this cycle's snapshot is skipped.
+  std::unique_lock lock(status_mutex_, std::try_to_lock);
+  if (!lock.owns_lock()) return;
+  status_.mn_state = mn_.mn_state();
+  status_.counters = mn_.counters();
+  status_.link_up = link_.link_up();
+  const auto nodes = mn_.nodes();
+  status_.node_count = std::min(nodes.size(), status_.nodes.size());
+  std::copy_n(nodes.begin(), status_.node_count, status_.nodes.begin());
+}
+
+PowerlinkStatus PowerlinkBus::status() const {
+  std::lock_guard lock(status_mutex_);
+  return status_;
+}
+
+bool PowerlinkBus::submit(const RegisterRequest& request) noexcept { return requests_.try_push(request); }
+
+bool PowerlinkBus::poll(RegisterResult& out) noexcept {
+  auto r = results_.try_pop();
+  if (!r) return false;
+  out = *r;
+  return true;
+}
+
+}  // namespace ds1928::powerlink
