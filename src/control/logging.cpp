@@ -1,0 +1,61 @@
+#include "control/logging.hpp"
+
+#include <spdlog/async.h>
+#include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/sinks/systemd_sink.h>
+
+#include <cstdlib>
+#include <string>
+
+namespace ds1928::control {
+
+LogSink detect_log_sink() noexcept {
+  const auto set = [](const char* name) {
+    const char* v = std::getenv(name);
+    return v != nullptr && v[0] != '\0';
+  };
+  return set("JOURNAL_STREAM") || set("INVOCATION_ID") ? LogSink::Journald : LogSink::Console;
+}
+
+std::optional<spdlog::level::level_enum> parse_log_level(std::string_view text) noexcept {
+  using spdlog::level::level_enum;
+  if (text == "trace") return level_enum::trace;
+  if (text == "debug") return level_enum::debug;
+  if (text == "info") return level_enum::info;
+  if (text == "warn" || text == "warning") return level_enum::warn;
+  if (text == "error") return level_enum::err;
+  if (text == "critical") return level_enum::critical;
+  if (text == "off") return level_enum::off;
+  return std::nullopt;
+}
+
+std::shared_ptr<spdlog::logger> setup_logging(spdlog::level::level_enum level, LogSink sink,
+                                              std::string_view name) {
+  // 8192 queued messages are several seconds of a chatty daemon.
+  if (!spdlog::thread_pool()) spdlog::init_thread_pool(8192, 1);
+  spdlog::sink_ptr out;
+  if (sink == LogSink::Journald) {
+    // The journal stamps time, priority and identifier itself.
+    out = std::make_shared<spdlog::sinks::systemd_sink_mt>(std::string(name));
+  } else {
+    out = std::make_shared<spdlog::sinks::stderr_color_sink_mt>();
+    out->set_pattern("%Y-%m-%d %H:%M:%S.%e %^%-5l%$ %v");
+  }
+  auto logger = std::make_shared<spdlog::async_logger>(
+      std::string(name), std::move(out), spdlog::thread_pool(),
+      spdlog::async_overflow_policy::overrun_oldest);
+  logger->set_level(level);
+  logger->flush_on(spdlog::level::warn);
+  spdlog::set_default_logger(logger);
+  return logger;
+}
+
+void shutdown_logging() noexcept {
+  try {
+    if (auto logger = spdlog::default_logger()) logger->flush();
+  } catch (...) {
+  }
+  spdlog::shutdown();
+}
+
+}  // namespace ds1928::control
