@@ -1,0 +1,277 @@
+#include <catch2/catch.hpp>
+
+#include <memory>
+
+#include "powerlink/powerlink_bus.hpp"
+#include "test_cn.hpp"
+
+using namespace ds1928;
+using namespace ds1928::powerlink;
+using test::MemoryLink;
+using test::TestCn;
+
+namespace {
+
+constexpr int64_t kPeriodNs = 1'000'000;
+
+int64_t fake_clock() noexcept { return 0; }  // exchanges take "no time" in memory
+
+struct Rig {
+  MnConfig config;
+  MemoryLink link;
+  std::vector<std::unique_ptr<TestCn>> cns;
+  std::unique_ptr<PowerlinkBus> bus;
+  std::vector<AxisIo> axes;
+  uint64_t cycle = 0;
+
+  explicit Rig(std::vector<uint8_t> nodes = {1}, uint8_t modules_per_node = 1) {
+    config.cycle_us = 1000;
+    config.mac = link.mac();
+    for (uint8_t n : nodes) {
+      PowerlinkNodeConfig nc;
+      nc.node_id = n;
+      config.bus.nodes.push_back(nc);
+      for (uint8_t s = 1; s <= modules_per_node; ++s) {
+        AxisConfig a;
+        a.node = n;
+        a.slot = s;
+        a.module.prescaler = static_cast<uint16_t>(3 + s);
+        config.axes.push_back(a);
+      }
+    }
+    for (uint8_t n : nodes) {
+      std::vector<ModuleSpec> specs;
+      for (const auto& a : config.axes)
+        if (a.node == n) specs.push_back({a.slot, a.module.input_mtu, a.module.output_mtu});
+      auto layout = make_layout(specs);
+      REQUIRE(layout);
+      cns.push_back(std::make_unique<TestCn>(n, *layout));
+      link.cns.push_back(cns.back().get());
+    }
+    bus = std::make_unique<PowerlinkBus>(config, link);
+    bus->set_clock(&fake_clock);
+    axes.resize(config.axes.size());
+    REQUIRE_FALSE(bus->start());
+  }
+
+  ExchangeResult step() {
+    auto r = bus->exchange(axes, static_cast<int64_t>(cycle) * kPeriodNs, cycle);
+    ++cycle;
+    return r;
+  }
+  // Runs until `pred` holds; fails after `max` cycles.
+  template <class P>
+  bool run_until(P pred, int max = 5000) {
+    for (int i = 0; i < max; ++i) {
+      step();
+      if (pred()) return true;
+    }
+    return false;
+  }
+  const CnStatus& st(uint8_t node) const { return *bus->managing_node().node(node); }
+};
+
+uint32_t le(const std::vector<uint8_t>& v) {
+  uint32_t x = 0;
+  for (std::size_t i = 0; i < v.size() && i < 4; ++i) x |= static_cast<uint32_t>(v[i]) << (8 * i);
+  return x;
+}
+
+}  // namespace
+
+TEST_CASE("MN boots an in-memory CN to OPERATIONAL and configures its modules by SDO",
+          "[powerlink][mn]") {
+  Rig rig({1}, 2);
+  TestCn& cn = *rig.cns[0];
+  cn.inputs.position_lw = 0xCAFE;
+  cn.inputs.error_info = 0x10;
+  rig.link.log = true;
+  REQUIRE(rig.run_until([&] { return rig.bus->state() == BusState::Operational; }));
+  CHECK(cn.state == NmtState::kOperational);
+  CHECK(rig.bus->managing_node().mn_state() == NmtState::kOperational);
+  const CnStatus& st = rig.st(1);
+  CHECK(st.boot == CnBootState::kOperational);
+  CHECK(st.boots == 1);
+  CHECK(st.sdo_errors == 0);
+  CHECK(st.mac == cn.mac);
+  CHECK(st.pres_size == 2 * pres_module_size(7));
+  // Every module got its settings before EnableReadyToOperate (docs/powerlink.md mapping).
+  CHECK(le(cn.objects[{0x2001, 0x01}]) == ModuleSettings{}.endat_mode());
+  CHECK(le(cn.objects[{0x2001, 0x02}]) == 4);  // prescaler of slot 1
+  CHECK(le(cn.objects[{0x2002, 0x02}]) == 5);  // prescaler of slot 2
+  CHECK(le(cn.objects[{0x2002, 0x05}]) == 1);  // SinCosEnable
+  CHECK(le(cn.objects[{0x2002, 0x06}]) == 1);  // SinCosRefSource
+  CHECK(cn.objects[{0x2001, 0x09}].size() == 4);  // SinCosQuitTime UDINT
+  CHECK(le(cn.objects[{0x2001, 0x09}]) == 100000);
+  CHECK(le(cn.objects[{0x2001, 0x0B}]) == 7);  // InputMTU
+  CHECK(cn.objects.size() == 28);
+
+  // The first frame of a boot is a reduced cycle: an SoA with IdentRequest, no SoC.
+  REQUIRE_FALSE(rig.link.sent_log.empty());
+  auto first = parse_soa(rig.link.sent_log.front());
+  REQUIRE(first);
+  CHECK(first->service == RequestedService::kIdentRequest);
+  CHECK(first->target == 1);
+
+  // Process data both ways, PReq RD once the MN is operational.
+  for (auto& io : rig.axes) io.outputs.output_sequence = 0x42;
+  rig.axes[0].outputs.tx_bytes[0] = 0x99;
+  auto r = rig.step();
+  CHECK(r.bus_up);
+  CHECK(r.frames_lost == 0);
+  CHECK(r.net_time.valid);
+  CHECK(cn.last_preq_ready);
+  CHECK(cn.last_outputs.output_sequence == 0x42);
+  CHECK(cn.last_outputs.tx_bytes[0] == 0x99);
+  REQUIRE(rig.axes[1].inputs_fresh);
+  CHECK(rig.axes[1].inputs.position_lw == 0xCAFE);
+  CHECK(rig.axes[1].inputs.error_info == 0x10);
+  // PosTime = low 32 bits of the SoC's RelativeTime (offset 0).
+  CHECK(rig.axes[0].inputs.pos_time_us == static_cast<uint32_t>(r.net_time.net_time_us));
+  CHECK(r.net_time.net_time_us == (rig.cycle - 1) * 1000);
+}
+
+TEST_CASE("Register requests become SDO transfers", "[powerlink][mn]") {
+  Rig rig({1}, 1);
+  REQUIRE(rig.run_until([&] { return rig.bus->state() == BusState::Operational; }));
+  RegisterRequest w{7, 0, reg::kEnDatAck, 1, true, 0x02};
+  REQUIRE(rig.bus->submit(w));
+  RegisterResult res;
+  REQUIRE(rig.run_until([&] { return rig.bus->poll(res); }, 200));
+  CHECK(res.tag == 7);
+  CHECK_FALSE(res.error);
+  CHECK(le(rig.cns[0]->objects[{0x2001, 0x0F}]) == 2);
+
+  RegisterRequest rd{8, 0, reg::kSystemCyclePrescaler, 2, false, 0};
+  REQUIRE(rig.bus->submit(rd));
+  REQUIRE(rig.run_until([&] { return rig.bus->poll(res); }, 200));
+  CHECK(res.tag == 8);
+  CHECK_FALSE(res.error);
+  CHECK(res.value == 4);
+
+  RegisterRequest missing{9, 0, reg::kEnDatError, 2, false, 0};  // object not in the CN
+  REQUIRE(rig.bus->submit(missing));
+  REQUIRE(rig.run_until([&] { return rig.bus->poll(res); }, 200));
+  CHECK(res.tag == 9);
+  CHECK(res.error == make_sdo_abort_error(0x06020000));
+  CHECK(rig.bus->state() == BusState::Operational);
+}
+
+TEST_CASE("Loss-of-PRes threshold removes, resets and re-boots the CN", "[powerlink][mn]") {
+  Rig rig({1, 2}, 1);
+  REQUIRE(rig.run_until([&] { return rig.bus->state() == BusState::Operational; }));
+  TestCn& cn = *rig.cns[0];
+  const int nmt_before = cn.nmt_commands;
+  cn.drop_pres = true;
+  auto r = rig.step();
+  CHECK(r.frames_lost == 1);
+  CHECK(rig.st(1).boot == CnBootState::kOperational);  // one loss: 8 < 15
+  rig.step();                                          // second: 16 ≥ 15
+  CHECK(rig.st(1).boot == CnBootState::kReset);
+  CHECK(rig.st(1).loss_of_pres.fired == 1);
+  CHECK_FALSE(rig.st(1).in_isochronous);
+  CHECK(rig.st(2).boot == CnBootState::kOperational);  // the other CN is untouched
+  cn.drop_pres = false;
+  REQUIRE(rig.run_until([&] { return rig.st(1).boot == CnBootState::kOperational; }));
+  CHECK(cn.nmt_commands > nmt_before);  // NMTResetNode, EnableReadyToOperate, StartNode
+  CHECK(rig.st(1).boots == 2);
+  CHECK(rig.st(1).resets == 1);
+  CHECK(rig.bus->state() == BusState::Operational);
+}
+
+TEST_CASE("Occasional PRes loss stays below the threshold", "[powerlink][mn]") {
+  Rig rig({1}, 1);
+  REQUIRE(rig.run_until([&] { return rig.bus->state() == BusState::Operational; }));
+  for (int i = 0; i < 400; ++i) {
+    rig.cns[0]->drop_pres = (i % 10) == 0;  // 10 % loss, never two in a row
+    auto r = rig.step();
+    if (rig.cns[0]->drop_pres) {
+      CHECK_FALSE(rig.axes[0].inputs_fresh);
+      CHECK(r.frames_lost == 1);
+    } else {
+      CHECK(rig.axes[0].inputs_fresh);
+    }
+  }
+  CHECK(rig.st(1).boots == 1);
+  CHECK(rig.st(1).loss_of_pres.events == 40);
+  CHECK(rig.st(1).loss_of_pres.fired == 0);
+}
+
+TEST_CASE("A power-cycled CN is detected and booted again", "[powerlink][mn]") {
+  Rig rig({1}, 1);
+  REQUIRE(rig.run_until([&] { return rig.bus->state() == BusState::Operational; }));
+  rig.cns[0]->power_cycle();
+  REQUIRE(rig.run_until([&] { return rig.st(1).boot != CnBootState::kOperational; }, 10));
+  REQUIRE(rig.run_until([&] { return rig.st(1).boots == 2; }));
+  CHECK(rig.cns[0]->state == NmtState::kOperational);
+  CHECK(le(rig.cns[0]->objects[{0x2001, 0x01}]) == ModuleSettings{}.endat_mode());  // reconfigured
+}
+
+TEST_CASE("StatusResponses with error entries are tolerated and counted", "[powerlink][mn]") {
+  Rig rig({1}, 1);
+  rig.cns[0]->status_errors = {{0x1000, 0x8235, 7, {}}, {0x1000, 0x8611, 8, {}}};
+  REQUIRE(rig.run_until([&] { return rig.bus->state() == BusState::Operational; }));
+  CHECK(rig.cns[0]->status_requests > 0);
+  CHECK(rig.st(1).status_error_entries >= 2);
+  CHECK(rig.st(1).last_error_code == 0x8611);
+}
+
+TEST_CASE("A PRes of unexpected size is reported, not fatal", "[powerlink][mn]") {
+  Rig rig({1}, 1);
+  REQUIRE(rig.run_until([&] { return rig.bus->state() == BusState::Operational; }));
+  rig.cns[0]->pres_size_delta = 10;  // longer: reported, modules still decoded
+  rig.step();
+  CHECK(rig.st(1).pres_size_mismatches == 1);
+  CHECK(rig.st(1).last_pres_size == pres_module_size(7) + 10);
+  CHECK(rig.axes[0].inputs_fresh);
+  CHECK(rig.st(1).last_error == MnError::kPresSizeMismatch);
+  rig.cns[0]->pres_size_delta = -5;  // shorter: reported, inputs not fresh
+  rig.step();
+  CHECK(rig.st(1).pres_size_mismatches == 2);
+  CHECK_FALSE(rig.axes[0].inputs_fresh);
+  CHECK(rig.st(1).boot == CnBootState::kOperational);
+  rig.cns[0]->pres_size_delta = 0;
+  rig.step();
+  CHECK(rig.axes[0].inputs_fresh);
+}
+
+TEST_CASE("A CN with the wrong identity is not booted", "[powerlink][mn]") {
+  Rig rig({1}, 1);
+  // Rebuild with an expected vendor the CN does not have.
+  rig.config.bus.nodes[0].vendor_id = 0x77;
+  rig.bus = std::make_unique<PowerlinkBus>(rig.config, rig.link);
+  rig.bus->set_clock(&fake_clock);
+  REQUIRE_FALSE(rig.bus->start());
+  for (int i = 0; i < 300; ++i) rig.step();
+  CHECK(rig.st(1).boot == CnBootState::kIdentify);
+  CHECK(rig.st(1).last_error == MnError::kIdentMismatch);
+  CHECK(rig.bus->state() == BusState::Booting);
+  const auto status = rig.bus->status();
+  CHECK(status.node_count == 1);
+  CHECK(status.nodes[0].last_error == MnError::kIdentMismatch);
+}
+
+TEST_CASE("The MN's frames decode in the codec with consistent fields", "[powerlink][mn]") {
+  Rig rig({1, 2}, 1);
+  rig.link.log = true;
+  REQUIRE(rig.run_until([&] { return rig.bus->state() == BusState::Operational; }));
+  std::size_t socs = 0, preqs = 0, soas = 0, asnds = 0;
+  for (const auto& f : rig.link.sent_log) {
+    REQUIRE(f.size() >= kMinFrameSize);
+    auto parsed = parse_frame(f);
+    REQUIRE(parsed);
+    CHECK(parsed->header.src_node == kNodeMn);
+    switch (parsed->header.type) {
+      case MessageType::kSoC: ++socs; break;
+      case MessageType::kPReq: ++preqs; break;
+      case MessageType::kSoA: ++soas; break;
+      case MessageType::kASnd: ++asnds; break;
+      default: FAIL("MN sent a PRes");
+    }
+  }
+  CHECK(soas == rig.cycle);
+  CHECK(socs > 0);
+  CHECK(socs < rig.cycle);  // the boot started with reduced cycles
+  CHECK(preqs > 0);
+  CHECK(asnds > 0);
+}

@@ -1,0 +1,141 @@
+#include "test_cn.hpp"
+
+#include <algorithm>
+
+namespace ds1928::powerlink::test {
+
+TestCn::TestCn(uint8_t id, NodeImageLayout l)
+    : node(id),
+      mac{0x02, 0, 0, 0, 0, id},
+      layout(l),
+      server_({.own_node = id, .own_mac = {0x02, 0, 0, 0, 0, id}, .client_node = kNodeMn,
+               .timeout_ns = 2'000'000'000, .max_segment = kMaxSdoSegment - 4},
+              *this, [this](std::span<const uint8_t> f) { sdo_out_.emplace_back(f.begin(), f.end()); }) {}
+
+void TestCn::power_cycle() {
+  state = NmtState::kNotActive;
+  server_.reset();
+  sdo_out_.clear();
+  objects.clear();
+}
+
+uint32_t TestCn::read_object(uint16_t index, uint8_t sub, std::span<uint8_t> out,
+                             std::size_t& size) noexcept {
+  auto it = objects.find({index, sub});
+  if (it == objects.end()) return 0x06020000;
+  size = std::min(out.size(), it->second.size());
+  std::copy_n(it->second.begin(), size, out.begin());
+  return 0;
+}
+
+uint32_t TestCn::write_object(uint16_t index, uint8_t sub, std::span<const uint8_t> data) noexcept {
+  if (index < 0x2001 || index > 0x2010) return 0x06020000;
+  objects[{index, sub}].assign(data.begin(), data.end());
+  return 0;
+}
+
+void TestCn::on_frame(std::span<const uint8_t> bytes, std::deque<std::vector<uint8_t>>& out) {
+  auto frame = parse_frame(bytes);
+  if (!frame) return;
+  std::array<uint8_t, kMaxFrameSize> buf{};
+  auto emit = [&](Result<std::size_t> len) {
+    if (len) out.emplace_back(buf.begin(), buf.begin() + *len);
+  };
+  const FrameHeader& h = frame->header;
+  if (const auto* soc = std::get_if<Soc>(&frame->message)) {
+    last_relative_time_us = soc->relative_time_us;
+    if (state == NmtState::kPreOperational1) state = NmtState::kPreOperational2;
+    return;
+  }
+  if (const auto* preq = std::get_if<PReq>(&frame->message)) {
+    if (h.dst_node != node || drop_pres) return;
+    if (state == NmtState::kNotActive || state == NmtState::kPreOperational1) return;
+    last_preq_ready = preq->ready;
+    if (layout.count > 0) (void)read_outputs(preq->payload, layout.modules[0], last_outputs);
+    std::vector<uint8_t> payload(std::max<int>(0, layout.pres_size + pres_size_delta), 0);
+    ModuleInputs in = inputs;
+    in.pos_time_us = static_cast<uint32_t>(last_relative_time_us);
+    for (const ModuleMapping& m : layout.mappings()) (void)write_inputs(payload, m, in);
+    PRes pres;
+    pres.nmt_state = state;
+    pres.ready = state == NmtState::kOperational;
+    pres.request_count = static_cast<uint8_t>(std::min<std::size_t>(sdo_out_.size(), 7));
+    pres.priority = 3;
+    pres.payload = payload;
+    emit(build_pres(buf, pres_header(mac, node), pres));
+    return;
+  }
+  if (const auto* soa = std::get_if<SoA>(&frame->message)) {
+    if (state == NmtState::kNotActive) state = NmtState::kPreOperational1;
+    if (soa->target != node) return;
+    const FrameHeader ah = asnd_header(mac, node, kNodeMn);
+    switch (soa->service) {
+      case RequestedService::kIdentRequest: {
+        ++ident_requests;
+        IdentResponse r;
+        r.nmt_state = state;
+        r.vendor_id = vendor_id;
+        r.product_code = product_code;
+        r.poll_in_size = layout.pres_size;
+        r.poll_out_size = layout.preq_size;
+        emit(build_ident_response(buf, ah, r));
+        break;
+      }
+      case RequestedService::kStatusRequest: {
+        ++status_requests;
+        StatusResponse r;
+        r.nmt_state = state;
+        r.exception_new = !status_errors.empty();
+        emit(build_status_response(buf, ah, r, status_errors));
+        break;
+      }
+      case RequestedService::kUnspecifiedInvite:
+        if (!sdo_out_.empty()) {
+          out.push_back(std::move(sdo_out_.front()));
+          sdo_out_.pop_front();
+        }
+        break;
+      default: break;
+    }
+    return;
+  }
+  if (const auto* asnd = std::get_if<Asnd>(&frame->message)) {
+    if (h.dst_node != node && h.dst_node != kNodeBroadcast) return;
+    if (const auto* cmd = std::get_if<NmtCommand>(&asnd->body)) {
+      ++nmt_commands;
+      switch (static_cast<NmtCommandId>(cmd->command)) {
+        case NmtCommandId::kEnableReadyToOperate:
+          if (state == NmtState::kPreOperational2) state = NmtState::kReadyToOperate;
+          break;
+        case NmtCommandId::kStartNode:
+          if (state == NmtState::kReadyToOperate) state = NmtState::kOperational;
+          break;
+        case NmtCommandId::kResetNode:
+        case NmtCommandId::kResetCommunication:
+          state = NmtState::kNotActive;
+          server_.reset();
+          sdo_out_.clear();
+          break;
+        default: break;
+      }
+    } else if (const auto* sdo = std::get_if<Sdo>(&asnd->body)) {
+      server_.receive(*sdo, 0);
+    }
+  }
+}
+
+std::error_code MemoryLink::send(std::span<const uint8_t> frame) noexcept {
+  if (log) sent_log.emplace_back(frame.begin(), frame.end());
+  for (TestCn* cn : cns) cn->on_frame(frame, rx);
+  return {};
+}
+
+Received MemoryLink::receive(std::span<uint8_t> buffer, int64_t) noexcept {
+  if (rx.empty()) return {};
+  auto f = std::move(rx.front());
+  rx.pop_front();
+  std::copy(f.begin(), f.end(), buffer.begin());
+  return {f.size(), 0, {}};
+}
+
+}  // namespace ds1928::powerlink::test

@@ -1,0 +1,67 @@
+// A minimal in-memory Controlled Node for the MN tests: NMT states, IdentResponse,
+// StatusResponse, PRes with a process image, an SDO server on a plain object map, and faults.
+#pragma once
+
+#include <deque>
+#include <map>
+#include <vector>
+
+#include "powerlink/link.hpp"
+#include "powerlink/process_image.hpp"
+#include "powerlink/sdo.hpp"
+
+namespace ds1928::powerlink::test {
+
+class TestCn : public SdoObjectAccess {
+ public:
+  TestCn(uint8_t node, NodeImageLayout layout);
+
+  // A frame the MN sent; answers go to `out`.
+  void on_frame(std::span<const uint8_t> frame, std::deque<std::vector<uint8_t>>& out);
+  void power_cycle();
+
+  uint32_t read_object(uint16_t index, uint8_t sub, std::span<uint8_t> out,
+                       std::size_t& size) noexcept override;
+  uint32_t write_object(uint16_t index, uint8_t sub, std::span<const uint8_t> data) noexcept override;
+
+  uint8_t node;
+  MacAddress mac;
+  NodeImageLayout layout;
+  NmtState state = NmtState::kNotActive;
+  std::map<std::pair<uint16_t, uint8_t>, std::vector<uint8_t>> objects;
+  ModuleInputs inputs;             // what every module reports
+  ModuleOutputs last_outputs;      // module 0's outputs from the last PReq
+  bool last_preq_ready = false;
+  uint64_t last_relative_time_us = 0;
+  // Faults.
+  bool drop_pres = false;
+  int pres_size_delta = 0;
+  std::vector<ErrorEntry> status_errors;
+  uint32_t vendor_id = 0x1A;
+  uint32_t product_code = 0x1928;
+  // Seen.
+  int nmt_commands = 0;
+  int ident_requests = 0;
+  int status_requests = 0;
+
+ private:
+  SdoServer server_;
+  std::deque<std::vector<uint8_t>> sdo_out_;
+};
+
+// The wire: every frame the MN sends is given to the CNs at once; their answers are queued
+// and received in order (deadlines are irrelevant in memory).
+class MemoryLink : public Link {
+ public:
+  std::vector<TestCn*> cns;
+  std::deque<std::vector<uint8_t>> rx;
+  std::vector<std::vector<uint8_t>> sent_log;  // when logging
+  bool log = false;
+  bool up = true;
+  std::error_code send(std::span<const uint8_t> frame) noexcept override;
+  Received receive(std::span<uint8_t> buffer, int64_t deadline_ns) noexcept override;
+  bool link_up() const noexcept override { return up; }
+  MacAddress mac() const noexcept override { return {0x02, 0, 0, 0, 0, 0xF0}; }
+};
+
+}  // namespace ds1928::powerlink::test
