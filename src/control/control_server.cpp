@@ -5,11 +5,12 @@
 #include <sys/stat.h>
 
 #include <atomic>
-#include <boost/asio.hpp>
 #include <deque>
 #include <filesystem>
 #include <map>
 #include <set>
+
+#include "control/asio.hpp"
 
 namespace ds1928::control {
 

@@ -2,9 +2,9 @@
 
 #include <systemd/sd-daemon.h>
 
-#include <boost/asio.hpp>
 #include <cstdlib>
-#include <utility>  // before Asio: 1.74 uses std::exchange without including it
+
+#include "control/asio.hpp"
 
 namespace ds1928::control {
 

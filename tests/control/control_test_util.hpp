@@ -5,7 +5,6 @@
 #include <sys/un.h>
 #include <unistd.h>
 
-#include <boost/asio.hpp>
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
@@ -16,6 +15,7 @@
 #include <thread>
 #include <type_traits>
 
+#include "control/asio.hpp"
 #include "control/control_server.hpp"
 
 namespace ds1928::control::test {

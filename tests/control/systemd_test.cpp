@@ -6,15 +6,14 @@
 
 #include <algorithm>
 #include <atomic>
-#include <boost/asio.hpp>
 #include <catch2/catch.hpp>
 #include <cstdlib>
 #include <filesystem>
 #include <string>
 #include <thread>
-#include <utility>  // before Asio: 1.74 uses std::exchange without including it
 #include <vector>
 
+#include "control/asio.hpp"
 #include "control/logging.hpp"
 #include "control/systemd_notifier.hpp"
 
