@@ -10,20 +10,34 @@ class FrameCategory final : public std::error_category {
   const char* name() const noexcept override { return "powerlink.frame"; }
   std::string message(int ev) const override {
     switch (static_cast<FrameError>(ev)) {
-      case FrameError::kFrameTooShort: return "frame too short";
-      case FrameError::kFrameTooLong: return "frame longer than 1514 bytes";
-      case FrameError::kNotPowerlink: return "EtherType is not 0x88AB";
-      case FrameError::kUnknownMessageType: return "unknown POWERLINK message type";
-      case FrameError::kPayloadSizeExceedsFrame: return "payload size runs past the frame end";
-      case FrameError::kPayloadTooLarge: return "isochronous payload above 1490 bytes";
-      case FrameError::kInvalidSourceNode: return "source node id invalid for this message";
-      case FrameError::kInvalidDestinationNode: return "destination node id invalid for this message";
-      case FrameError::kInvalidNmtState: return "undefined NMT state";
-      case FrameError::kUnknownServiceId: return "unknown service id";
-      case FrameError::kSdoSegmentSizeExceedsFrame: return "SDO segment size runs past the frame end";
-      case FrameError::kSdoInconsistentCommand: return "inconsistent SDO command layer";
-      case FrameError::kWrongMessageType: return "frame is of another message type";
-      case FrameError::kBufferTooSmall: return "buffer too small for the frame";
+      case FrameError::kFrameTooShort:
+        return "frame too short";
+      case FrameError::kFrameTooLong:
+        return "frame longer than 1514 bytes";
+      case FrameError::kNotPowerlink:
+        return "EtherType is not 0x88AB";
+      case FrameError::kUnknownMessageType:
+        return "unknown POWERLINK message type";
+      case FrameError::kPayloadSizeExceedsFrame:
+        return "payload size runs past the frame end";
+      case FrameError::kPayloadTooLarge:
+        return "isochronous payload above 1490 bytes";
+      case FrameError::kInvalidSourceNode:
+        return "source node id invalid for this message";
+      case FrameError::kInvalidDestinationNode:
+        return "destination node id invalid for this message";
+      case FrameError::kInvalidNmtState:
+        return "undefined NMT state";
+      case FrameError::kUnknownServiceId:
+        return "unknown service id";
+      case FrameError::kSdoSegmentSizeExceedsFrame:
+        return "SDO segment size runs past the frame end";
+      case FrameError::kSdoInconsistentCommand:
+        return "inconsistent SDO command layer";
+      case FrameError::kWrongMessageType:
+        return "frame is of another message type";
+      case FrameError::kBufferTooSmall:
+        return "buffer too small for the frame";
     }
     return "unknown frame error";
   }
@@ -34,12 +48,18 @@ class SdoCategory final : public std::error_category {
   const char* name() const noexcept override { return "powerlink.sdo"; }
   std::string message(int ev) const override {
     switch (static_cast<SdoError>(ev)) {
-      case SdoError::kBusy: return "SDO transfer already in progress for this node";
-      case SdoError::kTimeout: return "SDO timeout";
-      case SdoError::kProtocol: return "SDO protocol error";
-      case SdoError::kConnectionLost: return "SDO connection lost";
-      case SdoError::kDataTooLarge: return "SDO data too large";
-      case SdoError::kNoMapping: return "register has no SDO object mapping";
+      case SdoError::kBusy:
+        return "SDO transfer already in progress for this node";
+      case SdoError::kTimeout:
+        return "SDO timeout";
+      case SdoError::kProtocol:
+        return "SDO protocol error";
+      case SdoError::kConnectionLost:
+        return "SDO connection lost";
+      case SdoError::kDataTooLarge:
+        return "SDO data too large";
+      case SdoError::kNoMapping:
+        return "register has no SDO object mapping";
     }
     return "unknown SDO error";
   }
@@ -52,24 +72,54 @@ class SdoAbortCategory final : public std::error_category {
     const auto code = static_cast<uint32_t>(ev);
     const char* text = nullptr;
     switch (code) {
-      case 0x05040000: text = "SDO protocol timed out"; break;
-      case 0x05040001: text = "command specifier unknown"; break;
-      case 0x05040003: text = "invalid sequence number"; break;
-      case 0x05040005: text = "out of memory"; break;
-      case 0x06010000: text = "unsupported access to an object"; break;
-      case 0x06010001: text = "attempt to read a write-only object"; break;
-      case 0x06010002: text = "attempt to write a read-only object"; break;
-      case 0x06020000: text = "object does not exist"; break;
-      case 0x06070010: text = "data type does not match, length does not match"; break;
-      case 0x06090011: text = "subindex does not exist"; break;
-      case 0x06090030: text = "value range exceeded"; break;
-      case 0x08000000: text = "general error"; break;
-      case 0x08000020: text = "data cannot be transferred or stored"; break;
-      case 0x08000022: text = "not possible in the present device state"; break;
-      default: break;
+      case 0x05040000:
+        text = "SDO protocol timed out";
+        break;
+      case 0x05040001:
+        text = "command specifier unknown";
+        break;
+      case 0x05040003:
+        text = "invalid sequence number";
+        break;
+      case 0x05040005:
+        text = "out of memory";
+        break;
+      case 0x06010000:
+        text = "unsupported access to an object";
+        break;
+      case 0x06010001:
+        text = "attempt to read a write-only object";
+        break;
+      case 0x06010002:
+        text = "attempt to write a read-only object";
+        break;
+      case 0x06020000:
+        text = "object does not exist";
+        break;
+      case 0x06070010:
+        text = "data type does not match, length does not match";
+        break;
+      case 0x06090011:
+        text = "subindex does not exist";
+        break;
+      case 0x06090030:
+        text = "value range exceeded";
+        break;
+      case 0x08000000:
+        text = "general error";
+        break;
+      case 0x08000020:
+        text = "data cannot be transferred or stored";
+        break;
+      case 0x08000022:
+        text = "not possible in the present device state";
+        break;
+      default:
+        break;
     }
     char buf[96];
-    std::snprintf(buf, sizeof buf, "SDO abort 0x%08X%s%s", code, text ? ": " : "", text ? text : "");
+    std::snprintf(buf, sizeof buf, "SDO abort 0x%08X%s%s", code, text ? ": " : "",
+                  text ? text : "");
     return buf;
   }
 };
@@ -79,13 +129,20 @@ class MnCategory final : public std::error_category {
   const char* name() const noexcept override { return "powerlink.mn"; }
   std::string message(int ev) const override {
     switch (static_cast<MnError>(ev)) {
-      case MnError::kIdentMismatch: return "IdentResponse does not match the configured identity";
-      case MnError::kPresSizeMismatch: return "PRes payload size differs from the expected size";
-      case MnError::kNodeNotConfigured: return "node not configured";
-      case MnError::kNodeNotOperational: return "node not operational";
-      case MnError::kQueueFull: return "request queue full";
-      case MnError::kLinkDown: return "link down";
-      case MnError::kInvalidLayout: return "invalid process image layout";
+      case MnError::kIdentMismatch:
+        return "IdentResponse does not match the configured identity";
+      case MnError::kPresSizeMismatch:
+        return "PRes payload size differs from the expected size";
+      case MnError::kNodeNotConfigured:
+        return "node not configured";
+      case MnError::kNodeNotOperational:
+        return "node not operational";
+      case MnError::kQueueFull:
+        return "request queue full";
+      case MnError::kLinkDown:
+        return "link down";
+      case MnError::kInvalidLayout:
+        return "invalid process image layout";
     }
     return "unknown MN error";
   }

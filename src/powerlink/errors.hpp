@@ -31,12 +31,12 @@ enum class FrameError : int {
 
 // SDO transfer outcome not expressed by an abort code from the peer.
 enum class SdoError : int {
-  kBusy = 1,          // the node already has a transfer in progress
-  kTimeout,           // no answer within the SDO timeout
-  kProtocol,          // unexpected frame in the transfer (sequence, transaction, size)
-  kConnectionLost,    // the node left the network (loss, reset) during the transfer
-  kDataTooLarge,      // the value does not fit the caller's buffer / the transfer limit
-  kNoMapping,         // register has no (index, subindex)
+  kBusy = 1,        // the node already has a transfer in progress
+  kTimeout,         // no answer within the SDO timeout
+  kProtocol,        // unexpected frame in the transfer (sequence, transaction, size)
+  kConnectionLost,  // the node left the network (loss, reset) during the transfer
+  kDataTooLarge,    // the value does not fit the caller's buffer / the transfer limit
+  kNoMapping,       // register has no (index, subindex)
 };
 
 // NMT / MN conditions reported in status and results.
@@ -47,7 +47,7 @@ enum class MnError : int {
   kNodeNotOperational,  // request needs the node operational
   kQueueFull,
   kLinkDown,
-  kInvalidLayout,       // process image: duplicate slot, too many modules, MTU or size too large
+  kInvalidLayout,  // process image: duplicate slot, too many modules, MTU or size too large
 };
 
 [[nodiscard]] const std::error_category& frame_category() noexcept;
@@ -75,7 +75,7 @@ enum class MnError : int {
 template <class T>
 class [[nodiscard]] Result {
  public:
-  Result(T value) : value_(std::move(value)) {}  // NOLINT(google-explicit-constructor)
+  Result(T value) : value_(std::move(value)) {}     // NOLINT(google-explicit-constructor)
   Result(std::error_code error) : error_(error) {}  // NOLINT(google-explicit-constructor)
   template <class E, std::enable_if_t<std::is_error_code_enum_v<E>, int> = 0>
   Result(E error) : error_(make_error_code(error)) {}  // NOLINT(google-explicit-constructor)

@@ -44,7 +44,9 @@ uint8_t* begin_frame(std::span<uint8_t> out, std::size_t content, const FrameHea
   return p;
 }
 
-[[nodiscard]] bool is_cn(uint8_t node) noexcept { return node >= 1 && node <= kNodeMaxCn; }
+[[nodiscard]] bool is_cn(uint8_t node) noexcept {
+  return node >= 1 && node <= kNodeMaxCn;
+}
 
 [[nodiscard]] bool is_valid_requested_service(uint8_t v) noexcept {
   switch (static_cast<RequestedService>(v)) {
@@ -53,7 +55,8 @@ uint8_t* begin_frame(std::span<uint8_t> out, std::size_t content, const FrameHea
     case RequestedService::kStatusRequest:
     case RequestedService::kNmtRequestInvite:
     case RequestedService::kSyncRequest:
-    case RequestedService::kUnspecifiedInvite: return true;
+    case RequestedService::kUnspecifiedInvite:
+      return true;
   }
   return false;
 }
@@ -208,7 +211,8 @@ Result<Sdo> decode_sdo(std::span<const uint8_t> f) noexcept {
 }
 
 Result<Asnd> decode_asnd(std::span<const uint8_t> f, const FrameHeader& h) noexcept {
-  if (h.src_node == kNodeInvalid || h.src_node == kNodeBroadcast) return FrameError::kInvalidSourceNode;
+  if (h.src_node == kNodeInvalid || h.src_node == kNodeBroadcast)
+    return FrameError::kInvalidSourceNode;
   if (h.dst_node == kNodeInvalid) return FrameError::kInvalidDestinationNode;
   const uint8_t service = f[17];
   Asnd a;
@@ -266,39 +270,60 @@ bool is_valid_nmt_state(uint8_t raw) noexcept {
     case NmtState::kReadyToOperate:
     case NmtState::kOperational:
     case NmtState::kStopped:
-    case NmtState::kBasicEthernet: return true;
+    case NmtState::kBasicEthernet:
+      return true;
   }
   return false;
 }
 
 std::string_view to_string(NmtState s) noexcept {
   switch (s) {
-    case NmtState::kOff: return "OFF";
-    case NmtState::kInitialising: return "INITIALISING";
-    case NmtState::kResetApplication: return "RESET_APPLICATION";
-    case NmtState::kResetCommunication: return "RESET_COMMUNICATION";
-    case NmtState::kResetConfiguration: return "RESET_CONFIGURATION";
-    case NmtState::kNotActive: return "NOT_ACTIVE";
-    case NmtState::kPreOperational1: return "PRE_OPERATIONAL_1";
-    case NmtState::kPreOperational2: return "PRE_OPERATIONAL_2";
-    case NmtState::kReadyToOperate: return "READY_TO_OPERATE";
-    case NmtState::kOperational: return "OPERATIONAL";
-    case NmtState::kStopped: return "STOPPED";
-    case NmtState::kBasicEthernet: return "BASIC_ETHERNET";
+    case NmtState::kOff:
+      return "OFF";
+    case NmtState::kInitialising:
+      return "INITIALISING";
+    case NmtState::kResetApplication:
+      return "RESET_APPLICATION";
+    case NmtState::kResetCommunication:
+      return "RESET_COMMUNICATION";
+    case NmtState::kResetConfiguration:
+      return "RESET_CONFIGURATION";
+    case NmtState::kNotActive:
+      return "NOT_ACTIVE";
+    case NmtState::kPreOperational1:
+      return "PRE_OPERATIONAL_1";
+    case NmtState::kPreOperational2:
+      return "PRE_OPERATIONAL_2";
+    case NmtState::kReadyToOperate:
+      return "READY_TO_OPERATE";
+    case NmtState::kOperational:
+      return "OPERATIONAL";
+    case NmtState::kStopped:
+      return "STOPPED";
+    case NmtState::kBasicEthernet:
+      return "BASIC_ETHERNET";
   }
   return "?";
 }
 
 std::string_view to_string(NmtCommandId c) noexcept {
   switch (c) {
-    case NmtCommandId::kStartNode: return "NMTStartNode";
-    case NmtCommandId::kStopNode: return "NMTStopNode";
-    case NmtCommandId::kEnterPreOperational2: return "NMTEnterPreOperational2";
-    case NmtCommandId::kEnableReadyToOperate: return "NMTEnableReadyToOperate";
-    case NmtCommandId::kResetNode: return "NMTResetNode";
-    case NmtCommandId::kResetCommunication: return "NMTResetCommunication";
-    case NmtCommandId::kResetConfiguration: return "NMTResetConfiguration";
-    case NmtCommandId::kSwReset: return "NMTSwReset";
+    case NmtCommandId::kStartNode:
+      return "NMTStartNode";
+    case NmtCommandId::kStopNode:
+      return "NMTStopNode";
+    case NmtCommandId::kEnterPreOperational2:
+      return "NMTEnterPreOperational2";
+    case NmtCommandId::kEnableReadyToOperate:
+      return "NMTEnableReadyToOperate";
+    case NmtCommandId::kResetNode:
+      return "NMTResetNode";
+    case NmtCommandId::kResetCommunication:
+      return "NMTResetCommunication";
+    case NmtCommandId::kResetConfiguration:
+      return "NMTResetConfiguration";
+    case NmtCommandId::kSwReset:
+      return "NMTSwReset";
   }
   return "?";
 }
@@ -315,7 +340,8 @@ ErrorEntry StatusResponse::entry(std::size_t i) const noexcept {
 
 // ---- Build --------------------------------------------------------------------------------------
 
-Result<std::size_t> build_soc(std::span<uint8_t> out, const FrameHeader& h, const Soc& soc) noexcept {
+Result<std::size_t> build_soc(std::span<uint8_t> out, const FrameHeader& h,
+                              const Soc& soc) noexcept {
   std::size_t len = 0;
   uint8_t* p = begin_frame(out, 36, h, MessageType::kSoC, len);
   if (!p) return FrameError::kBufferTooSmall;
@@ -331,13 +357,16 @@ Result<std::size_t> build_preq(std::span<uint8_t> out, const FrameHeader& h,
                                const PReq& preq) noexcept {
   if (preq.payload.size() > kMaxIsoPayload) return FrameError::kPayloadTooLarge;
   std::size_t len = 0;
-  uint8_t* p = begin_frame(out, kPollPayloadOffset + preq.payload.size(), h, MessageType::kPReq, len);
+  uint8_t* p =
+      begin_frame(out, kPollPayloadOffset + preq.payload.size(), h, MessageType::kPReq, len);
   if (!p) return FrameError::kBufferTooSmall;
-  p[18] = static_cast<uint8_t>((preq.multiplexed_slot ? kFlagMs : 0) |
-                               (preq.exception_acknowledge ? kFlagEa : 0) | (preq.ready ? kFlagRd : 0));
+  p[18] =
+      static_cast<uint8_t>((preq.multiplexed_slot ? kFlagMs : 0) |
+                           (preq.exception_acknowledge ? kFlagEa : 0) | (preq.ready ? kFlagRd : 0));
   p[20] = preq.pdo_version;
   store_le16(p + 22, static_cast<uint16_t>(preq.payload.size()));
-  if (!preq.payload.empty()) std::memcpy(p + kPollPayloadOffset, preq.payload.data(), preq.payload.size());
+  if (!preq.payload.empty())
+    std::memcpy(p + kPollPayloadOffset, preq.payload.data(), preq.payload.size());
   return len;
 }
 
@@ -345,7 +374,8 @@ Result<std::size_t> build_pres(std::span<uint8_t> out, const FrameHeader& h,
                                const PRes& pres) noexcept {
   if (pres.payload.size() > kMaxIsoPayload) return FrameError::kPayloadTooLarge;
   std::size_t len = 0;
-  uint8_t* p = begin_frame(out, kPollPayloadOffset + pres.payload.size(), h, MessageType::kPRes, len);
+  uint8_t* p =
+      begin_frame(out, kPollPayloadOffset + pres.payload.size(), h, MessageType::kPRes, len);
   if (!p) return FrameError::kBufferTooSmall;
   p[17] = static_cast<uint8_t>(pres.nmt_state);
   p[18] = static_cast<uint8_t>((pres.multiplexed_slot ? kFlagMs : 0) |
@@ -353,11 +383,13 @@ Result<std::size_t> build_pres(std::span<uint8_t> out, const FrameHeader& h,
   p[19] = pr_rs(pres.priority, pres.request_count);
   p[20] = pres.pdo_version;
   store_le16(p + 22, static_cast<uint16_t>(pres.payload.size()));
-  if (!pres.payload.empty()) std::memcpy(p + kPollPayloadOffset, pres.payload.data(), pres.payload.size());
+  if (!pres.payload.empty())
+    std::memcpy(p + kPollPayloadOffset, pres.payload.data(), pres.payload.size());
   return len;
 }
 
-Result<std::size_t> build_soa(std::span<uint8_t> out, const FrameHeader& h, const SoA& soa) noexcept {
+Result<std::size_t> build_soa(std::span<uint8_t> out, const FrameHeader& h,
+                              const SoA& soa) noexcept {
   std::size_t len = 0;
   uint8_t* p = begin_frame(out, 23, h, MessageType::kSoA, len);
   if (!p) return FrameError::kBufferTooSmall;
@@ -459,8 +491,10 @@ Result<std::size_t> build_sdo(std::span<uint8_t> out, const FrameHeader& h, cons
   uint8_t* p = begin_frame(out, kSdoPayloadOffset + segment_size, h, MessageType::kASnd, len);
   if (!p) return FrameError::kBufferTooSmall;
   p[17] = static_cast<uint8_t>(AsndService::kSdo);
-  p[18] = static_cast<uint8_t>((s.sequence.recv_seq << 2) | static_cast<uint8_t>(s.sequence.recv_con));
-  p[19] = static_cast<uint8_t>((s.sequence.send_seq << 2) | static_cast<uint8_t>(s.sequence.send_con));
+  p[18] =
+      static_cast<uint8_t>((s.sequence.recv_seq << 2) | static_cast<uint8_t>(s.sequence.recv_con));
+  p[19] =
+      static_cast<uint8_t>((s.sequence.send_seq << 2) | static_cast<uint8_t>(s.sequence.send_con));
   if (!s.has_command) return len;
   p[23] = c.transaction_id;
   p[24] = static_cast<uint8_t>((c.response ? kSdoResponse : 0) | (c.abort ? kSdoAbort : 0) |
@@ -505,8 +539,10 @@ Result<FrameHeader> parse_header(std::span<const uint8_t> f) noexcept {
     case MessageType::kPReq:
     case MessageType::kPRes:
     case MessageType::kSoA:
-    case MessageType::kASnd: break;
-    default: return FrameError::kUnknownMessageType;
+    case MessageType::kASnd:
+      break;
+    default:
+      return FrameError::kUnknownMessageType;
   }
   FrameHeader h;
   std::memcpy(h.dst_mac.data(), f.data(), 6);
@@ -529,11 +565,21 @@ Result<Frame> parse_frame(std::span<const uint8_t> f) noexcept {
   };
   std::error_code ec;
   switch (h->type) {
-    case MessageType::kSoC: ec = take(decode_soc(f, *h)); break;
-    case MessageType::kPReq: ec = take(decode_preq(f, *h)); break;
-    case MessageType::kPRes: ec = take(decode_pres(f, *h)); break;
-    case MessageType::kSoA: ec = take(decode_soa(f, *h)); break;
-    case MessageType::kASnd: ec = take(decode_asnd(f, *h)); break;
+    case MessageType::kSoC:
+      ec = take(decode_soc(f, *h));
+      break;
+    case MessageType::kPReq:
+      ec = take(decode_preq(f, *h));
+      break;
+    case MessageType::kPRes:
+      ec = take(decode_pres(f, *h));
+      break;
+    case MessageType::kSoA:
+      ec = take(decode_soa(f, *h));
+      break;
+    case MessageType::kASnd:
+      ec = take(decode_asnd(f, *h));
+      break;
   }
   if (ec) return ec;
   return frame;
@@ -549,10 +595,20 @@ Result<T> parse_as(std::span<const uint8_t> f) noexcept {
 }
 }  // namespace
 
-Result<Soc> parse_soc(std::span<const uint8_t> f) noexcept { return parse_as<Soc>(f); }
-Result<PReq> parse_preq(std::span<const uint8_t> f) noexcept { return parse_as<PReq>(f); }
-Result<PRes> parse_pres(std::span<const uint8_t> f) noexcept { return parse_as<PRes>(f); }
-Result<SoA> parse_soa(std::span<const uint8_t> f) noexcept { return parse_as<SoA>(f); }
-Result<Asnd> parse_asnd(std::span<const uint8_t> f) noexcept { return parse_as<Asnd>(f); }
+Result<Soc> parse_soc(std::span<const uint8_t> f) noexcept {
+  return parse_as<Soc>(f);
+}
+Result<PReq> parse_preq(std::span<const uint8_t> f) noexcept {
+  return parse_as<PReq>(f);
+}
+Result<PRes> parse_pres(std::span<const uint8_t> f) noexcept {
+  return parse_as<PRes>(f);
+}
+Result<SoA> parse_soa(std::span<const uint8_t> f) noexcept {
+  return parse_as<SoA>(f);
+}
+Result<Asnd> parse_asnd(std::span<const uint8_t> f) noexcept {
+  return parse_as<Asnd>(f);
+}
 
 }  // namespace ds1928::powerlink

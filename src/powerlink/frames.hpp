@@ -48,7 +48,13 @@ inline constexpr MacAddress kMacPRes{0x01, 0x11, 0x1E, 0x00, 0x00, 0x02};
 inline constexpr MacAddress kMacSoA{0x01, 0x11, 0x1E, 0x00, 0x00, 0x03};
 inline constexpr MacAddress kMacAsnd{0x01, 0x11, 0x1E, 0x00, 0x00, 0x04};
 
-enum class MessageType : uint8_t { kSoC = 0x01, kPReq = 0x03, kPRes = 0x04, kSoA = 0x05, kASnd = 0x06 };
+enum class MessageType : uint8_t {
+  kSoC = 0x01,
+  kPReq = 0x03,
+  kPRes = 0x04,
+  kSoA = 0x05,
+  kASnd = 0x06
+};
 
 enum class NmtState : uint8_t {
   kOff = 0x00,
@@ -122,11 +128,11 @@ struct Soc {
 };
 
 struct PReq {
-  bool multiplexed_slot = false;      // MS
-  bool exception_acknowledge = false; // EA
-  bool ready = false;                 // RD: payload valid
+  bool multiplexed_slot = false;       // MS
+  bool exception_acknowledge = false;  // EA
+  bool ready = false;                  // RD: payload valid
   uint8_t pdo_version = 0;
-  std::span<const uint8_t> payload;   // ≤ 1490 bytes
+  std::span<const uint8_t> payload;  // ≤ 1490 bytes
 };
 
 struct PRes {
@@ -194,7 +200,9 @@ struct StatusResponse {
   uint64_t static_error_bits = 0;
   // Raw error entries (20 bytes each) up to, not including, the terminating type-0 entry.
   std::span<const uint8_t> entries;
-  [[nodiscard]] std::size_t entry_count() const noexcept { return entries.size() / kErrorEntrySize; }
+  [[nodiscard]] std::size_t entry_count() const noexcept {
+    return entries.size() / kErrorEntrySize;
+  }
   // Precondition: i < entry_count().
   [[nodiscard]] ErrorEntry entry(std::size_t i) const noexcept;
 };
@@ -278,10 +286,9 @@ struct Frame {
                                                        const FrameHeader& header,
                                                        const IdentResponse& ident) noexcept;
 // Writes `entries` followed by a terminating type-0 entry (frame ≥ 72 bytes).
-[[nodiscard]] Result<std::size_t> build_status_response(std::span<uint8_t> out,
-                                                        const FrameHeader& header,
-                                                        const StatusResponse& status,
-                                                        std::span<const ErrorEntry> entries) noexcept;
+[[nodiscard]] Result<std::size_t> build_status_response(
+    std::span<uint8_t> out, const FrameHeader& header, const StatusResponse& status,
+    std::span<const ErrorEntry> entries) noexcept;
 [[nodiscard]] Result<std::size_t> build_nmt_command(std::span<uint8_t> out,
                                                     const FrameHeader& header,
                                                     const NmtCommand& command) noexcept;

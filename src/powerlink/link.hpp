@@ -27,7 +27,8 @@ class Link {
 
   // Polls for the next received POWERLINK frame until `deadline_ns` (CLOCK_MONOTONIC). A deadline
   // in the past makes it a single non-blocking poll. Frames the link sent itself are not returned.
-  [[nodiscard]] virtual Received receive(std::span<uint8_t> buffer, int64_t deadline_ns) noexcept = 0;
+  [[nodiscard]] virtual Received receive(std::span<uint8_t> buffer,
+                                         int64_t deadline_ns) noexcept = 0;
 
   // Carrier / interface state; false when the link was lost.
   [[nodiscard]] virtual bool link_up() const noexcept = 0;

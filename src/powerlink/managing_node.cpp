@@ -7,13 +7,20 @@ namespace ds1928::powerlink {
 
 std::string_view to_string(CnBootState s) noexcept {
   switch (s) {
-    case CnBootState::kIdentify: return "identify";
-    case CnBootState::kWaitPreOp2: return "wait_pre_operational_2";
-    case CnBootState::kConfigure: return "configure";
-    case CnBootState::kWaitReadyToOperate: return "wait_ready_to_operate";
-    case CnBootState::kWaitOperational: return "wait_operational";
-    case CnBootState::kOperational: return "operational";
-    case CnBootState::kReset: return "reset";
+    case CnBootState::kIdentify:
+      return "identify";
+    case CnBootState::kWaitPreOp2:
+      return "wait_pre_operational_2";
+    case CnBootState::kConfigure:
+      return "configure";
+    case CnBootState::kWaitReadyToOperate:
+      return "wait_ready_to_operate";
+    case CnBootState::kWaitOperational:
+      return "wait_operational";
+    case CnBootState::kOperational:
+      return "operational";
+    case CnBootState::kReset:
+      return "reset";
   }
   return "?";
 }
@@ -85,7 +92,7 @@ struct ManagingNode::Handler {
   void (ManagingNode::*enter)(Cn&) noexcept;
   void (ManagingNode::*state)(Cn&, NmtState) noexcept;
   void (ManagingNode::*timeout)(Cn&) noexcept;  // nullptr: no timeout in this state
-  bool reset_timer;                              // timeout uses reset_wait instead of boot step
+  bool reset_timer;                             // timeout uses reset_wait instead of boot step
 };
 
 // Indexed by CnBootState.
@@ -122,7 +129,8 @@ ManagingNode::ManagingNode(const MnConfig& config)
       specs.push_back({a.slot, a.module.input_mtu, a.module.output_mtu});
       const ModuleSettings& m = a.module;
       auto add = [&](uint16_t reg, uint32_t value) {
-        cn->boot_ops.push_back({0, nc.node_id, a.slot, reg, register_size(reg).value_or(1), true, value});
+        cn->boot_ops.push_back(
+            {0, nc.node_id, a.slot, reg, register_size(reg).value_or(1), true, value});
       };
       add(reg::kSinCosEnable, 1);
       add(reg::kSinCosRefSource, 1);
@@ -168,7 +176,9 @@ const ManagingNode::Cn* ManagingNode::find(uint8_t node) const noexcept {
   return nullptr;
 }
 
-std::span<const CnStatus> ManagingNode::nodes() const noexcept { return status_view_; }
+std::span<const CnStatus> ManagingNode::nodes() const noexcept {
+  return status_view_;
+}
 const CnStatus* ManagingNode::node(uint8_t id) const noexcept {
   const Cn* cn = find(id);
   return cn ? cn->st : nullptr;
@@ -219,7 +229,9 @@ void ManagingNode::on_enter_identify(Cn& cn) noexcept {
 }
 void ManagingNode::on_state_identify(Cn&, NmtState) noexcept {}
 
-void ManagingNode::on_enter_wait_preop2(Cn& cn) noexcept { cn.last_status_request = 0; }
+void ManagingNode::on_enter_wait_preop2(Cn& cn) noexcept {
+  cn.last_status_request = 0;
+}
 void ManagingNode::on_state_wait_preop2(Cn& cn, NmtState s) noexcept {
   if (s == NmtState::kPreOperational2 && full_cycle()) {
     enter(cn, CnBootState::kConfigure);
@@ -240,7 +252,9 @@ void ManagingNode::on_state_configure(Cn& cn, NmtState s) noexcept {
     reset_node(cn, make_error_code(MnError::kNodeNotOperational));
 }
 
-void ManagingNode::on_enter_ready(Cn& cn) noexcept { queue_nmt(cn, NmtCommandId::kEnableReadyToOperate); }
+void ManagingNode::on_enter_ready(Cn& cn) noexcept {
+  queue_nmt(cn, NmtCommandId::kEnableReadyToOperate);
+}
 void ManagingNode::on_state_ready(Cn& cn, NmtState s) noexcept {
   if (s == NmtState::kReadyToOperate && (mn_state_ == NmtState::kOperational))
     enter(cn, CnBootState::kWaitOperational);
@@ -248,7 +262,9 @@ void ManagingNode::on_state_ready(Cn& cn, NmtState s) noexcept {
     reset_node(cn, make_error_code(MnError::kNodeNotOperational));
 }
 
-void ManagingNode::on_enter_wait_operational(Cn& cn) noexcept { queue_nmt(cn, NmtCommandId::kStartNode); }
+void ManagingNode::on_enter_wait_operational(Cn& cn) noexcept {
+  queue_nmt(cn, NmtCommandId::kStartNode);
+}
 void ManagingNode::on_state_wait_operational(Cn& cn, NmtState s) noexcept {
   if (s == NmtState::kOperational)
     enter(cn, CnBootState::kOperational);
@@ -287,12 +303,15 @@ void ManagingNode::on_enter_reset(Cn& cn) noexcept {
   queue_nmt(cn, NmtCommandId::kResetNode);
 }
 void ManagingNode::on_state_reset(Cn&, NmtState) noexcept {}
-void ManagingNode::on_timeout_reset(Cn& cn) noexcept { enter(cn, CnBootState::kIdentify); }
+void ManagingNode::on_timeout_reset(Cn& cn) noexcept {
+  enter(cn, CnBootState::kIdentify);
+}
 void ManagingNode::on_timeout_boot(Cn& cn) noexcept {
   reset_node(cn, make_error_code(SdoError::kTimeout));
 }
 
-// ---- SDO ------------------------------------------------------------------------------------------
+// ---- SDO
+// ------------------------------------------------------------------------------------------
 
 bool ManagingNode::submit(const SdoRegisterOp& op) noexcept {
   Cn* cn = find(op.node);
@@ -340,9 +359,10 @@ void ManagingNode::start_next_sdo(Cn& cn) noexcept {
     if (cn.current.write) {
       std::array<uint8_t, 4> bytes{};
       store_le32(bytes.data(), cn.current.value);
-      ec = cn.sdo->write(object->index, object->subindex,
-                         std::span<const uint8_t>(bytes.data(), std::min<std::size_t>(cn.current.size, 4)),
-                         now_ns_);
+      ec = cn.sdo->write(
+          object->index, object->subindex,
+          std::span<const uint8_t>(bytes.data(), std::min<std::size_t>(cn.current.size, 4)),
+          now_ns_);
     } else {
       ec = cn.sdo->read(object->index, object->subindex, now_ns_);
     }
@@ -373,7 +393,8 @@ void ManagingNode::sdo_done(Cn& cn, std::error_code ec, std::span<const uint8_t>
   start_next_sdo(cn);
 }
 
-// ---- Cycle ----------------------------------------------------------------------------------------
+// ---- Cycle
+// ----------------------------------------------------------------------------------------
 
 void ManagingNode::begin_cycle(int64_t now_ns, NetTime net_time) noexcept {
   if (start_ns_ < 0) {
@@ -397,7 +418,9 @@ void ManagingNode::begin_cycle(int64_t now_ns, NetTime net_time) noexcept {
   }
 }
 
-bool ManagingNode::full_cycle() const noexcept { return mn_state_ != NmtState::kPreOperational1; }
+bool ManagingNode::full_cycle() const noexcept {
+  return mn_state_ != NmtState::kPreOperational1;
+}
 
 std::span<const uint8_t> ManagingNode::isochronous_nodes() const noexcept {
   return {iso_list_.data(), iso_count_};
@@ -513,7 +536,8 @@ Result<std::size_t> ManagingNode::build_mn_asnd(std::span<uint8_t> out) noexcept
   std::memcpy(out.data(), cn->outbox[cn->outbox_head].data(), len);
   cn->outbox_head = (cn->outbox_head + 1) % kOutboxDepth;
   --cn->outbox_count;
-  if (out[17] == static_cast<uint8_t>(AsndService::kSdo) && cn->sdo->busy()) cn->sdo_wait_answer = true;
+  if (out[17] == static_cast<uint8_t>(AsndService::kSdo) && cn->sdo->busy())
+    cn->sdo_wait_answer = true;
   mn_asnd_from_ = nullptr;
   return len;
 }
@@ -592,10 +616,10 @@ void ManagingNode::handle_asnd(const FrameHeader& h, const Asnd& asnd) noexcept 
       cn->st->mac = h.src_mac;
       cn->st->vendor_id = ident->vendor_id;
       cn->st->product_code = ident->product_code;
-      cn->st->preq_size = c.preq_size.value_or(ident->poll_out_size ? ident->poll_out_size
-                                                                    : cn->layout.preq_size);
-      cn->st->pres_size = c.pres_size.value_or(ident->poll_in_size ? ident->poll_in_size
-                                                                   : cn->layout.pres_size);
+      cn->st->preq_size =
+          c.preq_size.value_or(ident->poll_out_size ? ident->poll_out_size : cn->layout.preq_size);
+      cn->st->pres_size =
+          c.pres_size.value_or(ident->poll_in_size ? ident->poll_in_size : cn->layout.pres_size);
       cn->st->preq_size = std::min<uint16_t>(cn->st->preq_size, kMaxIsoPayload);
       std::fill(cn->preq.begin(), cn->preq.end(), 0);
       enter(*cn, CnBootState::kWaitPreOp2);
@@ -645,7 +669,8 @@ void ManagingNode::update_mn_state() noexcept {
   }
   if (mn_state_ == NmtState::kOperational) {
     for (auto& cn : cns_)
-      if (cn->st->boot == CnBootState::kWaitReadyToOperate && cn->st->nmt == NmtState::kReadyToOperate)
+      if (cn->st->boot == CnBootState::kWaitReadyToOperate &&
+          cn->st->nmt == NmtState::kReadyToOperate)
         enter(*cn, CnBootState::kWaitOperational);
   }
 }
@@ -666,7 +691,8 @@ void ManagingNode::end_cycle(bool cycle_time_exceeded) noexcept {
     cn.sdo->tick(now_ns_);
     const Handler& h = kHandlers[static_cast<int>(cn.st->boot)];
     if (h.timeout) {
-      const int64_t limit = h.reset_timer ? ms(config_.reset_wait_ms) : ms(config_.boot_step_timeout_ms);
+      const int64_t limit =
+          h.reset_timer ? ms(config_.reset_wait_ms) : ms(config_.boot_step_timeout_ms);
       if (now_ns_ - cn.state_since_ns >= limit) (this->*h.timeout)(cn);
     }
   }

@@ -32,7 +32,7 @@ enum class CnBootState : uint8_t {
   kWaitReadyToOperate,  // NMTEnableReadyToOperate sent
   kWaitOperational,     // NMTStartNode sent
   kOperational,
-  kReset,               // NMTResetNode sent; waits before identifying again
+  kReset,  // NMTResetNode sent; waits before identifying again
 };
 [[nodiscard]] std::string_view to_string(CnBootState s) noexcept;
 
@@ -83,7 +83,7 @@ struct MnConfig {
   uint32_t cycle_us = 1000;
   MacAddress mac{};
   // NMT timeouts (powerlink.md §5).
-  uint32_t pre_op1_timeout_ms = 500;   // reduced cycle before the MN starts full cycles
+  uint32_t pre_op1_timeout_ms = 500;     // reduced cycle before the MN starts full cycles
   uint32_t boot_step_timeout_ms = 5000;  // a CN stuck in a boot step is reset
   uint32_t reset_wait_ms = 100;          // after NMTResetNode, before identifying again
   uint32_t status_request_every = 8;     // cycles between StatusRequests to a booting CN
@@ -176,7 +176,9 @@ class ManagingNode {
   void start_next_sdo(Cn& cn) noexcept;
   void sdo_done(Cn& cn, std::error_code ec, std::span<const uint8_t> data) noexcept;
   void update_mn_state() noexcept;
-  [[nodiscard]] int64_t ms(uint32_t v) const noexcept { return static_cast<int64_t>(v) * 1'000'000; }
+  [[nodiscard]] int64_t ms(uint32_t v) const noexcept {
+    return static_cast<int64_t>(v) * 1'000'000;
+  }
 
   // State handlers (one row each in kHandlers).
   void on_enter_identify(Cn& cn) noexcept;

@@ -42,7 +42,9 @@ std::error_code PowerlinkBus::start() {
   return {};
 }
 
-void PowerlinkBus::stop() noexcept { state_.store(BusState::Down, std::memory_order_relaxed); }
+void PowerlinkBus::stop() noexcept {
+  state_.store(BusState::Down, std::memory_order_relaxed);
+}
 
 void PowerlinkBus::send(Result<std::size_t> len) noexcept {
   if (len && *len > 0) (void)link_.send(std::span<const uint8_t>(tx_.data(), *len));
@@ -73,7 +75,8 @@ ExchangeResult PowerlinkBus::exchange(std::span<AxisIo> axes, int64_t cycle_star
       continue;
     }
     const AxisMap& am = axis_map_[req->axis];
-    SdoRegisterOp op{req->tag, am.node, am.mapping.slot, req->reg, req->size, req->write, req->value};
+    SdoRegisterOp op{req->tag,  am.node,    am.mapping.slot, req->reg,
+                     req->size, req->write, req->value};
     if (!mn_.submit(op)) {
       failed.error = make_error_code(MnError::kQueueFull);
       (void)results_.try_push(failed);
@@ -141,7 +144,8 @@ ExchangeResult PowerlinkBus::exchange(std::span<AxisIo> axes, int64_t cycle_star
 
   result.net_time = {mn_.net_time_us(), cycle_start_ns, mn_.full_cycle()};
   result.bus_up = mn_.all_operational();
-  state_.store(result.bus_up ? BusState::Operational : BusState::Booting, std::memory_order_relaxed);
+  state_.store(result.bus_up ? BusState::Operational : BusState::Booting,
+               std::memory_order_relaxed);
   publish_status();
   return result;
 }
@@ -163,7 +167,9 @@ PowerlinkStatus PowerlinkBus::status() const {
   return status_;
 }
 
-bool PowerlinkBus::submit(const RegisterRequest& request) noexcept { return requests_.try_push(request); }
+bool PowerlinkBus::submit(const RegisterRequest& request) noexcept {
+  return requests_.try_push(request);
+}
 
 bool PowerlinkBus::poll(RegisterResult& out) noexcept {
   auto r = results_.try_pop();

@@ -39,7 +39,9 @@ class PowerlinkBus final : public BusDriver {
   void stop() noexcept override;
   ExchangeResult exchange(std::span<AxisIo> axes, int64_t cycle_start_ns,
                           uint64_t cycle_index) noexcept override;
-  [[nodiscard]] BusState state() const noexcept override { return state_.load(std::memory_order_relaxed); }
+  [[nodiscard]] BusState state() const noexcept override {
+    return state_.load(std::memory_order_relaxed);
+  }
   [[nodiscard]] bool submit(const RegisterRequest& request) noexcept override;
   [[nodiscard]] bool poll(RegisterResult& out) noexcept override;
 

@@ -18,7 +18,9 @@ constexpr uint32_t kAbortGeneral = 0x08000000;
 constexpr uint32_t kAbortLength = 0x06070010;
 constexpr std::size_t kIndexHeader = 4;  // index u16, subindex u8, reserved u8
 
-[[nodiscard]] constexpr uint8_t next_seq(uint8_t s) noexcept { return (s + 1) & 0x3F; }
+[[nodiscard]] constexpr uint8_t next_seq(uint8_t s) noexcept {
+  return (s + 1) & 0x3F;
+}
 
 }  // namespace
 
@@ -39,7 +41,9 @@ void SdoClient::send_frame(bool with_command, const SdoCommand& cmd) noexcept {
   if (len) send_(std::span<const uint8_t>(frame_.data(), *len));
 }
 
-void SdoClient::send_ack() noexcept { send_frame(false, {}); }
+void SdoClient::send_ack() noexcept {
+  send_frame(false, {});
+}
 
 std::error_code SdoClient::read(uint16_t index, uint8_t subindex, int64_t now_ns) noexcept {
   if (busy()) return SdoError::kBusy;
@@ -136,8 +140,8 @@ void SdoClient::abort(std::error_code reason, int64_t) noexcept {
     SdoCommand cmd;
     cmd.transaction_id = transaction_;
     cmd.abort = true;
-    cmd.command_id = static_cast<uint8_t>(is_write_ ? SdoCommandId::kWriteByIndex
-                                                    : SdoCommandId::kReadByIndex);
+    cmd.command_id =
+        static_cast<uint8_t>(is_write_ ? SdoCommandId::kWriteByIndex : SdoCommandId::kReadByIndex);
     cmd.payload = code;
     send_frame(true, cmd);
   }
@@ -163,7 +167,8 @@ void SdoClient::receive(const Sdo& sdo, int64_t now_ns) noexcept {
     if (seq.recv_con == SdoRecvCon::kInit && seq.send_con == SdoSendCon::kInit) {
       Sdo ack;
       ack.sequence = {0, SdoRecvCon::kInit, 0, SdoSendCon::kValid};
-      auto len = build_sdo(frame_, asnd_header(config_.own_mac, config_.own_node, config_.node), ack);
+      auto len =
+          build_sdo(frame_, asnd_header(config_.own_mac, config_.own_node, config_.node), ack);
       if (len) send_(std::span<const uint8_t>(frame_.data(), *len));
       deadline_ns_ = now_ns + config_.timeout_ns;
     } else if (seq.recv_con == SdoRecvCon::kValid && seq.send_con == SdoSendCon::kValid) {
@@ -292,8 +297,8 @@ void SdoServer::receive(const Sdo& sdo, int64_t now_ns) noexcept {
   auto reply_seq = [&](SdoRecvCon rcon, SdoSendCon scon) {
     Sdo r;
     r.sequence = {seq.send_seq, rcon, 0, scon};
-    auto len = build_sdo(
-        frame_, asnd_header(config_.own_mac, config_.own_node, config_.client_node), r);
+    auto len =
+        build_sdo(frame_, asnd_header(config_.own_mac, config_.own_node, config_.client_node), r);
     if (len) send_(std::span<const uint8_t>(frame_.data(), *len));
   };
   if (seq.send_con == SdoSendCon::kInit) {  // client opens (or reopens) the connection
@@ -350,8 +355,8 @@ void SdoServer::handle_command(const SdoCommand& c, int64_t now_ns) noexcept {
     const uint16_t index = load_le16(c.payload.data());
     const uint8_t subindex = c.payload[2];
     std::size_t size = 0;
-    const uint32_t code =
-        objects_.read_object(index, subindex, std::span<uint8_t>(buffer_.data(), kMaxSdoTransfer), size);
+    const uint32_t code = objects_.read_object(
+        index, subindex, std::span<uint8_t>(buffer_.data(), kMaxSdoTransfer), size);
     if (code != 0) {
       send_abort(c.transaction_id, c.command_id, code);
       return;
@@ -416,7 +421,8 @@ void SdoServer::handle_command(const SdoCommand& c, int64_t now_ns) noexcept {
   const uint16_t index = load_le16(buffer_.data());
   const uint8_t subindex = buffer_[2];
   const uint32_t code = objects_.write_object(
-      index, subindex, std::span<const uint8_t>(buffer_.data() + kIndexHeader, size_ - kIndexHeader));
+      index, subindex,
+      std::span<const uint8_t>(buffer_.data() + kIndexHeader, size_ - kIndexHeader));
   if (code != 0) {
     send_abort(c.transaction_id, c.command_id, code);
     return;

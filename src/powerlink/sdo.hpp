@@ -22,7 +22,7 @@ inline constexpr std::size_t kMaxSdoTransfer = 1024;
 using FrameSink = std::function<void(std::span<const uint8_t> frame)>;
 
 struct SdoClientConfig {
-  uint8_t node = 1;           // the server (CN)
+  uint8_t node = 1;  // the server (CN)
   uint8_t own_node = kNodeMn;
   MacAddress own_mac{};
   int64_t timeout_ns = 500'000'000;
@@ -70,15 +70,15 @@ class SdoClient {
   Completion done_;
   State state_ = State::kIdle;
   bool connected_ = false;
-  uint8_t send_seq_ = 0;   // our next send sequence number
-  uint8_t recv_seq_ = 0;   // last sequence number received from the server
+  uint8_t send_seq_ = 0;  // our next send sequence number
+  uint8_t recv_seq_ = 0;  // last sequence number received from the server
   uint8_t transaction_ = 0;
   bool is_write_ = false;
   uint16_t index_ = 0;
   uint8_t subindex_ = 0;
-  std::size_t size_ = 0;       // write: data bytes; read: bytes received so far
-  std::size_t offset_ = 0;     // write: data bytes sent
-  std::size_t expected_ = 0;   // read: announced total size
+  std::size_t size_ = 0;      // write: data bytes; read: bytes received so far
+  std::size_t offset_ = 0;    // write: data bytes sent
+  std::size_t expected_ = 0;  // read: announced total size
   int64_t deadline_ns_ = 0;
   std::array<uint8_t, kMaxSdoTransfer + 4> buffer_{};
   std::array<uint8_t, kMaxFrameSize> frame_{};
@@ -89,7 +89,8 @@ class SdoObjectAccess {
  public:
   virtual ~SdoObjectAccess() = default;
   [[nodiscard]] virtual uint32_t read_object(uint16_t index, uint8_t subindex,
-                                             std::span<uint8_t> out, std::size_t& size) noexcept = 0;
+                                             std::span<uint8_t> out,
+                                             std::size_t& size) noexcept = 0;
   [[nodiscard]] virtual uint32_t write_object(uint16_t index, uint8_t subindex,
                                               std::span<const uint8_t> data) noexcept = 0;
 };

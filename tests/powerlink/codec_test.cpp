@@ -1,7 +1,6 @@
-#include <catch2/catch.hpp>
-
 #include <algorithm>
 #include <array>
+#include <catch2/catch.hpp>
 #include <random>
 #include <vector>
 
@@ -21,9 +20,10 @@ std::vector<uint8_t> padded(std::initializer_list<uint8_t> bytes) {
 }  // namespace
 
 TEST_CASE("SoC bytes are built and parsed exactly", "[powerlink][codec]") {
-  const auto wire = padded({0x01, 0x11, 0x1E, 0x00, 0x00, 0x01, 0x02, 0x00, 0x00, 0x00, 0x00, 0xF0,
-                            0x88, 0xAB, 0x01, 0xFF, 0xF0, 0x00, 0x80, 0x00, 0x78, 0x56, 0x34, 0x12,
-                            0xE8, 0x03, 0x00, 0x00, 0x08, 0x07, 0x06, 0x05, 0x04, 0x03, 0x02, 0x01});
+  const auto wire =
+      padded({0x01, 0x11, 0x1E, 0x00, 0x00, 0x01, 0x02, 0x00, 0x00, 0x00, 0x00, 0xF0,
+              0x88, 0xAB, 0x01, 0xFF, 0xF0, 0x00, 0x80, 0x00, 0x78, 0x56, 0x34, 0x12,
+              0xE8, 0x03, 0x00, 0x00, 0x08, 0x07, 0x06, 0x05, 0x04, 0x03, 0x02, 0x01});
   std::array<uint8_t, kMaxFrameSize> buf{};
   buf.fill(0xEE);  // padding must be written, not left over
   Soc soc;
@@ -45,9 +45,9 @@ TEST_CASE("SoC bytes are built and parsed exactly", "[powerlink][codec]") {
 
 TEST_CASE("PRes bytes parse to state, flags and payload", "[powerlink][codec]") {
   // PRes from node 5, OPERATIONAL, RD + EN, PR 7 RS 2, payload 4 bytes.
-  const auto wire = padded({0x01, 0x11, 0x1E, 0x00, 0x00, 0x02, 0x02, 0, 0, 0, 0, 5, 0x88, 0xAB,
-                            0x04, 0xFF, 0x05, 0xFD, 0x11, 0x3A, 0x20, 0x00, 0x04, 0x00, 0xDE, 0xAD,
-                            0xBE, 0xEF});
+  const auto wire =
+      padded({0x01, 0x11, 0x1E, 0x00, 0x00, 0x02, 0x02, 0,    0,    0,    0,    5,    0x88, 0xAB,
+              0x04, 0xFF, 0x05, 0xFD, 0x11, 0x3A, 0x20, 0x00, 0x04, 0x00, 0xDE, 0xAD, 0xBE, 0xEF});
   auto h = parse_header(wire);
   REQUIRE(h);
   CHECK(h->type == MessageType::kPRes);
@@ -143,7 +143,8 @@ TEST_CASE("SoA, PReq, NMTCommand and SDO bytes", "[powerlink][codec]") {
   CHECK(s.sequence.send_con == SdoSendCon::kValidAckRequest);
 }
 
-TEST_CASE("Parsing rejects short, long and inconsistent frames with a reason", "[powerlink][codec]") {
+TEST_CASE("Parsing rejects short, long and inconsistent frames with a reason",
+          "[powerlink][codec]") {
   const auto samples = ds1928::powerlink::test::build_samples();
   const auto& soc = samples.at(0).bytes;
   CHECK(parse_frame(std::span(soc).first(59)).error() == FrameError::kFrameTooShort);

@@ -35,7 +35,8 @@ inline std::vector<Sample> build_samples() {
   preq.payload = preq_payload;
   add("PReq", build_preq(buf, preq_header(kMnMac, kCnMac, 1), preq));
   std::array<uint8_t, 46> pres_payload{};
-  for (std::size_t i = 0; i < pres_payload.size(); ++i) pres_payload[i] = static_cast<uint8_t>(0xA0 + i);
+  for (std::size_t i = 0; i < pres_payload.size(); ++i)
+    pres_payload[i] = static_cast<uint8_t>(0xA0 + i);
   PRes pres;
   pres.nmt_state = NmtState::kOperational;
   pres.ready = true;
@@ -74,12 +75,12 @@ inline std::vector<Sample> build_samples() {
   std::array<ErrorEntry, 2> entries{};
   entries[0] = {0x1000, 0x8235, 0x1122334455667788ULL, {1, 2, 3, 4, 5, 6, 7, 8}};
   entries[1] = {0x1000, 0x8700, 42, {}};
-  add("StatusResponse", build_status_response(buf, asnd_header(kCnMac, 1, kNodeMn), status, entries));
+  add("StatusResponse",
+      build_status_response(buf, asnd_header(kCnMac, 1, kNodeMn), status, entries));
   add("NMTCommand", build_nmt_command(buf, asnd_header(kMnMac, kNodeMn, 1),
                                       {static_cast<uint8_t>(NmtCommandId::kStartNode), {}}));
-  add("NMTRequest",
-      build_nmt_request(buf, asnd_header(kCnMac, 1, kNodeMn),
-                        {static_cast<uint8_t>(NmtCommandId::kResetNode), 1, {}}));
+  add("NMTRequest", build_nmt_request(buf, asnd_header(kCnMac, 1, kNodeMn),
+                                      {static_cast<uint8_t>(NmtCommandId::kResetNode), 1, {}}));
   Sdo open;
   open.sequence = {0, SdoRecvCon::kNone, 0, SdoSendCon::kInit};
   add("SDO sequence init", build_sdo(buf, asnd_header(kMnMac, kNodeMn, 1), open));

@@ -1,5 +1,4 @@
 #include <catch2/catch.hpp>
-
 #include <memory>
 
 #include "powerlink/powerlink_bus.hpp"
@@ -14,7 +13,9 @@ namespace {
 
 constexpr int64_t kPeriodNs = 1'000'000;
 
-int64_t fake_clock() noexcept { return 0; }  // exchanges take "no time" in memory
+int64_t fake_clock() noexcept {
+  return 0;
+}  // exchanges take "no time" in memory
 
 struct Rig {
   MnConfig config;
@@ -97,10 +98,10 @@ TEST_CASE("MN boots an in-memory CN to OPERATIONAL and configures its modules by
   CHECK(st.pres_size == 2 * pres_module_size(7));
   // Every module got its settings before EnableReadyToOperate (docs/powerlink.md mapping).
   CHECK(le(cn.objects[{0x2001, 0x01}]) == ModuleSettings{}.endat_mode());
-  CHECK(le(cn.objects[{0x2001, 0x02}]) == 4);  // prescaler of slot 1
-  CHECK(le(cn.objects[{0x2002, 0x02}]) == 5);  // prescaler of slot 2
-  CHECK(le(cn.objects[{0x2002, 0x05}]) == 1);  // SinCosEnable
-  CHECK(le(cn.objects[{0x2002, 0x06}]) == 1);  // SinCosRefSource
+  CHECK(le(cn.objects[{0x2001, 0x02}]) == 4);     // prescaler of slot 1
+  CHECK(le(cn.objects[{0x2002, 0x02}]) == 5);     // prescaler of slot 2
+  CHECK(le(cn.objects[{0x2002, 0x05}]) == 1);     // SinCosEnable
+  CHECK(le(cn.objects[{0x2002, 0x06}]) == 1);     // SinCosRefSource
   CHECK(cn.objects[{0x2001, 0x09}].size() == 4);  // SinCosQuitTime UDINT
   CHECK(le(cn.objects[{0x2001, 0x09}]) == 100000);
   CHECK(le(cn.objects[{0x2001, 0x0B}]) == 7);  // InputMTU
@@ -262,11 +263,20 @@ TEST_CASE("The MN's frames decode in the codec with consistent fields", "[powerl
     REQUIRE(parsed);
     CHECK(parsed->header.src_node == kNodeMn);
     switch (parsed->header.type) {
-      case MessageType::kSoC: ++socs; break;
-      case MessageType::kPReq: ++preqs; break;
-      case MessageType::kSoA: ++soas; break;
-      case MessageType::kASnd: ++asnds; break;
-      default: FAIL("MN sent a PRes");
+      case MessageType::kSoC:
+        ++socs;
+        break;
+      case MessageType::kPReq:
+        ++preqs;
+        break;
+      case MessageType::kSoA:
+        ++soas;
+        break;
+      case MessageType::kASnd:
+        ++asnds;
+        break;
+      default:
+        FAIL("MN sent a PRes");
     }
   }
   CHECK(soas == rig.cycle);

@@ -1,10 +1,9 @@
-#include <catch2/catch.hpp>
+#include "powerlink/sdo.hpp"
 
+#include <catch2/catch.hpp>
 #include <deque>
 #include <map>
 #include <vector>
-
-#include "powerlink/sdo.hpp"
 
 using namespace ds1928::powerlink;
 
@@ -21,7 +20,8 @@ struct Dictionary : SdoObjectAccess {
     size = it->second.size();
     return 0;
   }
-  uint32_t write_object(uint16_t index, uint8_t sub, std::span<const uint8_t> data) noexcept override {
+  uint32_t write_object(uint16_t index, uint8_t sub,
+                        std::span<const uint8_t> data) noexcept override {
     if (index == 0x2001 && sub == 0x10) return 0x06010002;  // read-only
     objects[{index, sub}].assign(data.begin(), data.end());
     return 0;
@@ -41,15 +41,22 @@ struct Bench {
   SdoServer server;
 
   explicit Bench(std::size_t max_segment = kMaxSdoSegment - 4)
-      : client({.node = 1, .own_node = kNodeMn, .own_mac = {}, .timeout_ns = 100'000'000,
-                .max_segment = max_segment},
-               [this](std::span<const uint8_t> f) { to_server.emplace_back(f.begin(), f.end()); },
-               [this](std::error_code ec, std::span<const uint8_t> d) {
-                 result = ec;
-                 data.assign(d.begin(), d.end());
-                 ++completions;
-               }),
-        server({.own_node = 1, .own_mac = {}, .client_node = kNodeMn, .timeout_ns = 100'000'000,
+      : client(
+            {.node = 1,
+             .own_node = kNodeMn,
+             .own_mac = {},
+             .timeout_ns = 100'000'000,
+             .max_segment = max_segment},
+            [this](std::span<const uint8_t> f) { to_server.emplace_back(f.begin(), f.end()); },
+            [this](std::error_code ec, std::span<const uint8_t> d) {
+              result = ec;
+              data.assign(d.begin(), d.end());
+              ++completions;
+            }),
+        server({.own_node = 1,
+                .own_mac = {},
+                .client_node = kNodeMn,
+                .timeout_ns = 100'000'000,
                 .max_segment = max_segment},
                dict, [this](std::span<const uint8_t> f) {
                  if (!drop_server_frames) to_client.emplace_back(f.begin(), f.end());

@@ -8,9 +8,13 @@ TestCn::TestCn(uint8_t id, NodeImageLayout l)
     : node(id),
       mac{0x02, 0, 0, 0, 0, id},
       layout(l),
-      server_({.own_node = id, .own_mac = {0x02, 0, 0, 0, 0, id}, .client_node = kNodeMn,
-               .timeout_ns = 2'000'000'000, .max_segment = kMaxSdoSegment - 4},
-              *this, [this](std::span<const uint8_t> f) { sdo_out_.emplace_back(f.begin(), f.end()); }) {}
+      server_({.own_node = id,
+               .own_mac = {0x02, 0, 0, 0, 0, id},
+               .client_node = kNodeMn,
+               .timeout_ns = 2'000'000'000,
+               .max_segment = kMaxSdoSegment - 4},
+              *this,
+              [this](std::span<const uint8_t> f) { sdo_out_.emplace_back(f.begin(), f.end()); }) {}
 
 void TestCn::power_cycle() {
   state = NmtState::kNotActive;
@@ -95,7 +99,8 @@ void TestCn::on_frame(std::span<const uint8_t> bytes, std::deque<std::vector<uin
           sdo_out_.pop_front();
         }
         break;
-      default: break;
+      default:
+        break;
     }
     return;
   }
@@ -116,7 +121,8 @@ void TestCn::on_frame(std::span<const uint8_t> bytes, std::deque<std::vector<uin
           server_.reset();
           sdo_out_.clear();
           break;
-        default: break;
+        default:
+          break;
       }
     } else if (const auto* sdo = std::get_if<Sdo>(&asnd->body)) {
       server_.receive(*sdo, 0);

@@ -22,15 +22,16 @@ class TestCn : public SdoObjectAccess {
 
   uint32_t read_object(uint16_t index, uint8_t sub, std::span<uint8_t> out,
                        std::size_t& size) noexcept override;
-  uint32_t write_object(uint16_t index, uint8_t sub, std::span<const uint8_t> data) noexcept override;
+  uint32_t write_object(uint16_t index, uint8_t sub,
+                        std::span<const uint8_t> data) noexcept override;
 
   uint8_t node;
   MacAddress mac;
   NodeImageLayout layout;
   NmtState state = NmtState::kNotActive;
   std::map<std::pair<uint16_t, uint8_t>, std::vector<uint8_t>> objects;
-  ModuleInputs inputs;             // what every module reports
-  ModuleOutputs last_outputs;      // module 0's outputs from the last PReq
+  ModuleInputs inputs;         // what every module reports
+  ModuleOutputs last_outputs;  // module 0's outputs from the last PReq
   bool last_preq_ready = false;
   uint64_t last_relative_time_us = 0;
   // Faults.

@@ -1,19 +1,24 @@
 // Proof that Wireshark's POWERLINK dissector decodes the frames the codec builds.
-#include <catch2/catch.hpp>
+#include <unistd.h>
 
+#include <catch2/catch.hpp>
 #include <cstdio>
 #include <fstream>
 #include <string>
-#include <unistd.h>
 
 #include "frame_samples.hpp"
 
 namespace {
 
-void put32(std::ofstream& f, uint32_t v) { f.write(reinterpret_cast<const char*>(&v), 4); }
-void put16(std::ofstream& f, uint16_t v) { f.write(reinterpret_cast<const char*>(&v), 2); }
+void put32(std::ofstream& f, uint32_t v) {
+  f.write(reinterpret_cast<const char*>(&v), 4);
+}
+void put16(std::ofstream& f, uint16_t v) {
+  f.write(reinterpret_cast<const char*>(&v), 2);
+}
 
-void write_pcap(const std::string& path, const std::vector<ds1928::powerlink::test::Sample>& frames) {
+void write_pcap(const std::string& path,
+                const std::vector<ds1928::powerlink::test::Sample>& frames) {
   std::ofstream f(path, std::ios::binary | std::ios::trunc);
   put32(f, 0xA1B2C3D4);  // microsecond pcap, host byte order
   put16(f, 2);
@@ -28,7 +33,8 @@ void write_pcap(const std::string& path, const std::vector<ds1928::powerlink::te
     put32(f, t += 10);
     put32(f, static_cast<uint32_t>(s.bytes.size()));
     put32(f, static_cast<uint32_t>(s.bytes.size()));
-    f.write(reinterpret_cast<const char*>(s.bytes.data()), static_cast<std::streamsize>(s.bytes.size()));
+    f.write(reinterpret_cast<const char*>(s.bytes.data()),
+            static_cast<std::streamsize>(s.bytes.size()));
   }
 }
 
@@ -73,11 +79,11 @@ TEST_CASE("Wireshark decodes every frame type the codec builds", "[powerlink][co
   CHECK(lines.rfind("\n", 0) != 0);
   const std::string summary = run("tshark -n -r " + path + " 2>/dev/null");
   INFO(summary);
-  for (const char* what : {"SoC", "PReq [  36]", "PRes [  46]", "(STATUS_REQUEST)->  1",
-                           "(IDENT_REQUEST)->  1", "(UNSPEC_INVITE)->240", "IDENT_RESPONSE",
-                           "STATUS_RESPONSE", "NMTStartNode", "NMT_REQUEST", "(InitReq)",
-                           "WriteByIndex[5]: (0x2001/1)", "ReadByIndex[4]: (0x2001/7)",
-                           "Abort:0x06020000"})
+  for (const char* what :
+       {"SoC", "PReq [  36]", "PRes [  46]", "(STATUS_REQUEST)->  1", "(IDENT_REQUEST)->  1",
+        "(UNSPEC_INVITE)->240", "IDENT_RESPONSE", "STATUS_RESPONSE", "NMTStartNode", "NMT_REQUEST",
+        "(InitReq)", "WriteByIndex[5]: (0x2001/1)", "ReadByIndex[4]: (0x2001/7)",
+        "Abort:0x06020000"})
     CHECK(summary.find(what) != std::string::npos);
   const std::string expert = run("tshark -n -r " + path + " -q -z expert,warn 2>&1");
   INFO(expert);
