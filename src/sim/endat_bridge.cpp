@@ -49,7 +49,11 @@ void EnDatBridge::note_failure(std::error_code ec) noexcept {
   if (crc_like(ec)) latched_ |= error_info::kEnDatComError;
 }
 
-void EnDatBridge::acknowledge_error_info(uint8_t bits) noexcept { latched_ &= static_cast<uint8_t>(~bits); }
+// An acknowledge only clears what is gone: a bit whose condition persists stays latched and
+// needs another acknowledge once the cause is removed.
+void EnDatBridge::acknowledge_error_info(uint8_t bits) noexcept {
+  latched_ &= static_cast<uint8_t>(~(bits & ~present_));
+}
 
 void EnDatBridge::update_f1(bool f1, int64_t now_ns) noexcept {
   if (f1) {
@@ -374,6 +378,7 @@ void EnDatBridge::endat_ack(uint8_t bits, int64_t now_ns) {
 }
 
 PositionReading EnDatBridge::read_position(int64_t now_ns) {
+  service(now_ns);  // jobs due by now have happened on the wire before this frame
   PositionReading out;
   out.steps = last_position_;
   if (position_bits_ == 0) {
