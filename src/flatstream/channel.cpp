@@ -3,15 +3,19 @@
 namespace ds1928::flatstream {
 namespace {
 
-bool mtu_ok(uint8_t mtu) noexcept { return mtu >= kMinMtu && mtu <= kMaxMtu; }
+bool mtu_ok(uint8_t mtu) noexcept {
+  return mtu >= kMinMtu && mtu <= kMaxMtu;
+}
 
 SenderConfig master_sender(const MasterConfig& c) noexcept {
   return {c.output_mtu, c.output_layout, c.output_forward, 0, c.timeout_cycles};
 }
-ReceiverConfig master_receiver(const MasterConfig& c) noexcept { return {c.input_mtu, 0}; }
+ReceiverConfig master_receiver(const MasterConfig& c) noexcept {
+  return {c.input_mtu, 0};
+}
 SenderConfig module_sender(const ModuleConfig& c) noexcept {
-  return {c.input_mtu, static_cast<Layout>(c.flatstream_mode & 0x03), c.forward,
-          c.forward_delay_us, c.timeout_cycles};
+  return {c.input_mtu, static_cast<Layout>(c.flatstream_mode & 0x03), c.forward, c.forward_delay_us,
+          c.timeout_cycles};
 }
 // ForwardDelay delays the module's acknowledgement in the output direction (datasheet §11.9.5.2.2).
 ReceiverConfig module_receiver(const ModuleConfig& c) noexcept {
@@ -69,7 +73,9 @@ std::optional<SendOutcome> MasterChannel::take_outcome() noexcept {
 Counters MasterChannel::counters() const noexcept {
   return {sender_.counters(), receiver_.counters()};
 }
-ChannelState MasterChannel::state() const noexcept { return {sender_.state(), receiver_.state()}; }
+ChannelState MasterChannel::state() const noexcept {
+  return {sender_.state(), receiver_.state()};
+}
 
 void MasterChannel::reset() noexcept {
   sender_.reset();
@@ -115,7 +121,9 @@ std::optional<SendOutcome> ModuleChannel::take_outcome() noexcept {
 Counters ModuleChannel::counters() const noexcept {
   return {sender_.counters(), receiver_.counters()};
 }
-ChannelState ModuleChannel::state() const noexcept { return {sender_.state(), receiver_.state()}; }
+ChannelState ModuleChannel::state() const noexcept {
+  return {sender_.state(), receiver_.state()};
+}
 
 void ModuleChannel::reset() noexcept {
   sender_.reset();

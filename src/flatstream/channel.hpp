@@ -59,12 +59,12 @@ struct MasterConfig {
 };
 
 struct ModuleConfig {
-  uint8_t output_mtu = 7;          // OutputMTU (4609)
-  uint8_t input_mtu = 7;           // InputMTU (4611)
-  uint8_t flatstream_mode = 0;     // FlatstreamMode (4613): bit 0 MultiSegmentMTU, bit 1 large
-  uint8_t forward = 1;             // Forward (4615), 1..7
-  uint16_t forward_delay_us = 0;   // ForwardDelay (4620)
-  uint32_t timeout_cycles = 200;   // per-sequence timeout of the input sender
+  uint8_t output_mtu = 7;         // OutputMTU (4609)
+  uint8_t input_mtu = 7;          // InputMTU (4611)
+  uint8_t flatstream_mode = 0;    // FlatstreamMode (4613): bit 0 MultiSegmentMTU, bit 1 large
+  uint8_t forward = 1;            // Forward (4615), 1..7
+  uint16_t forward_delay_us = 0;  // ForwardDelay (4620)
+  uint32_t timeout_cycles = 200;  // per-sequence timeout of the input sender
 };
 
 // Precise reason a configuration is unusable; channels clamp out-of-range values instead.

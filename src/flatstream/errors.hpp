@@ -12,10 +12,10 @@ enum class Errc : int {
   message_too_long = 1,  // longer than kMaxMessageSize
   queue_full,            // kQueueDepth messages already queued or with an untaken outcome
   // configuration
-  invalid_mtu,           // MTU outside 2..27
-  invalid_forward,       // Forward outside 1..7
-  invalid_layout,        // FlatstreamMode with reserved bits set
-  invalid_timeout,       // timeout of 0 cycles
+  invalid_mtu,      // MTU outside 2..27
+  invalid_forward,  // Forward outside 1..7
+  invalid_layout,   // FlatstreamMode with reserved bits set
+  invalid_timeout,  // timeout of 0 cycles
   // send outcomes other than delivered
   timeout,           // a sequence of the message stayed unacknowledged past timeout_cycles
   unconfirmed,       // channel resynchronised after the message's last sequence was sent but before

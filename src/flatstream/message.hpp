@@ -22,8 +22,8 @@ struct Message {
 
 // What became of a submitted message. Exactly one outcome is produced per accepted submit.
 struct SendOutcome {
-  uint32_t tag = 0;           // the caller's tag from submit()
-  Errc result = Errc::ok;     // ok: delivered (every sequence carrying it acknowledged)
+  uint32_t tag = 0;        // the caller's tag from submit()
+  Errc result = Errc::ok;  // ok: delivered (every sequence carrying it acknowledged)
 
   [[nodiscard]] bool delivered() const noexcept { return result == Errc::ok; }
   [[nodiscard]] std::error_code error() const noexcept { return make_error_code(result); }
@@ -51,7 +51,9 @@ class Ring {
   }
   // i-th element from the front. Precondition: i < size().
   [[nodiscard]] T& operator[](std::size_t i) noexcept { return items_[(head_ + i) % N]; }
-  [[nodiscard]] const T& operator[](std::size_t i) const noexcept { return items_[(head_ + i) % N]; }
+  [[nodiscard]] const T& operator[](std::size_t i) const noexcept {
+    return items_[(head_ + i) % N];
+  }
   [[nodiscard]] T& front() noexcept { return items_[head_]; }
   void clear() noexcept { head_ = count_ = 0; }
 

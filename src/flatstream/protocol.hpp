@@ -11,14 +11,15 @@
 namespace ds1928::flatstream {
 
 // ---- Limits of this engine (storage is fixed; nothing grows at run time) --------------------
-inline constexpr std::size_t kMinMtu = 2;   // datasheet says 3 in theory; 2 still carries 1 byte
+inline constexpr std::size_t kMinMtu = 2;  // datasheet says 3 in theory; 2 still carries 1 byte
 inline constexpr std::size_t kMaxMtu = kMaxFlatstreamMtu;  // 27
 // Longest message one direction carries. EnDat commands and replies are far shorter; 512 leaves
 // room for a memory-block transfer and is what both roles' storage is sized for.
 inline constexpr std::size_t kMaxMessageSize = 512;
 // Messages per direction that may be queued (submitted, not yet reported) or received (not
-// yet taken).
-inline constexpr std::size_t kQueueDepth = 16;
+// yet taken). A message keeps its send slot until acknowledged, so the depth must cover what is
+// in flight: 7 sequences × up to 3 short messages per 27-byte MTU, plus what waits behind them.
+inline constexpr std::size_t kQueueDepth = 32;
 inline constexpr uint8_t kMaxForward = 7;  // 3-bit counter: at most 7 unacknowledged sequences
 inline constexpr uint8_t kMaxSegmentLength = 63;
 
@@ -51,10 +52,14 @@ enum class Layout : uint8_t {
 }
 [[nodiscard]] constexpr const char* to_string(Layout l) noexcept {
   switch (l) {
-    case Layout::Default: return "default";
-    case Layout::MultiSegmentMtu: return "multi-segment";
-    case Layout::LargeSegments: return "large";
-    case Layout::LargeMultiSegment: return "large+multi";
+    case Layout::Default:
+      return "default";
+    case Layout::MultiSegmentMtu:
+      return "multi-segment";
+    case Layout::LargeSegments:
+      return "large";
+    case Layout::LargeMultiSegment:
+      return "large+multi";
   }
   return "?";
 }

@@ -7,14 +7,19 @@ namespace ds1928::flatstream {
 
 const char* to_string(ReceiverState s) noexcept {
   switch (s) {
-    case ReceiverState::Closed: return "closed";
-    case ReceiverState::Mirroring: return "mirroring";
-    case ReceiverState::Open: return "open";
+    case ReceiverState::Closed:
+      return "closed";
+    case ReceiverState::Mirroring:
+      return "mirroring";
+    case ReceiverState::Open:
+      return "open";
   }
   return "?";
 }
 
-SequenceReceiver::SequenceReceiver(const ReceiverConfig& config) noexcept { configure(config); }
+SequenceReceiver::SequenceReceiver(const ReceiverConfig& config) noexcept {
+  configure(config);
+}
 
 void SequenceReceiver::configure(const ReceiverConfig& config) noexcept {
   config_ = config;

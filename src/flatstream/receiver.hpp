@@ -19,8 +19,9 @@ enum class ReceiverState : uint8_t {
 [[nodiscard]] const char* to_string(ReceiverState s) noexcept;
 
 struct ReceiverConfig {
-  uint8_t mtu = 7;                // 2..27
-  uint16_t forward_delay_us = 0;  // minimum time between taking two sequences (module: ForwardDelay)
+  uint8_t mtu = 7;  // 2..27
+  uint16_t forward_delay_us =
+      0;  // minimum time between taking two sequences (module: ForwardDelay)
 };
 
 struct ReceiverCounters {

@@ -18,10 +18,14 @@ SenderConfig clamped(SenderConfig c) noexcept {
 
 const char* to_string(SenderState s) noexcept {
   switch (s) {
-    case SenderState::Sync0: return "sync0";
-    case SenderState::Sync1: return "sync1";
-    case SenderState::Sync2: return "sync2";
-    case SenderState::Open: return "open";
+    case SenderState::Sync0:
+      return "sync0";
+    case SenderState::Sync1:
+      return "sync1";
+    case SenderState::Sync2:
+      return "sync2";
+    case SenderState::Open:
+      return "open";
   }
   return "?";
 }
@@ -271,8 +275,9 @@ bool SequenceSender::has_unsent_data() const noexcept {
 //   still fit in the MTU they start in; nextCBPos is set on every control byte;
 // - large segments: segments up to 63 bytes, continuing over following sequences;
 // - both: large segments packed back to back.
-// A control byte never takes the last byte of an MTU unless its segment is empty, so every
-// receiver finds payload right after a control byte.
+// With large segments a control byte may take the last byte of an MTU, its payload following
+// in the next sequence; the datasheet's receive flow chart (figure 8) reads that as any other
+// segment spanning sequences.
 bool SequenceSender::build_sequence(Slot& slot) noexcept {
   slot.bytes.fill(0);  // unused bytes read as C0
   slot.messages_ended = 0;
@@ -286,8 +291,10 @@ bool SequenceSender::build_sequence(Slot& slot) noexcept {
       const Message& m = queue_[ended_].message;
       const std::size_t room = mtu - pos;
       const std::size_t left = m.size - msg_offset_;
-      if (left > 0 && room < 2) break;
-      const std::size_t limit = large ? kMaxSegmentLength : std::min<std::size_t>(room - 1, kMaxSegmentLength);
+      // Without large segments a segment must fit where it starts: one free byte is no room.
+      if (!large && left > 0 && room < 2) break;
+      const std::size_t limit =
+          large ? kMaxSegmentLength : std::min<std::size_t>(room - 1, kMaxSegmentLength);
       const auto seg = static_cast<uint8_t>(std::min(left, limit));
       const uint8_t control = cb::make(seg, multi, msg_offset_ + seg == m.size);
       slot.bytes[pos++] = control;

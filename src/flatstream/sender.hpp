@@ -78,7 +78,7 @@ class SequenceSender {
     uint8_t restarts = 0;
     Message message;
   };
-  struct Slot {                 // one sent, not yet acknowledged sequence, indexed by its counter
+  struct Slot {  // one sent, not yet acknowledged sequence, indexed by its counter
     MtuBytes bytes{};
     uint8_t messages_ended = 0;  // messages whose last byte is in this sequence
     uint64_t first_cycle = 0;    // first transmission (timeout)
@@ -113,17 +113,17 @@ class SequenceSender {
   Ring<Pending, kQueueDepth> queue_;
   Ring<SendOutcome, kQueueDepth> outcomes_;
   std::size_t ended_ = 0;
-  uint16_t msg_offset_ = 0;   // bytes of message ended_ already placed
-  uint8_t seg_left_ = 0;      // payload bytes of the open segment still to place
-  uint8_t seg_flags_ = 0;     // nextCBPos / MessageEnd of the open segment
+  uint16_t msg_offset_ = 0;  // bytes of message ended_ already placed
+  uint8_t seg_left_ = 0;     // payload bytes of the open segment still to place
+  uint8_t seg_flags_ = 0;    // nextCBPos / MessageEnd of the open segment
   bool in_segment_ = false;
 
   uint64_t cycle_ = 0;
-  uint64_t stage_cycle_ = 0;     // when the current sync stage began
-  uint64_t last_write_us_ = 0;   // ForwardDelay reference
+  uint64_t stage_cycle_ = 0;    // when the current sync stage began
+  uint64_t last_write_us_ = 0;  // ForwardDelay reference
   bool written_ = false;
   uint64_t last_write_cycle_ = 0;
-  uint32_t rtt_cycles_ = 0;      // longest round trip seen since synchronising (go-back timer)
+  uint32_t rtt_cycles_ = 0;  // longest round trip seen since synchronising (go-back timer)
   SenderCounters counters_;
 };
 

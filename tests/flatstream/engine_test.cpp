@@ -1,7 +1,6 @@
 // Each rule of the protocol against a peer scripted register by register (datasheet §11.9.4.3,
 // §11.9.4.7, §11.9.5.3-4; spec digest §4, §7, §8).
 #include <catch2/catch.hpp>
-
 #include <type_traits>
 
 #include "harness.hpp"
@@ -11,7 +10,9 @@ using test::Bytes;
 
 // ---- Roles are types ---------------------------------------------------------------------
 template <typename A, typename B>
-concept Wirable = requires(A a, B b, uint64_t t) { b.step(a.step(decltype(b.step(a.step({}, t), t)){}, t), t); };
+concept Wirable = requires(A a, B b, uint64_t t) {
+  b.step(a.step(decltype(b.step(a.step({}, t), t)){}, t), t);
+};
 static_assert(Wirable<MasterChannel, ModuleChannel>);
 static_assert(Wirable<ModuleChannel, MasterChannel>);
 static_assert(!Wirable<MasterChannel, MasterChannel>, "two masters must not be wirable");
@@ -252,8 +253,8 @@ TEST_CASE("peer drops SyncAck: a message whose last sequence was sent is reporte
   m.open_output();
   REQUIRE_FALSE(master.submit(pattern(3, 0), 1));   // one sequence
   REQUIRE_FALSE(master.submit(pattern(12, 0), 2));  // two sequences
-  m.step();  // seq 2: message 1 complete
-  m.step();  // seq 3: first half of message 2
+  m.step();                                         // seq 2: message 1 complete
+  m.step();                                         // seq 3: first half of message 2
   REQUIRE(m.out.counter == 3);
   m.in.sync_ack = false;  // module resets its receiver
   m.step();
@@ -353,7 +354,8 @@ TEST_CASE("a peer that never synchronises still yields an outcome", "[flatstream
   CHECK(o->result == Errc::not_synchronised);
 }
 
-TEST_CASE("ForwardDelay spaces the module's sequences and acknowledgements", "[flatstream][forward]") {
+TEST_CASE("ForwardDelay spaces the module's sequences and acknowledgements",
+          "[flatstream][forward]") {
   ModuleChannel module({7, 5, 0, 7, 350, 200});
   ScriptedMaster m{module};
   m.cycle_us = 100;
@@ -420,8 +422,10 @@ TEST_CASE("submit rejects oversized messages and a full queue", "[flatstream][ap
 TEST_CASE("configuration validation names the wrong field", "[flatstream][api]") {
   CHECK_FALSE(validate(MasterConfig{}));
   CHECK_FALSE(validate(ModuleConfig{}));
-  CHECK(validate(MasterConfig{1, 7, Layout::Default, 1, 200}) == make_error_code(Errc::invalid_mtu));
-  CHECK(validate(MasterConfig{7, 28, Layout::Default, 1, 200}) == make_error_code(Errc::invalid_mtu));
+  CHECK(validate(MasterConfig{1, 7, Layout::Default, 1, 200}) ==
+        make_error_code(Errc::invalid_mtu));
+  CHECK(validate(MasterConfig{7, 28, Layout::Default, 1, 200}) ==
+        make_error_code(Errc::invalid_mtu));
   CHECK(validate(MasterConfig{7, 7, Layout::Default, 8, 200}) ==
         make_error_code(Errc::invalid_forward));
   CHECK(validate(MasterConfig{7, 7, Layout::Default, 1, 0}) ==
@@ -443,7 +447,8 @@ TEST_CASE("every MTU 2..27 carries messages of 0..512 bytes in every layout", "[
         REQUIRE_FALSE(module.submit(pattern(sizes[i], static_cast<uint8_t>(i + 100)), 0));
       }
       std::vector<Bytes> at_module, at_master;
-      for (int c = 0; c < 4000 && (at_module.size() < sizes.size() || at_master.size() < sizes.size()); ++c) {
+      for (int c = 0;
+           c < 4000 && (at_module.size() < sizes.size() || at_master.size() < sizes.size()); ++c) {
         bus.cycle();
         while (auto m = module.take_received()) at_module.push_back(test::bytes_of(*m));
         while (auto m = master.take_received()) at_master.push_back(test::bytes_of(*m));

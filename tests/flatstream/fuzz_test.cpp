@@ -3,7 +3,6 @@
 // the protocol (handshake mirrored, counter +1, plausible acks) so the parser and the sender's
 // error paths are reached, not only the closed state.
 #include <catch2/catch.hpp>
-
 #include <cstdlib>
 #include <random>
 
@@ -116,8 +115,11 @@ TEST_CASE("fuzz: garbage registers into the module role", "[flatstream][fuzz]") 
   for (int round = 0; round < 24; ++round) {
     const auto out_mtu = static_cast<uint8_t>(2 + rng() % 26);
     const auto in_mtu = static_cast<uint8_t>(2 + rng() % 26);
-    ModuleConfig cfg{out_mtu, in_mtu, static_cast<uint8_t>(rng() % 4),
-                     static_cast<uint8_t>(1 + rng() % 7), static_cast<uint16_t>(rng() % 3 ? 0 : rng() % 500),
+    ModuleConfig cfg{out_mtu,
+                     in_mtu,
+                     static_cast<uint8_t>(rng() % 4),
+                     static_cast<uint8_t>(1 + rng() % 7),
+                     static_cast<uint16_t>(rng() % 3 ? 0 : rng() % 500),
                      static_cast<uint32_t>(1 + rng() % 100)};
     fuzz<ModuleChannel, OutputFrame>(cfg, in_mtu, out_mtu, rng(), 20000);
   }
@@ -128,8 +130,8 @@ TEST_CASE("fuzz: out-of-range configuration is clamped, not trusted", "[flatstre
   for (int round = 0; round < 50; ++round) {
     MasterConfig mc{static_cast<uint8_t>(rng()), static_cast<uint8_t>(rng()),
                     static_cast<Layout>(rng()), static_cast<uint8_t>(rng()), 0};
-    ModuleConfig dc{static_cast<uint8_t>(rng()), static_cast<uint8_t>(rng()),
-                    static_cast<uint8_t>(rng()), static_cast<uint8_t>(rng()),
+    ModuleConfig dc{static_cast<uint8_t>(rng()),  static_cast<uint8_t>(rng()),
+                    static_cast<uint8_t>(rng()),  static_cast<uint8_t>(rng()),
                     static_cast<uint16_t>(rng()), 0};
     MasterChannel master(mc);
     ModuleChannel module(dc);
@@ -137,7 +139,8 @@ TEST_CASE("fuzz: out-of-range configuration is clamped, not trusted", "[flatstre
     for (int i = 0; i < 200; ++i) {
       (void)master.submit(std::vector<uint8_t>(rng() % 100, 1), 0);
       (void)module.submit(std::vector<uint8_t>(rng() % 100, 2), 0);
-      in = module.step(master.step(in, static_cast<uint64_t>(i) * 100), static_cast<uint64_t>(i) * 100);
+      in = module.step(master.step(in, static_cast<uint64_t>(i) * 100),
+                       static_cast<uint64_t>(i) * 100);
       while (master.take_received()) {
       }
       while (module.take_received()) {

@@ -10,7 +10,9 @@ namespace ds1928::flatstream::test {
 
 using Bytes = std::vector<uint8_t>;
 
-inline Bytes bytes_of(const Message& m) { return Bytes(m.payload().begin(), m.payload().end()); }
+inline Bytes bytes_of(const Message& m) {
+  return Bytes(m.payload().begin(), m.payload().end());
+}
 
 inline Bytes mtu_prefix(const MtuBytes& mtu, std::size_t n) {
   return Bytes(mtu.begin(), mtu.begin() + static_cast<std::ptrdiff_t>(n));

@@ -17,9 +17,14 @@ class LossyLink {
   // The sender wrote `f` in cycle `t`; what happens to it is `e` (delay: `k` cycles).
   void write(const Frame& f, uint64_t t, BusEvent e, unsigned k = 0) {
     switch (e) {
-      case BusEvent::Deliver: pipe_.push_back({t, t, f}); break;
-      case BusEvent::Drop: break;
-      case BusEvent::Delay: pipe_.push_back({t, t + k, f}); break;
+      case BusEvent::Deliver:
+        pipe_.push_back({t, t, f});
+        break;
+      case BusEvent::Drop:
+        break;
+      case BusEvent::Delay:
+        pipe_.push_back({t, t + k, f});
+        break;
       case BusEvent::Repeat:
         // The receiver gets the previous cycle's registers again; this image comes one later.
         freeze_ = true;

@@ -4,7 +4,6 @@
 // nothing arrived that was not submitted, nothing was truncated, merged or duplicated, and every
 // submit got exactly one outcome. Seed: FLATSTREAM_SEED=<n> overrides; printed on failure.
 #include <catch2/catch.hpp>
-
 #include <cstdlib>
 #include <deque>
 #include <random>
@@ -35,7 +34,7 @@ struct Submitted {
 struct DirectionLog {
   std::vector<Submitted> submitted;  // index = tag
   std::vector<Bytes> received;
-  std::deque<Bytes> recent;          // keeps tiny messages unique within a window
+  std::deque<Bytes> recent;  // keeps tiny messages unique within a window
   uint32_t next_outcome_tag = 0;
   std::vector<std::string> errors;
 
@@ -314,7 +313,9 @@ void sweep(uint8_t mode, uint64_t case_seed) {
 
 }  // namespace
 
-TEST_CASE("lossy bus: FlatstreamMode default", "[flatstream][random]") { sweep(0, base_seed() ^ 0x10); }
+TEST_CASE("lossy bus: FlatstreamMode default", "[flatstream][random]") {
+  sweep(0, base_seed() ^ 0x10);
+}
 TEST_CASE("lossy bus: FlatstreamMode MultiSegmentMTU", "[flatstream][random]") {
   sweep(1, base_seed() ^ 0x20);
 }

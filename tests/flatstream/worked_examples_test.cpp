@@ -1,7 +1,6 @@
 // The datasheet's worked example (§11.9.4.4, §11.9.4.9): messages A (7 bytes), B (2), D (9) over
 // a 7-byte MTU, in all four layouts, with the corrected control bytes of the spec digest.
 #include <catch2/catch.hpp>
-
 #include <functional>
 #include <map>
 
@@ -98,8 +97,10 @@ TEST_CASE("worked example: module sends the input direction in each FlatstreamMo
     MasterChannel master({7, 7, Layout::Default, 1, 200});
     ModuleChannel module({7, 7, static_cast<uint8_t>(layout), 1, 0, 200});
     test::PerfectBus bus{master, module};
-    REQUIRE(bus.run_until([&] { return master.state().receiving == ReceiverState::Open &&
-                                        module.state().sending == SenderState::Open; }));
+    REQUIRE(bus.run_until([&] {
+      return master.state().receiving == ReceiverState::Open &&
+             module.state().sending == SenderState::Open;
+    }));
     for (const Bytes* m : {&kA, &kB, &kD}) REQUIRE_FALSE(module.submit(*m, 0));
     Recorder rec;
     for (int i = 0; i < 100; ++i) {
@@ -192,7 +193,9 @@ TEST_CASE("the datasheet's literal large+multi control bytes lose B and D (why t
   // documents the misprint; the engine never sends it.
   MasterChannel master({7, 7, Layout::Default, 1, 200});
   feed(
-      [&](uint8_t reg, const MtuBytes& mtu) { return master.step({reg, mtu}, 0).output_sequence; },
+      [&](uint8_t reg, const MtuBytes& mtu) {
+        return master.step({reg, mtu}, 0).output_sequence;
+      },
       {{135, 0xA1, 0xA2, 0xA3, 0xA4, 0xA5, 0xA6},
        {0xA7, 130, 0xB1, 0xB2, 137, 0xD1, 0xD2},
        {0xD3, 0xD4, 0xD5, 0xD6, 0xD7, 0xD8, 0xD9}});
