@@ -285,3 +285,27 @@ TEST_CASE("The MN's frames decode in the codec with consistent fields", "[powerl
   CHECK(preqs > 0);
   CHECK(asnds > 0);
 }
+
+#include <unistd.h>
+
+#include "pcap_util.hpp"
+
+TEST_CASE("Wireshark decodes the MN's boot traffic without errors", "[powerlink][mn][tshark]") {
+  if (access("/usr/bin/tshark", X_OK) != 0) {
+    WARN("tshark not installed: Wireshark decoding check skipped");
+    return;
+  }
+  Rig rig({1}, 1);
+  rig.link.log = true;
+  REQUIRE(rig.run_until([&] { return rig.bus->state() == BusState::Operational; }));
+  const std::string path = std::string(DS1928_TEST_TMPDIR) + "/powerlink_mn_boot.pcap";
+  test::write_pcap(path, rig.link.sent_log);
+  const std::string out = test::run_command("tshark -n -r " + path + " -V 2>&1");
+  CHECK(out.find("Malformed") == std::string::npos);
+  CHECK(out.find("Expert Info (Error") == std::string::npos);
+  CHECK(out.find("Expert Info (Warning") == std::string::npos);
+  const std::string summary = test::run_command("tshark -n -r " + path + " 2>/dev/null");
+  for (const char* what : {"SoC", "PReq", "IDENT_REQUEST", "STATUS_REQUEST", "UNSPEC_INVITE",
+                           "NMTEnableReadyToOperate", "NMTStartNode", "WriteByIndex"})
+    CHECK(summary.find(what) != std::string::npos);
+}
