@@ -11,23 +11,37 @@ std::optional<Command> command_from_byte(uint8_t byte) noexcept {
 
 std::string_view command_name(Command c) noexcept {
   switch (c) {
-    case Command::Reset: return "reset";
-    case Command::AcknowledgeErrors: return "acknowledge errors";
-    case Command::ReadParameter: return "read parameter";
-    case Command::WriteParameter: return "write parameter";
-    case Command::ReadBlockParameter: return "read parameter from memory block";
-    case Command::WriteBlockParameter: return "write parameter to memory block";
-    case Command::ReadInfoWord1: return "read word 1 of additional information";
-    case Command::ReadInfoWord2: return "read word 2 of additional information";
-    case Command::ReadInfoWord3: return "read word 3 of additional information";
-    case Command::ReadInfoWord4: return "read word 4 of additional information";
+    case Command::Reset:
+      return "reset";
+    case Command::AcknowledgeErrors:
+      return "acknowledge errors";
+    case Command::ReadParameter:
+      return "read parameter";
+    case Command::WriteParameter:
+      return "write parameter";
+    case Command::ReadBlockParameter:
+      return "read parameter from memory block";
+    case Command::WriteBlockParameter:
+      return "write parameter to memory block";
+    case Command::ReadInfoWord1:
+      return "read word 1 of additional information";
+    case Command::ReadInfoWord2:
+      return "read word 2 of additional information";
+    case Command::ReadInfoWord3:
+      return "read word 3 of additional information";
+    case Command::ReadInfoWord4:
+      return "read word 4 of additional information";
   }
   return "?";
 }
 
-bool requires_endat22(Command c) noexcept { return static_cast<uint8_t>(c) >= 0x06; }
+bool requires_endat22(Command c) noexcept {
+  return static_cast<uint8_t>(c) >= 0x06;
+}
 
-bool has_mrs(Command c) noexcept { return static_cast<uint8_t>(c) >= 0x04; }
+bool has_mrs(Command c) noexcept {
+  return static_cast<uint8_t>(c) >= 0x04;
+}
 
 bool has_block(Command c) noexcept {
   return c == Command::ReadBlockParameter || c == Command::WriteBlockParameter;
@@ -42,7 +56,9 @@ bool is_write(Command c) noexcept {
   return c == Command::WriteParameter || c == Command::WriteBlockParameter;
 }
 
-bool is_info_read(Command c) noexcept { return static_cast<uint8_t>(c) >= 0x08; }
+bool is_info_read(Command c) noexcept {
+  return static_cast<uint8_t>(c) >= 0x08;
+}
 
 unsigned info_word_count(Command c) noexcept {
   return is_info_read(c) ? static_cast<unsigned>(static_cast<uint8_t>(c) - 0x07) : 0u;
@@ -51,15 +67,21 @@ unsigned info_word_count(Command c) noexcept {
 std::size_t request_size(Command c) noexcept {
   switch (c) {
     case Command::Reset:
-    case Command::AcknowledgeErrors: return 1;
-    case Command::ReadParameter: return 3;
-    case Command::WriteParameter: return 5;
-    case Command::ReadBlockParameter: return 4;
-    case Command::WriteBlockParameter: return 6;
+    case Command::AcknowledgeErrors:
+      return 1;
+    case Command::ReadParameter:
+      return 3;
+    case Command::WriteParameter:
+      return 5;
+    case Command::ReadBlockParameter:
+      return 4;
+    case Command::WriteBlockParameter:
+      return 6;
     case Command::ReadInfoWord1:
     case Command::ReadInfoWord2:
     case Command::ReadInfoWord3:
-    case Command::ReadInfoWord4: return 2;
+    case Command::ReadInfoWord4:
+      return 2;
   }
   return 0;
 }
@@ -67,21 +89,31 @@ std::size_t request_size(Command c) noexcept {
 std::size_t reply_size(Command c) noexcept {
   switch (c) {
     case Command::Reset:
-    case Command::AcknowledgeErrors: return 1;
-    case Command::ReadParameter: return 5;
-    case Command::WriteParameter: return 3;
-    case Command::ReadBlockParameter: return 6;
-    case Command::WriteBlockParameter: return 4;
+    case Command::AcknowledgeErrors:
+      return 1;
+    case Command::ReadParameter:
+      return 5;
+    case Command::WriteParameter:
+      return 3;
+    case Command::ReadBlockParameter:
+      return 6;
+    case Command::WriteBlockParameter:
+      return 4;
     case Command::ReadInfoWord1:
     case Command::ReadInfoWord2:
     case Command::ReadInfoWord3:
-    case Command::ReadInfoWord4: return 2 + 2 * info_word_count(c);
+    case Command::ReadInfoWord4:
+      return 2 + 2 * info_word_count(c);
   }
   return 0;
 }
 
-bool is_memory_area_mrs(uint8_t mrs) noexcept { return mrs >= 0xA0 && mrs <= 0xBF; }
-bool is_additional_info_mrs(uint8_t mrs) noexcept { return mrs >= 0x40 && mrs <= 0x5F; }
+bool is_memory_area_mrs(uint8_t mrs) noexcept {
+  return mrs >= 0xA0 && mrs <= 0xBF;
+}
+bool is_additional_info_mrs(uint8_t mrs) noexcept {
+  return mrs >= 0x40 && mrs <= 0x5F;
+}
 
 bool Request::same_as(const Request& other) const noexcept {
   if (command != other.command) return false;
@@ -146,11 +178,16 @@ Result<Reply> decode_reply(const Request& request, std::span<const uint8_t> mess
     if (message.size() < 2) return Errc::truncated_failure_reply;
     if (message.size() > 2) return Errc::oversized_failure_reply;
     switch (static_cast<FailureReason>(message[1])) {
-      case FailureReason::CrcError: return Errc::module_crc_failure;
-      case FailureReason::NoResponse: return Errc::module_no_response;
-      case FailureReason::NotSupported: return Errc::module_not_supported;
-      case FailureReason::MalformedRequest: return Errc::module_malformed_request;
-      case FailureReason::WireEchoMismatch: return Errc::module_wire_echo_mismatch;
+      case FailureReason::CrcError:
+        return Errc::module_crc_failure;
+      case FailureReason::NoResponse:
+        return Errc::module_no_response;
+      case FailureReason::NotSupported:
+        return Errc::module_not_supported;
+      case FailureReason::MalformedRequest:
+        return Errc::module_malformed_request;
+      case FailureReason::WireEchoMismatch:
+        return Errc::module_wire_echo_mismatch;
     }
     return Errc::module_unknown_failure;
   }
@@ -175,10 +212,10 @@ Result<Reply> decode_reply(const Request& request, std::span<const uint8_t> mess
     if (reply.echo.parameter != request.parameter) return Errc::parameter_echo_mismatch;
   }
   if (is_write(request.command)) reply.echo.value = request.value;
-  const unsigned words = (request.command == Command::ReadParameter ||
-                          request.command == Command::ReadBlockParameter)
-                             ? 1u
-                             : info_word_count(request.command);
+  const unsigned words =
+      (request.command == Command::ReadParameter || request.command == Command::ReadBlockParameter)
+          ? 1u
+          : info_word_count(request.command);
   for (unsigned w = 0; w < words; ++w, i += 2) {
     reply.words[w] = static_cast<uint16_t>(message[i] | (message[i + 1] << 8));
   }
@@ -193,9 +230,8 @@ ReplyMessage encode_reply(const Request& request, std::span<const uint16_t> word
   if (has_mrs(c)) m.push(request.mrs);
   if (has_block(c)) m.push(request.block);
   if (has_parameter(c)) m.push(request.parameter);
-  const unsigned n = (c == Command::ReadParameter || c == Command::ReadBlockParameter)
-                         ? 1u
-                         : info_word_count(c);
+  const unsigned n =
+      (c == Command::ReadParameter || c == Command::ReadBlockParameter) ? 1u : info_word_count(c);
   for (unsigned w = 0; w < n; ++w) {
     const uint16_t v = w < words.size() ? words[w] : 0;
     m.push(static_cast<uint8_t>(v & 0xFF));
@@ -206,11 +242,16 @@ ReplyMessage encode_reply(const Request& request, std::span<const uint16_t> word
 
 std::string_view failure_reason_name(FailureReason r) noexcept {
   switch (r) {
-    case FailureReason::CrcError: return "CRC error";
-    case FailureReason::NoResponse: return "no response";
-    case FailureReason::NotSupported: return "not supported by the encoder";
-    case FailureReason::MalformedRequest: return "malformed request";
-    case FailureReason::WireEchoMismatch: return "wrong echo on the EnDat wire";
+    case FailureReason::CrcError:
+      return "CRC error";
+    case FailureReason::NoResponse:
+      return "no response";
+    case FailureReason::NotSupported:
+      return "not supported by the encoder";
+    case FailureReason::MalformedRequest:
+      return "malformed request";
+    case FailureReason::WireEchoMismatch:
+      return "wrong echo on the EnDat wire";
   }
   return "unknown";
 }

@@ -34,9 +34,9 @@ enum class Command : uint8_t {
 };
 
 inline constexpr std::array<Command, 10> kAllCommands{
-    Command::Reset,          Command::AcknowledgeErrors,   Command::ReadParameter,
-    Command::WriteParameter, Command::ReadBlockParameter,  Command::WriteBlockParameter,
-    Command::ReadInfoWord1,  Command::ReadInfoWord2,       Command::ReadInfoWord3,
+    Command::Reset,          Command::AcknowledgeErrors,  Command::ReadParameter,
+    Command::WriteParameter, Command::ReadBlockParameter, Command::WriteBlockParameter,
+    Command::ReadInfoWord1,  Command::ReadInfoWord2,      Command::ReadInfoWord3,
     Command::ReadInfoWord4};
 
 // Which EnDat command set the encoder speaks (manufacturer word 37, endat.md §4).
@@ -123,8 +123,8 @@ using ReplyMessage = Message<kMaxReplyBytes>;
 
 // A successful reply.
 struct Reply {
-  Request echo;                      // command, MRS, block, parameter as echoed
-  std::array<uint16_t, 4> words{};   // read value(s): [0] for 0x04/0x06, info words 1..n
+  Request echo;                     // command, MRS, block, parameter as echoed
+  std::array<uint16_t, 4> words{};  // read value(s): [0] for 0x04/0x06, info words 1..n
   uint8_t word_count = 0;
   // The value asked for: the read parameter or the last (requested) information word.
   [[nodiscard]] uint16_t value() const noexcept {

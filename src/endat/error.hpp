@@ -12,37 +12,37 @@ namespace ds1928::endat {
 
 enum class Errc : int {
   // Reply messages from the module (X20DS1928.md §7).
-  truncated_reply = 1,         // fewer bytes than the command's reply has
-  oversized_reply,             // more bytes than the command's reply has
-  command_echo_mismatch,       // first reply byte is not the command byte
-  mrs_echo_mismatch,           // echoed MRS code differs from the request's
-  block_echo_mismatch,         // echoed block number differs
-  parameter_echo_mismatch,     // echoed parameter number differs
+  truncated_reply = 1,      // fewer bytes than the command's reply has
+  oversized_reply,          // more bytes than the command's reply has
+  command_echo_mismatch,    // first reply byte is not the command byte
+  mrs_echo_mismatch,        // echoed MRS code differs from the request's
+  block_echo_mismatch,      // echoed block number differs
+  parameter_echo_mismatch,  // echoed parameter number differs
   // Requests (encoding on the master, strict decoding on the module side).
-  unknown_command,             // not one of 0x00, 0x01, 0x04..0x0B
-  requires_endat22,            // command 0x06..0x0B sent to an EnDat 2.1 encoder
-  invalid_mrs,                 // MRS code outside the range the command accepts
+  unknown_command,   // not one of 0x00, 0x01, 0x04..0x0B
+  requires_endat22,  // command 0x06..0x0B sent to an EnDat 2.1 encoder
+  invalid_mrs,       // MRS code outside the range the command accepts
   truncated_request,
   oversized_request,
   // Failure replies of the module (docs/endat.md, "Failure replies").
-  module_crc_failure,          // EnDat CRC still wrong after the module's retries
-  module_no_response,          // the encoder did not answer
-  module_not_supported,        // the encoder does not support the command
-  module_malformed_request,    // the module could not parse the request
-  module_wire_echo_mismatch,   // the encoder's address echo on the wire was wrong
-  module_unknown_failure,      // failure reply with a reason code this version does not know
-  truncated_failure_reply,     // failure marker without its reason byte
+  module_crc_failure,         // EnDat CRC still wrong after the module's retries
+  module_no_response,         // the encoder did not answer
+  module_not_supported,       // the encoder does not support the command
+  module_malformed_request,   // the module could not parse the request
+  module_wire_echo_mismatch,  // the encoder's address echo on the wire was wrong
+  module_unknown_failure,     // failure reply with a reason code this version does not know
+  truncated_failure_reply,    // failure marker without its reason byte
   oversized_failure_reply,
   // Verification of a write by reading back.
   write_not_applied,
   // EnDat wire frames (simulated encoder and module firmware).
-  no_response,                 // no start bit: the encoder did not answer
-  crc_mismatch,                // received CRC differs from the computed one
-  frame_length,                // frame has the wrong number of bits
-  invalid_mode,                // 6 mode bits are not a known mode command
-  f2_not_inverted,             // EnDat 2.2 position frame with F2 == F1
+  no_response,      // no start bit: the encoder did not answer
+  crc_mismatch,     // received CRC differs from the computed one
+  frame_length,     // frame has the wrong number of bits
+  invalid_mode,     // 6 mode bits are not a known mode command
+  f2_not_inverted,  // EnDat 2.2 position frame with F2 == F1
   // Identification.
-  invalid_identification,      // manufacturer words contradict themselves
+  invalid_identification,  // manufacturer words contradict themselves
   // Number parsing (command-line arguments).
   invalid_number,
   number_out_of_range,
@@ -71,8 +71,8 @@ enum class Condition : int {
 template <class T>
 class [[nodiscard]] Result {
  public:
-  Result(T value) : value_(std::move(value)) {}  // NOLINT: implicit like std::expected
-  Result(std::error_code error) : error_(error) {}  // NOLINT
+  Result(T value) : value_(std::move(value)) {}           // NOLINT: implicit like std::expected
+  Result(std::error_code error) : error_(error) {}        // NOLINT
   Result(Errc error) : error_(make_error_code(error)) {}  // NOLINT
 
   [[nodiscard]] bool has_value() const noexcept { return value_.has_value(); }

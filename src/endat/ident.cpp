@@ -3,7 +3,9 @@
 namespace ds1928::endat {
 namespace {
 
-bool printable(char c) noexcept { return c > ' ' && c < 0x7F; }
+bool printable(char c) noexcept {
+  return c > ' ' && c < 0x7F;
+}
 
 }  // namespace
 

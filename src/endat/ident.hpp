@@ -26,14 +26,14 @@ inline constexpr unsigned kSignalPeriodsHigh = 16;
 inline constexpr unsigned kRevolutions = 17;  // 0 = singleturn
 inline constexpr unsigned kStepsLow = 20;
 inline constexpr unsigned kStepsHigh = 21;
-inline constexpr unsigned kIdText = 24;       // two ASCII characters, first in the high byte
-inline constexpr unsigned kIdLow = 25;        // 32-bit binary ID, low word
+inline constexpr unsigned kIdText = 24;  // two ASCII characters, first in the high byte
+inline constexpr unsigned kIdLow = 25;   // 32-bit binary ID, low word
 inline constexpr unsigned kIdHigh = 26;
-inline constexpr unsigned kSerial0 = 27;      // low byte ASCII prefix; high byte binary bits 7..0
-inline constexpr unsigned kSerial1 = 28;      // binary bits 23..8
-inline constexpr unsigned kSerial2 = 29;      // low byte binary bits 31..24; high byte ASCII suffix
+inline constexpr unsigned kSerial0 = 27;  // low byte ASCII prefix; high byte binary bits 7..0
+inline constexpr unsigned kSerial1 = 28;  // binary bits 23..8
+inline constexpr unsigned kSerial2 = 29;  // low byte binary bits 31..24; high byte ASCII suffix
 inline constexpr unsigned kWarningsSupported = 36;
-inline constexpr unsigned kCommandSet = 37;   // bit 0 = 1 and bit 1 = 0: EnDat 2.2 command set
+inline constexpr unsigned kCommandSet = 37;  // bit 0 = 1 and bit 1 = 0: EnDat 2.2 command set
 inline constexpr unsigned kChecksum = 47;
 }  // namespace manuf_word
 
@@ -63,9 +63,9 @@ struct Identification {
   uint16_t command_set_word = 0;  // word 37, raw
   CommandSet command_set = CommandSet::EnDat21;
   EncoderType type = EncoderType::Rotary;
-  unsigned position_bits = 0;        // clock pulses for the position value
-  uint32_t signal_periods = 0;       // per revolution (rotary)
-  uint16_t revolutions = 0;          // distinguishable revolutions, 0 = singleturn
+  unsigned position_bits = 0;   // clock pulses for the position value
+  uint32_t signal_periods = 0;  // per revolution (rotary)
+  uint16_t revolutions = 0;     // distinguishable revolutions, 0 = singleturn
   uint32_t steps_per_revolution = 0;
   IdNumber id;
   SerialNumber serial;

@@ -24,8 +24,20 @@ bool BitFrame::read_lsb_first(std::size_t& pos, unsigned count, uint64_t& out) c
 
 std::optional<Mode> mode_from_bits(uint8_t b) noexcept {
   switch (b) {
-    case 0x07: case 0x0E: case 0x1C: case 0x23: case 0x2A: case 0x15: case 0x31:
-    case 0x38: case 0x09: case 0x1B: case 0x24: case 0x2D: case 0x36: case 0x12:
+    case 0x07:
+    case 0x0E:
+    case 0x1C:
+    case 0x23:
+    case 0x2A:
+    case 0x15:
+    case 0x31:
+    case 0x38:
+    case 0x09:
+    case 0x1B:
+    case 0x24:
+    case 0x2D:
+    case 0x36:
+    case 0x12:
       return static_cast<Mode>(b);
     default:
       return std::nullopt;
@@ -155,8 +167,7 @@ Result<AdditionalInfo> read_additional_info(const BitFrame& b, std::size_t& pos)
 BitFrame encode_position_reply(const PositionReply& r, CommandSet set,
                                unsigned position_bits) noexcept {
   const bool v22 = set == CommandSet::EnDat22;
-  const uint64_t mask =
-      position_bits >= 64 ? ~uint64_t{0} : ((uint64_t{1} << position_bits) - 1);
+  const uint64_t mask = position_bits >= 64 ? ~uint64_t{0} : ((uint64_t{1} << position_bits) - 1);
   Crc5 crc;
   BitFrame b;
   b.push_bit(true);  // start bit

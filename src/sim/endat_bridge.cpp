@@ -70,7 +70,7 @@ void EnDatBridge::update_f1(bool f1, int64_t now_ns) noexcept {
 }
 
 endat::Result<endat::wire::PositionReply> EnDatBridge::decode_position(const BitFrame& f,
-                                                                      CommandSet set) const {
+                                                                       CommandSet set) const {
   endat::wire::PositionFormat fmt{set, position_bits_, false, false};
   if (set == CommandSet::EnDat22 && f.size() > fmt.frame_bits()) {
     // Additional information present: how many follows from the length; which is in each
@@ -115,8 +115,8 @@ std::error_code EnDatBridge::param_tx(int64_t& t, Mode mode, uint8_t address, ui
   return last;
 }
 
-std::error_code EnDatBridge::position_tx(int64_t& t, Mode mode, uint8_t address,
-                                         uint16_t parameter, endat::wire::PositionReply* out) {
+std::error_code EnDatBridge::position_tx(int64_t& t, Mode mode, uint8_t address, uint16_t parameter,
+                                         endat::wire::PositionReply* out) {
   const BitFrame frame = endat::wire::encode_master_frame({mode, address, parameter});
   std::error_code last;
   for (unsigned attempt = 0; attempt <= config_.max_retries; ++attempt) {
@@ -147,7 +147,8 @@ std::error_code EnDatBridge::read_area(int64_t& t, uint8_t mrs, unsigned first,
                                        std::span<uint16_t> out) {
   if (auto ec = param_tx(t, Mode::SelectMemoryArea, mrs, 0, true, nullptr)) return ec;
   for (std::size_t i = 0; i < out.size(); ++i) {
-    if (auto ec = param_tx(t, Mode::SendParameter, static_cast<uint8_t>(first + i), 0, false, &out[i])) {
+    if (auto ec =
+            param_tx(t, Mode::SendParameter, static_cast<uint8_t>(first + i), 0, false, &out[i])) {
       return ec;
     }
   }
@@ -244,7 +245,8 @@ std::error_code EnDatBridge::run_info(const endat::Request& r, int64_t& t,
   // Stop the selection so that cyclic position frames go back to their plain length.
   (void)position_tx(t, Mode::PositionAddInfoSelectMemory, code < 0x50 ? 0x4F : 0x5F, 0, nullptr);
   if (got < wanted) {
-    const std::error_code ec = saw_crc ? make_error_code(Errc::crc_mismatch) : make_error_code(Errc::no_response);
+    const std::error_code ec =
+        saw_crc ? make_error_code(Errc::crc_mismatch) : make_error_code(Errc::no_response);
     note_failure(ec);
     return ec;
   }
@@ -326,7 +328,8 @@ void EnDatBridge::service(int64_t now_ns) {
       reset_in_flight_ = is_reset && t > now_ns;
     } else if (status_due_ || (config_.status_refresh_ns > 0 && identification_ &&
                                last_status_ns_ + config_.status_refresh_ns <= now_ns)) {
-      t = std::max(free, status_due_ ? status_due_ns_ : last_status_ns_ + config_.status_refresh_ns);
+      t = std::max(free,
+                   status_due_ ? status_due_ns_ : last_status_ns_ + config_.status_refresh_ns);
       (void)run_status_refresh(t);
     } else {
       return;
@@ -363,7 +366,9 @@ std::optional<BridgeReply> EnDatBridge::poll(int64_t now_ns) {
   return reply;
 }
 
-bool EnDatBridge::idle() const noexcept { return !pending_ && !in_flight_; }
+bool EnDatBridge::idle() const noexcept {
+  return !pending_ && !in_flight_;
+}
 
 void EnDatBridge::endat_ack(uint8_t bits, int64_t now_ns) {
   if ((bits & 0x01) != 0 && !pending_ack_) {

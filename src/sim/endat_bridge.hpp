@@ -23,11 +23,12 @@
 namespace ds1928::sim {
 
 struct BridgeConfig {
-  unsigned max_retries = 2;                  // per wire transaction, after the first attempt
-  int64_t no_response_timeout_ns = 50'000;   // the master's wait for a start bit
-  int64_t frame_interval_ns = 200'000;       // EnDat cycle: spacing of frames fetching AI words
-  int64_t status_refresh_ns = 500'000'000;   // re-read status words 0/1 when idle; 0 = only on events
-  unsigned max_info_frames = 8;              // frames to wait for valid additional information
+  unsigned max_retries = 2;                 // per wire transaction, after the first attempt
+  int64_t no_response_timeout_ns = 50'000;  // the master's wait for a start bit
+  int64_t frame_interval_ns = 200'000;      // EnDat cycle: spacing of frames fetching AI words
+  int64_t status_refresh_ns =
+      500'000'000;               // re-read status words 0/1 when idle; 0 = only on events
+  unsigned max_info_frames = 8;  // frames to wait for valid additional information
 };
 
 struct BridgeReply {
@@ -45,17 +46,17 @@ struct PositionReading {
 
 // The module's identification registers (X20DS1928.md §6), exactly the encoder's words.
 struct IdentRegisters {
-  std::array<uint16_t, 16> operating_param{};        // OperatingParam_00..15 ← MRS 0xA7
-  std::array<uint16_t, 4> operating_status{};        // OperatingStatus_00..03 ← MRS 0xB9
-  endat::ManufacturerWords manufacturer{};           // ParamManuf_04..47 ← MRS 0xA1/A3/A5
-  std::array<uint16_t, 64> manufacturer_endat22{};   // ParamManufEnDat22_01..63 ← MRS 0xBD
+  std::array<uint16_t, 16> operating_param{};       // OperatingParam_00..15 ← MRS 0xA7
+  std::array<uint16_t, 4> operating_status{};       // OperatingStatus_00..03 ← MRS 0xB9
+  endat::ManufacturerWords manufacturer{};          // ParamManuf_04..47 ← MRS 0xA1/A3/A5
+  std::array<uint16_t, 64> manufacturer_endat22{};  // ParamManufEnDat22_01..63 ← MRS 0xBD
   bool valid = false;
 };
 
 struct BridgeStats {
   uint64_t transactions = 0;
   uint64_t retries = 0;
-  uint64_t crc_errors = 0;        // frames whose CRC (or F1/F2 check) failed
+  uint64_t crc_errors = 0;  // frames whose CRC (or F1/F2 check) failed
   uint64_t no_responses = 0;
   uint64_t messages = 0;
   uint64_t failed_messages = 0;
@@ -122,11 +123,11 @@ class EnDatBridge {
   std::error_code param_tx(int64_t& t, endat::wire::Mode mode, uint8_t address, uint16_t parameter,
                            bool echo_value, uint16_t* value_out);
   // One position-type transaction (2.2 modes answered with a position frame) with retries.
-  std::error_code position_tx(int64_t& t, endat::wire::Mode mode, uint8_t address, uint16_t parameter,
-                              endat::wire::PositionReply* out);
+  std::error_code position_tx(int64_t& t, endat::wire::Mode mode, uint8_t address,
+                              uint16_t parameter, endat::wire::PositionReply* out);
   std::error_code read_area(int64_t& t, uint8_t mrs, unsigned first, std::span<uint16_t> out);
-  [[nodiscard]] endat::Result<endat::wire::PositionReply> decode_position(const endat::wire::BitFrame& f,
-                                                                   endat::CommandSet set) const;
+  [[nodiscard]] endat::Result<endat::wire::PositionReply> decode_position(
+      const endat::wire::BitFrame& f, endat::CommandSet set) const;
   [[nodiscard]] int64_t wire_ns(std::size_t bits) const noexcept;
   void note_failure(std::error_code ec) noexcept;
   void update_f1(bool f1, int64_t now_ns) noexcept;

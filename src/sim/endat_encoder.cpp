@@ -45,12 +45,13 @@ void apply_identification(EncoderDescription& d) {
   for (unsigned page = 0; page < 3; ++page) {
     const auto it = d.areas.find(static_cast<uint8_t>(0xA1 + 2 * page));
     if (it == d.areas.end()) continue;
-    for (unsigned i = 0; i < 16 && i < it->second.words.size(); ++i) w[page * 16 + i] = it->second.words[i];
+    for (unsigned i = 0; i < 16 && i < it->second.words.size(); ++i)
+      w[page * 16 + i] = it->second.words[i];
   }
   endat::Identification id;
-  id.version_word =
-      d.version_word != 0 ? d.version_word
-                          : (d.command_set == CommandSet::EnDat22 ? uint16_t{0x0022} : uint16_t{0x0021});
+  id.version_word = d.version_word != 0 ? d.version_word
+                                        : (d.command_set == CommandSet::EnDat22 ? uint16_t{0x0022}
+                                                                                : uint16_t{0x0021});
   id.command_set_word = w[endat::manuf_word::kCommandSet];
   id.command_set = d.command_set;
   id.type = d.type;
@@ -63,7 +64,8 @@ void apply_identification(EncoderDescription& d) {
   id.warnings_supported = d.warnings_supported;
   endat::encode_identification(id, w);
   uint16_t sum = 0;
-  for (unsigned i = 0; i < endat::manuf_word::kChecksum; ++i) sum = static_cast<uint16_t>(sum + w[i]);
+  for (unsigned i = 0; i < endat::manuf_word::kChecksum; ++i)
+    sum = static_cast<uint16_t>(sum + w[i]);
   w[endat::manuf_word::kChecksum] = static_cast<uint16_t>(0u - sum);
   for (unsigned page = 0; page < 3; ++page) {
     auto& area = d.areas[static_cast<uint8_t>(0xA1 + 2 * page)];
@@ -149,7 +151,8 @@ endat::IdNumber parse_id(const YAML::Node& n, std::string_view origin) {
   id.binary = static_cast<uint32_t>(*bin);
   if (dash != std::string::npos) {
     const std::string text = s.substr(dash + 1);
-    if (text.size() > 2) throw LoadError{where(n, origin, "id_number") + "at most 2 characters after '-'"};
+    if (text.size() > 2)
+      throw LoadError{where(n, origin, "id_number") + "at most 2 characters after '-'"};
     for (std::size_t i = 0; i < text.size(); ++i) id.text[i] = text[i];
   }
   return id;
@@ -209,9 +212,11 @@ EncoderDescription parse(const YAML::Node& root, std::string_view origin) {
     }
   }
   if (auto n = root["steps_per_revolution"]) {
-    d.steps_per_revolution = static_cast<uint32_t>(number(n, origin, "steps_per_revolution", UINT32_MAX));
+    d.steps_per_revolution =
+        static_cast<uint32_t>(number(n, origin, "steps_per_revolution", UINT32_MAX));
   }
-  if (auto n = root["revolutions"]) d.revolutions = static_cast<uint16_t>(number(n, origin, "revolutions", 0xFFFF));
+  if (auto n = root["revolutions"])
+    d.revolutions = static_cast<uint16_t>(number(n, origin, "revolutions", 0xFFFF));
   if (auto n = root["signal_periods"]) {
     d.signal_periods = static_cast<uint32_t>(number(n, origin, "signal_periods", UINT32_MAX));
   }
@@ -220,7 +225,8 @@ EncoderDescription parse(const YAML::Node& root, std::string_view origin) {
   }
   if (auto n = root["id_number"]) d.id_number = parse_id(n, origin);
   if (auto n = root["serial_number"]) d.serial_number = parse_serial(n, origin);
-  if (auto n = root["version_word"]) d.version_word = static_cast<uint16_t>(number(n, origin, "version_word", 0xFFFF));
+  if (auto n = root["version_word"])
+    d.version_word = static_cast<uint16_t>(number(n, origin, "version_word", 0xFFFF));
   if (auto n = root["warnings_supported"]) {
     d.warnings_supported = static_cast<uint16_t>(number(n, origin, "warnings_supported", 0xFFFF));
   }
@@ -228,10 +234,14 @@ EncoderDescription parse(const YAML::Node& root, std::string_view origin) {
   if (auto n = root["temperature2_c"]) d.temperature2_c = real(n, origin, "temperature2_c");
   if (auto t = root["timing_ms"]) {
     only_keys(t, origin, "timing_ms",
-              {"select_memory", "read_parameter", "write_parameter", "reset", "error_reset", "select_info"});
-    if (auto n = t["select_memory"]) d.timing.select_memory_ns = ms(n, origin, "timing_ms.select_memory");
-    if (auto n = t["read_parameter"]) d.timing.read_parameter_ns = ms(n, origin, "timing_ms.read_parameter");
-    if (auto n = t["write_parameter"]) d.timing.write_parameter_ns = ms(n, origin, "timing_ms.write_parameter");
+              {"select_memory", "read_parameter", "write_parameter", "reset", "error_reset",
+               "select_info"});
+    if (auto n = t["select_memory"])
+      d.timing.select_memory_ns = ms(n, origin, "timing_ms.select_memory");
+    if (auto n = t["read_parameter"])
+      d.timing.read_parameter_ns = ms(n, origin, "timing_ms.read_parameter");
+    if (auto n = t["write_parameter"])
+      d.timing.write_parameter_ns = ms(n, origin, "timing_ms.write_parameter");
     if (auto n = t["reset"]) d.timing.reset_ns = ms(n, origin, "timing_ms.reset");
     if (auto n = t["error_reset"]) d.timing.error_reset_ns = ms(n, origin, "timing_ms.error_reset");
     if (auto n = t["select_info"]) d.timing.select_info_ns = ms(n, origin, "timing_ms.select_info");
@@ -251,23 +261,30 @@ EncoderDescription parse(const YAML::Node& root, std::string_view origin) {
         throw LoadError{where(n, origin, "faults.crc_error_rate") + "must be 0..1"};
       }
     }
-    if (auto n = f["seed"]) d.faults.seed = static_cast<uint32_t>(number(n, origin, "faults.seed", UINT32_MAX));
-    if (auto n = f["position_error"]) d.faults.position_error = boolean(n, origin, "faults.position_error");
-    if (auto n = f["battery_warning"]) d.faults.battery_warning = boolean(n, origin, "faults.battery_warning");
-    if (auto n = f["battery_error"]) d.faults.battery_error = boolean(n, origin, "faults.battery_error");
+    if (auto n = f["seed"])
+      d.faults.seed = static_cast<uint32_t>(number(n, origin, "faults.seed", UINT32_MAX));
+    if (auto n = f["position_error"])
+      d.faults.position_error = boolean(n, origin, "faults.position_error");
+    if (auto n = f["battery_warning"])
+      d.faults.battery_warning = boolean(n, origin, "faults.battery_warning");
+    if (auto n = f["battery_error"])
+      d.faults.battery_error = boolean(n, origin, "faults.battery_error");
   }
   apply_identification(d);
   if (d.type == endat::EncoderType::Rotary) {
-    const unsigned needed = endat::bits_for(d.steps_per_revolution) + endat::bits_for(d.revolutions);
+    const unsigned needed =
+        endat::bits_for(d.steps_per_revolution) + endat::bits_for(d.revolutions);
     if (needed > d.effective_position_bits() || d.effective_position_bits() > 48) {
-      throw LoadError{std::string(origin) + ": position_bits: steps_per_revolution × revolutions needs " +
+      throw LoadError{std::string(origin) +
+                      ": position_bits: steps_per_revolution × revolutions needs " +
                       std::to_string(needed) + " bits, the encoder has " +
                       std::to_string(d.effective_position_bits()) + " (max 48)"};
     }
   }
 
   if (auto areas = root["areas"]) {
-    if (!areas.IsMap()) throw LoadError{where(areas, origin, "areas") + "expected a mapping by MRS code"};
+    if (!areas.IsMap())
+      throw LoadError{where(areas, origin, "areas") + "expected a mapping by MRS code"};
     for (const auto& kv : areas) {
       const std::string key = "areas." + kv.first.Scalar();
       const auto mrs = static_cast<uint8_t>(number(kv.first, origin, key, 0xFF));
@@ -279,11 +296,14 @@ EncoderDescription parse(const YAML::Node& root, std::string_view origin) {
       EncoderArea area = d.areas.count(mrs) ? d.areas[mrs] : make_area(16, 1, false);
       if (auto n = a["writable"]) area.writable = boolean(n, origin, key + ".writable");
       const auto wpb = a["words_per_block"]
-                           ? static_cast<uint8_t>(number(a["words_per_block"], origin, key + ".words_per_block", 255))
+                           ? static_cast<uint8_t>(number(a["words_per_block"], origin,
+                                                         key + ".words_per_block", 255))
                            : area.words_per_block;
-      const auto blocks = a["blocks"] ? static_cast<uint8_t>(number(a["blocks"], origin, key + ".blocks", 255))
-                                      : area.blocks;
-      if (wpb == 0 || blocks == 0) throw LoadError{where(a, origin, key) + "blocks and words_per_block must be > 0"};
+      const auto blocks =
+          a["blocks"] ? static_cast<uint8_t>(number(a["blocks"], origin, key + ".blocks", 255))
+                      : area.blocks;
+      if (wpb == 0 || blocks == 0)
+        throw LoadError{where(a, origin, key) + "blocks and words_per_block must be > 0"};
       if (wpb != area.words_per_block || blocks != area.blocks) {
         area.words.resize(static_cast<std::size_t>(wpb) * blocks, 0);
         area.words_per_block = wpb;
@@ -341,7 +361,8 @@ EncoderLoadResult load_encoder_description(const std::string& path) {
 
 EnDatEncoder::EnDatEncoder(EncoderDescription description)
     : description_(std::move(description)), rng_(description_.faults.seed) {
-  position_bits_ = std::clamp(description_.effective_position_bits(), 1u, endat::wire::kMaxPositionBits);
+  position_bits_ =
+      std::clamp(description_.effective_position_bits(), 1u, endat::wire::kMaxPositionBits);
 }
 
 uint64_t EnDatEncoder::position_mask() const noexcept {
@@ -375,8 +396,12 @@ uint16_t* EnDatEncoder::status_word(unsigned index) {
   return &it->second.words[index];
 }
 
-uint16_t EnDatEncoder::error_word() const { return word(kStatusMrs, 0, 0).value_or(0); }
-uint16_t EnDatEncoder::warning_word() const { return word(kStatusMrs, 0, 1).value_or(0); }
+uint16_t EnDatEncoder::error_word() const {
+  return word(kStatusMrs, 0, 0).value_or(0);
+}
+uint16_t EnDatEncoder::warning_word() const {
+  return word(kStatusMrs, 0, 1).value_or(0);
+}
 
 // Conditions that persist set their status bits again after every clear, like a real encoder
 // that re-detects a weak battery.
@@ -402,21 +427,35 @@ void EnDatEncoder::reset_state() {
 uint16_t EnDatEncoder::info_data(uint8_t code) const {
   const uint64_t p = position_;
   switch (code) {
-    case 0x41: return 100;  // diagnosis: function reserve in percent
-    case 0x42: case 0x56: return static_cast<uint16_t>(p & 0xFFFF);
-    case 0x43: case 0x57: return static_cast<uint16_t>((p >> 16) & 0xFFFF);
-    case 0x44: case 0x58: return static_cast<uint16_t>((p >> 32) & 0xFFFF);
-    case 0x47: return selection_ ? static_cast<uint16_t>(selection_->mrs << 8 | selection_->block) : 0;
-    case 0x4C: return endat::temperature_raw(description_.temperature_c);
-    case 0x4D: return endat::temperature_raw(description_.temperature2_c);
+    case 0x41:
+      return 100;  // diagnosis: function reserve in percent
+    case 0x42:
+    case 0x56:
+      return static_cast<uint16_t>(p & 0xFFFF);
+    case 0x43:
+    case 0x57:
+      return static_cast<uint16_t>((p >> 16) & 0xFFFF);
+    case 0x44:
+    case 0x58:
+      return static_cast<uint16_t>((p >> 32) & 0xFFFF);
+    case 0x47:
+      return selection_ ? static_cast<uint16_t>(selection_->mrs << 8 | selection_->block) : 0;
+    case 0x4C:
+      return endat::temperature_raw(description_.temperature_c);
+    case 0x4D:
+      return endat::temperature_raw(description_.temperature2_c);
     case 0x51: {  // commutation: top 16 bits of the position within one revolution
       const unsigned st = endat::bits_for(description_.steps_per_revolution);
-      const uint64_t in_rev = description_.steps_per_revolution ? p % description_.steps_per_revolution : p;
+      const uint64_t in_rev =
+          description_.steps_per_revolution ? p % description_.steps_per_revolution : p;
       return static_cast<uint16_t>(st > 16 ? in_rev >> (st - 16) : in_rev << (16 - st));
     }
-    case 0x59: return error_word();
-    case 0x5B: return static_cast<uint16_t>(frames_ & 0xFFFF);
-    default: return 0;
+    case 0x59:
+      return error_word();
+    case 0x5B:
+      return static_cast<uint16_t>(frames_ & 0xFFFF);
+    default:
+      return 0;
   }
 }
 
@@ -444,8 +483,8 @@ BitFrame EnDatEncoder::position_frame(bool endat22) {
     r.ai1 = next_info(ai1_, frames_);
     r.ai2 = next_info(ai2_, frames_);
   }
-  return endat::wire::encode_position_reply(
-      r, endat22 ? CommandSet::EnDat22 : CommandSet::EnDat21, position_bits_);
+  return endat::wire::encode_position_reply(r, endat22 ? CommandSet::EnDat22 : CommandSet::EnDat21,
+                                            position_bits_);
 }
 
 void EnDatEncoder::finish(BitFrame& reply) {

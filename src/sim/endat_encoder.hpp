@@ -33,16 +33,16 @@ struct EncoderTiming {
   int64_t write_parameter_ns = 12'000'000;  // writing to EEPROM takes longest
   int64_t reset_ns = 50'000'000;            // after a reset the encoder is deaf this long
   int64_t error_reset_ns = 2'000'000;
-  int64_t select_info_ns = 0;               // additional information follows with the next frame
-  double scale = 1.0;                       // tests scale every time down
+  int64_t select_info_ns = 0;  // additional information follows with the next frame
+  double scale = 1.0;          // tests scale every time down
 };
 
 struct EncoderFaults {
-  double crc_error_rate = 0.0;  // probability that a reply frame gets one bit flipped
-  uint32_t seed = 1;            // for the rate above: runs are reproducible
-  bool position_error = false;  // operating status error bit 2 "position value" + F1
-  bool battery_warning = false; // warning bit 3 "battery charge low"
-  bool battery_error = false;   // error bit 6 "battery change required"
+  double crc_error_rate = 0.0;   // probability that a reply frame gets one bit flipped
+  uint32_t seed = 1;             // for the rate above: runs are reproducible
+  bool position_error = false;   // operating status error bit 2 "position value" + F1
+  bool battery_warning = false;  // warning bit 3 "battery charge low"
+  bool battery_error = false;    // error bit 6 "battery change required"
 };
 
 struct EncoderDescription {
@@ -51,13 +51,13 @@ struct EncoderDescription {
   uint32_t steps_per_revolution = 1u << 25;
   uint16_t revolutions = 4096;  // 0 = singleturn
   uint32_t signal_periods = 2048;
-  unsigned position_bits = 0;   // 0 = derived from steps and revolutions
+  unsigned position_bits = 0;  // 0 = derived from steps and revolutions
   endat::IdNumber id_number{{'0', '2'}, 1080790};
   endat::SerialNumber serial_number{'S', 36845217, ' '};
-  uint16_t version_word = 0;      // word 8; 0 = 0x0022 (2.2) or 0x0021 (2.1)
+  uint16_t version_word = 0;  // word 8; 0 = 0x0022 (2.2) or 0x0021 (2.1)
   uint16_t warnings_supported = 0x001F;
-  double temperature_c = 41.5;    // additional information "temperature 1"
-  double temperature2_c = 38.0;   // "temperature 2"
+  double temperature_c = 41.5;           // additional information "temperature 1"
+  double temperature2_c = 38.0;          // "temperature 2"
   std::map<uint8_t, EncoderArea> areas;  // by MRS code
   EncoderTiming timing;
   EncoderFaults faults;
@@ -114,9 +114,7 @@ class EnDatEncoder {
   bool set_word(uint8_t mrs, uint8_t block, uint8_t param, uint16_t value);
 
   [[nodiscard]] const EncoderDescription& description() const noexcept { return description_; }
-  [[nodiscard]] endat::CommandSet command_set() const noexcept {
-    return description_.command_set;
-  }
+  [[nodiscard]] endat::CommandSet command_set() const noexcept { return description_.command_set; }
   [[nodiscard]] unsigned position_bits() const noexcept { return position_bits_; }
   [[nodiscard]] uint16_t error_word() const;    // operating status word 0
   [[nodiscard]] uint16_t warning_word() const;  // operating status word 1
@@ -129,7 +127,7 @@ class EnDatEncoder {
     uint8_t block = 0;
   };
   struct InfoSelection {
-    uint8_t code = 0;   // 0x41..0x4E / 0x51..0x5E
+    uint8_t code = 0;  // 0x41..0x4E / 0x51..0x5E
     unsigned busy_frames = 0;
   };
 

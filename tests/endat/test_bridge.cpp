@@ -64,7 +64,8 @@ struct Harness {
 
 }  // namespace
 
-TEST_CASE("Bridge: identification registers mirror the encoder at power-up", "[endat][sim][bridge]") {
+TEST_CASE("Bridge: identification registers mirror the encoder at power-up",
+          "[endat][sim][bridge]") {
   EncoderDescription d = fast_description();
   d.areas[0xBD].words[1] = 0x1111;
   d.areas[0xBD].words[63] = 0x6363;
@@ -168,7 +169,8 @@ TEST_CASE("Bridge: additional information words", "[endat][sim][bridge]") {
   CHECK(h.run(Request::read_info(1, 0x4F)).error() == Errc::module_no_response);
 }
 
-TEST_CASE("Bridge: EnDat 2.1 encoder refuses 2.2 commands, malformed requests", "[endat][sim][bridge]") {
+TEST_CASE("Bridge: EnDat 2.1 encoder refuses 2.2 commands, malformed requests",
+          "[endat][sim][bridge]") {
   EncoderDescription d = fast_description();
   d.command_set = endat::CommandSet::EnDat21;
   d.areas.erase(0xBD);
@@ -228,7 +230,8 @@ TEST_CASE("Bridge: acknowledge, EnDatAck and persistent faults", "[endat][sim][b
   (void)b.poll(h.now);
   CHECK(b.endat_error() == 0x0004);
   CHECK(b.endat_warning() == 0x0008);
-  CHECK(endat::endat_warning_names(b.endat_warning()) == std::vector<std::string>{"battery charge low"});
+  CHECK(endat::endat_warning_names(b.endat_warning()) ==
+        std::vector<std::string>{"battery charge low"});
 
   // Acknowledge while both persist: both come back.
   REQUIRE(h.run(Request::acknowledge()));
@@ -352,7 +355,8 @@ TEST_CASE("Bridge: identical inputs give identical replies and times", "[endat][
     std::vector<std::vector<uint8_t>> out;
     std::vector<int64_t> times;
     for (int i = 0; i < 30; ++i) {
-      const std::vector<uint8_t> msg{0x05, 0xA9, static_cast<uint8_t>(i % 16), static_cast<uint8_t>(i), 0};
+      const std::vector<uint8_t> msg{0x05, 0xA9, static_cast<uint8_t>(i % 16),
+                                     static_cast<uint8_t>(i), 0};
       out.push_back(h.raw(msg));
       out.push_back(h.raw(std::vector<uint8_t>{0x04, 0xA9, static_cast<uint8_t>(i % 16)}));
       times.push_back(h.now);
@@ -362,7 +366,8 @@ TEST_CASE("Bridge: identical inputs give identical replies and times", "[endat][
   CHECK(run() == run());
 }
 
-TEST_CASE("Bridge: random commands on a lossy wire never yield a wrong value", "[endat][sim][bridge][random]") {
+TEST_CASE("Bridge: random commands on a lossy wire never yield a wrong value",
+          "[endat][sim][bridge][random]") {
   EncoderDescription d = fast_description(0.001);
   d.faults.seed = 5;
   Harness h(d);

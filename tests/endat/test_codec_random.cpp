@@ -66,7 +66,8 @@ TEST_CASE("Garbage replies give a named error or exactly the carried value", "[e
       for (auto& w : words) w = static_cast<uint16_t>(rng());
       const auto good = encode_reply(req, words);
       bytes.assign(good.span().begin(), good.span().end());
-      if (style == 1 && !bytes.empty()) bytes[rng() % bytes.size()] ^= static_cast<uint8_t>(1u << (rng() % 8));
+      if (style == 1 && !bytes.empty())
+        bytes[rng() % bytes.size()] ^= static_cast<uint8_t>(1u << (rng() % 8));
       if (style == 2) bytes.resize(rng() % (bytes.size() + 2));
       if (style == 3 && rng() % 2) bytes.push_back(static_cast<uint8_t>(rng()));
     }

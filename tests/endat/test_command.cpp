@@ -86,7 +86,8 @@ TEST_CASE("Replies decode per the datasheet table", "[endat][command]") {
     CHECK(r->echo.value == 0x55AA);
   }
   SECTION("read block parameter: 06 MRS B P VL VH") {
-    auto r = decode_reply(Request::read_block(0xB1, 2, 9), Bytes{0x06, 0xB1, 0x02, 0x09, 0xCD, 0xAB});
+    auto r =
+        decode_reply(Request::read_block(0xB1, 2, 9), Bytes{0x06, 0xB1, 0x02, 0x09, 0xCD, 0xAB});
     REQUIRE(r);
     CHECK(r->value() == 0xABCD);
     CHECK(r->echo.block == 2);
@@ -98,8 +99,8 @@ TEST_CASE("Replies decode per the datasheet table", "[endat][command]") {
     auto w1 = decode_reply(Request::read_info(1, 0x4C), Bytes{0x08, 0x4C, 0x01, 0x00});
     REQUIRE(w1);
     CHECK(w1->value() == 0x0001);
-    auto w4 = decode_reply(Request::read_info(4, 0x4C),
-                           Bytes{0x0B, 0x4C, 1, 0, 2, 0, 3, 0, 0x04, 0x0E});
+    auto w4 =
+        decode_reply(Request::read_info(4, 0x4C), Bytes{0x0B, 0x4C, 1, 0, 2, 0, 3, 0, 0x04, 0x0E});
     REQUIRE(w4);
     CHECK(w4->word_count == 4);
     CHECK(w4->words[0] == 1);
@@ -126,8 +127,9 @@ TEST_CASE("Every reply error is named", "[endat][command]") {
   CHECK(decode_reply(read, Bytes{0x04, 0xAB, 0x03, 0x34, 0x12}).error() == Errc::mrs_echo_mismatch);
   CHECK(decode_reply(read, Bytes{0x04, 0xA9, 0x04, 0x34, 0x12}).error() ==
         Errc::parameter_echo_mismatch);
-  CHECK(decode_reply(Request::read_block(0xB1, 2, 9), Bytes{0x06, 0xB1, 0x03, 0x09, 0, 0}).error() ==
-        Errc::block_echo_mismatch);
+  CHECK(
+      decode_reply(Request::read_block(0xB1, 2, 9), Bytes{0x06, 0xB1, 0x03, 0x09, 0, 0}).error() ==
+      Errc::block_echo_mismatch);
   CHECK(decode_reply(Request::read_info(2, 0x4C), Bytes{0x09, 0x4D, 0, 0, 0, 0}).error() ==
         Errc::mrs_echo_mismatch);
 

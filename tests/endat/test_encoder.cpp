@@ -64,15 +64,19 @@ TEST_CASE("Encoder YAML errors name file, line and key", "[endat][sim][encoder]"
   auto bad = [](const char* yaml) { return parse_encoder_description(yaml, "enc.yaml").error; };
   CHECK(bad("endat: 2.2\nbogus: 1\n").find("enc.yaml:2:1: encoder.bogus: unknown key") == 0);
   CHECK(bad("endat: 3.0\n").find("enc.yaml:1:8: endat: expected 2.1 or 2.2") == 0);
-  CHECK(bad("revolutions: 0x10000\n").find("revolutions: number out of range") != std::string::npos);
-  CHECK(bad("steps_per_revolution: lots\n").find("steps_per_revolution: not a number") != std::string::npos);
+  CHECK(bad("revolutions: 0x10000\n").find("revolutions: number out of range") !=
+        std::string::npos);
+  CHECK(bad("steps_per_revolution: lots\n").find("steps_per_revolution: not a number") !=
+        std::string::npos);
   CHECK(bad("areas:\n  0x40: {writable: true}\n").find("not a memory area") != std::string::npos);
   CHECK(bad("areas:\n  0xA9: {words: [1,2,3,4,5,6,7,8,9,10,11,12,13,14,15,16,17]}\n")
             .find("more words than the area holds") != std::string::npos);
   CHECK(bad("position_bits: 30\n").find("needs 37 bits") != std::string::npos);
-  CHECK(bad("faults: {crc_error_rate: 2}\n").find("faults.crc_error_rate: must be 0..1") != std::string::npos);
+  CHECK(bad("faults: {crc_error_rate: 2}\n").find("faults.crc_error_rate: must be 0..1") !=
+        std::string::npos);
   CHECK(bad("a: [1,\n").find("enc.yaml:") == 0);
-  CHECK(load_encoder_description("/nonexistent/enc.yaml").error == "/nonexistent/enc.yaml: cannot open");
+  CHECK(load_encoder_description("/nonexistent/enc.yaml").error ==
+        "/nonexistent/enc.yaml: cannot open");
   const auto ok = parse_encoder_description(
       "endat: 2.1\ntype: linear\nposition_bits: 30\nareas:\n  0xB1: {writable: true, blocks: 2, "
       "words_per_block: 8, words: {9: 0x55}}\n");
@@ -85,7 +89,8 @@ TEST_CASE("Encoder YAML errors name file, line and key", "[endat][sim][encoder]"
   CHECK_FALSE(e.word(0xB1, 2, 0));
 }
 
-TEST_CASE("Encoder memory over the wire: select, read, write, protection", "[endat][sim][encoder]") {
+TEST_CASE("Encoder memory over the wire: select, read, write, protection",
+          "[endat][sim][encoder]") {
   EnDatEncoder e;
   // Reading without a selected area: no answer.
   CHECK(tx(e, Mode::SendParameter, 0, 0).error() == endat::Errc::no_response);
@@ -120,9 +125,11 @@ TEST_CASE("Encoder memory over the wire: select, read, write, protection", "[end
   EncoderDescription d = default_encoder_description();
   d.timing.scale = 0.5;
   EnDatEncoder fast(d);
-  const auto sel_resp = fast.transact(endat::wire::encode_master_frame({Mode::SelectMemoryArea, 0xA9, 0}), 0);
+  const auto sel_resp =
+      fast.transact(endat::wire::encode_master_frame({Mode::SelectMemoryArea, 0xA9, 0}), 0);
   CHECK(sel_resp.processing_ns == 1'000'000);
-  const auto wr = fast.transact(endat::wire::encode_master_frame({Mode::ReceiveParameter, 0, 1}), 0);
+  const auto wr =
+      fast.transact(endat::wire::encode_master_frame({Mode::ReceiveParameter, 0, 1}), 0);
   CHECK(wr.processing_ns == 6'000'000);
 }
 
@@ -146,12 +153,14 @@ TEST_CASE("Encoder position frames, reset and 2.1 behaviour", "[endat][sim][enco
   EnDatEncoder e;
   e.set_position(0x12'3456'789A);
   const auto f21 = e.transact(endat::wire::encode_master_frame({Mode::SendPosition}), 0).reply;
-  auto p21 = endat::wire::decode_position_reply(f21, {endat::CommandSet::EnDat21, 37, false, false});
+  auto p21 =
+      endat::wire::decode_position_reply(f21, {endat::CommandSet::EnDat21, 37, false, false});
   REQUIRE(p21);
   CHECK(p21->position == 0x12'3456'789A);
   CHECK_FALSE(p21->f1);
   const auto f22 = e.transact(endat::wire::encode_master_frame({Mode::PositionAddInfo}), 0).reply;
-  auto p22 = endat::wire::decode_position_reply(f22, {endat::CommandSet::EnDat22, 37, false, false});
+  auto p22 =
+      endat::wire::decode_position_reply(f22, {endat::CommandSet::EnDat22, 37, false, false});
   REQUIRE(p22);
   CHECK(p22->f2);
   // Position error: F1 set, F2 cleared.
@@ -171,8 +180,10 @@ TEST_CASE("Encoder position frames, reset and 2.1 behaviour", "[endat][sim][enco
   auto reset = e.transact(endat::wire::encode_master_frame({Mode::ReceiveReset, 0, 0}), 1000);
   CHECK(reset.processing_ns == 50'000'000);
   CHECK(endat::wire::decode_parameter_reply(reset.reply).has_value());
-  CHECK(e.transact(endat::wire::encode_master_frame({Mode::SendPosition}), 1000 + 49'000'000).reply.empty());
-  CHECK_FALSE(e.transact(endat::wire::encode_master_frame({Mode::SendPosition}), 1000 + 50'000'000).reply.empty());
+  CHECK(e.transact(endat::wire::encode_master_frame({Mode::SendPosition}), 1000 + 49'000'000)
+            .reply.empty());
+  CHECK_FALSE(e.transact(endat::wire::encode_master_frame({Mode::SendPosition}), 1000 + 50'000'000)
+                  .reply.empty());
   CHECK(tx(e, Mode::SendParameter, 0, 0, 60'000'000).error() == endat::Errc::no_response);
 
   // An EnDat 2.1 encoder does not answer 2.2 modes.
@@ -180,7 +191,8 @@ TEST_CASE("Encoder position frames, reset and 2.1 behaviour", "[endat][sim][enco
   d.command_set = endat::CommandSet::EnDat21;
   EnDatEncoder old(d);
   CHECK(old.transact(endat::wire::encode_master_frame({Mode::PositionAddInfo}), 0).reply.empty());
-  CHECK_FALSE(old.transact(endat::wire::encode_master_frame({Mode::SendPosition}), 0).reply.empty());
+  CHECK_FALSE(
+      old.transact(endat::wire::encode_master_frame({Mode::SendPosition}), 0).reply.empty());
 }
 
 TEST_CASE("Encoder faults: injected CRC errors and silence", "[endat][sim][encoder]") {

@@ -12,15 +12,15 @@ using namespace ds1928::endat;
 TEST_CASE("Identification: words of endat.md §4 decode to their fields", "[endat][ident]") {
   ManufacturerWords w{};
   w[8] = 0x0022;
-  w[13] = 0xC025;             // bits 5..0 = 37; upper bits must be ignored
-  w[14] = 0x8000;             // rotary
-  w[15] = 0x0800;             // 2048 signal periods
+  w[13] = 0xC025;  // bits 5..0 = 37; upper bits must be ignored
+  w[14] = 0x8000;  // rotary
+  w[15] = 0x0800;  // 2048 signal periods
   w[16] = 0x0000;
   w[17] = 4096;
-  w[20] = 0x0000;             // 2^25 steps: low word 0, high word 0x0200
+  w[20] = 0x0000;  // 2^25 steps: low word 0, high word 0x0200
   w[21] = 0x0200;
-  w[24] = ('0' << 8) | '2';   // "02"
-  w[25] = 0x7DD6;             // 1080790 = 0x107DD6
+  w[24] = ('0' << 8) | '2';  // "02"
+  w[25] = 0x7DD6;            // 1080790 = 0x107DD6
   w[26] = 0x0010;
   w[27] = (0x4E << 8) | 'S';  // prefix 'S', binary bits 7..0 = 0x4E
   w[28] = 0xBC61;             // bits 23..8

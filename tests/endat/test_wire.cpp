@@ -30,7 +30,10 @@ TEST_CASE("Master frame: mode, address, parameter MSB first", "[endat][wire]") {
   const auto f = encode_master_frame({Mode::SendParameter, 0xA5, 0x8001});
   REQUIRE(f.size() == 30);
   // 100011 | 10100101 | 1000000000000001
-  const char* expect = "100011" "10100101" "1000000000000001";
+  const char* expect =
+      "100011"
+      "10100101"
+      "1000000000000001";
   for (std::size_t i = 0; i < 30; ++i) CHECK(f.bit(i) == (expect[i] == '1'));
   auto back = decode_master_frame(f);
   REQUIRE(back);
