@@ -407,3 +407,27 @@ TEST_CASE("Bridge: random commands on a lossy wire never yield a wrong value",
   CHECK(h.bridge.stats().retries > 0);
   INFO("failures: " << failures);
 }
+
+TEST_CASE("Bridge: garbage messages get a well-formed reply or a malformed-request failure",
+          "[endat][sim][bridge][fuzz]") {
+  Harness h(fast_description(0.001));
+  std::mt19937_64 rng(3);
+  for (int i = 0; i < 2000; ++i) {
+    std::vector<uint8_t> msg(rng() % 8);
+    for (auto& b : msg) b = static_cast<uint8_t>(rng() % 2 ? rng() % 12 : rng());
+    if (msg.size() > 1 && rng() % 2) msg[1] = static_cast<uint8_t>(0xA0 + rng() % 0x20);
+    const auto reply = h.raw(msg);
+    const auto req = endat::decode_request(msg);
+    if (!req) {
+      REQUIRE(reply.size() == 2);
+      REQUIRE(reply[1] == static_cast<uint8_t>(endat::FailureReason::MalformedRequest));
+      continue;
+    }
+    const auto decoded = endat::decode_reply(*req, reply);
+    if (!decoded) {
+      REQUIRE(decoded.error() == endat::Condition::module_failure);
+    } else if (req->command == endat::Command::ReadParameter) {
+      REQUIRE(decoded->value() == h.bridge.encoder().word(req->mrs, 0, req->parameter));
+    }
+  }
+}

@@ -1,6 +1,8 @@
 // Request bytes and reply decoding of the ten module commands against X20DS1928.md §7.
 #include <catch2/catch.hpp>
 #include <cstdint>
+#include <set>
+#include <string>
 #include <vector>
 
 #include "endat/command.hpp"
@@ -223,4 +225,20 @@ TEST_CASE("Module side: reply encoding matches the table", "[endat][command]") {
 TEST_CASE("Write verification by read-back", "[endat][command]") {
   CHECK_FALSE(check_readback(0x1234, 0x1234));
   CHECK(check_readback(0x1234, 0x0000) == Errc::write_not_applied);
+}
+
+TEST_CASE("Every error code and condition has its own message", "[endat][command]") {
+  std::set<std::string> seen;
+  for (int e = static_cast<int>(Errc::truncated_reply);
+       e <= static_cast<int>(Errc::number_out_of_range); ++e) {
+    const std::string m = make_error_code(static_cast<Errc>(e)).message();
+    CHECK(m.find("unknown endat error") == std::string::npos);
+    CHECK(seen.insert(m).second);
+  }
+  CHECK(make_error_code(static_cast<Errc>(999)).message() == "unknown endat error 999");
+  CHECK(std::string(error_category().name()) == "endat");
+  for (int c = 1; c <= 4; ++c) {
+    CHECK(make_error_condition(static_cast<Condition>(c)).message().find("unknown") ==
+          std::string::npos);
+  }
 }
