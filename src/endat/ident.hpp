@@ -78,8 +78,10 @@ struct Identification {
 // Command set from word 37: bit 0 set and bit 1 clear → EnDat 2.2.
 [[nodiscard]] CommandSet command_set_from_word(uint16_t word37) noexcept;
 
-// Decodes and checks consistency: position bits 1..48; for a rotary encoder, the steps per
-// revolution × revolutions must fit in the position bits. Error: invalid_identification.
+// `words` are global words 0..47; words 0..3 are not used (the module's registers ParamManuf_04..47
+// start at 4, so a daemon passes zeros there). Decodes and checks consistency: position bits 1..48;
+// for a rotary encoder, the steps per revolution × revolutions must fit in the position bits.
+// Error: invalid_identification.
 [[nodiscard]] Result<Identification> decode_identification(
     std::span<const uint16_t, kManufacturerWords> words) noexcept;
 

@@ -2,6 +2,7 @@
 
 #include <array>
 #include <cmath>
+#include <cstdio>
 
 namespace ds1928::endat {
 namespace {
@@ -147,6 +148,121 @@ std::string_view mrs_name(uint8_t mrs) noexcept {
     default:
       return {};
   }
+}
+
+std::string_view manufacturer_word_name(unsigned w) noexcept {
+  switch (w) {
+    case 4:
+      return "mask 0";
+    case 5:
+      return "mask 1";
+    case 6:
+      return "mask 2";
+    case 7:
+      return "mask 3";
+    case 8:
+      return "EnDat version";
+    case 13:
+      return "clock pulses for the position value";
+    case 14:
+      return "encoder type";
+    case 15:
+      return "signal periods per revolution, low word";
+    case 16:
+      return "signal periods per revolution, high word";
+    case 17:
+      return "distinguishable revolutions";
+    case 20:
+      return "measuring steps per revolution, low word";
+    case 21:
+      return "measuring steps per revolution, high word";
+    case 24:
+      return "ID number, ASCII part";
+    case 25:
+      return "ID number, low word";
+    case 26:
+      return "ID number, high word";
+    case 27:
+      return "serial number, ASCII prefix / binary bits 7..0";
+    case 28:
+      return "serial number, binary bits 23..8";
+    case 29:
+      return "serial number, binary bits 31..24 / ASCII suffix";
+    case 36:
+      return "support of warnings";
+    case 37:
+      return "EnDat command set";
+    case 47:
+      return "checksum";
+    default:
+      return {};
+  }
+}
+
+namespace {
+
+std::string join(const std::vector<std::string>& names) {
+  if (names.empty()) return "none";
+  std::string out;
+  for (const auto& n : names) {
+    if (!out.empty()) out += ", ";
+    out += n;
+  }
+  return out;
+}
+
+std::string celsius_text(uint16_t raw) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.1f °C", temperature_celsius(raw));
+  return buf;
+}
+
+char printable_or_dot(unsigned c) {
+  return c >= 0x20 && c < 0x7F ? static_cast<char>(c) : '.';
+}
+
+}  // namespace
+
+std::string describe_word(uint8_t mrs, uint8_t param, uint16_t value) {
+  if (mrs == 0xA1 || mrs == 0xA3 || mrs == 0xA5) {
+    const unsigned global = static_cast<unsigned>((mrs - 0xA1) / 2 * 16 + param);
+    const std::string name(manufacturer_word_name(global));
+    if (param >= 16 || name.empty()) return {};
+    switch (global) {
+      case 13:
+        return name + ": " + std::to_string(value & 0x3F) + " bits";
+      case 14:
+        return name + ": " + ((value & 0x8000) != 0 ? "rotary" : "linear");
+      case 17:
+        return name + ": " + (value == 0 ? std::string("singleturn") : std::to_string(value));
+      case 24:
+        return name + ": \"" + printable_or_dot(value >> 8u) + printable_or_dot(value & 0xFFu) +
+               "\"";
+      case 37:
+        return name + ": " + ((value & 3u) == 1u ? "EnDat 2.2" : "EnDat 2.1");
+      default:
+        return name;
+    }
+  }
+  if (mrs == 0xA7 && param == 6) return "temperature warning threshold: " + celsius_text(value);
+  if (mrs == 0xB9) {
+    switch (param) {
+      case 0:
+        return "errors: " + join(endat_error_names(value));
+      case 1:
+        return "warnings: " + join(endat_warning_names(value));
+      case 2:
+        return "write protection";
+      case 3:
+        return "configuration";
+      default:
+        return {};
+    }
+  }
+  if (mrs == 0x4C || mrs == 0x4D) return std::string(mrs_name(mrs)) + ": " + celsius_text(value);
+  if (mrs == 0x59) return "operating status errors: " + join(endat_error_names(value));
+  if (mrs >= 0x40 && mrs <= 0x5F) return std::string(mrs_name(mrs));
+  return {};
 }
 
 uint16_t temperature_raw(double celsius) noexcept {

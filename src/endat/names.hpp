@@ -24,6 +24,15 @@ namespace ds1928::endat {
 // Memory area or additional-information selection of an MRS code (endat.md §3), "" if unknown.
 [[nodiscard]] std::string_view mrs_name(uint8_t mrs) noexcept;
 
+// Name of a manufacturer parameter word (global number 0..47, endat.md §4), "" if unnamed.
+[[nodiscard]] std::string_view manufacturer_word_name(unsigned global_word) noexcept;
+
+// Human meaning of one word read from the encoder, for ds1928ctl output: the word's name where
+// known and its decoded value (status bits by name, temperatures in °C, position bits, ...).
+// "" when nothing is known beyond the raw value. `mrs` is a memory area (0x04..0x07 reads) or an
+// additional-information code (0x08..0x0B reads, `param` ignored).
+[[nodiscard]] std::string describe_word(uint8_t mrs, uint8_t param, uint16_t value);
+
 // Temperature words are in 0.1 K (endat.md §3): °C = raw × 0.1 − 273.2.
 [[nodiscard]] constexpr double temperature_celsius(uint16_t raw) noexcept {
   return raw * 0.1 - 273.2;

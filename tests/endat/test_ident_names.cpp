@@ -147,3 +147,20 @@ TEST_CASE("Numbers in hex or decimal with range checks", "[endat][number]") {
   CHECK(parse_u16("65536").error() == Errc::number_out_of_range);
   CHECK(*parse_u8("0xa1") == 0xA1);
 }
+
+TEST_CASE("Words read from the encoder described for humans", "[endat][names]") {
+  CHECK(describe_word(0xA1, 13, 0x0025) == "clock pulses for the position value: 37 bits");
+  CHECK(describe_word(0xA1, 14, 0x8000) == "encoder type: rotary");
+  CHECK(describe_word(0xA3, 1, 0) == "distinguishable revolutions: singleturn");  // word 17
+  CHECK(describe_word(0xA3, 8, ('0' << 8) | '2') == "ID number, ASCII part: \"02\"");
+  CHECK(describe_word(0xA5, 5, 0x0001) == "EnDat command set: EnDat 2.2");  // word 37
+  CHECK(describe_word(0xA5, 15, 0xABCD) == "checksum");
+  CHECK(describe_word(0xA1, 0, 0).empty());
+  CHECK(describe_word(0xB9, 0, 0x0041) == "errors: light source failed, battery change required");
+  CHECK(describe_word(0xB9, 1, 0) == "warnings: none");
+  CHECK(describe_word(0xA7, 6, 3582) == "temperature warning threshold: 85.0 °C");
+  CHECK(describe_word(0x4C, 0, 3147) == "additional information 1: temperature 1: 41.5 °C");
+  CHECK(describe_word(0xA9, 3, 0x1234).empty());
+  CHECK(manufacturer_word_name(20) == "measuring steps per revolution, low word");
+  CHECK(manufacturer_word_name(0).empty());
+}
