@@ -1,5 +1,7 @@
 #include "cycle_work.hpp"
 
+#include <algorithm>
+
 namespace ds1928 {
 
 CycleWork::CycleWork(const DaemonConfig& config, BusDriver& bus, shm::Publisher& publisher)
@@ -13,6 +15,14 @@ CycleWork::CycleWork(const DaemonConfig& config, BusDriver& bus, shm::Publisher&
       ack_hold_(config.axes.size(), 0),
       counters_(std::make_unique<AxisCounters[]>(config.axes.size())) {
   for (std::size_t i = 0; i < config.axes.size(); ++i) {
+    const ModuleSettings& m = config.axes[i].module;
+    flatstream::MasterConfig fc;
+    fc.output_mtu = m.output_mtu;
+    fc.input_mtu = m.input_mtu;
+    // Pipelining the output direction is safe only while the module takes a sequence per cycle.
+    fc.output_forward = m.forward_delay_us < config.cycle.period_us ? m.forward : uint8_t{1};
+    fc.timeout_cycles = config.axes[i].flatstream_timeout_cycles;
+    tunnels_.push_back(std::make_unique<Tunnel>(fc));
     params_[i].signed_format = config.axes[i].module.position_signed;
     params_[i].has_pos_time = config.axes[i].function_model == FunctionModel::Standard;
   }
@@ -67,10 +77,74 @@ void CycleWork::run_cycle(const CycleContext& ctx) noexcept {
     if (st.validity == shm::AxisValidity::Valid && !sample.fraction_valid)
       st.validity = shm::AxisValidity::ModuleError;
   }
+  const uint64_t now_us = static_cast<uint64_t>(ctx.start_ns / 1000);
+  for (std::size_t i = 0; i < io_.size(); ++i) run_tunnel(i, now_us);
+
   if (any_fresh)
     data_exchanges_.store(data_exchanges_.load(std::memory_order_relaxed) + 1,
                           std::memory_order_relaxed);
   publisher_.publish(ctx.index, status_);
+}
+
+}  // namespace ds1928
+
+namespace ds1928 {
+
+void CycleWork::run_tunnel(std::size_t axis, uint64_t now_us) noexcept {
+  Tunnel& t = *tunnels_[axis];
+  auto event = [&t](const TunnelEvent& e) {
+    if (!t.events.try_push(e)) {
+      t.counters.events_dropped.store(t.counters.events_dropped.load(std::memory_order_relaxed) + 1,
+                                      std::memory_order_relaxed);
+    }
+  };
+  for (std::size_t n = 0; n < 4; ++n) {  // a few per cycle: bounded work
+    auto request = t.requests.try_pop();
+    if (!request) break;
+    if (request->kind == TunnelRequest::Kind::ResetChannel) {
+      t.channel.reset();
+      continue;
+    }
+    const auto ec = t.channel.submit(std::span<const uint8_t>(request->bytes.data(), request->size),
+                                     request->tag);
+    if (ec) {
+      TunnelEvent e;
+      e.kind = TunnelEvent::Kind::Rejected;
+      e.tag = request->tag;
+      e.result = static_cast<flatstream::Errc>(ec.value());
+      event(e);
+    }
+  }
+  // The module's InputSequence/RxBytes of this cycle → OutputSequence/TxBytes of the next.
+  AxisIo& io = io_[axis];
+  const auto out = t.channel.step(flatstream::input_frame(io.inputs), now_us);
+  flatstream::apply(out, io.outputs);
+
+  while (auto outcome = t.channel.take_outcome()) {
+    TunnelEvent e;
+    e.kind = outcome->delivered() ? TunnelEvent::Kind::Sent : TunnelEvent::Kind::SendFailed;
+    e.tag = outcome->tag;
+    e.result = outcome->result;
+    event(e);
+  }
+  while (t.channel.take_received(t.received)) {
+    TunnelEvent e;
+    e.kind = TunnelEvent::Kind::Received;
+    e.full_size = t.received.size;
+    e.size = static_cast<uint8_t>(std::min<std::size_t>(t.received.size, kTunnelMessageMax));
+    std::copy_n(t.received.bytes.begin(), e.size, e.bytes.begin());
+    event(e);
+  }
+  const auto c = t.channel.counters();
+  const auto st = t.channel.state();
+  TunnelCounters& tc = t.counters;
+  tc.messages_sent.store(c.sent.messages_delivered, std::memory_order_relaxed);
+  tc.messages_failed.store(c.sent.messages_failed, std::memory_order_relaxed);
+  tc.messages_received.store(c.received.messages_received, std::memory_order_relaxed);
+  tc.sequences_repeated.store(c.sent.sequences_repeated, std::memory_order_relaxed);
+  tc.resyncs.store(c.sent.resyncs + c.received.resyncs, std::memory_order_relaxed);
+  tc.output_state.store(static_cast<uint8_t>(st.sending), std::memory_order_relaxed);
+  tc.input_state.store(static_cast<uint8_t>(st.receiving), std::memory_order_relaxed);
 }
 
 }  // namespace ds1928

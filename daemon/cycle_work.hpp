@@ -15,6 +15,7 @@
 #include "core/bus.hpp"
 #include "core/cycle_engine.hpp"
 #include "core/spsc_queue.hpp"
+#include "flatstream/channel.hpp"
 #include "shm/publisher.hpp"
 
 namespace ds1928 {
@@ -25,6 +26,47 @@ struct AxisCommand {
   Kind kind = Kind::AckErrors;
   uint16_t axis = 0;
   uint8_t bits = 0;
+};
+
+// Longest Flatstream message that crosses between the threads. EnDat commands and replies are at
+// most 10 bytes; anything longer from the module is reported as oversized, never cut silently.
+inline constexpr std::size_t kTunnelMessageMax = 32;
+
+// Normal thread → cycle thread: one Flatstream message for an axis, or a channel reset.
+struct TunnelRequest {
+  enum class Kind : uint8_t { Message, ResetChannel };
+  Kind kind = Kind::Message;
+  uint32_t tag = 0;
+  uint8_t size = 0;
+  std::array<uint8_t, kTunnelMessageMax> bytes{};
+};
+
+// Cycle thread → normal thread: what happened to a message, or a message from the module.
+struct TunnelEvent {
+  enum class Kind : uint8_t {
+    Sent,        // every sequence of message `tag` acknowledged by the module
+    SendFailed,  // message `tag` not delivered: `result` says why
+    Rejected,    // message `tag` not accepted by the channel (queue full / too long)
+    Received,    // a complete message from the module
+  };
+  Kind kind = Kind::Received;
+  uint32_t tag = 0;
+  flatstream::Errc result = flatstream::Errc::ok;
+  uint16_t full_size = 0;  // the received message's real size (> kTunnelMessageMax: oversized)
+  uint8_t size = 0;        // bytes kept
+  std::array<uint8_t, kTunnelMessageMax> bytes{};
+};
+
+// Flatstream figures of one axis (single writer: the cycle thread).
+struct TunnelCounters {
+  std::atomic<uint64_t> messages_sent{0};
+  std::atomic<uint64_t> messages_failed{0};
+  std::atomic<uint64_t> messages_received{0};
+  std::atomic<uint64_t> sequences_repeated{0};
+  std::atomic<uint64_t> resyncs{0};
+  std::atomic<uint64_t> events_dropped{0};  // event queue full: the normal thread fell behind
+  std::atomic<uint8_t> output_state{0};     // flatstream::SenderState
+  std::atomic<uint8_t> input_state{0};      // flatstream::ReceiverState
 };
 
 // Per-axis figures the normal thread reads for `status` (single writer: the cycle thread).
@@ -49,6 +91,18 @@ class CycleWork final : public CycleTask {
   // Normal thread. False when the queue is full (the caller reports "busy").
   [[nodiscard]] bool post(const AxisCommand& command) noexcept { return commands_.try_push(command); }
 
+  // Normal thread: the axis' Flatstream tunnel. False when its queue is full.
+  [[nodiscard]] bool submit_tunnel(std::size_t axis, const TunnelRequest& request) noexcept {
+    return axis < tunnels_.size() && tunnels_[axis]->requests.try_push(request);
+  }
+  [[nodiscard]] std::optional<TunnelEvent> poll_tunnel(std::size_t axis) noexcept {
+    if (axis >= tunnels_.size()) return std::nullopt;
+    return tunnels_[axis]->events.try_pop();
+  }
+  [[nodiscard]] const TunnelCounters& tunnel_counters(std::size_t axis) const noexcept {
+    return tunnels_[axis]->counters;
+  }
+
   [[nodiscard]] std::size_t axis_count() const noexcept { return io_.size(); }
   [[nodiscard]] AxisCounters& counters(std::size_t axis) noexcept { return counters_[axis]; }
   [[nodiscard]] uint64_t exchanges() const noexcept { return exchanges_.load(std::memory_order_relaxed); }
@@ -59,6 +113,16 @@ class CycleWork final : public CycleTask {
   [[nodiscard]] bool bus_up() const noexcept { return bus_up_.load(std::memory_order_relaxed); }
 
  private:
+  struct Tunnel {
+    explicit Tunnel(const flatstream::MasterConfig& c) : channel(c) {}
+    flatstream::MasterChannel channel;
+    SpscQueue<TunnelRequest, 16> requests;
+    SpscQueue<TunnelEvent, 64> events;
+    TunnelCounters counters;
+    flatstream::Message received;  // scratch, so the 512-byte message is not on the stack
+  };
+  void run_tunnel(std::size_t axis, uint64_t now_us) noexcept;
+
   BusDriver& bus_;
   shm::Publisher& publisher_;
   // Sized once at construction; never resized on the cycle thread.
@@ -69,6 +133,7 @@ class CycleWork final : public CycleTask {
   std::vector<uint8_t> ack_bits_;
   std::vector<uint32_t> ack_hold_;
   std::unique_ptr<AxisCounters[]> counters_;
+  std::vector<std::unique_ptr<Tunnel>> tunnels_;
   SpscQueue<AxisCommand, 64> commands_;
   std::atomic<uint64_t> exchanges_{0};
   std::atomic<uint64_t> data_exchanges_{0};

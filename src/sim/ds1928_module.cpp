@@ -26,8 +26,6 @@ struct Registers {
   uint8_t flatstream_mode = 0;
   uint8_t forward = 1;
   uint16_t forward_delay_us = 0;
-  uint16_t endat_error = 0;
-  uint16_t endat_warning = 0;
 };
 
 [[nodiscard]] uint8_t max_mtu(FunctionModel model) noexcept {
@@ -36,7 +34,24 @@ struct Registers {
 
 }  // namespace
 
+[[nodiscard]] flatstream::ModuleConfig channel_config(const Registers& r) noexcept {
+  flatstream::ModuleConfig c;
+  c.output_mtu = r.output_mtu;
+  c.input_mtu = r.input_mtu;
+  c.flatstream_mode = r.flatstream_mode;
+  c.forward = r.forward;
+  c.forward_delay_us = r.forward_delay_us;
+  return c;
+}
+
 struct Ds1928Module::State {
+  explicit State(EncoderDescription encoder)
+      : steps_per_period(encoder.signal_periods == 0
+                             ? 1.0
+                             : static_cast<double>(encoder.steps_per_revolution) / encoder.signal_periods),
+        channel(channel_config(Registers{})),
+        bridge(EnDatEncoder(std::move(encoder))) {}
+  double steps_per_period;  // the encoder's measuring steps per sine period
   FunctionModel model;
   SimAxisConfig sim;
   Registers regs;
@@ -48,10 +63,18 @@ struct Ds1928Module::State {
   int64_t origin_ns = 0;        // motion profile time zero
   int64_t next_tick_ns = 0;     // next module system tick
   uint64_t ticks = 0;           // module system ticks since power-up
+  int64_t now_ns = 0;           // time of the last tick
+  // Flatstream: stepped once per bus cycle (when the master's outputs arrive), not per tick —
+  // the protocol counts bus cycles.
+  flatstream::ModuleChannel channel;
+  bool outputs_pending = false;
+  std::optional<flatstream::Message> command;  // received, waiting for the EnDat channel
+  EnDatBridge bridge;
+  uint32_t reply_tag = 0;
 };
 
-Ds1928Module::Ds1928Module(FunctionModel model, const SimAxisConfig& sim)
-    : state_(std::make_unique<State>()) {
+Ds1928Module::Ds1928Module(FunctionModel model, const SimAxisConfig& sim, EncoderDescription encoder)
+    : state_(std::make_unique<State>(std::move(encoder))) {
   state_->model = model;
   state_->sim = sim;
   if (state_->sim.module_cycle_us == 0) state_->sim.module_cycle_us = 100;
@@ -71,6 +94,19 @@ void Ds1928Module::power_up() noexcept {
   s.prev_ack = 0;
   s.started = false;
   s.ticks = 0;
+  s.channel.configure(channel_config(s.regs));
+  s.channel.reset();
+  s.outputs_pending = false;
+  s.command.reset();
+  (void)s.bridge.power_up(s.now_ns);  // a failed identification shows as EnDatParSetError
+}
+
+const flatstream::ModuleChannel& Ds1928Module::flatstream() const noexcept { return state_->channel; }
+EnDatBridge& Ds1928Module::endat() noexcept { return state_->bridge; }
+
+EncoderLoadResult load_encoder(const SimAxisConfig& sim) {
+  if (sim.encoder_file.empty()) return {default_encoder_description(), {}};
+  return load_encoder_description(sim.encoder_file);
 }
 
 void Ds1928Module::inject_error(uint8_t bits) noexcept { state_->latched_errors |= bits; }
@@ -121,7 +157,9 @@ void Ds1928Module::tick(int64_t monotonic_ns, uint64_t net_time_us) noexcept {
     // One EnDat cycle: acquire a position when the interface is enabled.
     if ((s.regs.endat_mode & endat_mode::kEnable) == 0) continue;
     const double t_s = static_cast<double>(at_ns - s.origin_ns) * 1e-9;
-    const uint64_t raw = to_fixed_point(profile_position(s.sim, t_s));
+    const double periods = profile_position(s.sim, t_s);
+    const uint64_t raw = to_fixed_point(periods);
+    s.bridge.set_position(static_cast<uint64_t>(static_cast<int64_t>(periods * s.steps_per_period)));
     s.in.position_hw = static_cast<uint32_t>(raw >> 32);
     s.in.position_lw = static_cast<uint32_t>(raw);
     // PosTime = NetTime of the acquisition instant (µs).
@@ -130,16 +168,43 @@ void Ds1928Module::tick(int64_t monotonic_ns, uint64_t net_time_us) noexcept {
       s.in.pos_time_us = static_cast<uint32_t>(net_time_us - static_cast<uint64_t>(behind_us));
     s.in.pos_cycle = static_cast<int8_t>(s.in.pos_cycle + 1);
   }
-  s.in.error_info = static_cast<uint8_t>(s.latched_errors & s.regs.error_enable & ~0x02);
+  s.now_ns = monotonic_ns;
+  run_flatstream(monotonic_ns);
+  update_error_info();
+}
+
+void Ds1928Module::update_error_info() noexcept {
+  State& s = *state_;
+  const uint8_t present = static_cast<uint8_t>(s.latched_errors | s.bridge.error_info());
+  s.in.error_info = static_cast<uint8_t>(present & s.regs.error_enable & ~0x02);
+}
+
+void Ds1928Module::run_flatstream(int64_t now_ns) noexcept {
+  State& s = *state_;
+  // EnDat side: a finished reply goes into the input direction, a waiting command to the encoder.
+  if (auto reply = s.bridge.poll(now_ns)) {
+    (void)s.channel.submit(reply->bytes(), ++s.reply_tag);  // queue_full: the master is gone
+  }
+  if (s.command && s.bridge.submit(s.command->payload(), now_ns))
+    s.command.reset();
+  if (!s.outputs_pending) return;
+  s.outputs_pending = false;
+  const auto frame = s.channel.step(flatstream::output_frame(s.out), static_cast<uint64_t>(now_ns / 1000));
+  flatstream::apply(frame, s.in);
+  if (!s.command) {
+    if (auto m = s.channel.take_received()) s.command = *m;
+  }
 }
 
 void Ds1928Module::apply_outputs(const ModuleOutputs& outputs) noexcept {
   State& s = *state_;
   s.out = outputs;
+  s.outputs_pending = true;
   const uint8_t rising = static_cast<uint8_t>(outputs.ack_error_info & ~s.prev_ack);
   s.prev_ack = outputs.ack_error_info;
   s.latched_errors = static_cast<uint8_t>(s.latched_errors & ~rising);
-  s.in.error_info = static_cast<uint8_t>(s.latched_errors & s.regs.error_enable & ~0x02);
+  if (rising != 0) s.bridge.acknowledge_error_info(rising);
+  update_error_info();
 }
 
 ModuleInputs Ds1928Module::inputs() const noexcept { return state_->in; }
@@ -185,30 +250,32 @@ std::error_code Ds1928Module::write_register(uint16_t r, uint8_t size, uint32_t 
       return {};
     case reg::kEnDatAck:
       if (!want(1)) return make_error_code(SimErrc::wrong_size);
-      if (v & 0x01) {
-        g.endat_error = 0;
-        g.endat_warning = 0;
-      }
+      if (v > 0x03) return make_error_code(SimErrc::out_of_range);
+      state_->bridge.endat_ack(static_cast<uint8_t>(v), state_->now_ns);
       return {};
     case reg::kOutputMtu:
     case reg::kInputMtu:
       if (!want(1)) return make_error_code(SimErrc::wrong_size);
       if (!in_range(2, max_mtu(state_->model))) return make_error_code(SimErrc::out_of_range);
       (r == reg::kOutputMtu ? g.output_mtu : g.input_mtu) = static_cast<uint8_t>(v);
+      state_->channel.configure(channel_config(g));
       return {};
     case reg::kFlatstreamMode:
       if (!want(1)) return make_error_code(SimErrc::wrong_size);
       if (v > 3) return make_error_code(SimErrc::out_of_range);
       g.flatstream_mode = static_cast<uint8_t>(v);
+      state_->channel.configure(channel_config(g));
       return {};
     case reg::kForward:
       if (!want(1)) return make_error_code(SimErrc::wrong_size);
       if (!in_range(1, 7)) return make_error_code(SimErrc::out_of_range);
       g.forward = static_cast<uint8_t>(v);
+      state_->channel.configure(channel_config(g));
       return {};
     case reg::kForwardDelay:
       if (!want(2)) return make_error_code(SimErrc::wrong_size);
       g.forward_delay_us = static_cast<uint16_t>(v);
+      state_->channel.configure(channel_config(g));
       return {};
     default: break;
   }
@@ -235,8 +302,6 @@ std::error_code Ds1928Module::read_register(uint16_t r, uint8_t size, uint32_t& 
       {reg::kSinCosQuitTime, 4, g.quit_time_us},
       {reg::kEnDatMode, 1, g.endat_mode},
       {reg::kEnDatAck, 1, 0},
-      {reg::kEnDatError, 2, g.endat_error},
-      {reg::kEnDatWarning, 2, g.endat_warning},
       {reg::kOutputMtu, 1, g.output_mtu},
       {reg::kInputMtu, 1, g.input_mtu},
       {reg::kFlatstreamMode, 1, g.flatstream_mode},
@@ -247,6 +312,12 @@ std::error_code Ds1928Module::read_register(uint16_t r, uint8_t size, uint32_t& 
     if (e.reg != r) continue;
     if (e.size != size) return make_error_code(SimErrc::wrong_size);
     v = e.value;
+    return {};
+  }
+  // Identification, EnDatError/EnDatWarning: the encoder's words (UINT).
+  if (auto word = state_->bridge.read_register(r)) {
+    if (size != 2) return make_error_code(SimErrc::wrong_size);
+    v = *word;
     return {};
   }
   return make_error_code(SimErrc::unknown_register);

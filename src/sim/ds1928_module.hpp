@@ -9,12 +9,17 @@
 
 #include "config/config.hpp"
 #include "core/module_image.hpp"
+#include "flatstream/channel.hpp"
+#include "sim/endat_bridge.hpp"
 
 namespace ds1928::sim {
 
 class Ds1928Module {
  public:
-  Ds1928Module(FunctionModel model, const SimAxisConfig& sim);
+  // The encoder behind the module: `encoder` (default: the built-in multiturn rotary encoder;
+  // SimAxisConfig::encoder_file is loaded by the owner, see load_encoder()).
+  Ds1928Module(FunctionModel model, const SimAxisConfig& sim,
+               EncoderDescription encoder = default_encoder_description());
   ~Ds1928Module();
   Ds1928Module(const Ds1928Module&) = delete;
   Ds1928Module& operator=(const Ds1928Module&) = delete;
@@ -39,10 +44,19 @@ class Ds1928Module {
 
   [[nodiscard]] FunctionModel function_model() const noexcept;
 
+  // Views for tests and status of the simulator.
+  [[nodiscard]] const flatstream::ModuleChannel& flatstream() const noexcept;
+  [[nodiscard]] EnDatBridge& endat() noexcept;
+
  private:
+  void run_flatstream(int64_t now_ns) noexcept;
+  void update_error_info() noexcept;
   struct State;
   std::unique_ptr<State> state_;
 };
+
+// The encoder description a simulated axis asks for: the built-in one, or its encoder_file.
+[[nodiscard]] EncoderLoadResult load_encoder(const SimAxisConfig& sim);
 
 // Applies a configured axis' ModuleSettings through write_register (what a master does at boot).
 [[nodiscard]] std::error_code configure_module(Ds1928Module& module, const ModuleSettings& settings);
