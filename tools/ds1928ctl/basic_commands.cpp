@@ -1,0 +1,172 @@
+#include <cinttypes>
+#include <cstdio>
+#include <iostream>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "client.hpp"
+#include "commands.hpp"
+#include "endat/number.hpp"
+
+namespace ds1928::ctl {
+namespace {
+
+using json = nlohmann::json;
+
+template <class T>
+T get(const json& j, const char* key, T fallback) {
+  const auto it = j.find(key);
+  if (it == j.end() || it->is_null()) return fallback;
+  return it->get<T>();
+}
+
+std::string hex(uint64_t v, int digits) {
+  char buf[24];
+  std::snprintf(buf, sizeof(buf), "0x%0*" PRIx64, digits, v);
+  return buf;
+}
+
+std::string duration_text(double seconds) {
+  const auto s = static_cast<uint64_t>(seconds);
+  char buf[64];
+  if (s >= 86400)
+    std::snprintf(buf, sizeof(buf), "%" PRIu64 "d %02" PRIu64 "h %02" PRIu64 "m", s / 86400,
+                  s / 3600 % 24, s / 60 % 60);
+  else if (s >= 3600)
+    std::snprintf(buf, sizeof(buf), "%" PRIu64 "h %02" PRIu64 "m %02" PRIu64 "s", s / 3600,
+                  s / 60 % 60, s % 60);
+  else
+    std::snprintf(buf, sizeof(buf), "%" PRIu64 "m %02" PRIu64 "s", s / 60, s % 60);
+  return buf;
+}
+
+std::string ns_text(const json& v) {
+  if (!v.is_number()) return "-";
+  const double ns = v.get<double>();
+  char buf[32];
+  if (ns >= 1e6)
+    std::snprintf(buf, sizeof(buf), "%.2f ms", ns / 1e6);
+  else if (ns >= 1e3)
+    std::snprintf(buf, sizeof(buf), "%.1f µs", ns / 1e3);
+  else
+    std::snprintf(buf, sizeof(buf), "%.0f ns", ns);
+  return buf;
+}
+
+void print_quantiles(const char* label, const json& q) {
+  if (!q.is_object()) return;
+  std::cout << "  " << label << "p50 " << ns_text(q.value("p50", json())) << ", p99 "
+            << ns_text(q.value("p99", json())) << ", p99.9 " << ns_text(q.value("p999", json()))
+            << ", max " << ns_text(q.value("max", json())) << "\n";
+}
+
+void print_cycle(const json& c) {
+  if (!c.is_object()) return;
+  std::cout << "  cycle:     " << get<uint64_t>(c, "period_us", 0) << " µs, "
+            << get<uint64_t>(c, "count", 0) << " cycles, " << get<uint64_t>(c, "overruns", 0)
+            << " overruns, " << get<uint64_t>(c, "skipped", 0) << " skipped\n";
+}
+
+void print_axis_line(const json& a) {
+  std::printf("    %-3" PRIu64 " %-12s %-13s ErrorInfo %s  EnDat error %s  warning %s\n",
+              get<uint64_t>(a, "axis", 0), get<std::string>(a, "name", "").c_str(),
+              get<std::string>(a, "state", "?").c_str(),
+              hex(get<uint64_t>(a, "error_info", 0), 2).c_str(),
+              hex(get<uint64_t>(a, "endat_error", 0), 4).c_str(),
+              hex(get<uint64_t>(a, "endat_warning", 0), 4).c_str());
+}
+
+void print_status(const json& r) {
+  const json d = r.value("daemon", json::object());
+  std::cout << "ds1928d " << get<std::string>(d, "version", "?") << " (pid "
+            << get<int64_t>(d, "pid", 0) << "), " << get<std::string>(d, "state", "?") << ", up "
+            << duration_text(get<double>(d, "uptime_s", 0.0)) << "\n";
+  std::cout << "  real-time: " << (get<bool>(d, "realtime", false) ? "yes" : "no");
+  if (const auto t = get<std::string>(d, "rt_status", ""); !t.empty())
+    std::cout << " (" << t << ")";
+  std::cout << "\n";
+  const json b = r.value("bus", json::object());
+  std::cout << "  bus:       " << get<std::string>(b, "kind", "?") << ", "
+            << get<std::string>(b, "state", "?") << "\n";
+  print_cycle(r.value("cycle", json()));
+  const json axes = r.value("axes", json::array());
+  std::cout << "  axes:      " << axes.size() << "\n";
+  for (const auto& a : axes) print_axis_line(a);
+}
+
+void print_axes(const json& r) {
+  for (const auto& a : r.value("axes", json::array())) {
+    print_axis_line(a);
+    const uint64_t raw = get<uint64_t>(a, "position_raw", 0);
+    std::printf("        node %" PRIu64 " slot %" PRIu64 ", position %" PRId64 " + %" PRIu64
+                "/65536 periods (raw %s), PosCycle %" PRId64 "\n",
+                get<uint64_t>(a, "node", 0), get<uint64_t>(a, "slot", 0),
+                get<int64_t>(a, "periods", 0), get<uint64_t>(a, "fraction", 0),
+                hex(raw, 16).c_str(), get<int64_t>(a, "pos_cycle", 0));
+  }
+}
+
+void print_stats(const json& r) {
+  const json c = r.value("cycle", json::object());
+  std::cout << "cycle statistics";
+  if (r.contains("since_reset_s"))
+    std::cout << " (since " << duration_text(get<double>(r, "since_reset_s", 0.0)) << ")";
+  std::cout << "\n";
+  print_cycle(c);
+  print_quantiles("wake-up:   ", c.value("wake_latency_ns", json()));
+  print_quantiles("work:      ", c.value("work_ns", json()));
+  const json b = r.value("bus", json::object());
+  if (!b.empty()) {
+    std::cout << "  bus:       " << get<uint64_t>(b, "frames_lost", 0) << " frames lost";
+    if (b.contains("state")) std::cout << ", " << get<std::string>(b, "state", "?");
+    std::cout << "\n";
+  }
+}
+
+}  // namespace
+
+void add_basic_commands(CLI::App& app, Context& ctx) {
+  app.add_subcommand("status", "Daemon, real-time, bus, axis states, cycle counters")
+      ->callback([&ctx] {
+        ctx.action = [&ctx] { return request_and_print(ctx, {{"cmd", "status"}}, print_status); };
+      });
+
+  app.add_subcommand("axes", "Configuration and last sample of every axis (over the socket)")
+      ->callback([&ctx] {
+        ctx.action = [&ctx] { return request_and_print(ctx, {{"cmd", "axes"}}, print_axes); };
+      });
+
+  app.add_subcommand("stats", "Cycle statistics: wake-up latency, work time, overruns, losses")
+      ->callback([&ctx] {
+        ctx.action = [&ctx] { return request_and_print(ctx, {{"cmd", "stats"}}, print_stats); };
+      });
+
+  app.add_subcommand("stats-reset", "Reset the cycle statistics")->callback([&ctx] {
+    ctx.action = [&ctx] {
+      return request_and_print(ctx, {{"cmd", "stats-reset"}},
+                               [](const json&) { std::cout << "statistics reset\n"; });
+    };
+  });
+
+  auto* ack = app.add_subcommand("ack", "Acknowledge module errors: write BITS to AckErrorInfo");
+  auto axis = std::make_shared<std::string>();
+  auto bits = std::make_shared<std::string>();
+  ack->add_option("AXIS", *axis, "Axis index (0-based)")->required();
+  ack->add_option("BITS", *bits, "ErrorInfo bits to acknowledge, decimal or 0x hex (0..255)")
+      ->required();
+  ack->callback([&ctx, axis, bits] {
+    const auto a = endat::parse_number(*axis, 0, 0xFFFF);
+    if (!a) throw CLI::ValidationError("AXIS", "'" + *axis + "': " + a.error().message());
+    const auto b = endat::parse_u8(*bits);
+    if (!b) throw CLI::ValidationError("BITS", "'" + *bits + "': " + b.error().message());
+    ctx.action = [&ctx, a = *a, b = *b] {
+      return request_and_print(
+          ctx, {{"cmd", "ack-errors"}, {"axis", a}, {"bits", b}}, [](const json& r) {
+            std::cout << "axis " << get<uint64_t>(r, "axis", 0) << ": acknowledged "
+                      << hex(get<uint64_t>(r, "bits", 0), 2) << "\n";
+          });
+    };
+  });
+}
+
+}  // namespace ds1928::ctl

@@ -1,0 +1,125 @@
+#include "client.hpp"
+
+#include <poll.h>
+#include <sys/socket.h>
+#include <sys/un.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <chrono>
+#include <cstdio>
+#include <cstring>
+#include <iostream>
+
+namespace ds1928::ctl {
+namespace {
+
+class Fd {
+ public:
+  explicit Fd(int fd) : fd_(fd) {}
+  ~Fd() {
+    if (fd_ >= 0) ::close(fd_);
+  }
+  Fd(const Fd&) = delete;
+  Fd& operator=(const Fd&) = delete;
+  int get() const { return fd_; }
+
+ private:
+  int fd_;
+};
+
+std::string errno_text() {
+  return std::strerror(errno);
+}
+
+}  // namespace
+
+Outcome send_request(const Context& ctx, const nlohmann::json& request) {
+  Outcome out;
+  sockaddr_un addr{};
+  addr.sun_family = AF_UNIX;
+  if (ctx.socket_path.size() >= sizeof(addr.sun_path)) {
+    return {kUsage, nullptr, "socket path too long: " + ctx.socket_path};
+  }
+  std::memcpy(addr.sun_path, ctx.socket_path.c_str(), ctx.socket_path.size() + 1);
+  Fd fd(socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0));
+  if (fd.get() < 0) return {kUnavailable, nullptr, "socket: " + errno_text()};
+  if (connect(fd.get(), reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) != 0)
+    return {kUnavailable, nullptr,
+            "cannot connect to " + ctx.socket_path + ": " + errno_text() +
+                (errno == ENOENT || errno == ECONNREFUSED ? " (is ds1928d running?)" : "")};
+
+  const std::string line = request.dump() + "\n";
+  for (std::size_t off = 0; off < line.size();) {
+    const ssize_t n = ::send(fd.get(), line.data() + off, line.size() - off, MSG_NOSIGNAL);
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      return {kUnavailable, nullptr, "send: " + errno_text()};
+    }
+    off += static_cast<std::size_t>(n);
+  }
+
+  std::string buffer;
+  const auto deadline =
+      std::chrono::steady_clock::now() + std::chrono::milliseconds(ctx.timeout_ms);
+  for (;;) {
+    if (const auto nl = buffer.find('\n'); nl != std::string::npos) {
+      buffer.resize(nl);
+      break;
+    }
+    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
+                          deadline - std::chrono::steady_clock::now())
+                          .count();
+    if (left <= 0)
+      return {kUnavailable, nullptr, "no reply within " + std::to_string(ctx.timeout_ms) + " ms"};
+    pollfd p{fd.get(), POLLIN, 0};
+    const int r = poll(&p, 1, static_cast<int>(left));
+    if (r < 0 && errno == EINTR) continue;
+    if (r < 0) return {kUnavailable, nullptr, "poll: " + errno_text()};
+    if (r == 0) continue;
+    char chunk[4096];
+    const ssize_t n = ::recv(fd.get(), chunk, sizeof(chunk), 0);
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      return {kUnavailable, nullptr, "receive: " + errno_text()};
+    }
+    if (n == 0) return {kUnavailable, nullptr, "the daemon closed the connection without a reply"};
+    buffer.append(chunk, static_cast<std::size_t>(n));
+  }
+
+  out.reply = nlohmann::json::parse(buffer, nullptr, false);
+  if (out.reply.is_discarded() || !out.reply.is_object() || !out.reply.contains("ok") ||
+      !out.reply["ok"].is_boolean())
+    return {kBadReply, nullptr, "invalid reply from the daemon: " + buffer};
+  if (out.reply["ok"] == true) return out;
+  const auto& err = out.reply.value("error", nlohmann::json::object());
+  out.exit = kDaemonError;
+  out.problem =
+      err.value("code", std::string("error")) + ": " + err.value("message", std::string());
+  return out;
+}
+
+int request_and_print(const Context& ctx, const nlohmann::json& request,
+                      const HumanPrinter& print_human) {
+  const Outcome o = send_request(ctx, request);
+  if (o.exit == kDaemonError && ctx.json) {
+    std::cout << o.reply.dump() << std::endl;  // scripts get the error object too
+  }
+  if (o.exit != kOk) {
+    std::cerr << "ds1928ctl: " << (o.exit == kDaemonError ? "error: " : "") << o.problem << "\n";
+    return o.exit;
+  }
+  if (ctx.json) {
+    std::cout << o.reply.dump() << std::endl;
+  } else {
+    try {
+      print_human(o.reply);
+    } catch (const nlohmann::json::exception& e) {
+      std::cerr << "ds1928ctl: unexpected reply (" << e.what() << "): " << o.reply.dump() << "\n";
+      return kBadReply;
+    }
+  }
+  return kOk;
+}
+
+}  // namespace ds1928::ctl

@@ -1,0 +1,29 @@
+// Talking to the daemon's control socket: one request line, one reply line.
+#pragma once
+
+#include <functional>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+
+#include "context.hpp"
+
+namespace ds1928::ctl {
+
+struct Outcome {
+  int exit = kOk;        // Exit code
+  nlohmann::json reply;  // the parsed reply when exit is kOk or kDaemonError
+  std::string problem;   // what went wrong, for stderr
+};
+
+// Connects to ctx.socket_path, sends `request` as one line, reads one reply line.
+[[nodiscard]] Outcome send_request(const Context& ctx, const nlohmann::json& request);
+
+// The common case of a command: send, then on {"ok":true} print the reply (as one JSON line
+// with --json, else through `print_human`), on {"ok":false} print "error: <code>: <message>" to
+// stderr. Returns the exit code. A new command group needs nothing more than this.
+using HumanPrinter = std::function<void(const nlohmann::json& reply)>;
+[[nodiscard]] int request_and_print(const Context& ctx, const nlohmann::json& request,
+                                    const HumanPrinter& print_human);
+
+}  // namespace ds1928::ctl

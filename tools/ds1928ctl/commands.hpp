@@ -1,0 +1,17 @@
+// Subcommand groups of ds1928ctl. Each group adds its subcommands to the app; a subcommand's
+// callback sets ctx.action, which main() runs after parsing. A new group (e.g. `endat ...`) is
+// one more function of this shape, registered in main.cpp.
+#pragma once
+
+#include <CLI/CLI.hpp>
+
+#include "context.hpp"
+
+namespace ds1928::ctl {
+
+// status, axes, stats, ack, stats-reset: requests over the control socket.
+void add_basic_commands(CLI::App& app, Context& ctx);
+// position [--axis N] [--follow [--every N]]: read from shared memory.
+void add_position_command(CLI::App& app, Context& ctx);
+
+}  // namespace ds1928::ctl

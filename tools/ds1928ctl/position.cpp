@@ -1,0 +1,227 @@
+// `position`: reads the axis records straight from shared memory; with --follow waits on the
+// futex for each (N-th) publication, says so when the daemon stops or restarts and resumes.
+#include <cinttypes>
+#include <cstdio>
+#include <ctime>
+#include <iostream>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <thread>
+
+#include "commands.hpp"
+#include "ds1928/shm.hpp"
+
+namespace ds1928::ctl {
+namespace {
+
+using json = nlohmann::json;
+
+struct PositionOptions {
+  std::optional<uint32_t> axis;
+  bool follow = false;
+  uint32_t every = 1;
+  uint64_t count = 0;  // with --follow: stop after this many publications (0: never)
+};
+
+const char* validity_name(uint8_t v) {
+  switch (v) {
+    case DS1928_AXIS_VALID:
+      return "valid";
+    case DS1928_AXIS_STALE:
+      return "stale";
+    case DS1928_AXIS_BUS_DOWN:
+      return "bus_down";
+    case DS1928_AXIS_MODULE_ERROR:
+      return "module_error";
+    default:
+      return "unknown";
+  }
+}
+const char* time_source_name(uint8_t v) {
+  switch (v) {
+    case DS1928_TIME_NETTIME:
+      return "nettime";
+    case DS1928_TIME_RX_TIMESTAMP:
+      return "rx_timestamp";
+    default:
+      return "none";
+  }
+}
+
+json axis_json(uint32_t axis, const ds1928_axis_data& d) {
+  return {{"axis", axis},
+          {"cycle", d.cycle},
+          {"state", validity_name(d.validity)},
+          {"position_raw", d.position_raw},
+          {"periods", d.periods},
+          {"fraction", d.fraction},
+          {"position_sdc", d.position_sdc},
+          {"pos_time_ns", d.pos_time_ns},
+          {"pos_time_raw", d.pos_time_raw},
+          {"time_source", time_source_name(d.time_source)},
+          {"pos_cycle", d.pos_cycle},
+          {"new_position", (d.flags & DS1928_AXIS_NEW_POSITION) != 0},
+          {"fresh", (d.flags & DS1928_AXIS_FRESH) != 0},
+          {"error_info", d.error_info},
+          {"endat_error", d.endat_error},
+          {"endat_warning", d.endat_warning},
+          {"publish_ns", d.publish_ns}};
+}
+
+void print_axis(const Context& ctx, uint32_t axis, const ds1928_axis_data& d) {
+  if (ctx.json) {
+    std::cout << axis_json(axis, d).dump() << "\n";
+    return;
+  }
+  const double position = static_cast<double>(d.periods) + d.fraction / 65536.0;
+  std::printf("cycle %-10" PRIu64 " axis %-2u %-12s %18.6f periods  raw 0x%016" PRIx64
+              "  sdc %11" PRId32 "  PosCycle %4d%s  ErrorInfo 0x%02x\n",
+              d.cycle, axis, validity_name(d.validity), position, d.position_raw, d.position_sdc,
+              d.pos_cycle, (d.flags & DS1928_AXIS_NEW_POSITION) ? " new" : "    ", d.error_info);
+}
+
+// Stdout in --json mode (scripts follow one stream), stderr otherwise.
+void event(const Context& ctx, const json& e, const std::string& text) {
+  if (ctx.json) {
+    std::cout << e.dump() << std::endl;
+  } else {
+    std::cerr << "ds1928ctl: " << text << std::endl;
+  }
+}
+
+// Opens the shared memory, riding over the moment the daemon is still creating it.
+std::error_code open_reader(ShmReader& reader, const std::string& name) {
+  std::error_code ec;
+  for (int i = 0; i < 20; ++i) {
+    ec = reader.open(name);
+    if (ec != std::errc::resource_unavailable_try_again) return ec;
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  return ec;
+}
+
+std::string open_problem(const std::string& name, std::error_code ec) {
+  if (ec == std::errc::no_such_file_or_directory)
+    return "no shared memory " + name + " (is ds1928d running?)";
+  if (ec == std::errc::protocol_error)
+    return name + " is not ds1928d shared memory of ABI version " +
+           std::to_string(DS1928_SHM_ABI_VERSION);
+  return "cannot map " + name + ": " + ec.message();
+}
+
+bool print_selected(const Context& ctx, const ShmReader& reader, const PositionOptions& opt) {
+  const uint32_t first = opt.axis.value_or(0);
+  const uint32_t last = opt.axis ? *opt.axis + 1 : reader.axis_count();
+  for (uint32_t a = first; a < last; ++a) {
+    ds1928_axis_data d{};
+    if (auto ec = reader.read(a, d)) {
+      std::cerr << "ds1928ctl: axis " << a << ": " << ec.message() << "\n";
+      return false;
+    }
+    print_axis(ctx, a, d);
+  }
+  std::cout.flush();
+  return true;
+}
+
+// Without a wait area (no write permission on <name>.wait) a follower polls.
+ShmWait next_publication(const ShmReader& reader, uint64_t& seen, uint32_t every,
+                         int64_t deadline_ns) {
+  if (reader.can_wait()) {
+    std::error_code ec;
+    const auto r = reader.wait(seen, every, deadline_ns, ec);
+    return ec ? ShmWait::Timeout : r;
+  }
+  const int64_t step =
+      std::max<int64_t>(static_cast<int64_t>(reader.header().cycle_period_ns), 100'000);
+  for (;;) {
+    uint64_t last = 0;
+    if (ds1928_shm_due(&reader.header(), seen, every, &last)) {
+      seen = last;
+      return ShmWait::Published;
+    }
+    if (reader.daemon_state() == DS1928_DAEMON_STOPPED) return ShmWait::Stopped;
+    if (ds1928_shm_now_ns() >= deadline_ns) return ShmWait::Timeout;
+    std::this_thread::sleep_for(std::chrono::nanoseconds(step));
+  }
+}
+
+int follow(const Context& ctx, ShmReader& reader, const PositionOptions& opt) {
+  uint64_t seen = reader.wait_start();
+  uint64_t printed = 0;
+  for (;;) {
+    // A dead daemon is noticed within ~10 cycles or 100 ms, whichever is longer.
+    const int64_t period = static_cast<int64_t>(reader.header().cycle_period_ns);
+    const int64_t timeout = std::max<int64_t>(100'000'000, 10 * period * opt.every);
+    const ShmWait r = next_publication(reader, seen, opt.every, ds1928_shm_now_ns() + timeout);
+    if (r == ShmWait::Published) {
+      if (!print_selected(ctx, reader, opt)) return kUnavailable;
+      if (opt.count != 0 && ++printed >= opt.count) return kOk;
+      continue;
+    }
+    if (r == ShmWait::Timeout && reader.daemon_alive()) continue;
+
+    if (r == ShmWait::Stopped)
+      event(ctx, {{"event", "stopped"}, {"generation", reader.generation()}},
+            "daemon stopped; waiting for it to start again");
+    else
+      event(ctx, {{"event", "not_publishing"}, {"generation", reader.generation()}},
+            "daemon not publishing (dead or hung); waiting for it to start again");
+    // The name now belongs to the next daemon: look for a new generation.
+    while (!reader.reopen()) std::this_thread::sleep_for(std::chrono::milliseconds(200));
+    event(ctx,
+          {{"event", "restarted"},
+           {"generation", reader.generation()},
+           {"axes", reader.axis_count()}},
+          "daemon restarted (generation " + std::to_string(reader.generation()) + ", " +
+              std::to_string(reader.axis_count()) + " axes)");
+    if (opt.axis && *opt.axis >= reader.axis_count()) {
+      std::cerr << "ds1928ctl: axis " << *opt.axis << " does not exist any more\n";
+      return kUsage;
+    }
+    seen = reader.wait_start();
+  }
+}
+
+int run_position(const Context& ctx, const PositionOptions& opt) {
+  ShmReader reader;
+  if (auto ec = open_reader(reader, ctx.shm_name)) {
+    std::cerr << "ds1928ctl: " << open_problem(ctx.shm_name, ec) << "\n";
+    return kUnavailable;
+  }
+  if (opt.axis && *opt.axis >= reader.axis_count()) {
+    std::cerr << "ds1928ctl: axis " << *opt.axis << " does not exist (the daemon has "
+              << reader.axis_count() << " axes)\n";
+    return kUsage;
+  }
+  if (opt.follow) return follow(ctx, reader, opt);
+  if (!print_selected(ctx, reader, opt)) return kUnavailable;
+  if (!reader.daemon_alive()) {
+    std::cerr << "ds1928ctl: daemon "
+              << (reader.daemon_state() == DS1928_DAEMON_STOPPED ? "stopped" : "not publishing")
+              << ": these are its last values\n";
+    return kUnavailable;
+  }
+  return kOk;
+}
+
+}  // namespace
+
+void add_position_command(CLI::App& app, Context& ctx) {
+  auto opt = std::make_shared<PositionOptions>();
+  auto* cmd = app.add_subcommand("position", "Axis positions, read directly from shared memory");
+  cmd->add_option("--axis,-a", opt->axis, "Only this axis (0-based)");
+  auto* follow_flag =
+      cmd->add_flag("--follow,-f", opt->follow, "Print every new publication until interrupted");
+  cmd->add_option("--every,-n", opt->every,
+                  "With --follow: only publications whose cycle index is a multiple of N")
+      ->check(CLI::Range(1u, 1'000'000u))
+      ->needs(follow_flag);
+  cmd->add_option("--count,-c", opt->count, "With --follow: stop after N publications")
+      ->needs(follow_flag);
+  cmd->callback([&ctx, opt] { ctx.action = [&ctx, opt] { return run_position(ctx, *opt); }; });
+}
+
+}  // namespace ds1928::ctl
