@@ -171,8 +171,14 @@ std::optional<std::string> closest(std::string_view word, const std::vector<std:
     }
   }
   const size_t limit = std::max<size_t>(2, std::min(word.size(), best ? best->size() : 0) / 3);
-  if (!best || best_distance > limit) return std::nullopt;
-  return best;
+  if (best && best_distance <= limit) return best;
+  // An abbreviation of a longer key ("rt_prio" for "rt_priority").
+  if (word.size() >= 3) {
+    for (const auto& o : options) {
+      if (o.size() > word.size() && o.compare(0, word.size(), word) == 0) return o;
+    }
+  }
+  return std::nullopt;
 }
 
 std::string join(const std::vector<std::string>& items) {
@@ -411,6 +417,8 @@ class Section {
     if (!v) return false;
     const std::string suffix = note.empty() ? std::string() : " " + std::string(note);
     const std::string expected = "an integer in " + range_text(lo, hi) + suffix;
+    const std::string expected_syntax =
+        "an integer (decimal or 0x hex) in " + range_text(lo, hi) + suffix;
     if (!is_plain(*v)) {
       std::string message = "expected " + expected + ", got " + describe(*v);
       if (v->IsScalar() && parse_integer(v->Scalar()).status == IntParse::Status::Ok) {
@@ -431,7 +439,7 @@ class Section {
         error(key, v->Scalar() + " is out of range " + range_text(lo, hi) + suffix);
         return false;
       case IntParse::Status::Syntax:
-        error(key, "expected " + expected + " (decimal or 0x hex), got " + describe(*v));
+        error(key, "expected " + expected_syntax + ", got " + describe(*v));
         return false;
     }
     if (parsed.value < lo || parsed.value > hi) {
@@ -718,24 +726,22 @@ void parse_socket(Section s, SocketConfig& c) {
 
 // ---------------------------------------------------------------------------------------------
 
-// Re-locates a cross-field error on the key it names, when that key is written in the file.
-Loc locate(const YAML::Node& root, std::initializer_list<std::string_view> keys) {
-  YAML::Node n = root;
-  Loc best = loc_of(root.Mark());
-  for (const auto key : keys) {
-    if (!n.IsMap()) break;
-    YAML::Node next;
-    for (auto it = n.begin(); it != n.end(); ++it) {
-      if (it->first.IsScalar() && it->first.Scalar() == key) {
-        next = it->second;
-        best = loc_of(it->second.IsNull() ? it->first.Mark() : it->second.Mark());
-        break;
-      }
+// Where the value at `keys` below `node` is written; the deepest existing key when the full path
+// is not in the file. (Recursion instead of a loop: assigning a YAML::Node writes through it.)
+Loc locate(const YAML::Node& node, std::initializer_list<std::string_view> keys,
+           size_t depth = 0) {
+  const Loc here = loc_of(node.Mark());
+  if (depth == keys.size() || !node.IsMap()) return here;
+  const std::string_view key = *(keys.begin() + depth);
+  for (auto it = node.begin(); it != node.end(); ++it) {
+    if (!it->first.IsScalar() || it->first.Scalar() != key) continue;
+    if (it->second.IsNull() || depth + 1 == keys.size()) {
+      const Loc v = loc_of(it->second.Mark());
+      return it->second.IsNull() || v.line == 0 ? loc_of(it->first.Mark()) : v;
     }
-    if (!next.IsDefined()) break;
-    n = next;
+    return locate(it->second, keys, depth + 1);
   }
-  return best;
+  return here;
 }
 
 void check_cross_fields(Diagnostics& diag, const DaemonConfig& c, const std::vector<AxisSite>& axes,
