@@ -294,7 +294,7 @@ TEST_CASE("a second daemon cannot take over a live daemon's name, but replaces a
     REQUIRE(live.running());
     Publisher pub;
     CHECK(pub.open(config_for(name), 1, 1'000'000) == ShmError::kNameInUse);
-    live.stop();  // killed: its object stays behind
+    live.stop(false);  // killed: its objects stay behind
   }
   Publisher pub;
   CHECK_FALSE(pub.open(config_for(name), 1, 1'000'000));

@@ -67,9 +67,11 @@ inline int64_t now_ns() {
 // Signals readiness through a pipe so that the parent maps a complete object.
 struct WriterProcess {
   pid_t pid = -1;
+  std::string name;
 
   void start(const std::string& name, uint32_t axes, int64_t period_ns, uint64_t cycles,
              bool close_at_end, int linger_ms = 0) {
+    this->name = name;
     int fds[2];
     if (pipe(fds) != 0) return;
     pid = fork();
@@ -121,9 +123,16 @@ struct WriterProcess {
     pid = -1;
     return status;
   }
-  void stop() {
-    if (pid > 0) kill(pid, SIGKILL);
+  // Kills the writer; a killed writer cannot remove its objects, so this does (unless the test
+  // wants the leftovers of a dead daemon).
+  void stop(bool remove_objects = true) {
+    const bool killed = pid > 0;
+    if (killed) kill(pid, SIGKILL);
     join();
+    if (killed && remove_objects) {
+      shm_unlink(name.c_str());
+      shm_unlink((name + DS1928_SHM_WAIT_SUFFIX).c_str());
+    }
   }
   ~WriterProcess() { stop(); }
 };
