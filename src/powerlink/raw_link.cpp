@@ -219,12 +219,22 @@ std::error_code RawLink::open(const RawLinkOptions& options) {
   return {};
 }
 
-void RawLink::set_up(bool up) noexcept {
+void RawLink::set_up(bool up) const noexcept {
   const bool was = up_.exchange(up, std::memory_order_relaxed);
   if (was && !up) ++stats_.link_losses;
 }
 
-void RawLink::refresh_link_state() noexcept {
+bool RawLink::link_up() const noexcept {
+  if (up_.load(std::memory_order_relaxed)) return true;
+  const int64_t now = monotonic_now_ns();
+  if (fd_ >= 0 && now >= next_carrier_check_ns_) {
+    refresh_link_state();
+    next_carrier_check_ns_ = now + options_.carrier_check_interval_ns;
+  }
+  return up_.load(std::memory_order_relaxed);
+}
+
+void RawLink::refresh_link_state() const noexcept {
   if (fd_ < 0) {
     set_up(false);
     return;
@@ -309,6 +319,15 @@ Received RawLink::receive_ring(std::span<uint8_t> buffer, int64_t deadline_ns) n
     }
     cpu_relax();
   }
+  // The kernel stamped the frame when it arrived (CLOCK_REALTIME); moved to CLOCK_MONOTONIC it
+  // is the arrival instant even when this thread was late to look.
+  timespec real{};
+  clock_gettime(CLOCK_REALTIME, &real);
+  const int64_t mono = monotonic_now_ns();
+  const int64_t real_ns = static_cast<int64_t>(real.tv_sec) * 1'000'000'000 + real.tv_nsec;
+  const int64_t stamp_ns = static_cast<int64_t>(hdr->tp_sec) * 1'000'000'000 + hdr->tp_nsec;
+  int64_t rx_time = stamp_ns != 0 ? stamp_ns - (real_ns - mono) : mono;
+  if (rx_time > mono || rx_time < mono - 1'000'000'000) rx_time = mono;  // clock step
   const std::size_t len = hdr->tp_snaplen;
   const uint8_t* data = reinterpret_cast<const uint8_t*>(hdr) + hdr->tp_mac;
   const std::size_t copied = std::min(len, buffer.size());
@@ -318,9 +337,9 @@ Received RawLink::receive_ring(std::span<uint8_t> buffer, int64_t deadline_ns) n
   ++stats_.rx_frames;
   if (copied < len) {
     ++stats_.rx_truncated;
-    return Received{copied, monotonic_now_ns(), make_error_code(RawLinkErrc::kBufferTooSmall)};
+    return Received{copied, rx_time, make_error_code(RawLinkErrc::kBufferTooSmall)};
   }
-  return Received{copied, monotonic_now_ns(), {}};
+  return Received{copied, rx_time, {}};
 }
 
 Received RawLink::receive_socket(std::span<uint8_t> buffer, int64_t deadline_ns,

@@ -87,16 +87,16 @@ class RawLink final : public Link {
   // when the deadline passed, or an error (link loss, truncated frame). rx_time_ns is taken when
   // the frame is picked up.
   [[nodiscard]] Received receive(std::span<uint8_t> buffer, int64_t deadline_ns) noexcept override;
-  [[nodiscard]] bool link_up() const noexcept override {
-    return up_.load(std::memory_order_relaxed);
-  }
+  // While up, send() re-reads the interface flags every carrier_check_interval_ns; while down,
+  // link_up() itself does (a driver that stops sending on link loss must still see it return).
+  [[nodiscard]] bool link_up() const noexcept override;
   [[nodiscard]] MacAddress mac() const noexcept override { return mac_; }
 
   // Blocks in ppoll() until a frame is ready or the deadline passes, whatever the RX mode. For
   // idle phases where burning a CPU would be wasteful. True if a frame is ready.
   [[nodiscard]] bool wait_readable(int64_t deadline_ns) noexcept;
   // Re-reads the interface flags now (normal thread or rate-limited from send()).
-  void refresh_link_state() noexcept;
+  void refresh_link_state() const noexcept;
 
   [[nodiscard]] RxMode rx_mode() const noexcept { return options_.rx_mode; }
   [[nodiscard]] const RawLinkStats& stats() const noexcept { return stats_; }
@@ -109,22 +109,22 @@ class RawLink final : public Link {
   [[nodiscard]] Received receive_socket(std::span<uint8_t> buffer, int64_t deadline_ns,
                                         bool block) noexcept;
   [[nodiscard]] bool ring_ready() const noexcept;
-  void set_up(bool up) noexcept;
+  void set_up(bool up) const noexcept;
   void move_from(RawLink& other) noexcept;
 
   RawLinkOptions options_;
   int fd_ = -1;
   int ifindex_ = 0;
   MacAddress mac_{};
-  std::atomic<bool> up_{false};
-  int64_t next_carrier_check_ns_ = 0;
+  mutable std::atomic<bool> up_{false};
+  mutable int64_t next_carrier_check_ns_ = 0;
   // TPACKET_V2 ring mapping.
   uint8_t* ring_ = nullptr;
   std::size_t ring_bytes_ = 0;
   uint32_t ring_frame_size_ = 0;
   uint32_t ring_frame_count_ = 0;
   uint32_t ring_head_ = 0;
-  RawLinkStats stats_;
+  mutable RawLinkStats stats_;
 };
 
 [[nodiscard]] int64_t monotonic_now_ns() noexcept;
