@@ -76,6 +76,9 @@ void CycleWork::run_cycle(const CycleContext& ctx) noexcept {
     // A position that breaks the format is never published as valid.
     if (st.validity == shm::AxisValidity::Valid && !sample.fraction_valid)
       st.validity = shm::AxisValidity::ModuleError;
+    c.position_raw.store(sample.position_raw, std::memory_order_relaxed);
+    c.pos_cycle.store(sample.pos_cycle, std::memory_order_relaxed);
+    c.validity.store(static_cast<uint8_t>(st.validity), std::memory_order_relaxed);
   }
   const uint64_t now_us = static_cast<uint64_t>(ctx.start_ns / 1000);
   for (std::size_t i = 0; i < io_.size(); ++i) run_tunnel(i, now_us);

@@ -76,6 +76,11 @@ struct AxisCounters {
   std::atomic<uint64_t> new_positions{0};
   std::atomic<uint64_t> format_violations{0};  // fraction with low 3 bits set
   std::atomic<uint8_t> error_info{0};
+  // Last sample, for human-readable status only (fields are not read as one consistent set;
+  // applications read the seqlock record in shared memory).
+  std::atomic<uint64_t> position_raw{0};
+  std::atomic<int8_t> pos_cycle{0};
+  std::atomic<uint8_t> validity{0};  // shm::AxisValidity
   std::atomic<uint32_t> endat_error{0};    // written by the normal thread from acyclic reads
   std::atomic<uint32_t> endat_warning{0};  // idem
 };

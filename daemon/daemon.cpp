@@ -1,59 +1,59 @@
 #include "daemon.hpp"
 
 #include <spdlog/spdlog.h>
+#include <unistd.h>
 
 #include <boost/asio/post.hpp>
-#include <chrono>
 #include <cstdio>
 
 #include "config/config_loader.hpp"
-#include "sim/simulated_bus.hpp"
 
 namespace ds1928 {
 
 namespace {
 
-[[nodiscard]] double us(int64_t ns) noexcept { return static_cast<double>(ns) / 1000.0; }
+using json = nlohmann::json;
 
-[[nodiscard]] nlohmann::json histogram_json(const HistogramSummary& h) {
-  return {{"count", h.count},           {"min_us", us(h.min_ns)}, {"mean_us", us(h.mean_ns)},
-          {"p50_us", us(h.p50_ns)},     {"p99_us", us(h.p99_ns)}, {"p999_us", us(h.p999_ns)},
-          {"max_us", us(h.max_ns)},     {"overflow", h.overflow}};
+[[nodiscard]] json quantiles_json(const HistogramSummary& h) {
+  return {{"count", h.count}, {"min", h.min_ns},   {"mean", h.mean_ns},
+          {"p50", h.p50_ns},  {"p99", h.p99_ns},   {"p999", h.p999_ns},
+          {"max", h.max_ns},  {"overflow", h.overflow}};
 }
+
+[[nodiscard]] std::string_view validity_name(uint8_t v) noexcept {
+  switch (static_cast<shm::AxisValidity>(v)) {
+    case shm::AxisValidity::Valid: return "valid";
+    case shm::AxisValidity::Stale: return "stale";
+    case shm::AxisValidity::BusDown: return "bus_down";
+    case shm::AxisValidity::ModuleError: return "module_error";
+  }
+  return "?";
+}
+
+[[nodiscard]] double seconds_since(std::chrono::steady_clock::time_point t) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
+}
+
+constexpr auto kTick = std::chrono::milliseconds(10);
 
 }  // namespace
 
-std::unique_ptr<BusDriver> make_bus(const DaemonConfig& config, std::string& why_not) {
-  switch (config.bus) {
-    case BusKind::Simulated: return std::make_unique<sim::SimulatedBus>(config);
-    case BusKind::Powerlink:
-      why_not = "the powerlink bus is not available in this build";
-      return nullptr;
-    case BusKind::Canio:
-      why_not = "the canio bus is not available in this build";
-      return nullptr;
-  }
-  why_not = "unknown bus";
-  return nullptr;
-}
-
-struct Daemon::Services {};
-
 Daemon::Daemon(DaemonConfig config)
-    : config_(std::move(config)), signals_(io_, SIGINT, SIGTERM), timer_(io_) {}
+    : config_(std::move(config)), signals_(io_, SIGINT, SIGTERM), tick_timer_(io_) {}
 
 Daemon::~Daemon() { stop(); }
 
 std::error_code Daemon::start() {
+  started_at_ = stats_reset_at_ = last_log_ = std::chrono::steady_clock::now();
+  if (auto ec = CycleEngine::validate(config_.cycle)) {
+    spdlog::error("cycle configuration: {}", ec.message());
+    return ec;
+  }
   std::string why_not;
   bus_ = make_bus(config_, why_not);
   if (!bus_) {
     spdlog::error("{}", why_not);
     return std::make_error_code(std::errc::not_supported);
-  }
-  if (auto ec = CycleEngine::validate(config_.cycle)) {
-    spdlog::error("cycle configuration: {}", ec.message());
-    return ec;
   }
   if (auto ec = publisher_.open(config_.shm, static_cast<uint32_t>(config_.axes.size()),
                                 uint64_t{config_.cycle.period_us} * 1000)) {
@@ -64,23 +64,62 @@ std::error_code Daemon::start() {
     spdlog::error("{} bus: {}", bus_->name(), ec.message());
     return ec;
   }
+
+  // Control socket: the configured path, or the per-user fallback when its directory cannot be
+  // made (a daemon started by hand without root).
+  SocketConfig socket = config_.socket;
+  server_ = std::make_unique<control::Server>(io_, socket);
+  register_commands();
+  if (auto ec = server_->start()) {
+    const std::string fallback = fallback_socket_path(config_.socket.path);
+    spdlog::warn("control socket {}: {}; using {}", config_.socket.path, ec.message(), fallback);
+    socket.path = fallback;
+    server_ = std::make_unique<control::Server>(io_, socket);
+    register_commands();
+    if (auto ec2 = server_->start()) {
+      spdlog::error("control socket {}: {}", fallback, ec2.message());
+      return ec2;
+    }
+  }
+  socket_path_ = socket.path;
+
   work_ = std::make_unique<CycleWork>(config_, *bus_, publisher_);
+  registers_ = std::make_unique<RegisterClient>(io_, *bus_);
   engine_ = std::make_unique<CycleEngine>(config_.cycle, *work_);
   auto started = engine_->start();
   if (!started) {
     spdlog::error("cycle engine: {}", started.error.message());
     return started.error;
   }
+  started_ = true;
   if (!started.warning.empty()) spdlog::warn("{}", started.warning);
-  spdlog::info("ds1928d cycling: bus {}, {} axis(es), period {} µs, {}", bus_->name(),
-               config_.axes.size(), config_.cycle.period_us, engine_->rt_status_text());
+  registers_->start(std::chrono::microseconds(std::max<uint32_t>(config_.cycle.period_us, 1000)));
+  notifier_.supervise(
+      io_, [this] { return engine_->cycle_count(); }, [this] { return summary_line(); });
+  spdlog::info("ds1928d {} cycling: bus {}, {} axis(es), period {} µs; {}; shm {}; socket {}",
+               PROJECT_VERSION, bus_->name(), config_.axes.size(), config_.cycle.period_us,
+               engine_->rt_status_text(), config_.shm.name, socket_path_);
   return {};
 }
 
 void Daemon::stop() noexcept {
+  if (started_) spdlog::info("ds1928d stopping");
+  notifier_.stop_supervising();
+  if (started_) notifier_.stopping();
+  publisher_.set_state(shm::DaemonState::Stopping);
   if (engine_) engine_->stop();
+  if (registers_) registers_->stop();
+  if (server_) server_->stop();
   if (bus_) bus_->stop();
   publisher_.close();
+  started_ = false;
+}
+
+void Daemon::request_stop() {
+  boost::asio::post(io_, [this] {
+    tick_timer_.cancel();
+    io_.stop();
+  });
 }
 
 int Daemon::run() {
@@ -90,83 +129,165 @@ int Daemon::run() {
   }
   signals_.async_wait([this](const boost::system::error_code& ec, int signo) {
     if (ec) return;
-    spdlog::info("signal {}: stopping", signo);
-    timer_.cancel();
+    spdlog::info("signal {} received", signo);
+    tick_timer_.cancel();
     io_.stop();
   });
-  timer_.expires_after(std::chrono::seconds(1));
-  timer_.async_wait([this](const boost::system::error_code& ec) {
-    if (!ec) on_second();
+  tick_timer_.expires_after(kTick);
+  tick_timer_.async_wait([this](const boost::system::error_code& ec) {
+    if (!ec) on_tick();
   });
   io_.run();
   stop();
-  spdlog::info("ds1928d stopped");
   return 0;
 }
 
-void Daemon::on_second() {
-  poll_register_results();
-  spdlog::info("{}", summary_line());
-  last_cycle_count_ = engine_->cycle_count();
-  timer_.expires_after(std::chrono::seconds(1));
-  timer_.async_wait([this](const boost::system::error_code& ec) {
-    if (!ec) on_second();
-  });
-}
-
-void Daemon::poll_register_results() {
-  RegisterResult r;
-  while (bus_->poll(r)) {
+void Daemon::on_tick() {
+  // READY=1 once the first cycle exchanged data with the modules.
+  if (!ready_sent_ && work_->data_exchanges() > 0) {
+    ready_sent_ = true;
+    notifier_.ready(summary_line());
+    spdlog::info("first data exchanged: ready");
   }
+  const auto now = std::chrono::steady_clock::now();
+  if (now - last_log_ >= std::chrono::seconds(1)) {
+    last_log_ = now;
+    spdlog::info("{}", summary_line());
+  }
+  tick_timer_.expires_after(kTick);
+  tick_timer_.async_wait([this](const boost::system::error_code& ec) {
+    if (!ec) on_tick();
+  });
 }
 
 std::string Daemon::summary_line() const {
   const auto s = engine_->stats_snapshot();
-  std::string line = fmt::format("cycle {} | late p99 {:.1f} µs max {:.1f} µs | overruns {} | bus {}",
-                                 engine_->cycle_count(), us(s.wake_latency.p99_ns),
-                                 us(s.wake_latency.max_ns), s.overruns, to_string(bus_->state()));
+  std::string line = fmt::format("cycle {} | late p99 {:.1f} µs max {:.1f} µs | overruns {} | {}{}",
+                                 engine_->cycle_count(), s.wake_latency.p99_ns / 1000.0,
+                                 s.wake_latency.max_ns / 1000.0, s.overruns, bus_->name(),
+                                 bus_->state() == BusState::Operational
+                                     ? ""
+                                     : fmt::format(" {}", to_string(bus_->state())));
+  if (!engine_->realtime()) line += " | NOT real-time";
   if (work_->axis_count() > 0) {
-    ds1928_axis_data d{};
-    (void)d;
+    const AxisCounters& c = work_->counters(0);
+    const auto raw = c.position_raw.load(std::memory_order_relaxed);
+    const double periods = static_cast<double>(static_cast<int64_t>(raw)) / 65536.0;
+    line += fmt::format(" | {} {:.4f} periods ({})", config_.axes[0].name, periods,
+                        validity_name(c.validity.load(std::memory_order_relaxed)));
   }
   return line;
 }
 
-nlohmann::json Daemon::stats_json() const {
-  const auto s = engine_->stats_snapshot();
-  return {{"cycles", s.cycles},
-          {"overruns", s.overruns},
-          {"skipped_cycles", s.skipped_cycles},
-          {"reset_generation", s.reset_generation},
-          {"wake_latency", histogram_json(s.wake_latency)},
-          {"work", histogram_json(s.work)},
-          {"exchanges", work_->exchanges()},
-          {"frames_lost", work_->frames_lost()}};
-}
-
-nlohmann::json Daemon::axes_json() const {
-  nlohmann::json axes = nlohmann::json::array();
-  for (std::size_t i = 0; i < config_.axes.size(); ++i) {
-    const AxisConfig& a = config_.axes[i];
-    axes.push_back({{"index", i},
-                    {"name", a.name},
-                    {"node", a.node},
-                    {"slot", a.slot},
-                    {"function_model", static_cast<int>(a.function_model)}});
-  }
-  return axes;
-}
-
-nlohmann::json Daemon::status_json() const {
-  nlohmann::json j;
-  j["daemon"] = {{"version", "0.1.0"},
-                 {"realtime", engine_->realtime()},
-                 {"rt_status", engine_->rt_status_text()},
-                 {"cycle_period_us", config_.cycle.period_us},
-                 {"cycles", engine_->cycle_count()}};
-  j["bus"] = {{"kind", std::string(bus_->name())}, {"state", std::string(to_string(bus_->state()))}};
-  j["stats"] = stats_json();
+json Daemon::axis_json(std::size_t i, bool with_sample) const {
+  const AxisConfig& a = config_.axes[i];
+  AxisCounters& c = work_->counters(i);
+  json j{{"axis", i},
+         {"name", a.name},
+         {"state", validity_name(c.validity.load(std::memory_order_relaxed))},
+         {"error_info", c.error_info.load(std::memory_order_relaxed)},
+         {"endat_error", c.endat_error.load(std::memory_order_relaxed)},
+         {"endat_warning", c.endat_warning.load(std::memory_order_relaxed)}};
+  if (!with_sample) return j;
+  const uint64_t raw = c.position_raw.load(std::memory_order_relaxed);
+  j["node"] = a.node;
+  j["slot"] = a.slot;
+  j["function_model"] = static_cast<int>(a.function_model);
+  j["position_raw"] = raw;
+  j["periods"] = a.module.position_signed ? (static_cast<int64_t>(raw) >> 16)
+                                          : static_cast<int64_t>(raw >> 16);
+  j["fraction"] = raw & 0xFFFF;
+  j["pos_cycle"] = c.pos_cycle.load(std::memory_order_relaxed);
+  j["fresh_cycles"] = c.fresh_cycles.load(std::memory_order_relaxed);
+  j["stale_cycles"] = c.stale_cycles.load(std::memory_order_relaxed);
+  j["new_positions"] = c.new_positions.load(std::memory_order_relaxed);
+  j["format_violations"] = c.format_violations.load(std::memory_order_relaxed);
+  const TunnelCounters& t = work_->tunnel_counters(i);
+  j["flatstream"] = {{"messages_sent", t.messages_sent.load(std::memory_order_relaxed)},
+                     {"messages_failed", t.messages_failed.load(std::memory_order_relaxed)},
+                     {"messages_received", t.messages_received.load(std::memory_order_relaxed)},
+                     {"sequences_repeated", t.sequences_repeated.load(std::memory_order_relaxed)},
+                     {"resyncs", t.resyncs.load(std::memory_order_relaxed)},
+                     {"events_dropped", t.events_dropped.load(std::memory_order_relaxed)},
+                     {"output", flatstream::to_string(static_cast<flatstream::SenderState>(
+                                    t.output_state.load(std::memory_order_relaxed)))},
+                     {"input", flatstream::to_string(static_cast<flatstream::ReceiverState>(
+                                   t.input_state.load(std::memory_order_relaxed)))}};
   return j;
+}
+
+json Daemon::axes_json() const {
+  json axes = json::array();
+  for (std::size_t i = 0; i < config_.axes.size(); ++i) axes.push_back(axis_json(i, true));
+  return {{"axes", std::move(axes)}};
+}
+
+json Daemon::stats_json() const {
+  const auto s = engine_->stats_snapshot();
+  json bus = bus_status_json(*bus_);
+  bus["frames_lost"] = work_->frames_lost();
+  bus["exchanges"] = work_->exchanges();
+  return {{"since_reset_s", seconds_since(stats_reset_at_)},
+          {"cycle",
+           {{"period_us", config_.cycle.period_us},
+            {"count", s.cycles},
+            {"overruns", s.overruns},
+            {"skipped", s.skipped_cycles},
+            {"reset_generation", s.reset_generation},
+            {"wake_latency_ns", quantiles_json(s.wake_latency)},
+            {"work_ns", quantiles_json(s.work)}}},
+          {"bus", std::move(bus)}};
+}
+
+json Daemon::status_json() const {
+  const auto s = engine_->stats_snapshot();
+  json axes = json::array();
+  for (std::size_t i = 0; i < config_.axes.size(); ++i) axes.push_back(axis_json(i, false));
+  return {{"daemon",
+           {{"version", PROJECT_VERSION},
+            {"pid", static_cast<int64_t>(::getpid())},
+            {"state", engine_->running() ? "running" : "stopped"},
+            {"uptime_s", seconds_since(started_at_)},
+            {"realtime", engine_->realtime()},
+            {"rt_status", engine_->rt_status_text()},
+            {"shm", config_.shm.name},
+            {"socket", socket_path_}}},
+          {"bus", bus_status_json(*bus_)},
+          {"cycle",
+           {{"period_us", config_.cycle.period_us},
+            {"count", engine_->cycle_count()},
+            {"overruns", s.overruns},
+            {"skipped", s.skipped_cycles},
+            {"wake_latency_ns", quantiles_json(s.wake_latency)}}},
+          {"axes", std::move(axes)}};
+}
+
+void Daemon::register_commands() {
+  using control::Reply;
+  using control::Request;
+  server_->add_command("status", [this](const Request&, Reply reply) { reply.ok(status_json()); });
+  server_->add_command("axes", [this](const Request&, Reply reply) { reply.ok(axes_json()); });
+  server_->add_command("stats", [this](const Request&, Reply reply) { reply.ok(stats_json()); });
+  server_->add_command("stats-reset", [this](const Request&, Reply reply) {
+    engine_->request_stats_reset();
+    stats_reset_at_ = std::chrono::steady_clock::now();
+    reply.ok();
+  });
+  server_->add_command("ack-errors", [this](const Request& req, Reply reply) {
+    const uint64_t axis = req.get_uint("axis", 0xFFFF);
+    const uint64_t bits = req.get_uint("bits", 0xFF);
+    if (axis >= config_.axes.size()) {
+      reply.error(control::ErrorCode::BadArgument,
+                  fmt::format("axis: {} does not exist (0..{})", axis, config_.axes.size() - 1));
+      return;
+    }
+    if (!work_->post({AxisCommand::Kind::AckErrors, static_cast<uint16_t>(axis),
+                      static_cast<uint8_t>(bits)})) {
+      reply.error("busy", "the cycle thread's command queue is full; try again");
+      return;
+    }
+    reply.ok({{"axis", axis}, {"bits", bits}});
+  });
 }
 
 }  // namespace ds1928

@@ -5,58 +5,75 @@
 #include <boost/asio/io_context.hpp>
 #include <boost/asio/signal_set.hpp>
 #include <boost/asio/steady_timer.hpp>
+#include <chrono>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <string>
 
 #include "config/config.hpp"
+#include "control/control_server.hpp"
+#include "control/systemd_notifier.hpp"
 #include "core/bus.hpp"
 #include "core/cycle_engine.hpp"
 #include "cycle_work.hpp"
+#include "register_client.hpp"
 #include "shm/publisher.hpp"
 
 namespace ds1928 {
+
 
 class Daemon {
  public:
   explicit Daemon(DaemonConfig config);
   ~Daemon();
+  Daemon(const Daemon&) = delete;
+  Daemon& operator=(const Daemon&) = delete;
 
-  // Runs until SIGINT/SIGTERM. Returns the process exit code.
+  // Starts everything; errors are logged and returned.
+  [[nodiscard]] std::error_code start();
+  // Runs the normal thread until SIGINT/SIGTERM or request_stop(). Returns the exit code.
   int run();
+  // Any thread.
+  void request_stop();
+  void stop() noexcept;
 
   // Views for the control commands.
   [[nodiscard]] nlohmann::json status_json() const;
   [[nodiscard]] nlohmann::json axes_json() const;
   [[nodiscard]] nlohmann::json stats_json() const;
+  [[nodiscard]] std::string summary_line() const;
   [[nodiscard]] const DaemonConfig& config() const noexcept { return config_; }
   [[nodiscard]] CycleWork& cycle_work() noexcept { return *work_; }
   [[nodiscard]] CycleEngine& engine() noexcept { return *engine_; }
   [[nodiscard]] BusDriver& bus() noexcept { return *bus_; }
   [[nodiscard]] boost::asio::io_context& io() noexcept { return io_; }
+  [[nodiscard]] const std::string& socket_path() const noexcept { return socket_path_; }
 
  private:
-  [[nodiscard]] std::error_code start();
-  void stop() noexcept;
-  void on_second();
-  void poll_register_results();
-  [[nodiscard]] std::string summary_line() const;
+  void register_commands();
+  void on_tick();
+  [[nodiscard]] nlohmann::json axis_json(std::size_t axis, bool with_sample) const;
 
   DaemonConfig config_;
   boost::asio::io_context io_;
   boost::asio::signal_set signals_;
-  boost::asio::steady_timer timer_;
+  boost::asio::steady_timer tick_timer_;
   std::unique_ptr<BusDriver> bus_;
   shm::Publisher publisher_;
   std::unique_ptr<CycleWork> work_;
   std::unique_ptr<CycleEngine> engine_;
-  struct Services;
-  std::unique_ptr<Services> services_;  // control socket, systemd notifier, EnDat service
-  uint64_t last_cycle_count_ = 0;
+  std::unique_ptr<RegisterClient> registers_;
+  std::unique_ptr<control::Server> server_;
+  control::SystemdNotifier notifier_;
+  std::string socket_path_;
+  std::chrono::steady_clock::time_point started_at_;
+  std::chrono::steady_clock::time_point stats_reset_at_;
+  std::chrono::steady_clock::time_point last_log_;
   bool ready_sent_ = false;
-  uint32_t next_tag_ = 1;
+  bool started_ = false;
 };
 
 [[nodiscard]] std::unique_ptr<BusDriver> make_bus(const DaemonConfig& config, std::string& why_not);
+[[nodiscard]] nlohmann::json bus_status_json(const BusDriver& bus);
 
 }  // namespace ds1928

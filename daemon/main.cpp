@@ -6,6 +6,7 @@
 #include <iostream>
 
 #include "config/config_loader.hpp"
+#include "control/logging.hpp"
 #include "daemon.hpp"
 
 int main(int argc, char** argv) {
@@ -18,7 +19,7 @@ int main(int argc, char** argv) {
                  "validate FILE without touching the bus; exit 0 when valid, 2 otherwise");
   app.add_flag("--print-config", print_config,
                "with --check-config: print the effective configuration (all defaults filled in)");
-  app.set_version_flag("--version", "ds1928d 0.1.0");
+  app.set_version_flag("--version", "ds1928d " PROJECT_VERSION);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -39,6 +40,15 @@ int main(int argc, char** argv) {
                 std::string(ds1928::to_string(c.bus)).c_str(), c.axes.size(), c.cycle.period_us);
     return 0;
   }
-  ds1928::Daemon daemon(std::move(loaded).config());
-  return daemon.run();
+  auto config = std::move(loaded).config();
+  const auto level = ds1928::control::parse_log_level(config.log_level)
+                         .value_or(spdlog::level::info);
+  ds1928::control::setup_logging(level, ds1928::control::detect_log_sink());
+  int rc = 0;
+  {
+    ds1928::Daemon daemon(std::move(config));
+    rc = daemon.run();
+  }
+  ds1928::control::shutdown_logging();
+  return rc;
 }

@@ -1,0 +1,89 @@
+// Which bus driver a configuration asks for, and its status for the control socket.
+#include <spdlog/spdlog.h>
+
+#include "daemon.hpp"
+#include "powerlink/powerlink_bus.hpp"
+#include "powerlink/raw_link.hpp"
+#include "sim/simulated_bus.hpp"
+
+namespace ds1928 {
+
+std::unique_ptr<BusDriver> make_bus(const DaemonConfig& config, std::string& why_not) {
+  switch (config.bus) {
+    case BusKind::Simulated: return std::make_unique<sim::SimulatedBus>(config);
+    case BusKind::Powerlink: {
+      auto link = std::make_unique<powerlink::RawLink>();
+      powerlink::RawLinkOptions options;
+      options.interface = config.powerlink.interface;
+      if (auto ec = link->open(options)) {
+        why_not = fmt::format("powerlink: cannot open raw socket on '{}': {}{}",
+                              config.powerlink.interface, ec.message(),
+                              ec == std::errc::operation_not_permitted
+                                  ? " (needs root or CAP_NET_RAW)"
+                                  : "");
+        return nullptr;
+      }
+      powerlink::MnConfig mn;
+      mn.bus = config.powerlink;
+      mn.axes = config.axes;
+      mn.cycle_us = config.cycle.period_us;
+      mn.mac = link->mac();
+      try {
+        return std::make_unique<powerlink::PowerlinkBus>(mn, std::move(link));
+      } catch (const std::exception& e) {
+        why_not = fmt::format("powerlink: {}", e.what());
+        return nullptr;
+      }
+    }
+    case BusKind::Canio:
+      why_not =
+          "canio: the CAN-I/O bus driver is not part of this build yet (use bus: simulated or "
+          "powerlink)";
+      return nullptr;
+  }
+  why_not = "unknown bus";
+  return nullptr;
+}
+
+nlohmann::json bus_status_json(const BusDriver& bus) {
+  nlohmann::json j{{"kind", std::string(bus.name())}, {"state", std::string(to_string(bus.state()))}};
+  const auto* pl = dynamic_cast<const powerlink::PowerlinkBus*>(&bus);
+  if (pl == nullptr) return j;
+  const auto st = pl->status();
+  j["mn_state"] = std::string(powerlink::to_string(st.mn_state));
+  j["link_up"] = st.link_up;
+  j["counters"] = {{"cycles", st.counters.cycles},
+                   {"cycle_time_exceeded", st.counters.cycle_time_exceeded.events},
+                   {"cycle_time_exceeded_fired", st.counters.cycle_time_exceeded.fired},
+                   {"unexpected_frames", st.counters.unexpected_frames},
+                   {"invalid_frames", st.counters.invalid_frames},
+                   {"async_timeouts", st.counters.async_timeouts}};
+  nlohmann::json nodes = nlohmann::json::array();
+  for (std::size_t i = 0; i < st.node_count; ++i) {
+    const auto& n = st.nodes[i];
+    nodes.push_back({{"node", n.node},
+                     {"boot", std::string(powerlink::to_string(n.boot))},
+                     {"nmt", std::string(powerlink::to_string(n.nmt))},
+                     {"in_isochronous", n.in_isochronous},
+                     {"vendor_id", n.vendor_id},
+                     {"product_code", n.product_code},
+                     {"preq_size", n.preq_size},
+                     {"pres_size", n.pres_size},
+                     {"pres_received", n.pres_received},
+                     {"loss_of_pres", {{"events", n.loss_of_pres.events},
+                                       {"counter", n.loss_of_pres.value},
+                                       {"fired", n.loss_of_pres.fired}}},
+                     {"late_pres", {{"events", n.late_pres.events}, {"fired", n.late_pres.fired}}},
+                     {"pres_size_mismatches", n.pres_size_mismatches},
+                     {"last_pres_size", n.last_pres_size},
+                     {"status_error_entries", n.status_error_entries},
+                     {"boots", n.boots},
+                     {"resets", n.resets},
+                     {"sdo_errors", n.sdo_errors},
+                     {"last_error", n.last_error ? n.last_error.message() : std::string()}});
+  }
+  j["nodes"] = std::move(nodes);
+  return j;
+}
+
+}  // namespace ds1928

@@ -1,0 +1,275 @@
+// The endat-* socket commands: argument parsing, privilege check, reply formatting. The command
+// engine itself is in endat_service.cpp.
+#include <cstdio>
+#include <string>
+
+#include "endat/names.hpp"
+#include "endat/number.hpp"
+#include "endat_service.hpp"
+
+namespace ds1928 {
+
+namespace {
+
+using nlohmann::json;
+using endat::Request;
+
+[[nodiscard]] std::string hex(uint64_t v, int digits) {
+  char buf[24];
+  std::snprintf(buf, sizeof(buf), "0x%0*llX", digits, static_cast<unsigned long long>(v));
+  return buf;
+}
+
+// A number argument: a JSON number, or a string in decimal or 0x hex ("0xA9").
+[[nodiscard]] uint64_t number_arg(const control::Request& req, const char* name, uint64_t min,
+                                  uint64_t max) {
+  const json& body = req.body();
+  const auto it = body.find(name);
+  uint64_t v = 0;
+  if (it != body.end() && it->is_string()) {
+    auto r = endat::parse_number(it->get<std::string>(), min, max);
+    if (!r)
+      throw control::ArgumentError("argument '" + std::string(name) + "': '" +
+                                   it->get<std::string>() + "': " + r.error().message());
+    v = *r;
+  } else {
+    v = req.get_uint(name, max);
+  }
+  if (v < min || v > max)
+    throw control::ArgumentError("argument '" + std::string(name) + "': " + std::to_string(v) +
+                                 " is outside " + std::to_string(min) + ".." + std::to_string(max));
+  return v;
+}
+
+[[nodiscard]] json area_json(uint8_t mrs) {
+  json j{{"mrs", mrs}, {"mrs_hex", hex(mrs, 2)}};
+  if (const auto name = endat::mrs_name(mrs); !name.empty()) j["area"] = std::string(name);
+  return j;
+}
+
+[[nodiscard]] json value_json(uint8_t mrs, uint8_t param, uint16_t value) {
+  json j{{"value", value}, {"value_hex", hex(value, 4)}};
+  if (auto meaning = endat::describe_word(mrs, param, value); !meaning.empty())
+    j["meaning"] = std::move(meaning);
+  return j;
+}
+
+[[nodiscard]] std::string step_context(const Request& r) {
+  std::string s = std::string(endat::command_name(r.command));
+  if (endat::has_mrs(r.command)) s += " MRS " + hex(r.mrs, 2);
+  if (endat::has_block(r.command)) s += " block " + std::to_string(r.block);
+  if (endat::has_parameter(r.command)) s += " parameter " + std::to_string(r.parameter);
+  return s;
+}
+
+void reply_error(const control::Reply& reply, const EnDatService::JobResult& r) {
+  std::string message;
+  if (!r.detail.empty()) {
+    message = r.detail;
+  } else {
+    message = r.error.message();
+    for (const auto& s : r.steps) {
+      if (s.error == r.error) {
+        message = step_context(s.request) + ": " + message;
+        break;
+      }
+    }
+  }
+  reply.error(endat_error_code_name(r.error), std::move(message));
+}
+
+// Dump sizes: the operating status has 4 words, the EnDat 2.2 manufacturer area 64.
+[[nodiscard]] unsigned area_words(uint8_t mrs) noexcept {
+  if (mrs == 0xB9) return 4;
+  if (mrs == 0xBD) return 64;
+  return 16;
+}
+
+}  // namespace
+
+void EnDatService::register_commands(control::Server& server) {
+  // Runs a job for a socket request and completes the reply with `format` or the error.
+  auto run = [this](const control::Request& req, const control::Reply& reply, JobKind kind,
+                    std::vector<Request> steps, std::function<json(const JobResult&)> format) {
+    if (axes_.empty()) throw control::ArgumentError("argument 'axis': the daemon has no axes");
+    const auto axis = static_cast<std::size_t>(
+        req.has("axis") ? number_arg(req, "axis", 0, axes_.size() - 1) : 0);
+    const JobId id = submit(axis, kind, std::move(steps),
+                            [reply, axis, format = std::move(format)](const JobResult& r) {
+                              if (r.error) return reply_error(reply, r);
+                              json j = format(r);
+                              j["axis"] = axis;
+                              reply.ok(std::move(j));
+                            });
+    if (id != 0) {
+      reply.on_cancel([this, id, alive = std::weak_ptr<bool>(alive_)] {
+        if (!alive.expired()) cancel(id);
+      });
+    }
+  };
+  auto privileged = [this](const control::Request& req, const control::Reply& reply) {
+    if (may_change_encoder(req)) return true;
+    reply.error("permission_denied",
+                "'" + req.command() + "' changes the encoder: needs uid 0 or group '" +
+                    config_.socket.privileged_group + "'");
+    return false;
+  };
+
+  server.add_command("endat-reset", [run, privileged](const control::Request& req,
+                                                      control::Reply reply) {
+    if (!privileged(req, reply)) return;
+    run(req, reply, JobKind::Single, {Request::reset()},
+        [](const JobResult&) { return json{{"command", "reset"}}; });
+  });
+
+  server.add_command("endat-ack", [run](const control::Request& req, control::Reply reply) {
+    run(req, reply, JobKind::Single, {Request::acknowledge()},
+        [](const JobResult&) { return json{{"command", "ack"}}; });
+  });
+
+  server.add_command("endat-read-param", [run](const control::Request& req, control::Reply reply) {
+    const auto mrs = static_cast<uint8_t>(number_arg(req, "mrs", 0, 0xFF));
+    const auto param = static_cast<uint8_t>(number_arg(req, "param", 0, 0xFF));
+    run(req, reply, JobKind::Single, {Request::read(mrs, param)}, [mrs, param](const JobResult& r) {
+      json j = area_json(mrs);
+      j["command"] = "read-param";
+      j["param"] = param;
+      j.update(value_json(mrs, param, r.steps.back().reply.value()));
+      return j;
+    });
+  });
+
+  server.add_command("endat-write-param", [run, privileged](const control::Request& req,
+                                                            control::Reply reply) {
+    const auto mrs = static_cast<uint8_t>(number_arg(req, "mrs", 0, 0xFF));
+    const auto param = static_cast<uint8_t>(number_arg(req, "param", 0, 0xFF));
+    const auto value = static_cast<uint16_t>(number_arg(req, "value", 0, 0xFFFF));
+    if (!privileged(req, reply)) return;
+    run(req, reply, JobKind::WriteVerify,
+        {Request::write(mrs, param, value), Request::read(mrs, param)},
+        [mrs, param](const JobResult& r) {
+          json j = area_json(mrs);
+          j["command"] = "write-param";
+          j["param"] = param;
+          j.update(value_json(mrs, param, r.steps.back().reply.value()));
+          j["verified"] = true;
+          return j;
+        });
+  });
+
+  server.add_command("endat-read-block", [run](const control::Request& req, control::Reply reply) {
+    const auto mrs = static_cast<uint8_t>(number_arg(req, "mrs", 0, 0xFF));
+    const auto block = static_cast<uint8_t>(number_arg(req, "block", 0, 0xFF));
+    const auto param = static_cast<uint8_t>(number_arg(req, "param", 0, 0xFF));
+    run(req, reply, JobKind::Single, {Request::read_block(mrs, block, param)},
+        [mrs, block, param](const JobResult& r) {
+          json j = area_json(mrs);
+          j["command"] = "read-block";
+          j["block"] = block;
+          j["param"] = param;
+          j.update(value_json(mrs, param, r.steps.back().reply.value()));
+          return j;
+        });
+  });
+
+  server.add_command("endat-write-block", [run, privileged](const control::Request& req,
+                                                            control::Reply reply) {
+    const auto mrs = static_cast<uint8_t>(number_arg(req, "mrs", 0, 0xFF));
+    const auto block = static_cast<uint8_t>(number_arg(req, "block", 0, 0xFF));
+    const auto param = static_cast<uint8_t>(number_arg(req, "param", 0, 0xFF));
+    const auto value = static_cast<uint16_t>(number_arg(req, "value", 0, 0xFFFF));
+    if (!privileged(req, reply)) return;
+    run(req, reply, JobKind::WriteVerify,
+        {Request::write_block(mrs, block, param, value), Request::read_block(mrs, block, param)},
+        [mrs, block, param](const JobResult& r) {
+          json j = area_json(mrs);
+          j["command"] = "write-block";
+          j["block"] = block;
+          j["param"] = param;
+          j.update(value_json(mrs, param, r.steps.back().reply.value()));
+          j["verified"] = true;
+          return j;
+        });
+  });
+
+  server.add_command("endat-read-info", [run](const control::Request& req, control::Reply reply) {
+    const auto word = static_cast<unsigned>(number_arg(req, "word", 1, 4));
+    const auto mrs = static_cast<uint8_t>(number_arg(req, "mrs", 0, 0xFF));
+    run(req, reply, JobKind::Single, {Request::read_info(word, mrs)},
+        [word, mrs](const JobResult& r) {
+          const endat::Reply& rep = r.steps.back().reply;
+          json j{{"command", "read-info"}, {"word", word}, {"mrs", mrs}, {"mrs_hex", hex(mrs, 2)}};
+          if (const auto name = endat::mrs_name(mrs); !name.empty()) j["info"] = std::string(name);
+          j.update(value_json(mrs, 0, rep.value()));
+          json words = json::array();
+          for (unsigned i = 0; i < rep.word_count; ++i) words.push_back(rep.words[i]);
+          j["words"] = std::move(words);
+          return j;
+        });
+  });
+
+  server.add_command("endat-dump", [run](const control::Request& req, control::Reply reply) {
+    const auto mrs = static_cast<uint8_t>(number_arg(req, "mrs", 0, 0xFF));
+    const unsigned count = req.has("count") ? static_cast<unsigned>(number_arg(req, "count", 1, 64))
+                                            : area_words(mrs);
+    std::vector<Request> steps;
+    for (unsigned p = 0; p < count; ++p) steps.push_back(Request::read(mrs, static_cast<uint8_t>(p)));
+    run(req, reply, JobKind::Sequence, std::move(steps), [mrs, count](const JobResult& r) {
+      json j = area_json(mrs);
+      j["command"] = "dump";
+      j["count"] = count;
+      json words = json::array();
+      for (const auto& s : r.steps) {
+        json w{{"param", s.request.parameter}};
+        if (s.error) {
+          w["error"] = {{"code", std::string(endat_error_code_name(s.error))},
+                        {"message", s.error.message()}};
+        } else {
+          w.update(value_json(mrs, s.request.parameter, s.reply.value()));
+        }
+        words.push_back(std::move(w));
+      }
+      j["words"] = std::move(words);
+      return j;
+    });
+  });
+
+  server.add_command("endat-ident", [this](const control::Request& req, control::Reply reply) {
+    if (axes_.empty()) throw control::ArgumentError("argument 'axis': the daemon has no axes");
+    const auto axis = static_cast<std::size_t>(
+        req.has("axis") ? number_arg(req, "axis", 0, axes_.size() - 1) : 0);
+    const bool refresh = req.opt_bool("refresh").value_or(false);
+    auto answer = [this, axis, reply, alive = std::weak_ptr<bool>(alive_)](std::error_code ec) {
+      if (alive.expired()) return;
+      const Axis& a = *axes_[axis];
+      if (!a.ident) {
+        const auto error = ec ? ec : make_error_code(EnDatServiceErrc::identification_unavailable);
+        return reply.error(endat_error_code_name(error),
+                           "axis " + std::to_string(axis) + ": identification: " + error.message());
+      }
+      json j{{"axis", axis}, {"source", a.ident_source}, {"identification", identification_json(*a.ident)}};
+      json words = json::object();
+      for (unsigned w = 4; w < endat::kManufacturerWords; ++w) {
+        json word{{"value", a.words[w]}, {"value_hex", hex(a.words[w], 4)}};
+        if (const auto name = endat::manufacturer_word_name(w); !name.empty())
+          word["name"] = std::string(name);
+        words[std::to_string(w)] = std::move(word);
+      }
+      j["words"] = std::move(words);
+      if (a.endat_error) {
+        j["endat_error"] = *a.endat_error;
+        j["endat_error_names"] = endat::endat_error_names(*a.endat_error);
+      }
+      if (a.endat_warning) {
+        j["endat_warning"] = *a.endat_warning;
+        j["endat_warning_names"] = endat::endat_warning_names(*a.endat_warning);
+      }
+      reply.ok(std::move(j));
+    };
+    const Axis& a = *axes_[axis];
+    if (!refresh && a.ident && !a.identifying) return answer({});
+    refresh_identification(axis, std::move(answer));
+  });
+}
+
+}  // namespace ds1928
