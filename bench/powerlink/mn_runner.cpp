@@ -30,7 +30,9 @@ namespace pl = ds1928::powerlink;
 namespace {
 
 std::atomic<bool> g_stop{false};
-void on_stop(int) { g_stop.store(true); }
+void on_stop(int) {
+  g_stop.store(true);
+}
 
 // Fixed-bin histogram (100 ns bins): exact enough percentiles without storing samples and
 // without allocating on the cycle path.
@@ -121,10 +123,10 @@ struct Options {
   std::string iface;
   std::string config_file;
   int nodes = 1;
-  uint32_t period_us = 0;          // 0: from the config (1000 without one)
-  uint32_t pres_timeout_us = 0;    // 0: from the config (100 without one)
-  int64_t loss_threshold = -1;     // -1: from the config
-  double duration_s = 0;           // measured run after all CNs are operational (0: until signal)
+  uint32_t period_us = 0;        // 0: from the config (1000 without one)
+  uint32_t pres_timeout_us = 0;  // 0: from the config (100 without one)
+  int64_t loss_threshold = -1;   // -1: from the config
+  double duration_s = 0;         // measured run after all CNs are operational (0: until signal)
   double warmup_s = 1.0;
   double boot_timeout_s = 20.0;
   int rt_priority = 80;
@@ -217,13 +219,14 @@ int main(int argc, char** argv) {
   for (auto& n : config.powerlink.nodes) {
     if (o.pres_timeout_us != 0) n.pres_timeout_us = o.pres_timeout_us;
   }
-  if (o.loss_threshold >= 0) config.powerlink.thresholds.loss_of_pres = static_cast<uint32_t>(o.loss_threshold);
+  if (o.loss_threshold >= 0)
+    config.powerlink.thresholds.loss_of_pres = static_cast<uint32_t>(o.loss_threshold);
   config.powerlink.interface = o.iface;
 
   pl::RawLink raw;
   pl::RawLinkOptions lo;
   lo.interface = o.iface;
-  lo.rx_mode = o.rx_mode == "busy-poll" ? pl::RxMode::BusyPoll
+  lo.rx_mode = o.rx_mode == "busy-poll"  ? pl::RxMode::BusyPoll
                : o.rx_mode == "blocking" ? pl::RxMode::Blocking
                                          : pl::RxMode::Ring;
   if (auto ec = raw.open(lo)) {
@@ -310,12 +313,13 @@ int main(int argc, char** argv) {
     const auto nodes = bus->managing_node().nodes();
     for (std::size_t k = 0; k < nodes.size() && k < last_boot.size(); ++k) {
       if (nodes[k].boot != last_boot[k]) {
-        std::printf("EVENT t=%.3f node=%u boot=%s nmt=%s boots=%u resets=%u pres_losses=%u "
-                    "last_error=\"%s\"\n",
-                    t_s, nodes[k].node, std::string(pl::to_string(nodes[k].boot)).c_str(),
-                    std::string(pl::to_string(nodes[k].nmt)).c_str(), nodes[k].boots,
-                    nodes[k].resets, nodes[k].loss_of_pres.events,
-                    nodes[k].last_error ? nodes[k].last_error.message().c_str() : "");
+        std::printf(
+            "EVENT t=%.3f node=%u boot=%s nmt=%s boots=%u resets=%u pres_losses=%u "
+            "last_error=\"%s\"\n",
+            t_s, nodes[k].node, std::string(pl::to_string(nodes[k].boot)).c_str(),
+            std::string(pl::to_string(nodes[k].nmt)).c_str(), nodes[k].boots, nodes[k].resets,
+            nodes[k].loss_of_pres.events,
+            nodes[k].last_error ? nodes[k].last_error.message().c_str() : "");
         last_boot[k] = nodes[k].boot;
       }
     }
@@ -403,9 +407,10 @@ int main(int argc, char** argv) {
         const double tolerance = 0.01 + std::fabs(c.velocity) * slack_s;
         if (dt < 0 || std::fabs((pos - c.prev_pos) - expected) > tolerance) {
           if (++wrong <= 5)
-            std::printf("EVENT t=%.3f axis=%zu wrong-position pos=%.5f prev=%.5f dt=%.6f "
-                        "expected_delta=%.5f\n",
-                        t_s, i, pos, c.prev_pos, dt, expected);
+            std::printf(
+                "EVENT t=%.3f axis=%zu wrong-position pos=%.5f prev=%.5f dt=%.6f "
+                "expected_delta=%.5f\n",
+                t_s, i, pos, c.prev_pos, dt, expected);
         }
       }
       c.have_prev = true;
@@ -434,33 +439,33 @@ int main(int argc, char** argv) {
     resets += st.resets;
   }
   const pl::MnCounters& mc = bus->managing_node().counters();
-  std::printf("RESULT period_us=%u nodes=%zu cycles=%llu measured_cycles=%llu all_operational=%d "
-              "boots=%u resets=%u loss_of_pres_events=%u loss_threshold_fired=%u "
-              "measured_loss_events=%u measured_threshold_fired=%u overruns=%llu "
-              "cycle_time_exceeded=%u invalid_frames=%u unexpected_frames=%u async_timeouts=%u "
-              "fresh=%llu moving=%llu wrong_positions=%llu bad_stamps=%llu\n",
-              config.cycle.period_us, config.powerlink.nodes.size(),
-              static_cast<unsigned long long>(cycles),
-              static_cast<unsigned long long>(measured_cycles), all_op ? 1 : 0, boots, resets,
-              events, fired, measuring ? events - events_at_start : 0,
-              measuring ? fired - fired_at_start : 0, static_cast<unsigned long long>(overruns),
-              mc.cycle_time_exceeded.events, mc.invalid_frames, mc.unexpected_frames,
-              mc.async_timeouts, static_cast<unsigned long long>(fresh),
-              static_cast<unsigned long long>(moving), static_cast<unsigned long long>(wrong),
-              static_cast<unsigned long long>(bad_stamp));
-  std::printf("JITTER soc_to_soc_deviation_us p50=%.1f p99=%.1f max=%.1f (n=%llu, max interval %.1f us)\n",
-              link.soc_jitter().percentile_us(0.5), link.soc_jitter().percentile_us(0.99),
-              link.soc_jitter().max_us(),
-              static_cast<unsigned long long>(link.soc_jitter().count()),
-              static_cast<double>(link.soc_interval_max_ns()) / 1000.0);
+  std::printf(
+      "RESULT period_us=%u nodes=%zu cycles=%llu measured_cycles=%llu all_operational=%d "
+      "boots=%u resets=%u loss_of_pres_events=%u loss_threshold_fired=%u "
+      "measured_loss_events=%u measured_threshold_fired=%u overruns=%llu "
+      "cycle_time_exceeded=%u invalid_frames=%u unexpected_frames=%u async_timeouts=%u "
+      "fresh=%llu moving=%llu wrong_positions=%llu bad_stamps=%llu\n",
+      config.cycle.period_us, config.powerlink.nodes.size(),
+      static_cast<unsigned long long>(cycles), static_cast<unsigned long long>(measured_cycles),
+      all_op ? 1 : 0, boots, resets, events, fired, measuring ? events - events_at_start : 0,
+      measuring ? fired - fired_at_start : 0, static_cast<unsigned long long>(overruns),
+      mc.cycle_time_exceeded.events, mc.invalid_frames, mc.unexpected_frames, mc.async_timeouts,
+      static_cast<unsigned long long>(fresh), static_cast<unsigned long long>(moving),
+      static_cast<unsigned long long>(wrong), static_cast<unsigned long long>(bad_stamp));
+  std::printf(
+      "JITTER soc_to_soc_deviation_us p50=%.1f p99=%.1f max=%.1f (n=%llu, max interval %.1f us)\n",
+      link.soc_jitter().percentile_us(0.5), link.soc_jitter().percentile_us(0.99),
+      link.soc_jitter().max_us(), static_cast<unsigned long long>(link.soc_jitter().count()),
+      static_cast<double>(link.soc_interval_max_ns()) / 1000.0);
   std::printf("LATENCY preq_to_pres_us p50=%.1f p99=%.1f max=%.1f (n=%llu)\n",
               link.latency().percentile_us(0.5), link.latency().percentile_us(0.99),
               link.latency().max_us(), static_cast<unsigned long long>(link.latency().count()));
   std::printf("WAKE latency_us p50=%.1f p99=%.1f max=%.1f\n", wake.percentile_us(0.5),
               wake.percentile_us(0.99), wake.max_us());
-  std::printf("NETTIME bus_reference_error_us p50=%.1f p99=%.1f max=%.1f (SoC send instant vs "
-              "NetTimeRef.monotonic_ns)\n",
-              ref_error.percentile_us(0.5), ref_error.percentile_us(0.99), ref_error.max_us());
+  std::printf(
+      "NETTIME bus_reference_error_us p50=%.1f p99=%.1f max=%.1f (SoC send instant vs "
+      "NetTimeRef.monotonic_ns)\n",
+      ref_error.percentile_us(0.5), ref_error.percentile_us(0.99), ref_error.max_us());
   bus->stop();
   if (dma_fd >= 0) close(dma_fd);
   if (exit_code == 0 && (wrong != 0 || bad_stamp != 0)) exit_code = 3;

@@ -5,9 +5,9 @@
 // two in network namespaces joined by a veth pair and runs every mode.
 #include <fcntl.h>
 #include <sched.h>
-#include <unistd.h>
 #include <sys/mman.h>
 #include <time.h>
+#include <unistd.h>
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
@@ -24,7 +24,9 @@ namespace pl = ds1928::powerlink;
 namespace {
 
 std::atomic<bool> g_stop{false};
-void on_signal(int) { g_stop.store(true); }
+void on_signal(int) {
+  g_stop.store(true);
+}
 
 constexpr uint8_t kMnNode = 240;
 
@@ -59,8 +61,8 @@ std::size_t make_frame(uint8_t* f, const pl::MacAddress& src, bool preq, uint8_t
                        std::size_t payload, uint32_t seq) {
   const std::size_t len = std::max<std::size_t>(60, 24 + payload);
   std::memset(f, 0, len);
-  const pl::MacAddress dst = preq ? pl::MacAddress{0xff, 0xff, 0xff, 0xff, 0xff, 0xff}
-                                  : pl::kMacPRes;
+  const pl::MacAddress dst =
+      preq ? pl::MacAddress{0xff, 0xff, 0xff, 0xff, 0xff, 0xff} : pl::kMacPRes;
   std::memcpy(f, dst.data(), 6);
   std::memcpy(f + 6, src.data(), 6);
   f[12] = 0x88;
@@ -152,7 +154,8 @@ int run_ping(pl::RawLink& link, uint8_t node, uint32_t count, uint32_t period_us
     while (!got) {
       const auto r = link.receive(rx, deadline);
       if (r.error || r.length == 0) break;
-      if (r.length >= 28 && rx[14] == 0x04 && rx[16] == node && pl::load_le32(rx.data() + 24) == i) {
+      if (r.length >= 28 && rx[14] == 0x04 && rx[16] == node &&
+          pl::load_le32(rx.data() + 24) == i) {
         got = true;
         if (i >= 100) rtt.push_back(r.rx_time_ns - t0);
       }
@@ -165,8 +168,8 @@ int run_ping(pl::RawLink& link, uint8_t node, uint32_t count, uint32_t period_us
     const auto idx = static_cast<std::size_t>(p * static_cast<double>(rtt.size() - 1));
     return static_cast<double>(rtt[idx]) / 1000.0;
   };
-  std::printf("%-10s n=%zu lost=%u  rtt_us median=%.1f p90=%.1f p99=%.1f max=%.1f\n",
-              label.c_str(), rtt.size(), lost, pct(0.5), pct(0.9), pct(0.99), pct(1.0));
+  std::printf("%-10s n=%zu lost=%u  rtt_us median=%.1f p90=%.1f p99=%.1f max=%.1f\n", label.c_str(),
+              rtt.size(), lost, pct(0.5), pct(0.9), pct(0.99), pct(1.0));
   return 0;
 }
 

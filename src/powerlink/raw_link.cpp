@@ -31,12 +31,18 @@ class RawLinkCategory final : public std::error_category {
   [[nodiscard]] const char* name() const noexcept override { return "powerlink.raw_link"; }
   [[nodiscard]] std::string message(int ev) const override {
     switch (static_cast<RawLinkErrc>(ev)) {
-      case RawLinkErrc::kInterfaceNameTooLong: return "interface name longer than IFNAMSIZ-1";
-      case RawLinkErrc::kNotOpen: return "raw link is not open";
-      case RawLinkErrc::kCarrierLost: return "link down: interface not up or no carrier";
-      case RawLinkErrc::kFrameTooLong: return "frame longer than 1514 bytes";
-      case RawLinkErrc::kFrameTooShort: return "frame shorter than an Ethernet header";
-      case RawLinkErrc::kBufferTooSmall: return "received frame truncated: buffer too small";
+      case RawLinkErrc::kInterfaceNameTooLong:
+        return "interface name longer than IFNAMSIZ-1";
+      case RawLinkErrc::kNotOpen:
+        return "raw link is not open";
+      case RawLinkErrc::kCarrierLost:
+        return "link down: interface not up or no carrier";
+      case RawLinkErrc::kFrameTooLong:
+        return "frame longer than 1514 bytes";
+      case RawLinkErrc::kFrameTooShort:
+        return "frame shorter than an Ethernet header";
+      case RawLinkErrc::kBufferTooSmall:
+        return "received frame truncated: buffer too small";
     }
     return "unknown raw link error";
   }
@@ -77,9 +83,13 @@ int64_t monotonic_now_ns() noexcept {
   return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
 }
 
-RawLink::~RawLink() { close(); }
+RawLink::~RawLink() {
+  close();
+}
 
-RawLink::RawLink(RawLink&& other) noexcept { move_from(other); }
+RawLink::RawLink(RawLink&& other) noexcept {
+  move_from(other);
+}
 
 RawLink& RawLink::operator=(RawLink&& other) noexcept {
   if (this != &other) {
@@ -298,9 +308,12 @@ bool RawLink::ring_ready() const noexcept {
 Received RawLink::receive(std::span<uint8_t> buffer, int64_t deadline_ns) noexcept {
   if (fd_ < 0) return Received{0, 0, make_error_code(RawLinkErrc::kNotOpen)};
   switch (options_.rx_mode) {
-    case RxMode::Ring: return receive_ring(buffer, deadline_ns);
-    case RxMode::BusyPoll: return receive_socket(buffer, deadline_ns, false);
-    case RxMode::Blocking: return receive_socket(buffer, deadline_ns, true);
+    case RxMode::Ring:
+      return receive_ring(buffer, deadline_ns);
+    case RxMode::BusyPoll:
+      return receive_socket(buffer, deadline_ns, false);
+    case RxMode::Blocking:
+      return receive_socket(buffer, deadline_ns, true);
   }
   return Received{0, 0, make_error_code(RawLinkErrc::kNotOpen)};
 }
@@ -308,8 +321,8 @@ Received RawLink::receive(std::span<uint8_t> buffer, int64_t deadline_ns) noexce
 Received RawLink::receive_ring(std::span<uint8_t> buffer, int64_t deadline_ns) noexcept {
   // Polls the head slot's status word: no syscall while waiting, and the check costs a cache
   // line that the kernel writes when it fills the slot.
-  auto* hdr = reinterpret_cast<tpacket2_hdr*>(
-      ring_ + static_cast<std::size_t>(ring_head_) * ring_frame_size_);
+  auto* hdr = reinterpret_cast<tpacket2_hdr*>(ring_ + static_cast<std::size_t>(ring_head_) *
+                                                          ring_frame_size_);
   uint32_t spins = 0;
   while ((__atomic_load_n(&hdr->tp_status, __ATOMIC_ACQUIRE) & TP_STATUS_USER) == 0) {
     // Reading the clock every poll would dominate the loop; every 16th is fine-grained enough.
@@ -343,7 +356,7 @@ Received RawLink::receive_ring(std::span<uint8_t> buffer, int64_t deadline_ns) n
 }
 
 Received RawLink::receive_socket(std::span<uint8_t> buffer, int64_t deadline_ns,
-                                      bool block) noexcept {
+                                 bool block) noexcept {
   for (;;) {
     const ssize_t n = recv(fd_, buffer.data(), buffer.size(), MSG_DONTWAIT | MSG_TRUNC);
     if (n >= 0) {

@@ -24,9 +24,12 @@ enum class RxMode : uint8_t { Ring = 0, BusyPoll = 1, Blocking = 2 };
 
 [[nodiscard]] constexpr const char* to_string(RxMode m) noexcept {
   switch (m) {
-    case RxMode::Ring: return "ring";
-    case RxMode::BusyPoll: return "busy-poll";
-    case RxMode::Blocking: return "blocking";
+    case RxMode::Ring:
+      return "ring";
+    case RxMode::BusyPoll:
+      return "busy-poll";
+    case RxMode::Blocking:
+      return "blocking";
   }
   return "?";
 }
@@ -61,9 +64,9 @@ struct RawLinkStats {
   uint64_t tx_frames = 0;
   uint64_t tx_errors = 0;
   uint64_t rx_frames = 0;
-  uint64_t rx_truncated = 0;   // did not fit the caller's buffer
-  uint64_t link_losses = 0;    // up → down transitions seen
-  uint64_t kernel_drops = 0;   // PACKET_STATISTICS tp_drops, accumulated by read_kernel_drops()
+  uint64_t rx_truncated = 0;  // did not fit the caller's buffer
+  uint64_t link_losses = 0;   // up → down transitions seen
+  uint64_t kernel_drops = 0;  // PACKET_STATISTICS tp_drops, accumulated by read_kernel_drops()
 };
 
 class RawLink final : public Link {

@@ -61,12 +61,24 @@ class PowerlinkCn::Objects final : public pl::SdoObjectAccess {
       value = cn_.config_.device_type;
     } else if (index == 0x1018) {
       switch (subindex) {
-        case 0: value = 4; width = 1; break;
-        case 1: value = cn_.config_.vendor_id; break;
-        case 2: value = cn_.config_.product_code; break;
-        case 3: value = cn_.config_.revision_no; break;
-        case 4: value = cn_.config_.serial_no; break;
-        default: return kAbortNoSubindex;
+        case 0:
+          value = 4;
+          width = 1;
+          break;
+        case 1:
+          value = cn_.config_.vendor_id;
+          break;
+        case 2:
+          value = cn_.config_.product_code;
+          break;
+        case 3:
+          value = cn_.config_.revision_no;
+          break;
+        case 4:
+          value = cn_.config_.serial_no;
+          break;
+        default:
+          return kAbortNoSubindex;
       }
     } else {
       Ds1928Module* module = nullptr;
@@ -90,7 +102,8 @@ class PowerlinkCn::Objects final : public pl::SdoObjectAccess {
     const uint8_t width = pl::register_size(reg).value_or(static_cast<uint8_t>(data.size()));
     if (data.size() != width || (width != 1 && width != 2 && width != 4)) return kAbortTypeLength;
     uint32_t value = 0;
-    for (std::size_t i = 0; i < data.size(); ++i) value |= static_cast<uint32_t>(data[i]) << (8 * i);
+    for (std::size_t i = 0; i < data.size(); ++i)
+      value |= static_cast<uint32_t>(data[i]) << (8 * i);
     if (auto ec = module->write_register(reg, width, value)) return abort_for(ec);
     return 0;
   }
@@ -139,7 +152,9 @@ const PowerlinkCn::StateHandler& PowerlinkCn::handler() const noexcept {
 }
 
 PowerlinkCn::PowerlinkCn(const PowerlinkCnConfig& config, FrameSink send)
-    : config_(config), send_(std::move(send)), mapping_(config.sdo_overrides),
+    : config_(config),
+      send_(std::move(send)),
+      mapping_(config.sdo_overrides),
       rng_(config.faults.seed) {
   std::vector<pl::ModuleSpec> specs;
   for (const PowerlinkCnModuleConfig& m : config_.modules) {
@@ -251,9 +266,8 @@ void PowerlinkCn::tick(int64_t now_ns) noexcept {
   if (have_soc_ && is_cycling(state_)) {
     // Loss of SoC: the MN stopped cycling (or the link is gone); fall back and wait to be
     // booted again.
-    const int64_t timeout =
-        std::max<int64_t>(config_.soc_timeout_min_ns,
-                          static_cast<int64_t>(config_.soc_loss_periods) * period_ns_);
+    const int64_t timeout = std::max<int64_t>(
+        config_.soc_timeout_min_ns, static_cast<int64_t>(config_.soc_loss_periods) * period_ns_);
     if (now_ns - last_soc_ns_ > timeout) {
       ++stats_.loss_of_soc;
       log_error(kErrorLossOfSoc, now_ns);
@@ -414,8 +428,12 @@ void PowerlinkCn::soa_answer(const pl::SoA& soa, int64_t now_ns) noexcept {
   (void)now_ns;
   if (soa.target != config_.node_id) return;
   switch (soa.service) {
-    case pl::RequestedService::kIdentRequest: send_ident_response(); break;
-    case pl::RequestedService::kStatusRequest: send_status_response(); break;
+    case pl::RequestedService::kIdentRequest:
+      send_ident_response();
+      break;
+    case pl::RequestedService::kStatusRequest:
+      send_status_response();
+      break;
     case pl::RequestedService::kUnspecifiedInvite:
       if (async_count_ != 0) {
         emit({async_frames_[async_head_].data(), async_len_[async_head_]});
@@ -488,7 +506,8 @@ void PowerlinkCn::send_ident_response() noexcept {
   ident.serial_no = config_.serial_no;
   // Feature flags: SDO by ASnd (bit 2) and NMT Info services (bit 3) — no PDO over SDO, no PRC.
   ident.feature_flags = (1u << 2) | (1u << 3);
-  ident.ip_address = 192u | (168u << 8) | (100u << 16) | (static_cast<uint32_t>(config_.node_id) << 24);
+  ident.ip_address =
+      192u | (168u << 8) | (100u << 16) | (static_cast<uint32_t>(config_.node_id) << 24);
   ident.subnet_mask = 0x00FFFFFF;
   ident.default_gateway = 192u | (168u << 8) | (100u << 16) | (254u << 24);
   const char name[] = "ds1928-sim";
@@ -565,7 +584,9 @@ void PowerlinkCn::emit(std::span<const uint8_t> frame) noexcept {
 
 PowerlinkCnLoop::PowerlinkCnLoop(pl::Link& link, std::function<bool(int64_t)> wait_readable,
                                  std::span<PowerlinkCn* const> nodes, Options options)
-    : link_(link), wait_readable_(std::move(wait_readable)), nodes_(nodes.begin(), nodes.end()),
+    : link_(link),
+      wait_readable_(std::move(wait_readable)),
+      nodes_(nodes.begin(), nodes.end()),
       options_(options) {}
 
 namespace {
@@ -608,8 +629,8 @@ bool PowerlinkCnLoop::run_once() noexcept {
   if (next_start != 0 && cycle_done_) {
     // Idle phase: this cycle's frames are handled; frames that still come (an ASnd from the MN
     // after its SoA) wait in the ring until the wake-up.
-    const int64_t wake = std::min({next_start - options_.guard_ns, node_deadline,
-                                   now + options_.idle_wait_ns});
+    const int64_t wake =
+        std::min({next_start - options_.guard_ns, node_deadline, now + options_.idle_wait_ns});
     if (wake > now) sleep_until_ns(wake);
     now = now_monotonic_ns();
   } else if (next_start == 0 && node_deadline > now) {

@@ -45,10 +45,10 @@ struct PowerlinkCnModuleConfig {
 
 // Fault injection. Probabilities are per PRes.
 struct PowerlinkCnFaults {
-  double drop_pres = 0.0;            // PRes not sent
-  double delay_pres = 0.0;           // PRes sent `delay_pres_ns` late
+  double drop_pres = 0.0;   // PRes not sent
+  double delay_pres = 0.0;  // PRes sent `delay_pres_ns` late
   int64_t delay_pres_ns = 0;
-  int pres_size_delta = 0;           // PRes payload this many bytes longer (or shorter)
+  int pres_size_delta = 0;  // PRes payload this many bytes longer (or shorter)
   uint64_t seed = 1;
 };
 

@@ -1,5 +1,7 @@
 // The simulated Controlled Node's protocol core, driven in memory with frames the codec builds
 // (what an MN sends) and checked on what it answers. No sockets, no sleeps: time is an argument.
+#include "sim/powerlink_cn.hpp"
+
 #include <catch2/catch.hpp>
 #include <deque>
 #include <vector>
@@ -8,7 +10,6 @@
 #include "powerlink/process_image.hpp"
 #include "powerlink/sdo.hpp"
 #include "powerlink/sdo_mapping.hpp"
-#include "sim/powerlink_cn.hpp"
 
 namespace pl = ds1928::powerlink;
 namespace sim = ds1928::sim;
@@ -122,7 +123,8 @@ TEST_CASE("CN boots NOT_ACTIVE to PRE_OPERATIONAL_2 and identifies with its imag
   CHECK(h.cn.nmt_state() == NmtState::kPreOperational1);
   CHECK(h.out.empty());
   const pl::IdentResponse ident = boot_to_pre_op2(h, 7);
-  const auto expected = pl::make_layout(std::array{pl::ModuleSpec{1, 7, 7}, pl::ModuleSpec{2, 15, 3}});
+  const auto expected =
+      pl::make_layout(std::array{pl::ModuleSpec{1, 7, 7}, pl::ModuleSpec{2, 15, 3}});
   REQUIRE(expected.has_value());
   CHECK(ident.poll_in_size == expected->pres_size);
   CHECK(ident.poll_out_size == expected->preq_size);
@@ -136,7 +138,8 @@ TEST_CASE("CN boots NOT_ACTIVE to PRE_OPERATIONAL_2 and identifies with its imag
   CHECK(std::vector(h.transitions.end() - 2, h.transitions.end()) == path);
 }
 
-TEST_CASE("CN answers its PReq with a PRes carrying the modules' inputs, RD only when operational") {
+TEST_CASE(
+    "CN answers its PReq with a PRes carrying the modules' inputs, RD only when operational") {
   Harness h(two_module_config());
   boot_to_pre_op2(h, 7);
   std::vector<uint8_t> preq_payload(h.cn.layout().preq_size, 0);
@@ -180,8 +183,8 @@ TEST_CASE("CN modules take NetTime from the SoC RelativeTime") {
   h.relative_us = 0x1'2345'6789ULL;  // beyond 32 bits: PosTime is the low word
   std::vector<uint8_t> preq_payload(h.cn.layout().preq_size, 0);
   // Enable the encoder through the register so that the module stamps positions.
-  REQUIRE_FALSE(h.cn.module(0).write_register(ds1928::reg::kEnDatMode, 1,
-                                              ds1928::endat_mode::kEnable));
+  REQUIRE_FALSE(
+      h.cn.module(0).write_register(ds1928::reg::kEnDatMode, 1, ds1928::endat_mode::kEnable));
   for (int i = 0; i < 20; ++i) {
     h.soc();
     h.preq(3, preq_payload, false);
@@ -340,7 +343,6 @@ TEST_CASE("CN fault injection: dropped, delayed and wrongly sized PRes") {
   CHECK(loss > 0.20);
   CHECK(loss < 0.30);
   CHECK(h.cn.stats().pres_dropped == static_cast<uint64_t>(kRequests - answered));
-
 
   sim::PowerlinkCnFaults faults;
   faults.delay_pres = 1.0;

@@ -27,8 +27,12 @@ namespace {
 
 std::atomic<bool> g_stop{false};
 std::atomic<bool> g_power_cycle{false};
-void on_stop(int) { g_stop.store(true); }
-void on_usr1(int) { g_power_cycle.store(true); }
+void on_stop(int) {
+  g_stop.store(true);
+}
+void on_usr1(int) {
+  g_power_cycle.store(true);
+}
 
 struct PowerlinkOptions {
   std::string iface;
@@ -120,8 +124,7 @@ int run_powerlink(const PowerlinkOptions& o) {
   link_options.interface = o.iface;
   link_options.rx_mode = parse_rx_mode(o.rx_mode);
   if (auto ec = link.open(link_options)) {
-    std::fprintf(stderr, "ds1928-sim: cannot open %s: %s\n", o.iface.c_str(),
-                 ec.message().c_str());
+    std::fprintf(stderr, "ds1928-sim: cannot open %s: %s\n", o.iface.c_str(), ec.message().c_str());
     return 2;
   }
 
@@ -153,15 +156,17 @@ int run_powerlink(const PowerlinkOptions& o) {
       node->set_state_listener([node_id, start](pl::NmtState from, pl::NmtState to, int64_t t) {
         std::printf("%10.6f node %u: %s -> %s\n",
                     static_cast<double>((t > 0 ? t : now_ns()) - start) / 1e9, node_id,
-                    std::string(pl::to_string(from)).c_str(), std::string(pl::to_string(to)).c_str());
+                    std::string(pl::to_string(from)).c_str(),
+                    std::string(pl::to_string(to)).c_str());
         std::fflush(stdout);
       });
     }
-    std::printf("node %u: %zu module(s), PRes payload %u bytes, PReq payload %u bytes, MAC "
-                "%02x:%02x:%02x:%02x:%02x:%02x on %s (%s)\n",
-                node_id, node->module_count(), node->layout().pres_size, node->layout().preq_size,
-                cn.mac[0], cn.mac[1], cn.mac[2], cn.mac[3], cn.mac[4], cn.mac[5], o.iface.c_str(),
-                pl::to_string(link.rx_mode()));
+    std::printf(
+        "node %u: %zu module(s), PRes payload %u bytes, PReq payload %u bytes, MAC "
+        "%02x:%02x:%02x:%02x:%02x:%02x on %s (%s)\n",
+        node_id, node->module_count(), node->layout().pres_size, node->layout().preq_size,
+        cn.mac[0], cn.mac[1], cn.mac[2], cn.mac[3], cn.mac[4], cn.mac[5], o.iface.c_str(),
+        pl::to_string(link.rx_mode()));
     node_ptrs.push_back(node.get());
     nodes.push_back(std::move(node));
   }
@@ -203,23 +208,21 @@ int run_powerlink(const PowerlinkOptions& o) {
   }
   for (auto* n : node_ptrs) {
     const sim::PowerlinkCnStats& s = n->stats();
-    std::printf("node %u stats: soc=%llu preq=%llu pres=%llu dropped=%llu delayed=%llu soa=%llu "
-                "asnd=%llu nmt=%llu sdo_in=%llu loss_soc=%llu loss_preq=%llu resets=%llu "
-                "bad=%llu state=%s\n",
-                n->node_id(), static_cast<unsigned long long>(s.soc),
-                static_cast<unsigned long long>(s.preq),
-                static_cast<unsigned long long>(s.pres_sent),
-                static_cast<unsigned long long>(s.pres_dropped),
-                static_cast<unsigned long long>(s.pres_delayed),
-                static_cast<unsigned long long>(s.soa),
-                static_cast<unsigned long long>(s.asnd_sent),
-                static_cast<unsigned long long>(s.nmt_commands),
-                static_cast<unsigned long long>(s.sdo_frames_in),
-                static_cast<unsigned long long>(s.loss_of_soc),
-                static_cast<unsigned long long>(s.loss_of_preq),
-                static_cast<unsigned long long>(s.resets),
-                static_cast<unsigned long long>(s.bad_frames),
-                std::string(pl::to_string(n->nmt_state())).c_str());
+    std::printf(
+        "node %u stats: soc=%llu preq=%llu pres=%llu dropped=%llu delayed=%llu soa=%llu "
+        "asnd=%llu nmt=%llu sdo_in=%llu loss_soc=%llu loss_preq=%llu resets=%llu "
+        "bad=%llu state=%s\n",
+        n->node_id(), static_cast<unsigned long long>(s.soc),
+        static_cast<unsigned long long>(s.preq), static_cast<unsigned long long>(s.pres_sent),
+        static_cast<unsigned long long>(s.pres_dropped),
+        static_cast<unsigned long long>(s.pres_delayed), static_cast<unsigned long long>(s.soa),
+        static_cast<unsigned long long>(s.asnd_sent),
+        static_cast<unsigned long long>(s.nmt_commands),
+        static_cast<unsigned long long>(s.sdo_frames_in),
+        static_cast<unsigned long long>(s.loss_of_soc),
+        static_cast<unsigned long long>(s.loss_of_preq), static_cast<unsigned long long>(s.resets),
+        static_cast<unsigned long long>(s.bad_frames),
+        std::string(pl::to_string(n->nmt_state())).c_str());
   }
   return 0;
 }
