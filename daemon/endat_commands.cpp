@@ -241,33 +241,14 @@ void EnDatService::register_commands(control::Server& server) {
     const bool refresh = req.opt_bool("refresh").value_or(false);
     auto answer = [this, axis, reply, alive = std::weak_ptr<bool>(alive_)](std::error_code ec) {
       if (alive.expired()) return;
-      const Axis& a = *axes_[axis];
-      if (!a.ident) {
+      if (!identification(axis)) {
         const auto error = ec ? ec : make_error_code(EnDatServiceErrc::identification_unavailable);
         return reply.error(endat_error_code_name(error),
                            "axis " + std::to_string(axis) + ": identification: " + error.message());
       }
-      json j{{"axis", axis}, {"source", a.ident_source}, {"identification", identification_json(*a.ident)}};
-      json words = json::object();
-      for (unsigned w = 4; w < endat::kManufacturerWords; ++w) {
-        json word{{"value", a.words[w]}, {"value_hex", hex(a.words[w], 4)}};
-        if (const auto name = endat::manufacturer_word_name(w); !name.empty())
-          word["name"] = std::string(name);
-        words[std::to_string(w)] = std::move(word);
-      }
-      j["words"] = std::move(words);
-      if (a.endat_error) {
-        j["endat_error"] = *a.endat_error;
-        j["endat_error_names"] = endat::endat_error_names(*a.endat_error);
-      }
-      if (a.endat_warning) {
-        j["endat_warning"] = *a.endat_warning;
-        j["endat_warning_names"] = endat::endat_warning_names(*a.endat_warning);
-      }
-      reply.ok(std::move(j));
+      reply.ok(identification_reply(axis));
     };
-    const Axis& a = *axes_[axis];
-    if (!refresh && a.ident && !a.identifying) return answer({});
+    if (!refresh && identification(axis) && !identifying(axis)) return answer({});
     refresh_identification(axis, std::move(answer));
   });
 }

@@ -690,6 +690,33 @@ void EnDatService::identification_done(std::size_t index, std::error_code error)
   for (auto& w : waiters) w(error);
 }
 
+bool EnDatService::identifying(std::size_t axis) const { return axes_.at(axis)->identifying; }
+
+nlohmann::json EnDatService::identification_reply(std::size_t axis) const {
+  const Axis& a = *axes_.at(axis);
+  nlohmann::json j{{"axis", axis}, {"source", a.ident_source}};
+  if (a.ident) j["identification"] = identification_json(*a.ident);
+  nlohmann::json words = nlohmann::json::object();
+  for (unsigned w = 4; w < endat::kManufacturerWords; ++w) {
+    char hex[8];
+    std::snprintf(hex, sizeof(hex), "0x%04X", a.words[w]);
+    nlohmann::json word{{"value", a.words[w]}, {"value_hex", hex}};
+    if (const auto name = endat::manufacturer_word_name(w); !name.empty())
+      word["name"] = std::string(name);
+    words[std::to_string(w)] = std::move(word);
+  }
+  j["words"] = std::move(words);
+  if (a.endat_error) {
+    j["endat_error"] = *a.endat_error;
+    j["endat_error_names"] = endat::endat_error_names(*a.endat_error);
+  }
+  if (a.endat_warning) {
+    j["endat_warning"] = *a.endat_warning;
+    j["endat_warning_names"] = endat::endat_warning_names(*a.endat_warning);
+  }
+  return j;
+}
+
 // ---------------------------------------------------------------------------------------------
 // Status
 

@@ -158,6 +158,8 @@ class EnDatService {
   void identify_by_flatstream(std::size_t index);
   void identification_done(std::size_t index, std::error_code error);
   [[nodiscard]] bool may_change_encoder(const control::Request& request) const;
+  [[nodiscard]] bool identifying(std::size_t axis) const;
+  [[nodiscard]] nlohmann::json identification_reply(std::size_t axis) const;
 
   boost::asio::io_context& io_;
   CycleWork& work_;
