@@ -78,6 +78,11 @@ void CycleWork::run_cycle(const CycleContext& ctx) noexcept {
       st.validity = shm::AxisValidity::ModuleError;
     c.position_raw.store(sample.position_raw, std::memory_order_relaxed);
     c.pos_cycle.store(sample.pos_cycle, std::memory_order_relaxed);
+    if (sample.fresh) {
+      c.pos_time_ns.store(sample.pos_time_ns, std::memory_order_relaxed);
+      c.time_source.store(static_cast<uint8_t>(sample.time_source), std::memory_order_relaxed);
+    }
+    c.cycle.store(ctx.index, std::memory_order_relaxed);
     c.validity.store(static_cast<uint8_t>(st.validity), std::memory_order_relaxed);
   }
   const uint64_t now_us = static_cast<uint64_t>(ctx.start_ns / 1000);

@@ -80,6 +80,9 @@ struct AxisCounters {
   // applications read the seqlock record in shared memory).
   std::atomic<uint64_t> position_raw{0};
   std::atomic<int8_t> pos_cycle{0};
+  std::atomic<int64_t> pos_time_ns{0};
+  std::atomic<uint8_t> time_source{0};  // TimeSource
+  std::atomic<uint64_t> cycle{0};       // cycle index of the last publication
   std::atomic<uint8_t> validity{0};  // shm::AxisValidity
   std::atomic<uint32_t> endat_error{0};    // written by the normal thread from acyclic reads
   std::atomic<uint32_t> endat_warning{0};  // idem

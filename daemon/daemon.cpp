@@ -197,7 +197,15 @@ json Daemon::axis_json(std::size_t i, bool with_sample) const {
   j["periods"] = a.module.position_signed ? (static_cast<int64_t>(raw) >> 16)
                                           : static_cast<int64_t>(raw >> 16);
   j["fraction"] = raw & 0xFFFF;
+  j["position_sdc"] = static_cast<int32_t>(static_cast<uint32_t>(raw));
   j["pos_cycle"] = c.pos_cycle.load(std::memory_order_relaxed);
+  j["pos_time_ns"] = c.pos_time_ns.load(std::memory_order_relaxed);
+  switch (static_cast<TimeSource>(c.time_source.load(std::memory_order_relaxed))) {
+    case TimeSource::None: j["time_source"] = "none"; break;
+    case TimeSource::NetTime: j["time_source"] = "nettime"; break;
+    case TimeSource::RxTimestamp: j["time_source"] = "rx_timestamp"; break;
+  }
+  j["cycle"] = c.cycle.load(std::memory_order_relaxed);
   j["fresh_cycles"] = c.fresh_cycles.load(std::memory_order_relaxed);
   j["stale_cycles"] = c.stale_cycles.load(std::memory_order_relaxed);
   j["new_positions"] = c.new_positions.load(std::memory_order_relaxed);
@@ -250,8 +258,8 @@ json Daemon::status_json() const {
             {"uptime_s", seconds_since(started_at_)},
             {"realtime", engine_->realtime()},
             {"rt_status", engine_->rt_status_text()},
-            {"shm", config_.shm.name},
             {"socket", socket_path_}}},
+          {"shm", {{"name", config_.shm.name}, {"generation", publisher_.generation()}}},
           {"bus", bus_status_json(*bus_)},
           {"cycle",
            {{"period_us", config_.cycle.period_us},
@@ -279,6 +287,11 @@ void Daemon::register_commands() {
     if (axis >= config_.axes.size()) {
       reply.error(control::ErrorCode::BadArgument,
                   fmt::format("axis: {} does not exist (0..{})", axis, config_.axes.size() - 1));
+      return;
+    }
+    if (bus_->state() != BusState::Operational) {
+      reply.error("bus_down", fmt::format("the {} bus is {}: nothing to acknowledge to",
+                                          bus_->name(), to_string(bus_->state())));
       return;
     }
     if (!work_->post({AxisCommand::Kind::AckErrors, static_cast<uint16_t>(axis),
