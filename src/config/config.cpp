@@ -5,6 +5,7 @@
 #include "config/config_loader.hpp"
 
 #include <unistd.h>
+#include <yaml-cpp/eventhandler.h>
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
@@ -884,24 +885,58 @@ DaemonConfig parse_document(Diagnostics& diag, const YAML::Node& doc, const std:
   return c;
 }
 
+// Counts the documents of a YAML stream without building them. yaml-cpp 0.7 never advances past
+// a flow indicator (',') at document level and reports empty documents there forever, so
+// LoadAll() would exhaust memory; a document that starts where the previous one started is that
+// case and is reported as a syntax error instead.
+class DocumentCounter final : public YAML::EventHandler {
+ public:
+  void OnDocumentStart(const YAML::Mark& mark) override { starts.push_back(mark); }
+  void OnDocumentEnd() override {}
+  void OnNull(const YAML::Mark&, YAML::anchor_t) override {}
+  void OnAlias(const YAML::Mark&, YAML::anchor_t) override {}
+  void OnScalar(const YAML::Mark&, const std::string&, YAML::anchor_t,
+                const std::string&) override {}
+  void OnSequenceStart(const YAML::Mark&, const std::string&, YAML::anchor_t,
+                       YAML::EmitterStyle::value) override {}
+  void OnSequenceEnd() override {}
+  void OnMapStart(const YAML::Mark&, const std::string&, YAML::anchor_t,
+                  YAML::EmitterStyle::value) override {}
+  void OnMapEnd() override {}
+
+  std::vector<YAML::Mark> starts;
+};
+
 ConfigResult load_text(std::string_view text, const std::string& name,
                        const std::filesystem::path& base_dir) {
   Diagnostics diag(name);
-  std::vector<YAML::Node> docs;
+  YAML::Node doc;
   try {
-    docs = YAML::LoadAll(std::string(text));
+    std::istringstream stream{std::string(text)};
+    YAML::Parser parser(stream);
+    DocumentCounter counter;
+    while (counter.starts.size() < 2 && parser.HandleNextDocument(counter)) {
+    }
+    if (counter.starts.size() == 2 && counter.starts[0].pos == counter.starts[1].pos) {
+      const auto pos = static_cast<size_t>(std::max(0, counter.starts[0].pos));
+      const std::string found = pos < text.size() ? "'" + std::string(1, text[pos]) + "'" : "this";
+      diag.error(loc_of(counter.starts[0]), "",
+                 "YAML syntax error: unexpected " + found + " (not inside a [list] or {map})");
+      return ConfigResult(diag.take());
+    }
+    if (counter.starts.size() > 1) {
+      diag.error(loc_of(counter.starts[1]), "",
+                 "the file holds more than one YAML document; one is expected");
+      return ConfigResult(diag.take());
+    }
+    doc = YAML::Load(std::string(text));
   } catch (const YAML::Exception& e) {
     diag.error(loc_of(e.mark), "", "YAML syntax error: " + e.msg);
     return ConfigResult(diag.take());
   }
-  if (docs.size() > 1) {
-    diag.error(loc_of(docs[1].Mark()), "",
-               "the file holds " + std::to_string(docs.size()) + " YAML documents; one is expected");
-    return ConfigResult(diag.take());
-  }
   DaemonConfig config;
   try {
-    config = parse_document(diag, docs.empty() ? YAML::Node() : docs.front(), name, base_dir);
+    config = parse_document(diag, doc, name, base_dir);
   } catch (const std::exception& e) {
     // yaml-cpp may throw on exotic documents (e.g. unusual aliases); never let that escape.
     diag.error({}, "", std::string("cannot interpret the document: ") + e.what());

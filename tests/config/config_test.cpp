@@ -331,7 +331,10 @@ TEST_CASE("cross-field and list rules", "[config]") {
                Catch::Contains("unknown key 'colour'; allowed keys here: name, mode, group"));
   }
   SECTION("more than one YAML document") {
-    CHECK_THAT(one_error("bus: simulated\n---\nbus: canio\n"), Catch::Contains("2 YAML documents"));
+    CHECK_THAT(one_error("bus: simulated\n---\nbus: canio\n"), Catch::Contains("test.yaml:2:1: the file holds more than one YAML document"));
+  }
+  SECTION("a stray comma at document level") {
+    CHECK(one_error(",") == "test.yaml:1:1: YAML syntax error: unexpected ',' (not inside a [list] or {map})");
   }
 }
 
