@@ -95,6 +95,8 @@ class MeasuringLink final : public pl::Link {
       const uint8_t node = buffer[16];
       if (preq_time_[node] != 0) {
         latency_.add(r.rx_time_ns - preq_time_[node]);
+        // Answered, but after the MN gave up: the CN side (its host) was late, not silent.
+        if (r.rx_time_ns - preq_time_[node] > pres_timeout_ns) ++late_pres;
         preq_time_[node] = 0;
       }
     }
@@ -104,6 +106,8 @@ class MeasuringLink final : public pl::Link {
   pl::MacAddress mac() const noexcept override { return inner_.mac(); }
 
   bool measuring = false;
+  int64_t pres_timeout_ns = 100'000;
+  uint64_t late_pres = 0;
   int64_t soc_sent_ns = 0;  // this cycle's SoC left at this instant
   const Histogram& soc_jitter() const { return soc_jitter_; }
   const Histogram& latency() const { return latency_; }
@@ -276,6 +280,15 @@ int main(int argc, char** argv) {
 
   Histogram wake(20'000'000);
   Histogram ref_error(20'000'000);
+  uint32_t min_timeout_us = UINT32_MAX;
+  for (const auto& n : config.powerlink.nodes)
+    min_timeout_us = std::min(min_timeout_us, n.pres_timeout_us);
+  const int64_t stall_ns =
+      static_cast<int64_t>(min_timeout_us == UINT32_MAX ? 100 : min_timeout_us) * 1000;
+  link.pres_timeout_ns = stall_ns;
+  uint64_t last_stall = UINT64_MAX, stalls = 0;
+  uint32_t prev_fired = 0, prev_events = 0;
+  uint64_t fired_after_stall = 0, fired_other = 0, losses_after_stall = 0, losses_other = 0;
   int64_t prev_soc_sent = 0;
   int64_t prev_send_jitter = 0;
   std::vector<pl::CnBootState> last_boot(config.powerlink.nodes.size(), pl::CnBootState::kIdentify);
@@ -305,6 +318,20 @@ int main(int argc, char** argv) {
     const int64_t woke = pl::monotonic_now_ns();
     if (measuring) wake.add(woke - next);
     const ds1928::ExchangeResult res = bus->exchange(axes, next, index);
+    // Stall attribution: a cycle thread that wakes later than the shortest PRes timeout, or a
+    // cycle that overran, cannot keep the CNs' PRes in time whatever the protocol code does.
+    // Losses and threshold events within a few cycles after such a stall are counted apart.
+    if (woke - next > stall_ns || pl::monotonic_now_ns() - next > period_ns) last_stall = index;
+    if (measuring) {
+      uint32_t f = 0, e = 0;
+      loss_totals(f, e);
+      const bool after_stall = last_stall != UINT64_MAX && index - last_stall <= 5;
+      if (f > prev_fired) (after_stall ? fired_after_stall : fired_other) += f - prev_fired;
+      if (e > prev_events) (after_stall ? losses_after_stall : losses_other) += e - prev_events;
+      if (woke - next > stall_ns) ++stalls;
+      prev_fired = f;
+      prev_events = e;
+    }
     ++cycles;
     if (measuring) ++measured_cycles;
     const double t_s = static_cast<double>(woke - start) / 1e9;
@@ -336,6 +363,8 @@ int main(int argc, char** argv) {
       measuring = true;
       link.measuring = true;
       loss_totals(fired_at_start, events_at_start);
+      prev_fired = fired_at_start;
+      prev_events = events_at_start;
       measure_until = o.duration_s > 0 ? woke + static_cast<int64_t>(o.duration_s * 1e9) : 0;
       std::printf("EVENT t=%.3f measuring\n", t_s);
     }
@@ -452,6 +481,14 @@ int main(int argc, char** argv) {
       mc.cycle_time_exceeded.events, mc.invalid_frames, mc.unexpected_frames, mc.async_timeouts,
       static_cast<unsigned long long>(fresh), static_cast<unsigned long long>(moving),
       static_cast<unsigned long long>(wrong), static_cast<unsigned long long>(bad_stamp));
+  std::printf(
+      "STALLS mn_wake_later_than_pres_timeout=%llu losses_after_stall=%llu "
+      "losses_other=%llu late_pres=%llu fired_after_stall=%llu fired_other=%llu\n",
+      static_cast<unsigned long long>(stalls), static_cast<unsigned long long>(losses_after_stall),
+      static_cast<unsigned long long>(losses_other),
+      static_cast<unsigned long long>(link.late_pres),
+      static_cast<unsigned long long>(fired_after_stall),
+      static_cast<unsigned long long>(fired_other));
   std::printf(
       "JITTER soc_to_soc_deviation_us p50=%.1f p99=%.1f max=%.1f (n=%llu, max interval %.1f us)\n",
       link.soc_jitter().percentile_us(0.5), link.soc_jitter().percentile_us(0.99),
