@@ -118,6 +118,9 @@ class EnDatService {
 
   // Identification of an axis, once known.
   [[nodiscard]] const std::optional<endat::Identification>& identification(std::size_t axis) const;
+  // The `endat-ident` reply body: identification, raw words 4..47 with names, status words.
+  [[nodiscard]] nlohmann::json identification_reply(std::size_t axis) const;
+  [[nodiscard]] bool identifying(std::size_t axis) const;
   // Reads the identification again (registers, else Flatstream); `done` gets the outcome.
   void refresh_identification(std::size_t axis, std::function<void(std::error_code)> done);
 
@@ -158,8 +161,6 @@ class EnDatService {
   void identify_by_flatstream(std::size_t index);
   void identification_done(std::size_t index, std::error_code error);
   [[nodiscard]] bool may_change_encoder(const control::Request& request) const;
-  [[nodiscard]] bool identifying(std::size_t axis) const;
-  [[nodiscard]] nlohmann::json identification_reply(std::size_t axis) const;
 
   boost::asio::io_context& io_;
   CycleWork& work_;

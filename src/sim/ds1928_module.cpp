@@ -182,6 +182,9 @@ void Ds1928Module::update_error_info() noexcept {
 void Ds1928Module::run_flatstream(int64_t now_ns) noexcept {
   State& s = *state_;
   // EnDat side: a finished reply goes into the input direction, a waiting command to the encoder.
+  // Outcomes of sent replies are not needed here, but they share the send queue's capacity.
+  while (s.channel.take_outcome()) {
+  }
   if (auto reply = s.bridge.poll(now_ns)) {
     (void)s.channel.submit(reply->bytes(), ++s.reply_tag);  // queue_full: the master is gone
   }

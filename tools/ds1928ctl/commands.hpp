@@ -13,5 +13,7 @@ namespace ds1928::ctl {
 void add_basic_commands(CLI::App& app, Context& ctx);
 // position [--axis N] [--follow [--every N]]: read from shared memory.
 void add_position_command(CLI::App& app, Context& ctx);
+// endat reset|ack|read-param|write-param|read-block|write-block|read-info|ident|dump.
+void add_endat_commands(CLI::App& app, Context& ctx);
 
 }  // namespace ds1928::ctl

@@ -24,7 +24,7 @@ int main(int argc, char** argv) {
 
   add_basic_commands(app, ctx);
   add_position_command(app, ctx);
-  // Further groups register here (e.g. add_endat_commands(app, ctx) for `ds1928ctl endat ...`).
+  add_endat_commands(app, ctx);
 
   try {
     app.parse(argc, argv);
