@@ -2,8 +2,6 @@
 // small "section" reader that knows which keys it was asked for, so every key left over is an
 // unknown key; each value is parsed by hand (not yaml-cpp's as<T>) to get precise messages for
 // hex numbers, octal modes, quoted numbers and out-of-range values.
-#include "config/config_loader.hpp"
-
 #include <unistd.h>
 #include <yaml-cpp/eventhandler.h>
 #include <yaml-cpp/yaml.h>
@@ -24,6 +22,8 @@
 #include <sstream>
 #include <utility>
 
+#include "config/config_loader.hpp"
+
 namespace ds1928 {
 namespace {
 
@@ -37,7 +37,9 @@ Loc loc_of(const YAML::Mark& m) {
   return {m.line + 1, m.column + 1};
 }
 
-std::string where(Loc l) { return "line " + std::to_string(l.line); }
+std::string where(Loc l) {
+  return "line " + std::to_string(l.line);
+}
 
 class Diagnostics {
  public:
@@ -77,7 +79,9 @@ std::string describe(const YAML::Node& n) {
   return n.Tag() == "?" ? "'" + n.Scalar() + "'" : "the string \"" + n.Scalar() + "\"";
 }
 
-bool is_plain(const YAML::Node& n) { return n.IsScalar() && n.Tag() == "?"; }
+bool is_plain(const YAML::Node& n) {
+  return n.IsScalar() && n.Tag() == "?";
+}
 
 struct IntParse {
   enum class Status { Ok, Syntax, LeadingZero, Overflow } status = Status::Syntax;
@@ -344,7 +348,8 @@ class Section {
     }
     std::string message = describe(*v) + " is not allowed; expected one of: " + join(names);
     if (v->IsScalar()) {
-      if (const auto hint = closest(v->Scalar(), names)) message += " (did you mean '" + *hint + "'?)";
+      if (const auto hint = closest(v->Scalar(), names))
+        message += " (did you mean '" + *hint + "'?)";
     }
     error(key, std::move(message));
     return false;
@@ -513,9 +518,9 @@ void parse_module(Section s, ModuleSettings& m, FunctionModel fm) {
   const bool have_min = s.integer("vss_min_mv", m.vss_min_mv, 0, 1500, "mV");
   const bool have_max = s.integer("vss_max_mv", m.vss_max_mv, 0, 1500, "mV");
   if ((have_min || have_max) && m.vss_min_mv > m.vss_max_mv) {
-    s.error(have_min ? "vss_min_mv" : "vss_max_mv",
-            "vss_min_mv (" + std::to_string(m.vss_min_mv) + ") must not exceed vss_max_mv (" +
-                std::to_string(m.vss_max_mv) + ")");
+    s.error(have_min ? "vss_min_mv" : "vss_max_mv", "vss_min_mv (" + std::to_string(m.vss_min_mv) +
+                                                        ") must not exceed vss_max_mv (" +
+                                                        std::to_string(m.vss_max_mv) + ")");
   }
   s.integer("quit_time_us", m.quit_time_us, 0, 20000000, "µs");
   const bool standard = fm == FunctionModel::Standard;
@@ -555,14 +560,17 @@ void parse_axis(Section s, AxisConfig& a, BusKind bus, size_t index) {
   int64_t fm = 0;
   if (s.integer("function_model", fm, 0, kU8)) {
     if (fm != 0 && fm != 254) {
-      s.error("function_model",
-              std::to_string(fm) + " is not allowed; expected 0 (standard) or 254 (bus controller)");
+      s.error(
+          "function_model",
+          std::to_string(fm) + " is not allowed; expected 0 (standard) or 254 (bus controller)");
     } else if (bus == BusKind::Powerlink && fm != 0) {
-      s.error("function_model", "254 is not allowed on bus powerlink; modules behind a POWERLINK "
-                                "bus controller run function model 0");
+      s.error("function_model",
+              "254 is not allowed on bus powerlink; modules behind a POWERLINK "
+              "bus controller run function model 0");
     } else if (bus == BusKind::Canio && fm != 254) {
-      s.error("function_model", "0 is not allowed on bus canio; modules behind a CAN-I/O bus "
-                                "controller run function model 254");
+      s.error("function_model",
+              "0 is not allowed on bus canio; modules behind a CAN-I/O bus "
+              "controller run function model 254");
     } else {
       a.function_model = static_cast<FunctionModel>(fm);
     }
@@ -606,7 +614,7 @@ bool valid_interface_name(const std::string& name) {
 
 struct PowerlinkSites {
   bool present = false;
-  std::map<uint8_t, Loc> nodes;     // node id → where it is listed
+  std::map<uint8_t, Loc> nodes;      // node id → where it is listed
   std::vector<Loc> pres_timeout_at;  // per nodes[] entry
 };
 
@@ -729,8 +737,7 @@ void parse_socket(Section s, SocketConfig& c) {
 
 // Where the value at `keys` below `node` is written; the deepest existing key when the full path
 // is not in the file. (Recursion instead of a loop: assigning a YAML::Node writes through it.)
-Loc locate(const YAML::Node& node, std::initializer_list<std::string_view> keys,
-           size_t depth = 0) {
+Loc locate(const YAML::Node& node, std::initializer_list<std::string_view> keys, size_t depth = 0) {
   const Loc here = loc_of(node.Mark());
   if (depth == keys.size() || !node.IsMap()) return here;
   const std::string_view key = *(keys.begin() + depth);
@@ -784,8 +791,8 @@ void check_cross_fields(Diagnostics& diag, const DaemonConfig& c, const std::vec
         diag.error(pl_sites.pres_timeout_at[i],
                    "powerlink.nodes[" + std::to_string(i) + "].pres_timeout_us",
                    "pres_timeout_us (" + std::to_string(n.pres_timeout_us) +
-                       ") must be less than cycle.period_us (" +
-                       std::to_string(c.cycle.period_us) + ")");
+                       ") must be less than cycle.period_us (" + std::to_string(c.cycle.period_us) +
+                       ")");
       }
     }
   }
@@ -824,7 +831,8 @@ DaemonConfig parse_document(Diagnostics& diag, const YAML::Node& doc, const std:
   parse_powerlink(root.section("powerlink"), c.powerlink, pl_sites);
   parse_canio(root.section("canio"), c.canio);
   if (c.bus == BusKind::Powerlink && !have_powerlink) {
-    root.error("bus", "bus is 'powerlink' but the file has no powerlink section (interface, nodes)");
+    root.error("bus",
+               "bus is 'powerlink' but the file has no powerlink section (interface, nodes)");
   } else if (c.bus == BusKind::Powerlink && c.powerlink.interface.empty()) {
     diag.error(root.value_at("powerlink"), "powerlink.interface",
                "missing: bus powerlink needs the network interface of the POWERLINK segment");
@@ -981,7 +989,9 @@ std::string hex(uint64_t v) {
   return "0x" + std::string(buf.data(), ec == std::errc{} ? end : buf.data());
 }
 
-const char* yes(bool b) { return b ? "true" : "false"; }
+const char* yes(bool b) {
+  return b ? "true" : "false";
+}
 
 }  // namespace
 

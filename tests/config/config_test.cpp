@@ -29,30 +29,45 @@ struct Expected {
 
 // One row per fixture; the directory walk below makes sure no fixture goes unchecked.
 const Expected kBadFiles[] = {
-    {"unknown_key.yaml", 3, 3, "cycle.perod_us", "unknown key 'perod_us' (did you mean 'period_us'?)"},
-    {"wrong_type.yaml", 3, 16, "cycle.rt_priority", "expected an integer (decimal or 0x hex) in 1..99 (SCHED_FIFO), got 'high'"},
-    {"output_mtu_fm0.yaml", 6, 19, "axes[0].module.output_mtu", "16 is out of range 1..15 for function model 0"},
-    {"input_mtu_fm254.yaml", 8, 18, "axes[0].module.input_mtu", "6 is out of range 1..5 for function model 254"},
+    {"unknown_key.yaml", 3, 3, "cycle.perod_us",
+     "unknown key 'perod_us' (did you mean 'period_us'?)"},
+    {"wrong_type.yaml", 3, 16, "cycle.rt_priority",
+     "expected an integer (decimal or 0x hex) in 1..99 (SCHED_FIFO), got 'high'"},
+    {"output_mtu_fm0.yaml", 6, 19, "axes[0].module.output_mtu",
+     "16 is out of range 1..15 for function model 0"},
+    {"input_mtu_fm254.yaml", 8, 18, "axes[0].module.input_mtu",
+     "6 is out of range 1..5 for function model 254"},
     {"forward.yaml", 3, 16, "axes[0].module.forward", "0 is out of range 1..7"},
     {"prescaler.yaml", 4, 25, "axes[1].module.prescaler", "1 is out of range 2..65535"},
     {"rt_priority.yaml", 2, 16, "cycle.rt_priority", "100 is out of range 1..99"},
     {"period.yaml", 3, 14, "cycle.period_us", "50 is out of range 100..100000 µs"},
-    {"vss_window.yaml", 4, 19, "axes[0].module.vss_min_mv", "vss_min_mv (1300) must not exceed vss_max_mv (1200)"},
-    {"duplicate_name.yaml", 4, 11, "axes[1].name", "axis name 'x' is already used by axes[0] (line 2)"},
+    {"vss_window.yaml", 4, 19, "axes[0].module.vss_min_mv",
+     "vss_min_mv (1300) must not exceed vss_max_mv (1200)"},
+    {"duplicate_name.yaml", 4, 11, "axes[1].name",
+     "axis name 'x' is already used by axes[0] (line 2)"},
     {"duplicate_slot.yaml", 5, 5, "axes[1]", "node 1 slot 3 is already used by axes[0] (line 2)"},
-    {"missing_bus_section.yaml", 3, 6, "bus", "bus is 'powerlink' but the file has no powerlink section"},
-    {"unknown_node.yaml", 10, 11, "axes[1].node", "node 3 is not listed in powerlink.nodes (listed: 1)"},
+    {"missing_bus_section.yaml", 3, 6, "bus",
+     "bus is 'powerlink' but the file has no powerlink section"},
+    {"unknown_node.yaml", 10, 11, "axes[1].node",
+     "node 3 is not listed in powerlink.nodes (listed: 1)"},
     {"spin.yaml", 3, 12, "cycle.spin_us", "spin_us (200) must be less than cycle.period_us (200)"},
     {"sim_count.yaml", 3, 5, "simulated.axes", "2 entries but only 1 axes are configured"},
-    {"bad_bus.yaml", 1, 6, "bus", "'powerlnk' is not allowed; expected one of: simulated, powerlink, canio (did you mean 'powerlink'?)"},
-    {"bad_mode.yaml", 3, 9, "shm.mode", "expected an octal file mode such as \"0640\", got the string \"0999\""},
-    {"quoted_number.yaml", 2, 14, "cycle.period_us", "got the string \"1000\" (write the number without quotes)"},
+    {"bad_bus.yaml", 1, 6, "bus",
+     "'powerlnk' is not allowed; expected one of: simulated, powerlink, canio (did you mean "
+     "'powerlink'?)"},
+    {"bad_mode.yaml", 3, 9, "shm.mode",
+     "expected an octal file mode such as \"0640\", got the string \"0999\""},
+    {"quoted_number.yaml", 2, 14, "cycle.period_us",
+     "got the string \"1000\" (write the number without quotes)"},
     {"leading_zero.yaml", 3, 18, "axes[0].module.prescaler", "'04' has a leading zero"},
     {"syntax.yaml", 4, 1, "", "YAML syntax error: end of sequence flow not found"},
     {"duplicate_key.yaml", 3, 3, "cycle.period_us", "duplicate key (first given at line 2)"},
-    {"slframe.yaml", 3, 23, "axes[0].module.slframe_gen_id", "10 is not allowed; expected 9 (fastest response) or 14"},
-    {"function_model_bus.yaml", 7, 21, "axes[0].function_model", "254 is not allowed on bus powerlink"},
-    {"pres_timeout.yaml", 8, 24, "powerlink.nodes[0].pres_timeout_us", "pres_timeout_us (250) must be less than cycle.period_us (200)"},
+    {"slframe.yaml", 3, 23, "axes[0].module.slframe_gen_id",
+     "10 is not allowed; expected 9 (fastest response) or 14"},
+    {"function_model_bus.yaml", 7, 21, "axes[0].function_model",
+     "254 is not allowed on bus powerlink"},
+    {"pres_timeout.yaml", 8, 24, "powerlink.nodes[0].pres_timeout_us",
+     "pres_timeout_us (250) must be less than cycle.period_us (200)"},
     {"shm_name.yaml", 2, 9, "shm.name", "is not a shared-memory name"},
     {"not_a_map.yaml", 1, 8, "cycle", "expected a map of settings, got '1000'"},
 };
@@ -81,7 +96,9 @@ const Expected& row(std::string_view file) {
   return kBadFiles[0];
 }
 
-ConfigResult from(std::string_view text) { return load_config_from_string(text, "test.yaml"); }
+ConfigResult from(std::string_view text) {
+  return load_config_from_string(text, "test.yaml");
+}
 
 std::string one_error(std::string_view text) {
   const ConfigResult r = from(text);
@@ -92,8 +109,10 @@ std::string one_error(std::string_view text) {
 
 }  // namespace
 
-#define BAD_FIXTURE(name) \
-  TEST_CASE("bad config " name, "[config][bad]") { check_bad(row(name)); }
+#define BAD_FIXTURE(name)                          \
+  TEST_CASE("bad config " name, "[config][bad]") { \
+    check_bad(row(name));                          \
+  }
 
 BAD_FIXTURE("unknown_key.yaml")
 BAD_FIXTURE("wrong_type.yaml")
@@ -228,9 +247,9 @@ TEST_CASE("defaults are the datasheet's", "[config][defaults]") {
   CHECK(a.slot == 1);
   CHECK(a.function_model == FunctionModel::Standard);
   const ModuleSettings& m = a.module;
-  CHECK(m.prescaler == 2);          // X20DS1928.md §3: 2 = bus-controller default
-  CHECK(m.slframe_gen_id == 14);    // X2X-cycle aligned
-  CHECK(m.error_enable == 0xFF);    // every detection on
+  CHECK(m.prescaler == 2);        // X20DS1928.md §3: 2 = bus-controller default
+  CHECK(m.slframe_gen_id == 14);  // X2X-cycle aligned
+  CHECK(m.error_enable == 0xFF);  // every detection on
   CHECK(m.vss_min_mv == 800);
   CHECK(m.vss_max_mv == 1200);
   CHECK(m.quit_time_us == 100000u);
@@ -278,7 +297,9 @@ socket: {mode: "0o640"}
   CHECK(c.shm.mode == 0600u);
   CHECK(c.socket.mode == 0640u);
 
-  CHECK_THAT(one_error("cycle: {period_us: 0x}"), Catch::Contains("expected an integer (decimal or 0x hex) in 100..100000 µs, got '0x'"));
+  CHECK_THAT(
+      one_error("cycle: {period_us: 0x}"),
+      Catch::Contains("expected an integer (decimal or 0x hex) in 100..100000 µs, got '0x'"));
   CHECK_THAT(one_error("cycle: {period_us: 1000.5}"), Catch::Contains("expected an integer"));
   CHECK_THAT(one_error("powerlink: {nodes: [{node_id: 1, vendor_id: 0x100000000}]}"),
              Catch::Contains("0x100000000 is out of range 0..4294967295"));
@@ -286,7 +307,8 @@ socket: {mode: "0o640"}
              Catch::Contains("is out of range 100..100000"));
   CHECK_THAT(one_error("shm: {mode: 01777}"), Catch::Contains("out of range 0000..0777"));
   CHECK_THAT(one_error("cycle: {lock_memory: maybe}"), Catch::Contains("expected true or false"));
-  CHECK_THAT(one_error("simulated: {axes: [{frequency_hz: .nan}]}"), Catch::Contains("expected a number"));
+  CHECK_THAT(one_error("simulated: {axes: [{frequency_hz: .nan}]}"),
+             Catch::Contains("expected a number"));
 }
 
 TEST_CASE("cross-field and list rules", "[config]") {
@@ -315,8 +337,8 @@ TEST_CASE("cross-field and list rules", "[config]") {
                Catch::Contains("powerlink.nodes[0].node_id: missing required key"));
   }
   SECTION("sdo overrides") {
-    const ConfigResult r = from(
-        "powerlink: {sdo_overrides: [{register: 4097, index: 0x2001, subindex: 5}]}");
+    const ConfigResult r =
+        from("powerlink: {sdo_overrides: [{register: 4097, index: 0x2001, subindex: 5}]}");
     INFO(r.error_report());
     REQUIRE(r.ok());
     const auto it = r.config().powerlink.sdo_overrides.find(4097);
@@ -331,10 +353,12 @@ TEST_CASE("cross-field and list rules", "[config]") {
                Catch::Contains("unknown key 'colour'; allowed keys here: name, mode, group"));
   }
   SECTION("more than one YAML document") {
-    CHECK_THAT(one_error("bus: simulated\n---\nbus: canio\n"), Catch::Contains("test.yaml:2:1: the file holds more than one YAML document"));
+    CHECK_THAT(one_error("bus: simulated\n---\nbus: canio\n"),
+               Catch::Contains("test.yaml:2:1: the file holds more than one YAML document"));
   }
   SECTION("a stray comma at document level") {
-    CHECK(one_error(",") == "test.yaml:1:1: YAML syntax error: unexpected ',' (not inside a [list] or {map})");
+    CHECK(one_error(",") ==
+          "test.yaml:1:1: YAML syntax error: unexpected ',' (not inside a [list] or {map})");
   }
 }
 
@@ -351,8 +375,8 @@ TEST_CASE("dump_config round-trips", "[config]") {
 }
 
 TEST_CASE("encoder files are resolved against the config file", "[config]") {
-  const auto dir = std::filesystem::temp_directory_path() /
-                   ("ds1928-config-test-" + std::to_string(::getpid()));
+  const auto dir =
+      std::filesystem::temp_directory_path() / ("ds1928-config-test-" + std::to_string(::getpid()));
   std::filesystem::create_directories(dir);
   std::ofstream(dir / "enc.yaml") << "{}\n";
   std::ofstream(dir / "good.yaml") << "simulated: {axes: [{encoder_file: enc.yaml}]}\n";
@@ -389,7 +413,8 @@ TEST_CASE("socket fallback path", "[config]") {
 
 TEST_CASE("mutated files never crash the loader and every error is located", "[config][fuzz]") {
   std::ifstream in(kSource + "/config/powerlink.yaml");
-  const std::string original((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string original((std::istreambuf_iterator<char>(in)),
+                             std::istreambuf_iterator<char>());
   REQUIRE(original.size() > 100);
   uint64_t state = 0x9E3779B97F4A7C15ull;  // fixed seed: failures reproduce
   const auto next = [&state] {
