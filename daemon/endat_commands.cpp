@@ -11,8 +11,8 @@ namespace ds1928 {
 
 namespace {
 
-using nlohmann::json;
 using endat::Request;
+using nlohmann::json;
 
 [[nodiscard]] std::string hex(uint64_t v, int digits) {
   char buf[24];
@@ -109,22 +109,24 @@ void EnDatService::register_commands(control::Server& server) {
   };
   auto privileged = [this](const control::Request& req, const control::Reply& reply) {
     if (may_change_encoder(req)) return true;
-    reply.error("permission_denied",
-                "'" + req.command() + "' changes the encoder: needs uid 0 or group '" +
-                    config_.socket.privileged_group + "'");
+    reply.error("permission_denied", "'" + req.command() +
+                                         "' changes the encoder: needs uid 0 or group '" +
+                                         config_.socket.privileged_group + "'");
     return false;
   };
 
-  server.add_command("endat-reset", [run, privileged](const control::Request& req,
-                                                      control::Reply reply) {
-    if (!privileged(req, reply)) return;
-    run(req, reply, JobKind::Single, {Request::reset()},
-        [](const JobResult&) { return json{{"command", "reset"}}; });
-  });
+  server.add_command("endat-reset",
+                     [run, privileged](const control::Request& req, control::Reply reply) {
+                       if (!privileged(req, reply)) return;
+                       run(req, reply, JobKind::Single, {Request::reset()}, [](const JobResult&) {
+                         return json{{"command", "reset"}};
+                       });
+                     });
 
   server.add_command("endat-ack", [run](const control::Request& req, control::Reply reply) {
-    run(req, reply, JobKind::Single, {Request::acknowledge()},
-        [](const JobResult&) { return json{{"command", "ack"}}; });
+    run(req, reply, JobKind::Single, {Request::acknowledge()}, [](const JobResult&) {
+      return json{{"command", "ack"}};
+    });
   });
 
   server.add_command("endat-read-param", [run](const control::Request& req, control::Reply reply) {
@@ -139,23 +141,23 @@ void EnDatService::register_commands(control::Server& server) {
     });
   });
 
-  server.add_command("endat-write-param", [run, privileged](const control::Request& req,
-                                                            control::Reply reply) {
-    const auto mrs = static_cast<uint8_t>(number_arg(req, "mrs", 0, 0xFF));
-    const auto param = static_cast<uint8_t>(number_arg(req, "param", 0, 0xFF));
-    const auto value = static_cast<uint16_t>(number_arg(req, "value", 0, 0xFFFF));
-    if (!privileged(req, reply)) return;
-    run(req, reply, JobKind::WriteVerify,
-        {Request::write(mrs, param, value), Request::read(mrs, param)},
-        [mrs, param](const JobResult& r) {
-          json j = area_json(mrs);
-          j["command"] = "write-param";
-          j["param"] = param;
-          j.update(value_json(mrs, param, r.steps.back().reply.value()));
-          j["verified"] = true;
-          return j;
-        });
-  });
+  server.add_command(
+      "endat-write-param", [run, privileged](const control::Request& req, control::Reply reply) {
+        const auto mrs = static_cast<uint8_t>(number_arg(req, "mrs", 0, 0xFF));
+        const auto param = static_cast<uint8_t>(number_arg(req, "param", 0, 0xFF));
+        const auto value = static_cast<uint16_t>(number_arg(req, "value", 0, 0xFFFF));
+        if (!privileged(req, reply)) return;
+        run(req, reply, JobKind::WriteVerify,
+            {Request::write(mrs, param, value), Request::read(mrs, param)},
+            [mrs, param](const JobResult& r) {
+              json j = area_json(mrs);
+              j["command"] = "write-param";
+              j["param"] = param;
+              j.update(value_json(mrs, param, r.steps.back().reply.value()));
+              j["verified"] = true;
+              return j;
+            });
+      });
 
   server.add_command("endat-read-block", [run](const control::Request& req, control::Reply reply) {
     const auto mrs = static_cast<uint8_t>(number_arg(req, "mrs", 0, 0xFF));
@@ -210,10 +212,11 @@ void EnDatService::register_commands(control::Server& server) {
 
   server.add_command("endat-dump", [run](const control::Request& req, control::Reply reply) {
     const auto mrs = static_cast<uint8_t>(number_arg(req, "mrs", 0, 0xFF));
-    const unsigned count = req.has("count") ? static_cast<unsigned>(number_arg(req, "count", 1, 64))
-                                            : area_words(mrs);
+    const unsigned count =
+        req.has("count") ? static_cast<unsigned>(number_arg(req, "count", 1, 64)) : area_words(mrs);
     std::vector<Request> steps;
-    for (unsigned p = 0; p < count; ++p) steps.push_back(Request::read(mrs, static_cast<uint8_t>(p)));
+    for (unsigned p = 0; p < count; ++p)
+      steps.push_back(Request::read(mrs, static_cast<uint8_t>(p)));
     run(req, reply, JobKind::Sequence, std::move(steps), [mrs, count](const JobResult& r) {
       json j = area_json(mrs);
       j["command"] = "dump";

@@ -23,15 +23,20 @@ class ServiceCategory final : public std::error_category {
   [[nodiscard]] const char* name() const noexcept override { return "endat-service"; }
   [[nodiscard]] std::string message(int c) const override {
     switch (static_cast<EnDatServiceErrc>(c)) {
-      case EnDatServiceErrc::timeout: return "no reply from the module within the command timeout";
+      case EnDatServiceErrc::timeout:
+        return "no reply from the module within the command timeout";
       case EnDatServiceErrc::not_delivered:
         return "the command did not reach the module (not executed)";
-      case EnDatServiceErrc::busy: return "the axis' EnDat command queue is full";
+      case EnDatServiceErrc::busy:
+        return "the axis' EnDat command queue is full";
       case EnDatServiceErrc::write_rejected:
         return "the value read back differs from the value written (write-protected area?)";
-      case EnDatServiceErrc::cancelled: return "cancelled: the client went away";
-      case EnDatServiceErrc::stopped: return "the daemon is stopping";
-      case EnDatServiceErrc::no_such_axis: return "no such axis";
+      case EnDatServiceErrc::cancelled:
+        return "cancelled: the client went away";
+      case EnDatServiceErrc::stopped:
+        return "the daemon is stopping";
+      case EnDatServiceErrc::no_such_axis:
+        return "no such axis";
       case EnDatServiceErrc::identification_unavailable:
         return "the encoder identification could not be read";
     }
@@ -54,14 +59,22 @@ std::string_view endat_error_code_name(std::error_code ec) noexcept {
   if (!ec) return "ok";
   if (ec.category() == endat_service_category()) {
     switch (static_cast<EnDatServiceErrc>(ec.value())) {
-      case EnDatServiceErrc::timeout: return "timeout";
-      case EnDatServiceErrc::not_delivered: return "not_delivered";
-      case EnDatServiceErrc::busy: return "busy";
-      case EnDatServiceErrc::write_rejected: return "write_rejected";
-      case EnDatServiceErrc::cancelled: return "cancelled";
-      case EnDatServiceErrc::stopped: return "stopped";
-      case EnDatServiceErrc::no_such_axis: return "bad_argument";
-      case EnDatServiceErrc::identification_unavailable: return "identification_unavailable";
+      case EnDatServiceErrc::timeout:
+        return "timeout";
+      case EnDatServiceErrc::not_delivered:
+        return "not_delivered";
+      case EnDatServiceErrc::busy:
+        return "busy";
+      case EnDatServiceErrc::write_rejected:
+        return "write_rejected";
+      case EnDatServiceErrc::cancelled:
+        return "cancelled";
+      case EnDatServiceErrc::stopped:
+        return "stopped";
+      case EnDatServiceErrc::no_such_axis:
+        return "bad_argument";
+      case EnDatServiceErrc::identification_unavailable:
+        return "identification_unavailable";
     }
     return "internal";
   }
@@ -69,27 +82,41 @@ std::string_view endat_error_code_name(std::error_code ec) noexcept {
     using endat::Errc;
     switch (static_cast<Errc>(ec.value())) {
       case Errc::truncated_reply:
-      case Errc::truncated_failure_reply: return "truncated_reply";
+      case Errc::truncated_failure_reply:
+        return "truncated_reply";
       case Errc::oversized_reply:
-      case Errc::oversized_failure_reply: return "oversized_reply";
+      case Errc::oversized_failure_reply:
+        return "oversized_reply";
       case Errc::command_echo_mismatch:
       case Errc::mrs_echo_mismatch:
       case Errc::block_echo_mismatch:
-      case Errc::parameter_echo_mismatch: return "echo_mismatch";
-      case Errc::requires_endat22: return "requires_endat22";
+      case Errc::parameter_echo_mismatch:
+        return "echo_mismatch";
+      case Errc::requires_endat22:
+        return "requires_endat22";
       case Errc::invalid_mrs:
       case Errc::unknown_command:
       case Errc::invalid_number:
-      case Errc::number_out_of_range: return "bad_argument";
-      case Errc::module_crc_failure: return "module_crc_error";
-      case Errc::module_no_response: return "module_no_response";
-      case Errc::module_not_supported: return "module_not_supported";
-      case Errc::module_malformed_request: return "module_malformed_request";
-      case Errc::module_wire_echo_mismatch: return "module_wire_echo_mismatch";
-      case Errc::module_unknown_failure: return "module_failure";
-      case Errc::write_not_applied: return "write_rejected";
-      case Errc::invalid_identification: return "invalid_identification";
-      default: return "internal";
+      case Errc::number_out_of_range:
+        return "bad_argument";
+      case Errc::module_crc_failure:
+        return "module_crc_error";
+      case Errc::module_no_response:
+        return "module_no_response";
+      case Errc::module_not_supported:
+        return "module_not_supported";
+      case Errc::module_malformed_request:
+        return "module_malformed_request";
+      case Errc::module_wire_echo_mismatch:
+        return "module_wire_echo_mismatch";
+      case Errc::module_unknown_failure:
+        return "module_failure";
+      case Errc::write_not_applied:
+        return "write_rejected";
+      case Errc::invalid_identification:
+        return "invalid_identification";
+      default:
+        return "internal";
     }
   }
   return "internal";
@@ -214,16 +241,16 @@ EnDatService::EnDatService(boost::asio::io_context& io, CycleWork& work, Registe
       config_(config),
       poll_timer_(io),
       status_timer_(io),
-      poll_period_(std::max<std::chrono::microseconds>(std::chrono::milliseconds(1),
-                                                       std::chrono::microseconds(
-                                                           config.cycle.period_us))),
+      poll_period_(std::max<std::chrono::microseconds>(
+          std::chrono::milliseconds(1), std::chrono::microseconds(config.cycle.period_us))),
       privileged_([group = config.socket.privileged_group](const control::PeerCredentials& p) {
         return peer_is_privileged(p, group);
       }) {
   for (std::size_t i = 0; i < work.axis_count(); ++i) {
     auto axis = std::make_unique<Axis>();
     if (i < config.axes.size())
-      axis->timeout = std::chrono::milliseconds(std::max<uint32_t>(1, config.axes[i].command_timeout_ms));
+      axis->timeout =
+          std::chrono::milliseconds(std::max<uint32_t>(1, config.axes[i].command_timeout_ms));
     axes_.push_back(std::move(axis));
   }
 }
@@ -259,8 +286,7 @@ void EnDatService::stop() {
   }
 }
 
-void EnDatService::set_privilege_check(
-    std::function<bool(const control::PeerCredentials&)> check) {
+void EnDatService::set_privilege_check(std::function<bool(const control::PeerCredentials&)> check) {
   privileged_ = std::move(check);
 }
 
@@ -340,7 +366,8 @@ void EnDatService::dispatch(std::size_t index, Clock::time_point now) {
     }
     const endat::Request& request = job->steps[job->next];
     const endat::CommandSet set =
-        a.ident ? a.ident->command_set : endat::CommandSet::EnDat22;  // unknown: let the module judge
+        a.ident ? a.ident->command_set
+                : endat::CommandSet::EnDat22;  // unknown: let the module judge
     auto message = endat::encode_request(request, set);
     a.in_flight.emplace();
     a.in_flight->job = std::move(job);
@@ -447,11 +474,12 @@ void EnDatService::complete_job(Axis& a, std::unique_ptr<Job> job) {
 void EnDatService::arm_poll() {
   if (!running_) return;
   poll_timer_.expires_after(poll_period_);
-  poll_timer_.async_wait([this, alive = std::weak_ptr<bool>(alive_)](const boost::system::error_code& ec) {
-    if (ec || alive.expired()) return;
-    poll();
-    arm_poll();
-  });
+  poll_timer_.async_wait(
+      [this, alive = std::weak_ptr<bool>(alive_)](const boost::system::error_code& ec) {
+        if (ec || alive.expired()) return;
+        poll();
+        arm_poll();
+      });
 }
 
 void EnDatService::poll() {
@@ -485,7 +513,8 @@ void EnDatService::poll_axis(std::size_t index, Clock::time_point now) {
           finish_step(index, endat::Errc::oversized_reply, {});
           break;
         }
-        auto reply = endat::decode_reply(request, std::span<const uint8_t>(event->bytes.data(), event->size));
+        auto reply = endat::decode_reply(
+            request, std::span<const uint8_t>(event->bytes.data(), event->size));
         if (reply)
           finish_step(index, {}, *reply);
         else
@@ -544,11 +573,12 @@ void EnDatService::poll_axis(std::size_t index, Clock::time_point now) {
 void EnDatService::arm_status() {
   if (!running_) return;
   status_timer_.expires_after(std::chrono::seconds(1));
-  status_timer_.async_wait([this, alive = std::weak_ptr<bool>(alive_)](const boost::system::error_code& ec) {
-    if (ec || alive.expired()) return;
-    read_status_registers();
-    arm_status();
-  });
+  status_timer_.async_wait(
+      [this, alive = std::weak_ptr<bool>(alive_)](const boost::system::error_code& ec) {
+        if (ec || alive.expired()) return;
+        read_status_registers();
+        arm_status();
+      });
 }
 
 void EnDatService::read_status_registers() {
@@ -557,23 +587,24 @@ void EnDatService::read_status_registers() {
     if (a.status_pending != 0) continue;  // the previous read has not come back yet
     a.status_pending = 2;
     for (const uint16_t reg : {reg::kEnDatError, reg::kEnDatWarning}) {
-      registers_.read(static_cast<uint16_t>(i), reg, 2,
-                      [this, i, reg, alive = std::weak_ptr<bool>(alive_)](std::error_code ec, uint32_t v) {
-                        if (alive.expired()) return;
-                        Axis& ax = *axes_[i];
-                        if (ax.status_pending > 0) --ax.status_pending;
-                        ax.status_error = ec;
-                        if (ec) return;
-                        const auto word = static_cast<uint16_t>(v);
-                        auto& counters = work_.counters(i);
-                        if (reg == reg::kEnDatError) {
-                          ax.endat_error = word;
-                          counters.endat_error.store(word, std::memory_order_relaxed);
-                        } else {
-                          ax.endat_warning = word;
-                          counters.endat_warning.store(word, std::memory_order_relaxed);
-                        }
-                      });
+      registers_.read(
+          static_cast<uint16_t>(i), reg, 2,
+          [this, i, reg, alive = std::weak_ptr<bool>(alive_)](std::error_code ec, uint32_t v) {
+            if (alive.expired()) return;
+            Axis& ax = *axes_[i];
+            if (ax.status_pending > 0) --ax.status_pending;
+            ax.status_error = ec;
+            if (ec) return;
+            const auto word = static_cast<uint16_t>(v);
+            auto& counters = work_.counters(i);
+            if (reg == reg::kEnDatError) {
+              ax.endat_error = word;
+              counters.endat_error.store(word, std::memory_order_relaxed);
+            } else {
+              ax.endat_warning = word;
+              counters.endat_warning.store(word, std::memory_order_relaxed);
+            }
+          });
     }
   }
 }
@@ -617,17 +648,20 @@ void EnDatService::identify_by_registers(std::size_t index, unsigned attempt) {
           if (ec && !collect->error) collect->error = ec;
           collect->words[w] = static_cast<uint16_t>(v);
           if (--collect->remaining != 0) return;
-          if (!running_) return identification_done(index, make_error_code(EnDatServiceErrc::stopped));
+          if (!running_)
+            return identification_done(index, make_error_code(EnDatServiceErrc::stopped));
           if (collect->error) {
-            spdlog::info("axis {}: identification registers not readable ({}); reading over Flatstream",
-                         index, collect->error.message());
+            spdlog::info(
+                "axis {}: identification registers not readable ({}); reading over Flatstream",
+                index, collect->error.message());
             return identify_by_flatstream(index);
           }
           auto ident = endat::decode_identification(collect->words);
           if (!ident) {
             // The module may still be reading the encoder after power-up: try again shortly.
             if (attempt < 4) {
-              auto timer = std::make_shared<boost::asio::steady_timer>(io_, std::chrono::milliseconds(250));
+              auto timer =
+                  std::make_shared<boost::asio::steady_timer>(io_, std::chrono::milliseconds(250));
               timer->async_wait([this, index, attempt, timer, alive = std::weak_ptr<bool>(alive_)](
                                     const boost::system::error_code& e) {
                 if (e || alive.expired() || !running_) return;
@@ -635,8 +669,9 @@ void EnDatService::identify_by_registers(std::size_t index, unsigned attempt) {
               });
               return;
             }
-            spdlog::info("axis {}: identification registers inconsistent ({}); reading over Flatstream",
-                         index, ident.error().message());
+            spdlog::info(
+                "axis {}: identification registers inconsistent ({}); reading over Flatstream",
+                index, ident.error().message());
             return identify_by_flatstream(index);
           }
           Axis& a = *axes_[index];
@@ -651,7 +686,8 @@ void EnDatService::identify_by_registers(std::size_t index, unsigned attempt) {
 void EnDatService::identify_by_flatstream(std::size_t index) {
   std::vector<endat::Request> steps;
   for (unsigned w = 4; w < endat::kManufacturerWords; ++w)
-    steps.push_back(endat::Request::read(endat::manufacturer_page_mrs(w), static_cast<uint8_t>(w % 16)));
+    steps.push_back(
+        endat::Request::read(endat::manufacturer_page_mrs(w), static_cast<uint8_t>(w % 16)));
   submit(index, JobKind::Sequence, std::move(steps), [this, index](const JobResult& r) {
     if (r.error) return identification_done(index, r.error);
     endat::ManufacturerWords words{};
@@ -679,8 +715,8 @@ void EnDatService::identification_done(std::size_t index, std::error_code error)
     spdlog::warn("axis {}: encoder identification failed: {}", index, error.message());
   } else {
     a.ident_state = "ok";
-    spdlog::info("axis {}: EnDat {} {} encoder, {} position bits, ID {}, serial {} (from {})", index,
-                 a.ident->command_set == endat::CommandSet::EnDat22 ? "2.2" : "2.1",
+    spdlog::info("axis {}: EnDat {} {} encoder, {} position bits, ID {}, serial {} (from {})",
+                 index, a.ident->command_set == endat::CommandSet::EnDat22 ? "2.2" : "2.1",
                  a.ident->type == endat::EncoderType::Rotary ? "rotary" : "linear",
                  a.ident->position_bits, a.ident->id.to_string(), a.ident->serial.to_string(),
                  a.ident_source);
@@ -690,7 +726,9 @@ void EnDatService::identification_done(std::size_t index, std::error_code error)
   for (auto& w : waiters) w(error);
 }
 
-bool EnDatService::identifying(std::size_t axis) const { return axes_.at(axis)->identifying; }
+bool EnDatService::identifying(std::size_t axis) const {
+  return axes_.at(axis)->identifying;
+}
 
 nlohmann::json EnDatService::identification_reply(std::size_t axis) const {
   const Axis& a = *axes_.at(axis);
@@ -725,8 +763,9 @@ nlohmann::json EnDatService::status_json(std::size_t index) const {
   const Axis& a = *axes_[index];
   nlohmann::json id{{"state", a.ident_state}};
   if (!a.ident_source.empty()) id["source"] = a.ident_source;
-  if (a.ident_error) id["error"] = {{"code", std::string(endat_error_code_name(a.ident_error))},
-                                    {"message", a.ident_error.message()}};
+  if (a.ident_error)
+    id["error"] = {{"code", std::string(endat_error_code_name(a.ident_error))},
+                   {"message", a.ident_error.message()}};
   if (a.ident) id.update(identification_json(*a.ident));
   nlohmann::json j{{"identification", id}};
   if (a.endat_error) {

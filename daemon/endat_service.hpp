@@ -37,14 +37,15 @@ namespace ds1928 {
 
 // Failures the service adds to the codec's endat::Errc.
 enum class EnDatServiceErrc : int {
-  timeout = 1,       // no reply within AxisConfig::command_timeout_ms
-  not_delivered,     // Flatstream gave up before the module had the whole command (not executed)
-  busy,              // the axis' command queue is full
-  write_rejected,    // the read-back differs from the written value (protected area)
-  cancelled,         // the client went away
-  stopped,           // the service stopped before the command ran
+  timeout = 1,     // no reply within AxisConfig::command_timeout_ms
+  not_delivered,   // Flatstream gave up before the module had the whole command (not executed)
+  busy,            // the axis' command queue is full
+  write_rejected,  // the read-back differs from the written value (protected area)
+  cancelled,       // the client went away
+  stopped,         // the service stopped before the command ran
   no_such_axis,
-  identification_unavailable,  // neither the registers nor Flatstream reads gave a valid identification
+  identification_unavailable,  // neither the registers nor Flatstream reads gave a valid
+                               // identification
 };
 [[nodiscard]] const std::error_category& endat_service_category() noexcept;
 [[nodiscard]] std::error_code make_error_code(EnDatServiceErrc e) noexcept;
@@ -129,11 +130,11 @@ class EnDatService {
 
   // Figures of one axis (tests, benchmark).
   struct Counters {
-    uint64_t commands_sent = 0;     // Flatstream messages submitted (resends included)
-    uint64_t replies = 0;           // replies matched to the command in flight
+    uint64_t commands_sent = 0;  // Flatstream messages submitted (resends included)
+    uint64_t replies = 0;        // replies matched to the command in flight
     uint64_t timeouts = 0;
     uint64_t resends = 0;
-    uint64_t late_replies = 0;      // replies after a timeout, discarded
+    uint64_t late_replies = 0;        // replies after a timeout, discarded
     uint64_t unexpected_replies = 0;  // replies with no command in flight, discarded
     uint64_t discarded_replies = 0;   // replies of cancelled commands
     uint64_t jobs_done = 0;

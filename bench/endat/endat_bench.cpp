@@ -84,7 +84,8 @@ class Bench {
     service_->start();
     io_thread_ = std::thread([this] { io_.run(); });
     // Let the channels synchronise and the start-up identification finish.
-    for (int i = 0; i < 500 && !run([this] { return service_->identification(0).has_value(); }); ++i)
+    for (int i = 0; i < 500 && !run([this] { return service_->identification(0).has_value(); });
+         ++i)
       std::this_thread::sleep_for(std::chrono::milliseconds(10));
     std::this_thread::sleep_for(std::chrono::milliseconds(100));
   }
@@ -151,7 +152,8 @@ class Bench {
     while (!stop_) {
       CycleContext ctx;
       ctx.index = index++;
-      ctx.start_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(next.time_since_epoch()).count();
+      ctx.start_ns =
+          std::chrono::duration_cast<std::chrono::nanoseconds>(next.time_since_epoch()).count();
       ctx.woke_ns = ctx.start_ns;
       work_->run_cycle(ctx);
       next += std::chrono::microseconds(period_us_);
@@ -191,19 +193,22 @@ int main(int argc, char** argv) {
       period_us = static_cast<uint32_t>(std::max(100, std::atoi(argv[++i])));
   }
   const double endat_read_ms = 4.0;  // simulated encoder: selection 2 ms + read 2 ms
-  const unsigned endat_cycles = static_cast<unsigned>(std::ceil(endat_read_ms * 1000.0 / period_us));
-  std::printf("EnDat commands through the daemon path, bus cycle %u µs, simulated encoder "
-              "(read = %.1f ms EnDat time), median of %d\n\n",
-              period_us, endat_read_ms, reps);
-  std::printf("| MTU | Fwd | read-param cycles (min sim / X2X) | read-param wall ms (min) | "
-              "ident 44 words cycles (min sim) | ident wall ms (min) | ident via registers ms |\n");
+  const unsigned endat_cycles =
+      static_cast<unsigned>(std::ceil(endat_read_ms * 1000.0 / period_us));
+  std::printf(
+      "EnDat commands through the daemon path, bus cycle %u µs, simulated encoder "
+      "(read = %.1f ms EnDat time), median of %d\n\n",
+      period_us, endat_read_ms, reps);
+  std::printf(
+      "| MTU | Fwd | read-param cycles (min sim / X2X) | read-param wall ms (min) | "
+      "ident 44 words cycles (min sim) | ident wall ms (min) | ident via registers ms |\n");
   std::printf("|---|---|---|---|---|---|---|\n");
   for (const Setup s : {Setup{5, 1}, Setup{5, 7}, Setup{15, 1}, Setup{15, 7}}) {
     Bench bench(s, period_us);
     const unsigned rq = sequences(3, s.mtu), rp = sequences(5, s.mtu);
     // +1: the cycle thread takes the request at the start of the next cycle.
-    const unsigned min_sim = 1 + transfer_cycles(rq, s.forward, 1) + endat_cycles +
-                             transfer_cycles(rp, s.forward, 1);
+    const unsigned min_sim =
+        1 + transfer_cycles(rq, s.forward, 1) + endat_cycles + transfer_cycles(rp, s.forward, 1);
     const unsigned min_x2x = 1 + transfer_cycles(rq, s.forward, 5) + 2 + endat_cycles +
                              transfer_cycles(rp, s.forward, 5) + 2;  // + one-way delays
     std::vector<uint64_t> cycles;
@@ -217,7 +222,8 @@ int main(int argc, char** argv) {
     }
     std::vector<endat::Request> ident;
     for (unsigned w = 4; w < endat::kManufacturerWords; ++w)
-      ident.push_back(endat::Request::read(endat::manufacturer_page_mrs(w), static_cast<uint8_t>(w % 16)));
+      ident.push_back(
+          endat::Request::read(endat::manufacturer_page_mrs(w), static_cast<uint8_t>(w % 16)));
     std::vector<uint64_t> icycles;
     std::vector<double> ims, regms;
     for (int i = 0; i < std::max(1, reps / 7); ++i) {
@@ -228,11 +234,10 @@ int main(int argc, char** argv) {
       regms.push_back(bench.register_ident_ms());
     }
     std::printf("| %u | %u | %llu (%u / %u) | %.2f (%.2f) | %llu (%u) | %.1f (%.1f) | %.1f |%s\n",
-                s.mtu, s.forward, static_cast<unsigned long long>(median(cycles)), min_sim,
-                min_x2x, median(ms), min_sim * period_us / 1000.0,
+                s.mtu, s.forward, static_cast<unsigned long long>(median(cycles)), min_sim, min_x2x,
+                median(ms), min_sim * period_us / 1000.0,
                 static_cast<unsigned long long>(median(icycles)), 44 * min_sim, median(ims),
-                44 * min_sim * period_us / 1000.0, median(regms),
-                failures ? "  FAILURES" : "");
+                44 * min_sim * period_us / 1000.0, median(regms), failures ? "  FAILURES" : "");
     std::fflush(stdout);
   }
   return 0;

@@ -4,14 +4,14 @@
 #include <map>
 #include <set>
 
-#include "ds1928/shm.hpp"
 #include "core/module_image.hpp"
+#include "ds1928/shm.hpp"
 #include "rig.hpp"
 
 using namespace ds1928;
 using namespace ds1928::endat_test;
-using control::test::LineClient;
 using control::test::error_code_of;
+using control::test::LineClient;
 
 namespace {
 
@@ -46,7 +46,8 @@ TEST_CASE("ident, read-param, write-param round trip and protected write over th
   CHECK(ident["identification"]["serial"] == "S36845217");
 
   // The same words read over Flatstream agree with the registers (word 13 = position bits).
-  const json bits = c.request({{"cmd", "endat-read-param"}, {"axis", 0}, {"mrs", "0xA1"}, {"param", 13}});
+  const json bits =
+      c.request({{"cmd", "endat-read-param"}, {"axis", 0}, {"mrs", "0xA1"}, {"param", 13}});
   INFO(bits.dump());
   REQUIRE(bits.value("ok", false));
   CHECK(bits["value"] == ident["words"]["13"]["value"]);
@@ -54,8 +55,11 @@ TEST_CASE("ident, read-param, write-param round trip and protected write over th
   CHECK(bits.value("meaning", "").find("37") != std::string::npos);
 
   // OEM area: write, read back, read again.
-  const json w = c.request(
-      {{"cmd", "endat-write-param"}, {"axis", 0}, {"mrs", 0xA9}, {"param", "3"}, {"value", "0xBEEF"}});
+  const json w = c.request({{"cmd", "endat-write-param"},
+                            {"axis", 0},
+                            {"mrs", 0xA9},
+                            {"param", "3"},
+                            {"value", "0xBEEF"}});
   INFO(w.dump());
   REQUIRE(w.value("ok", false));
   CHECK(w["value"] == 0xBEEF);
@@ -81,7 +85,8 @@ TEST_CASE("ident, read-param, write-param round trip and protected write over th
   CHECK(d["words"][3]["value"] == 0xBEEF);
 
   // Additional information and the other commands.
-  const json info = c.request({{"cmd", "endat-read-info"}, {"axis", 0}, {"word", 1}, {"mrs", "0x4C"}});
+  const json info =
+      c.request({{"cmd", "endat-read-info"}, {"axis", 0}, {"word", 1}, {"mrs", "0x4C"}});
   INFO(info.dump());
   REQUIRE(info.value("ok", false));
   CHECK(info.value("meaning", "").find("41.5") != std::string::npos);
@@ -89,9 +94,11 @@ TEST_CASE("ident, read-param, write-param round trip and protected write over th
   CHECK(c.request({{"cmd", "endat-reset"}, {"axis", 0}}).value("ok", false));
 
   // Bad arguments are named.
-  const json bad = c.request({{"cmd", "endat-read-param"}, {"axis", 0}, {"mrs", "0xZZ"}, {"param", 1}});
+  const json bad =
+      c.request({{"cmd", "endat-read-param"}, {"axis", 0}, {"mrs", "0xZZ"}, {"param", 1}});
   CHECK(error_code_of(bad) == "bad_argument");
-  const json area = c.request({{"cmd", "endat-read-param"}, {"axis", 0}, {"mrs", 0x41}, {"param", 1}});
+  const json area =
+      c.request({{"cmd", "endat-read-param"}, {"axis", 0}, {"mrs", 0x41}, {"param", 1}});
   CHECK(error_code_of(area) == "bad_argument");  // additional-information code, not a memory area
   CHECK(error_code_of(c.request({{"cmd", "endat-ident"}, {"axis", 7}})) == "bad_argument");
 
@@ -108,7 +115,8 @@ TEST_CASE("privileged commands need the privileged group", "[endat_e2e]") {
     rig.service().set_privilege_check([](const control::PeerCredentials&) { return false; });
   });
   LineClient c(rig.socket_path(), kClientTimeoutMs);
-  const json w = c.request({{"cmd", "endat-write-param"}, {"mrs", 0xA9}, {"param", 1}, {"value", 1}});
+  const json w =
+      c.request({{"cmd", "endat-write-param"}, {"mrs", 0xA9}, {"param", 1}, {"value", 1}});
   CHECK(error_code_of(w) == "permission_denied");
   CHECK(error_code_of(c.request({{"cmd", "endat-reset"}})) == "permission_denied");
   CHECK(error_code_of(c.request({{"cmd", "endat-write-block"},
@@ -176,8 +184,9 @@ TEST_CASE("a client that disconnects: its queued command is dropped, its reply d
     LineClient b(rig.socket_path(), kClientTimeoutMs);
     a.send_raw(json{{"cmd", "endat-read-param"}, {"mrs", 0xA9}, {"param", 40}}.dump() + "\n");
     std::this_thread::sleep_for(std::chrono::milliseconds(50));
-    b.send_raw(json{{"cmd", "endat-write-param"}, {"mrs", 0xA9}, {"param", 41}, {"value", 7}}.dump() +
-               "\n");
+    b.send_raw(
+        json{{"cmd", "endat-write-param"}, {"mrs", 0xA9}, {"param", 41}, {"value", 7}}.dump() +
+        "\n");
     std::this_thread::sleep_for(std::chrono::milliseconds(50));
     b.close();
     std::this_thread::sleep_for(std::chrono::milliseconds(50));
@@ -195,8 +204,7 @@ TEST_CASE("a client that disconnects: its queued command is dropped, its reply d
   CHECK(counters.timeouts == 0);
 }
 
-TEST_CASE("under a lossy bus every result is the right value or an explicit error",
-          "[endat_e2e]") {
+TEST_CASE("under a lossy bus every result is the right value or an explicit error", "[endat_e2e]") {
   const uint32_t seed = static_cast<uint32_t>(std::random_device{}());
   INFO("seed " << seed);
   Rig rig({.peer = Peer::Lossy, .command_timeout_ms = 1000, .seed = seed});
@@ -205,7 +213,8 @@ TEST_CASE("under a lossy bus every result is the right value or an explicit erro
   const uint64_t cycles_before = rig.cycles();
 
   // Manufacturer words as the registers show them (identification read at start).
-  const json expected_words = rig.run([&] { return rig.service().identification_reply(0); })["words"];
+  const json expected_words =
+      rig.run([&] { return rig.service().identification_reply(0); })["words"];
 
   struct Tally {
     int ok = 0, errors = 0, wrong = 0;
@@ -255,7 +264,8 @@ TEST_CASE("under a lossy bus every result is the right value or an explicit erro
         t.wrong_cases.push_back(why + ": " + req.dump() + " -> " + r.dump());
       };
       if (req["mrs"] == 0xA5) {
-        if (is_ok) wrong("protected write accepted");
+        if (is_ok)
+          wrong("protected write accepted");
         else if (code != "write_rejected" && code != "timeout" && code != "not_delivered" &&
                  code.rfind("module_", 0) != 0)
           wrong("unexpected error");
@@ -288,12 +298,15 @@ TEST_CASE("under a lossy bus every result is the right value or an explicit erro
     while (!finished.load()) {
       std::this_thread::sleep_for(std::chrono::seconds(1));
       const auto& tc = rig.work().tunnel_counters(0);
-      std::fprintf(stderr, "%s | fs sent %llu failed %llu received %llu repeated %llu resyncs %llu out %u in %u\n",
-                   rig.run([&] { return rig.service().status_json(0)["commands"].dump(); }).c_str(),
-                   (unsigned long long)tc.messages_sent.load(), (unsigned long long)tc.messages_failed.load(),
-                   (unsigned long long)tc.messages_received.load(),
-                   (unsigned long long)tc.sequences_repeated.load(), (unsigned long long)tc.resyncs.load(),
-                   tc.output_state.load(), tc.input_state.load());
+      std::fprintf(
+          stderr,
+          "%s | fs sent %llu failed %llu received %llu repeated %llu resyncs %llu out %u in %u\n",
+          rig.run([&] { return rig.service().status_json(0)["commands"].dump(); }).c_str(),
+          (unsigned long long)tc.messages_sent.load(),
+          (unsigned long long)tc.messages_failed.load(),
+          (unsigned long long)tc.messages_received.load(),
+          (unsigned long long)tc.sequences_repeated.load(), (unsigned long long)tc.resyncs.load(),
+          tc.output_state.load(), tc.input_state.load());
     }
   });
   std::thread ta([&] { client(0, seed + 1, a); });

@@ -51,7 +51,8 @@ class BusDecorator : public BusDriver {
 class LossyBus final : public BusDecorator {
  public:
   LossyBus(BusDriver& inner, uint32_t seed) : BusDecorator(inner), rng_(seed) {}
-  ExchangeResult exchange(std::span<AxisIo> axes, int64_t start_ns, uint64_t index) noexcept override {
+  ExchangeResult exchange(std::span<AxisIo> axes, int64_t start_ns,
+                          uint64_t index) noexcept override {
     using flatstream::test::BusEvent;
     if (scratch_.size() != axes.size()) {
       scratch_.resize(axes.size());
@@ -113,7 +114,8 @@ class ScriptedModule final : public BusDecorator {
   [[nodiscard]] int received_with_param(uint8_t param) const { return seen_[param].load(); }
   [[nodiscard]] int commands() const { return commands_.load(); }
 
-  ExchangeResult exchange(std::span<AxisIo> axes, int64_t start_ns, uint64_t index) noexcept override {
+  ExchangeResult exchange(std::span<AxisIo> axes, int64_t start_ns,
+                          uint64_t index) noexcept override {
     const ExchangeResult r = inner_.exchange(axes, start_ns, index);
     if (axes.empty()) return r;
     ++cycle_;
@@ -153,11 +155,19 @@ class ScriptedModule final : public BusDecorator {
       fault = static_cast<Fault>(fault_.load());
     }
     switch (fault) {
-      case Fault::None: break;
-      case Fault::WrongMrsEcho: reply.bytes[1] = static_cast<uint8_t>(reply.bytes[1] + 2); break;
-      case Fault::Truncated: --reply.size; break;
-      case Fault::Silent: return;
-      case Fault::Late: due += late_cycles_.load(); break;
+      case Fault::None:
+        break;
+      case Fault::WrongMrsEcho:
+        reply.bytes[1] = static_cast<uint8_t>(reply.bytes[1] + 2);
+        break;
+      case Fault::Truncated:
+        --reply.size;
+        break;
+      case Fault::Silent:
+        return;
+      case Fault::Late:
+        due += late_cycles_.load();
+        break;
     }
     if (pending_count_ < pending_.size()) pending_[pending_count_++] = {due, reply};
   }
@@ -206,7 +216,9 @@ class Rig {
     config_.socket.privileged_group = "";
     sim_ = std::make_unique<sim::SimulatedBus>(config_);
     switch (o.peer) {
-      case Peer::Simulated: bus_ = sim_.get(); break;
+      case Peer::Simulated:
+        bus_ = sim_.get();
+        break;
       case Peer::Lossy:
         decorator_ = std::make_unique<LossyBus>(*sim_, o.seed);
         bus_ = decorator_.get();
@@ -281,13 +293,15 @@ class Rig {
     while (!stop_.load()) {
       CycleContext ctx;
       ctx.index = index++;
-      ctx.start_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(next.time_since_epoch()).count();
+      ctx.start_ns =
+          std::chrono::duration_cast<std::chrono::nanoseconds>(next.time_since_epoch()).count();
       ctx.woke_ns = ctx.start_ns;
       work_->run_cycle(ctx);
       cycles_.fetch_add(1);
       next += std::chrono::microseconds(options_.period_us);
       std::this_thread::sleep_until(next);
-      if (clock::now() - next > std::chrono::milliseconds(20)) next = clock::now();  // loaded machine
+      if (clock::now() - next > std::chrono::milliseconds(20))
+        next = clock::now();  // loaded machine
     }
   }
 
@@ -299,8 +313,8 @@ class Rig {
   shm::Publisher publisher_;
   std::unique_ptr<CycleWork> work_;
   boost::asio::io_context io_;
-  std::optional<boost::asio::executor_work_guard<boost::asio::io_context::executor_type>> work_guard_{
-      boost::asio::make_work_guard(io_)};
+  std::optional<boost::asio::executor_work_guard<boost::asio::io_context::executor_type>>
+      work_guard_{boost::asio::make_work_guard(io_)};
   std::unique_ptr<RegisterClient> registers_;
   std::unique_ptr<EnDatService> service_;
   std::unique_ptr<control::Server> server_;
@@ -310,6 +324,8 @@ class Rig {
   std::atomic<uint64_t> cycles_{0};
 };
 
-inline json call(control::test::LineClient& c, json request) { return c.request(request); }
+inline json call(control::test::LineClient& c, json request) {
+  return c.request(request);
+}
 
 }  // namespace ds1928::endat_test

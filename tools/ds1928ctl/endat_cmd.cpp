@@ -74,7 +74,7 @@ void print_ident(const json& r) {
     std::cout << "  steps/revolution:  " << num(id, "steps_per_revolution") << "\n";
     std::cout << "  revolutions:       "
               << (id.value("multiturn", false) ? std::to_string(num(id, "revolutions"))
-                                                : std::string("singleturn"))
+                                               : std::string("singleturn"))
               << "\n";
     std::cout << "  signal periods:    " << num(id, "signal_periods") << " per revolution\n";
   } else {
@@ -149,9 +149,8 @@ void add_endat_commands(CLI::App& app, Context& ctx) {
   };
 
   endat->add_subcommand("reset", "Reset the encoder (EnDat command 0x00)")->callback([action] {
-    action({{"cmd", "endat-reset"}}, [](const json& r) {
-      std::cout << "axis " << num(r, "axis") << ": encoder reset\n";
-    });
+    action({{"cmd", "endat-reset"}},
+           [](const json& r) { std::cout << "axis " << num(r, "axis") << ": encoder reset\n"; });
   });
   endat->add_subcommand("ack", "Acknowledge the encoder's errors (EnDat command 0x01)")
       ->callback([action] {
@@ -173,7 +172,8 @@ void add_endat_commands(CLI::App& app, Context& ctx) {
     });
   }
   {
-    auto* c = endat->add_subcommand("write-param", "Write a parameter word (0x05), verified by reading back");
+    auto* c = endat->add_subcommand("write-param",
+                                    "Write a parameter word (0x05), verified by reading back");
     auto mrs = std::make_shared<Number>(), param = std::make_shared<Number>(),
          value = std::make_shared<Number>();
     add_number(c, "MRS", *mrs, "Memory area (e.g. 0xA9)");
@@ -188,7 +188,8 @@ void add_endat_commands(CLI::App& app, Context& ctx) {
     });
   }
   {
-    auto* c = endat->add_subcommand("read-block", "Read a parameter of a memory block (0x06, EnDat 2.2)");
+    auto* c =
+        endat->add_subcommand("read-block", "Read a parameter of a memory block (0x06, EnDat 2.2)");
     auto mrs = std::make_shared<Number>(), block = std::make_shared<Number>(),
          param = std::make_shared<Number>();
     add_number(c, "MRS", *mrs, "Memory area (e.g. 0xB1)");
@@ -203,8 +204,8 @@ void add_endat_commands(CLI::App& app, Context& ctx) {
     });
   }
   {
-    auto* c = endat->add_subcommand("write-block",
-                                    "Write a parameter of a memory block (0x07, EnDat 2.2), verified");
+    auto* c = endat->add_subcommand(
+        "write-block", "Write a parameter of a memory block (0x07, EnDat 2.2), verified");
     auto mrs = std::make_shared<Number>(), block = std::make_shared<Number>(),
          param = std::make_shared<Number>(), value = std::make_shared<Number>();
     add_number(c, "MRS", *mrs, "Memory area (e.g. 0xB1)");
@@ -221,7 +222,8 @@ void add_endat_commands(CLI::App& app, Context& ctx) {
     });
   }
   {
-    auto* c = endat->add_subcommand("read-info", "Read additional-information word 1..4 (0x08..0x0B, EnDat 2.2)");
+    auto* c = endat->add_subcommand(
+        "read-info", "Read additional-information word 1..4 (0x08..0x0B, EnDat 2.2)");
     auto word = std::make_shared<Number>(), mrs = std::make_shared<Number>();
     add_number(c, "WORD", *word, "Word 1..4");
     add_number(c, "MRS", *mrs, "Additional information code (e.g. 0x4C temperature 1)");
@@ -243,7 +245,8 @@ void add_endat_commands(CLI::App& app, Context& ctx) {
     });
   }
   {
-    auto* c = endat->add_subcommand("dump", "Read a whole memory area (16 words; 0xB9: 4, 0xBD: 64)");
+    auto* c =
+        endat->add_subcommand("dump", "Read a whole memory area (16 words; 0xB9: 4, 0xBD: 64)");
     auto mrs = std::make_shared<Number>();
     add_number(c, "MRS", *mrs, "Memory area (e.g. 0xA1)");
     c->callback([action, mrs] {
