@@ -7,6 +7,7 @@
 #include <cstdio>
 
 #include "config/config_loader.hpp"
+#include "sim/simulated_bus.hpp"
 
 namespace ds1928 {
 
@@ -61,7 +62,9 @@ std::error_code Daemon::start() {
     return ec;
   }
   if (auto ec = bus_->start()) {
-    spdlog::error("{} bus: {}", bus_->name(), ec.message());
+    const auto* sim = dynamic_cast<const sim::SimulatedBus*>(bus_.get());
+    spdlog::error("{} bus: {}{}", bus_->name(), ec.message(),
+                  sim && !sim->load_error().empty() ? ": " + sim->load_error() : std::string());
     return ec;
   }
 
@@ -94,6 +97,9 @@ std::error_code Daemon::start() {
   started_ = true;
   if (!started.warning.empty()) spdlog::warn("{}", started.warning);
   registers_->start(std::chrono::microseconds(std::max<uint32_t>(config_.cycle.period_us, 1000)));
+  endat_ = std::make_unique<EnDatService>(io_, *work_, *registers_, config_);
+  endat_->register_commands(*server_);
+  endat_->start();
   notifier_.supervise(
       io_, [this] { return engine_->cycle_count(); }, [this] { return summary_line(); });
   spdlog::info("ds1928d {} cycling: bus {}, {} axis(es), period {} µs; {}; shm {}; socket {}",
@@ -107,6 +113,7 @@ void Daemon::stop() noexcept {
   notifier_.stop_supervising();
   if (started_) notifier_.stopping();
   publisher_.set_state(shm::DaemonState::Stopping);
+  if (endat_) endat_->stop();
   if (engine_) engine_->stop();
   if (registers_) registers_->stop();
   if (server_) server_->stop();
@@ -250,7 +257,10 @@ json Daemon::stats_json() const {
 json Daemon::status_json() const {
   const auto s = engine_->stats_snapshot();
   json axes = json::array();
-  for (std::size_t i = 0; i < config_.axes.size(); ++i) axes.push_back(axis_json(i, false));
+  for (std::size_t i = 0; i < config_.axes.size(); ++i) {
+    axes.push_back(axis_json(i, false));
+    axes.back()["endat"] = endat_ ? endat_->status_json(i) : json();
+  }
   return {{"daemon",
            {{"version", PROJECT_VERSION},
             {"pid", static_cast<int64_t>(::getpid())},

@@ -16,6 +16,7 @@
 #include "core/bus.hpp"
 #include "core/cycle_engine.hpp"
 #include "cycle_work.hpp"
+#include "endat_service.hpp"
 #include "register_client.hpp"
 #include "shm/publisher.hpp"
 
@@ -63,6 +64,7 @@ class Daemon {
   std::unique_ptr<CycleWork> work_;
   std::unique_ptr<CycleEngine> engine_;
   std::unique_ptr<RegisterClient> registers_;
+  std::unique_ptr<EnDatService> endat_;
   std::unique_ptr<control::Server> server_;
   control::SystemdNotifier notifier_;
   std::string socket_path_;

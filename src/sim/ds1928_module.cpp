@@ -159,7 +159,10 @@ void Ds1928Module::tick(int64_t monotonic_ns, uint64_t net_time_us) noexcept {
     const double t_s = static_cast<double>(at_ns - s.origin_ns) * 1e-9;
     const double periods = profile_position(s.sim, t_s);
     const uint64_t raw = to_fixed_point(periods);
+    // The absolute position comes over the EnDat wire (position frame with CRC); a frame that
+    // fails leaves the last good position in place and no new PosCycle, as the module does.
     s.bridge.set_position(static_cast<uint64_t>(static_cast<int64_t>(periods * s.steps_per_period)));
+    if (s.bridge.read_position(at_ns).error) continue;
     s.in.position_hw = static_cast<uint32_t>(raw >> 32);
     s.in.position_lw = static_cast<uint32_t>(raw);
     // PosTime = NetTime of the acquisition instant (µs).

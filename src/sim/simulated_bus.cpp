@@ -8,12 +8,23 @@ SimulatedBus::SimulatedBus(const DaemonConfig& config) {
   for (std::size_t i = 0; i < config.axes.size(); ++i) {
     const SimAxisConfig sim =
         i < config.simulated.axes.size() ? config.simulated.axes[i] : SimAxisConfig{};
-    modules_.push_back(std::make_unique<Ds1928Module>(config.axes[i].function_model, sim));
+    auto encoder = load_encoder(sim);
+    if (!encoder.description) {
+      // Reported by start(); the module gets the built-in encoder meanwhile.
+      if (load_error_.empty()) load_error_ = encoder.error;
+      encoder.description = default_encoder_description();
+    }
+    modules_.push_back(std::make_unique<Ds1928Module>(config.axes[i].function_model, sim,
+                                                      std::move(*encoder.description)));
     settings_.push_back(config.axes[i].module);
   }
 }
 
 std::error_code SimulatedBus::start() {
+  if (!load_error_.empty()) {
+    state_.store(BusState::Error, std::memory_order_release);
+    return std::make_error_code(std::errc::invalid_argument);
+  }
   // What a master does at boot: power-up defaults, then write the configured settings.
   for (std::size_t i = 0; i < modules_.size(); ++i) {
     modules_[i]->power_up();

@@ -29,11 +29,14 @@ class SimulatedBus final : public BusDriver {
 
   // Test hooks: reach a module between cycles (only while the cycle thread is not running).
   [[nodiscard]] Ds1928Module& module(std::size_t axis) { return *modules_.at(axis); }
+  // Why start() failed to set up an encoder ("file:line:column: key: what"), or empty.
+  [[nodiscard]] const std::string& load_error() const noexcept { return load_error_; }
 
  private:
   std::vector<std::unique_ptr<Ds1928Module>> modules_;
   std::vector<ModuleSettings> settings_;
   std::atomic<BusState> state_{BusState::Down};
+  std::string load_error_;
   SpscQueue<RegisterRequest, 64> requests_;
   SpscQueue<RegisterResult, 64> results_;
 };
