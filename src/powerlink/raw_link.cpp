@@ -35,7 +35,6 @@ class RawLinkCategory final : public std::error_category {
         return "interface name longer than IFNAMSIZ-1";
       case RawLinkErrc::kNotOpen:
         return "raw link is not open";
-      case RawLinkErrc::kCarrierLost:
         return "link down: interface not up or no carrier";
       case RawLinkErrc::kFrameTooLong:
         return "frame longer than 1514 bytes";

@@ -36,9 +36,8 @@ enum class RxMode : uint8_t { Ring = 0, BusyPoll = 1, Blocking = 2 };
 
 // Errors of the raw link that are not plain errno values.
 enum class RawLinkErrc : int {
-  kInterfaceNameTooLong = 1,  // does not fit IFNAMSIZ
+  kInterfaceNameTooLong = 1,  // empty, or does not fit IFNAMSIZ
   kNotOpen,                   // used after a failed open or after close
-  kCarrierLost,               // interface down or no carrier (frames would vanish silently)
   kFrameTooLong,              // more than 1514 bytes
   kFrameTooShort,             // fewer than 14 bytes: not even an Ethernet header
   kBufferTooSmall,            // received frame does not fit the caller's buffer (truncated)
