@@ -10,17 +10,17 @@ namespace ds1928 {
 
 std::unique_ptr<BusDriver> make_bus(const DaemonConfig& config, std::string& why_not) {
   switch (config.bus) {
-    case BusKind::Simulated: return std::make_unique<sim::SimulatedBus>(config);
+    case BusKind::Simulated:
+      return std::make_unique<sim::SimulatedBus>(config);
     case BusKind::Powerlink: {
       auto link = std::make_unique<powerlink::RawLink>();
       powerlink::RawLinkOptions options;
       options.interface = config.powerlink.interface;
       if (auto ec = link->open(options)) {
-        why_not = fmt::format("powerlink: cannot open raw socket on '{}': {}{}",
-                              config.powerlink.interface, ec.message(),
-                              ec == std::errc::operation_not_permitted
-                                  ? " (needs root or CAP_NET_RAW)"
-                                  : "");
+        why_not = fmt::format(
+            "powerlink: cannot open raw socket on '{}': {}{}", config.powerlink.interface,
+            ec.message(),
+            ec == std::errc::operation_not_permitted ? " (needs root or CAP_NET_RAW)" : "");
         return nullptr;
       }
       powerlink::MnConfig mn;
@@ -46,7 +46,8 @@ std::unique_ptr<BusDriver> make_bus(const DaemonConfig& config, std::string& why
 }
 
 nlohmann::json bus_status_json(const BusDriver& bus) {
-  nlohmann::json j{{"kind", std::string(bus.name())}, {"state", std::string(to_string(bus.state()))}};
+  nlohmann::json j{{"kind", std::string(bus.name())},
+                   {"state", std::string(to_string(bus.state()))}};
   const auto* pl = dynamic_cast<const powerlink::PowerlinkBus*>(&bus);
   if (pl == nullptr) return j;
   const auto st = pl->status();
@@ -70,9 +71,10 @@ nlohmann::json bus_status_json(const BusDriver& bus) {
                      {"preq_size", n.preq_size},
                      {"pres_size", n.pres_size},
                      {"pres_received", n.pres_received},
-                     {"loss_of_pres", {{"events", n.loss_of_pres.events},
-                                       {"counter", n.loss_of_pres.value},
-                                       {"fired", n.loss_of_pres.fired}}},
+                     {"loss_of_pres",
+                      {{"events", n.loss_of_pres.events},
+                       {"counter", n.loss_of_pres.value},
+                       {"fired", n.loss_of_pres.fired}}},
                      {"late_pres", {{"events", n.late_pres.events}, {"fired", n.late_pres.fired}}},
                      {"pres_size_mismatches", n.pres_size_mismatches},
                      {"last_pres_size", n.last_pres_size},

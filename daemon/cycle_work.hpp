@@ -81,9 +81,9 @@ struct AxisCounters {
   std::atomic<uint64_t> position_raw{0};
   std::atomic<int8_t> pos_cycle{0};
   std::atomic<int64_t> pos_time_ns{0};
-  std::atomic<uint8_t> time_source{0};  // TimeSource
-  std::atomic<uint64_t> cycle{0};       // cycle index of the last publication
-  std::atomic<uint8_t> validity{0};  // shm::AxisValidity
+  std::atomic<uint8_t> time_source{0};     // TimeSource
+  std::atomic<uint64_t> cycle{0};          // cycle index of the last publication
+  std::atomic<uint8_t> validity{0};        // shm::AxisValidity
   std::atomic<uint32_t> endat_error{0};    // written by the normal thread from acyclic reads
   std::atomic<uint32_t> endat_warning{0};  // idem
 };
@@ -97,7 +97,9 @@ class CycleWork final : public CycleTask {
   void run_cycle(const CycleContext& ctx) noexcept override;
 
   // Normal thread. False when the queue is full (the caller reports "busy").
-  [[nodiscard]] bool post(const AxisCommand& command) noexcept { return commands_.try_push(command); }
+  [[nodiscard]] bool post(const AxisCommand& command) noexcept {
+    return commands_.try_push(command);
+  }
 
   // Normal thread: the axis' Flatstream tunnel. False when its queue is full.
   [[nodiscard]] bool submit_tunnel(std::size_t axis, const TunnelRequest& request) noexcept {
@@ -113,11 +115,15 @@ class CycleWork final : public CycleTask {
 
   [[nodiscard]] std::size_t axis_count() const noexcept { return io_.size(); }
   [[nodiscard]] AxisCounters& counters(std::size_t axis) noexcept { return counters_[axis]; }
-  [[nodiscard]] uint64_t exchanges() const noexcept { return exchanges_.load(std::memory_order_relaxed); }
+  [[nodiscard]] uint64_t exchanges() const noexcept {
+    return exchanges_.load(std::memory_order_relaxed);
+  }
   [[nodiscard]] uint64_t data_exchanges() const noexcept {
     return data_exchanges_.load(std::memory_order_relaxed);
   }
-  [[nodiscard]] uint64_t frames_lost() const noexcept { return frames_lost_.load(std::memory_order_relaxed); }
+  [[nodiscard]] uint64_t frames_lost() const noexcept {
+    return frames_lost_.load(std::memory_order_relaxed);
+  }
   [[nodiscard]] bool bus_up() const noexcept { return bus_up_.load(std::memory_order_relaxed); }
 
  private:

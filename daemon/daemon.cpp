@@ -16,17 +16,20 @@ namespace {
 using json = nlohmann::json;
 
 [[nodiscard]] json quantiles_json(const HistogramSummary& h) {
-  return {{"count", h.count}, {"min", h.min_ns},   {"mean", h.mean_ns},
-          {"p50", h.p50_ns},  {"p99", h.p99_ns},   {"p999", h.p999_ns},
-          {"max", h.max_ns},  {"overflow", h.overflow}};
+  return {{"count", h.count}, {"min", h.min_ns},   {"mean", h.mean_ns}, {"p50", h.p50_ns},
+          {"p99", h.p99_ns},  {"p999", h.p999_ns}, {"max", h.max_ns},   {"overflow", h.overflow}};
 }
 
 [[nodiscard]] std::string_view validity_name(uint8_t v) noexcept {
   switch (static_cast<shm::AxisValidity>(v)) {
-    case shm::AxisValidity::Valid: return "valid";
-    case shm::AxisValidity::Stale: return "stale";
-    case shm::AxisValidity::BusDown: return "bus_down";
-    case shm::AxisValidity::ModuleError: return "module_error";
+    case shm::AxisValidity::Valid:
+      return "valid";
+    case shm::AxisValidity::Stale:
+      return "stale";
+    case shm::AxisValidity::BusDown:
+      return "bus_down";
+    case shm::AxisValidity::ModuleError:
+      return "module_error";
   }
   return "?";
 }
@@ -42,7 +45,9 @@ constexpr auto kTick = std::chrono::milliseconds(10);
 Daemon::Daemon(DaemonConfig config)
     : config_(std::move(config)), signals_(io_, SIGINT, SIGTERM), tick_timer_(io_) {}
 
-Daemon::~Daemon() { stop(); }
+Daemon::~Daemon() {
+  stop();
+}
 
 std::error_code Daemon::start() {
   started_at_ = stats_reset_at_ = last_log_ = std::chrono::steady_clock::now();
@@ -169,12 +174,10 @@ void Daemon::on_tick() {
 
 std::string Daemon::summary_line() const {
   const auto s = engine_->stats_snapshot();
-  std::string line = fmt::format("cycle {} | late p99 {:.1f} µs max {:.1f} µs | overruns {} | {}{}",
-                                 engine_->cycle_count(), s.wake_latency.p99_ns / 1000.0,
-                                 s.wake_latency.max_ns / 1000.0, s.overruns, bus_->name(),
-                                 bus_->state() == BusState::Operational
-                                     ? ""
-                                     : fmt::format(" {}", to_string(bus_->state())));
+  std::string line = fmt::format(
+      "cycle {} | late p99 {:.1f} µs max {:.1f} µs | overruns {} | {}{}", engine_->cycle_count(),
+      s.wake_latency.p99_ns / 1000.0, s.wake_latency.max_ns / 1000.0, s.overruns, bus_->name(),
+      bus_->state() == BusState::Operational ? "" : fmt::format(" {}", to_string(bus_->state())));
   if (!engine_->realtime()) line += " | NOT real-time";
   if (work_->axis_count() > 0) {
     const AxisCounters& c = work_->counters(0);
@@ -208,9 +211,15 @@ json Daemon::axis_json(std::size_t i, bool with_sample) const {
   j["pos_cycle"] = c.pos_cycle.load(std::memory_order_relaxed);
   j["pos_time_ns"] = c.pos_time_ns.load(std::memory_order_relaxed);
   switch (static_cast<TimeSource>(c.time_source.load(std::memory_order_relaxed))) {
-    case TimeSource::None: j["time_source"] = "none"; break;
-    case TimeSource::NetTime: j["time_source"] = "nettime"; break;
-    case TimeSource::RxTimestamp: j["time_source"] = "rx_timestamp"; break;
+    case TimeSource::None:
+      j["time_source"] = "none";
+      break;
+    case TimeSource::NetTime:
+      j["time_source"] = "nettime";
+      break;
+    case TimeSource::RxTimestamp:
+      j["time_source"] = "rx_timestamp";
+      break;
   }
   j["cycle"] = c.cycle.load(std::memory_order_relaxed);
   j["fresh_cycles"] = c.fresh_cycles.load(std::memory_order_relaxed);

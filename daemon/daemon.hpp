@@ -22,7 +22,6 @@
 
 namespace ds1928 {
 
-
 class Daemon {
  public:
   explicit Daemon(DaemonConfig config);

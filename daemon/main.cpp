@@ -41,8 +41,8 @@ int main(int argc, char** argv) {
     return 0;
   }
   auto config = std::move(loaded).config();
-  const auto level = ds1928::control::parse_log_level(config.log_level)
-                         .value_or(spdlog::level::info);
+  const auto level =
+      ds1928::control::parse_log_level(config.log_level).value_or(spdlog::level::info);
   ds1928::control::setup_logging(level, ds1928::control::detect_log_sink());
   int rc = 0;
   {

@@ -6,7 +6,9 @@ RegisterClient::RegisterClient(boost::asio::io_context& io, BusDriver& bus,
                                std::chrono::milliseconds timeout)
     : io_(io), bus_(bus), timeout_(timeout), timer_(io) {}
 
-RegisterClient::~RegisterClient() { stop(); }
+RegisterClient::~RegisterClient() {
+  stop();
+}
 
 void RegisterClient::read(uint16_t axis, uint16_t reg, uint8_t size, Callback done) {
   submit(RegisterRequest{0, axis, reg, size, false, 0}, std::move(done));

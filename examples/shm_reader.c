@@ -10,11 +10,16 @@
 
 static const char* validity_name(uint8_t v) {
   switch (v) {
-    case DS1928_AXIS_VALID: return "valid";
-    case DS1928_AXIS_STALE: return "stale";
-    case DS1928_AXIS_BUS_DOWN: return "bus-down";
-    case DS1928_AXIS_MODULE_ERROR: return "module-error";
-    default: return "?";
+    case DS1928_AXIS_VALID:
+      return "valid";
+    case DS1928_AXIS_STALE:
+      return "stale";
+    case DS1928_AXIS_BUS_DOWN:
+      return "bus-down";
+    case DS1928_AXIS_MODULE_ERROR:
+      return "module-error";
+    default:
+      return "?";
   }
 }
 
@@ -38,7 +43,8 @@ int main(int argc, char** argv) {
     const int64_t deadline = ds1928_shm_now_ns() + 1000000000; /* 1 s */
     rc = ds1928_shm_wait(&reader, &seen, every, deadline);
     if (rc == DS1928_SHM_TIMEOUT || rc == DS1928_SHM_STOPPED) {
-      if (rc == DS1928_SHM_TIMEOUT && ds1928_shm_daemon_alive(reader.header, ds1928_shm_now_ns(), 10))
+      if (rc == DS1928_SHM_TIMEOUT &&
+          ds1928_shm_daemon_alive(reader.header, ds1928_shm_now_ns(), 10))
         continue;
       fprintf(stderr, "daemon %s\n", rc == DS1928_SHM_STOPPED ? "stopped" : "not publishing");
       if (ds1928_shm_reader_reopen(&reader, name) == 1) {
@@ -61,8 +67,8 @@ int main(int argc, char** argv) {
       ds1928_shm_reader_close(&reader);
       return 1;
     }
-    printf("cycle %" PRIu64 " axis %" PRIu32 " %s position %" PRId64 " + %u/65536 periods (raw 0x%016" PRIx64
-           ") error_info 0x%02x\n",
+    printf("cycle %" PRIu64 " axis %" PRIu32 " %s position %" PRId64
+           " + %u/65536 periods (raw 0x%016" PRIx64 ") error_info 0x%02x\n",
            d.cycle, axis, validity_name(d.validity), d.periods, (unsigned)d.fraction,
            d.position_raw, (unsigned)d.error_info);
     ++n;

@@ -57,10 +57,10 @@ enum ds1928_daemon_state {
 
 /* Validity of one axis record. */
 enum ds1928_axis_validity {
-  DS1928_AXIS_VALID = 0,        /* fresh inputs this cycle, no module error */
-  DS1928_AXIS_STALE = 1,        /* no fresh inputs this cycle: the data is the last good one */
-  DS1928_AXIS_BUS_DOWN = 2,     /* the bus is not cycling */
-  DS1928_AXIS_MODULE_ERROR = 3  /* fresh inputs, but ErrorInfo reports an error */
+  DS1928_AXIS_VALID = 0,       /* fresh inputs this cycle, no module error */
+  DS1928_AXIS_STALE = 1,       /* no fresh inputs this cycle: the data is the last good one */
+  DS1928_AXIS_BUS_DOWN = 2,    /* the bus is not cycling */
+  DS1928_AXIS_MODULE_ERROR = 3 /* fresh inputs, but ErrorInfo reports an error */
 };
 
 /* Time source of pos_time_ns (core/bus.hpp TimeSource). */
@@ -77,23 +77,23 @@ enum ds1928_time_source {
 
 /* Payload of one axis record: what a reader gets. 9 words of 64 bits. */
 struct ds1928_axis_data {
-  uint64_t position_raw; /* PositionHW:PositionLW, 64-bit sin/cos fixed point */
-  int64_t periods;       /* whole sine periods (bits 63..16, sign-extended if signed format) */
-  int64_t pos_time_ns;   /* acquisition instant, CLOCK_MONOTONIC ns (0 if none) */
-  int64_t publish_ns;    /* CLOCK_MONOTONIC ns when the daemon published this record */
-  uint64_t cycle;        /* daemon cycle index of the publication */
-  int32_t position_sdc;  /* low 32 bits read signed ("SDC" view) */
-  uint32_t pos_time_raw; /* PosTime as sent (NetTime µs, 32 bit) */
-  uint32_t endat_error;  /* EnDat error word (register 4352) as last read by the daemon */
-  uint32_t endat_warning;/* EnDat warning word (register 4353) as last read by the daemon */
-  uint16_t fraction;     /* fraction of one period (bits 15..0) */
-  uint8_t time_source;   /* enum ds1928_time_source */
-  int8_t pos_cycle;      /* PosCycle */
-  uint8_t error_info;    /* ErrorInfo bits (261) */
-  uint8_t validity;      /* enum ds1928_axis_validity */
-  uint8_t flags;         /* DS1928_AXIS_* flags */
+  uint64_t position_raw;  /* PositionHW:PositionLW, 64-bit sin/cos fixed point */
+  int64_t periods;        /* whole sine periods (bits 63..16, sign-extended if signed format) */
+  int64_t pos_time_ns;    /* acquisition instant, CLOCK_MONOTONIC ns (0 if none) */
+  int64_t publish_ns;     /* CLOCK_MONOTONIC ns when the daemon published this record */
+  uint64_t cycle;         /* daemon cycle index of the publication */
+  int32_t position_sdc;   /* low 32 bits read signed ("SDC" view) */
+  uint32_t pos_time_raw;  /* PosTime as sent (NetTime µs, 32 bit) */
+  uint32_t endat_error;   /* EnDat error word (register 4352) as last read by the daemon */
+  uint32_t endat_warning; /* EnDat warning word (register 4353) as last read by the daemon */
+  uint16_t fraction;      /* fraction of one period (bits 15..0) */
+  uint8_t time_source;    /* enum ds1928_time_source */
+  int8_t pos_cycle;       /* PosCycle */
+  uint8_t error_info;     /* ErrorInfo bits (261) */
+  uint8_t validity;       /* enum ds1928_axis_validity */
+  uint8_t flags;          /* DS1928_AXIS_* flags */
   uint8_t reserved;
-  uint64_t check;        /* ds1928_shm_check() of the 8 words above */
+  uint64_t check; /* ds1928_shm_check() of the 8 words above */
 };
 
 #define DS1928_AXIS_DATA_WORDS 9u
@@ -122,11 +122,11 @@ struct ds1928_shm_header {
   uint32_t reserved0;
   uint64_t reserved1[2];
   /* Second cache line: changes at run time (all atomic). */
-  uint32_t daemon_state;    /* enum ds1928_daemon_state */
+  uint32_t daemon_state; /* enum ds1928_daemon_state */
   uint32_t reserved2;
-  uint64_t last_cycle;      /* cycle index of the last publication */
-  int64_t last_publish_ns;  /* CLOCK_MONOTONIC ns of the last publication (0 = none yet) */
-  uint64_t publish_count;   /* publications since start */
+  uint64_t last_cycle;     /* cycle index of the last publication */
+  int64_t last_publish_ns; /* CLOCK_MONOTONIC ns of the last publication (0 = none yet) */
+  uint64_t publish_count;  /* publications since start */
   uint64_t reserved3[4];
 };
 
@@ -139,7 +139,7 @@ struct ds1928_shm_wait_area {
   uint64_t magic;      /* DS1928_SHM_WAIT_MAGIC, stored last at creation */
   uint64_t generation; /* same as the data object's header */
   uint64_t reserved0[6];
-  uint32_t futex;      /* changes (+1) at every publication and when the daemon stops */
+  uint32_t futex; /* changes (+1) at every publication and when the daemon stops */
   uint32_t reserved1[15];
   struct ds1928_shm_wait_slot slots[DS1928_SHM_WAIT_SLOTS]; /* bit i of the futex bitset = slot i */
 };
@@ -188,7 +188,7 @@ static inline void ds1928_shm_cpu_relax(void) {
 static inline const struct ds1928_shm_axis* ds1928_shm_axis_record(
     const struct ds1928_shm_header* h, uint32_t axis) {
   return (const struct ds1928_shm_axis*)(const void*)((const char*)h + h->header_size +
-                                                     (size_t)axis * h->record_size);
+                                                      (size_t)axis * h->record_size);
 }
 
 /* Consistent copy of one record. Returns 0, -EINVAL for a bad axis, or -EBUSY when the record
@@ -325,8 +325,8 @@ static inline int ds1928_shm_reader_open(struct ds1928_shm_reader* r, const char
     memcpy(wait_name + len, DS1928_SHM_WAIT_SUFFIX, sizeof(DS1928_SHM_WAIT_SUFFIX));
     int wfd = shm_open(wait_name, O_RDWR | O_CLOEXEC, 0);
     if (wfd >= 0) {
-      void* w = mmap(NULL, sizeof(struct ds1928_shm_wait_area), PROT_READ | PROT_WRITE,
-                     MAP_SHARED, wfd, 0);
+      void* w = mmap(NULL, sizeof(struct ds1928_shm_wait_area), PROT_READ | PROT_WRITE, MAP_SHARED,
+                     wfd, 0);
       close(wfd);
       if (w != MAP_FAILED) {
         struct ds1928_shm_wait_area* wa = (struct ds1928_shm_wait_area*)w;
@@ -368,8 +368,8 @@ static inline int ds1928_shm_wait_slot_for(struct ds1928_shm_wait_area* w, uint3
       if (f == factor) return (int)i;
       if (f == 0) {
         uint32_t expected = 0;
-        if (__atomic_compare_exchange_n(&w->slots[i].factor, &expected, factor, 0,
-                                        __ATOMIC_SEQ_CST, __ATOMIC_ACQUIRE) ||
+        if (__atomic_compare_exchange_n(&w->slots[i].factor, &expected, factor, 0, __ATOMIC_SEQ_CST,
+                                        __ATOMIC_ACQUIRE) ||
             expected == factor)
           return (int)i;
       }

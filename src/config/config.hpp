@@ -44,12 +44,12 @@ struct ModuleSettings {
 };
 
 struct AxisConfig {
-  std::string name;                 // shown in status; default "axis<N>"
-  uint8_t node = 1;                 // POWERLINK CN node id / CAN-I/O node number / sim node
-  uint8_t slot = 1;                 // module position behind the bus controller (1-based)
+  std::string name;  // shown in status; default "axis<N>"
+  uint8_t node = 1;  // POWERLINK CN node id / CAN-I/O node number / sim node
+  uint8_t slot = 1;  // module position behind the bus controller (1-based)
   FunctionModel function_model = FunctionModel::Standard;
   ModuleSettings module;
-  uint32_t command_timeout_ms = 2000;  // EnDat command over Flatstream
+  uint32_t command_timeout_ms = 2000;        // EnDat command over Flatstream
   uint32_t flatstream_timeout_cycles = 200;  // per-sequence timeout
 };
 
@@ -85,10 +85,10 @@ struct DllThresholds {
   uint32_t late_pres = 15;
 };
 struct PowerlinkBusConfig {
-  std::string interface;                   // raw-socket interface, e.g. "eth1"
+  std::string interface;  // raw-socket interface, e.g. "eth1"
   std::vector<PowerlinkNodeConfig> nodes;
   DllThresholds thresholds;
-  uint32_t async_timeout_us = 50;          // wait for the invited ASnd
+  uint32_t async_timeout_us = 50;  // wait for the invited ASnd
   uint32_t sdo_timeout_ms = 500;
   // PosTime relation: PosTime = low 32 bits of (SoC RelativeTime µs + offset).
   int64_t nettime_offset_us = 0;
@@ -121,9 +121,9 @@ struct SocketConfig {
 
 struct CycleConfig {
   uint32_t period_us = 1000;
-  int rt_priority = 80;          // SCHED_FIFO 1..99
-  int cpu = -1;                  // -1 = no affinity
-  uint32_t spin_us = 0;          // busy-wait this long before the deadline (0 = off)
+  int rt_priority = 80;  // SCHED_FIFO 1..99
+  int cpu = -1;          // -1 = no affinity
+  uint32_t spin_us = 0;  // busy-wait this long before the deadline (0 = off)
   bool hold_cpu_dma_latency = true;
   bool lock_memory = true;
 };

@@ -9,18 +9,18 @@
 namespace ds1928 {
 
 struct AxisSample {
-  uint64_t position_raw = 0;  // PositionHW:PositionLW
-  int32_t position_sdc = 0;   // low 32 bits read signed ("SDC" view)
-  int64_t periods = 0;        // whole sine periods, bits 63..16 (sign-extended in signed format)
-  uint16_t fraction = 0;      // fraction of one period, bits 15..0 (13-bit resolution)
-  bool fraction_valid = true; // false when one of the low 3 bits is set (violates the format)
-  uint32_t pos_time_raw = 0;  // PosTime as sent (NetTime µs, 32 bit)
-  int64_t pos_time_ns = 0;    // acquisition instant on CLOCK_MONOTONIC
+  uint64_t position_raw = 0;   // PositionHW:PositionLW
+  int32_t position_sdc = 0;    // low 32 bits read signed ("SDC" view)
+  int64_t periods = 0;         // whole sine periods, bits 63..16 (sign-extended in signed format)
+  uint16_t fraction = 0;       // fraction of one period, bits 15..0 (13-bit resolution)
+  bool fraction_valid = true;  // false when one of the low 3 bits is set (violates the format)
+  uint32_t pos_time_raw = 0;   // PosTime as sent (NetTime µs, 32 bit)
+  int64_t pos_time_ns = 0;     // acquisition instant on CLOCK_MONOTONIC
   TimeSource time_source = TimeSource::None;
   int8_t pos_cycle = 0;
   bool new_position = false;  // PosCycle changed since the previous fresh sample
   uint8_t error_info = 0;
-  bool fresh = false;         // inputs arrived this cycle
+  bool fresh = false;  // inputs arrived this cycle
 };
 
 // What the decoder remembers between cycles for one axis.

@@ -20,10 +20,10 @@ enum class TimeSource : uint8_t {
 
 // One axis' slot in the cycle: the cycle stages outputs, the exchange fills inputs.
 struct AxisIo {
-  ModuleOutputs outputs;        // sent during this cycle's exchange
-  ModuleInputs inputs;          // valid when inputs_fresh
-  bool inputs_fresh = false;    // this cycle's exchange delivered the module's inputs
-  int64_t rx_time_ns = 0;       // CLOCK_MONOTONIC reception time of the inputs
+  ModuleOutputs outputs;      // sent during this cycle's exchange
+  ModuleInputs inputs;        // valid when inputs_fresh
+  bool inputs_fresh = false;  // this cycle's exchange delivered the module's inputs
+  int64_t rx_time_ns = 0;     // CLOCK_MONOTONIC reception time of the inputs
 };
 
 // The bus' NetTime at a reference instant. A module's 32-bit PosTime is unwrapped against it:
@@ -38,18 +38,22 @@ struct NetTimeRef {
 // What one exchange did, for statistics and the axis states.
 struct ExchangeResult {
   NetTimeRef net_time;
-  bool bus_up = false;        // the bus is cycling (POWERLINK: MN operational for this CN set)
-  uint32_t frames_lost = 0;   // expected responses that did not arrive in this cycle
+  bool bus_up = false;       // the bus is cycling (POWERLINK: MN operational for this CN set)
+  uint32_t frames_lost = 0;  // expected responses that did not arrive in this cycle
 };
 
 enum class BusState : uint8_t { Down = 0, Booting = 1, Operational = 2, Error = 3 };
 
 [[nodiscard]] constexpr std::string_view to_string(BusState s) noexcept {
   switch (s) {
-    case BusState::Down: return "down";
-    case BusState::Booting: return "booting";
-    case BusState::Operational: return "operational";
-    case BusState::Error: return "error";
+    case BusState::Down:
+      return "down";
+    case BusState::Booting:
+      return "booting";
+    case BusState::Operational:
+      return "operational";
+    case BusState::Error:
+      return "error";
   }
   return "?";
 }
@@ -57,12 +61,12 @@ enum class BusState : uint8_t { Down = 0, Booting = 1, Operational = 2, Error = 
 // Acyclic register access (configuration, identification, EnDatAck). Submitted and collected on
 // the normal thread; drivers that need the cycle thread for it (POWERLINK SDO) queue internally.
 struct RegisterRequest {
-  uint32_t tag = 0;       // caller's correlation id
+  uint32_t tag = 0;  // caller's correlation id
   uint16_t axis = 0;
-  uint16_t reg = 0;       // datasheet register number (module_image.hpp, namespace reg)
-  uint8_t size = 1;       // 1, 2 or 4 bytes
+  uint16_t reg = 0;  // datasheet register number (module_image.hpp, namespace reg)
+  uint8_t size = 1;  // 1, 2 or 4 bytes
   bool write = false;
-  uint32_t value = 0;     // for writes
+  uint32_t value = 0;  // for writes
 };
 struct RegisterResult {
   uint32_t tag = 0;

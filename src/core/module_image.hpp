@@ -27,9 +27,9 @@ struct ModuleInputs {
 
 // Cyclic outputs (master → module).
 struct ModuleOutputs {
-  uint8_t output_sequence = 0;  // OutputSequence (4704)
+  uint8_t output_sequence = 0;                        // OutputSequence (4704)
   std::array<uint8_t, kMaxFlatstreamMtu> tx_bytes{};  // TxByte1.. (4705..)
-  uint8_t ack_error_info = 0;   // AckErrorInfo (325)
+  uint8_t ack_error_info = 0;                         // AckErrorInfo (325)
 };
 
 // Acyclic register numbers of the datasheet (function model 0 numbering; function model 254
@@ -47,9 +47,9 @@ inline constexpr uint16_t kSinCosVssMin = 1034;
 inline constexpr uint16_t kSinCosVssMax = 1038;
 inline constexpr uint16_t kSinCosQuitTime = 1044;
 inline constexpr uint16_t kEnDatMode = 4097;
-inline constexpr uint16_t kOperatingParam0 = 4400;   // + N, N = 0..15
-inline constexpr uint16_t kOperatingStatus0 = 4352;  // + N, N = 0..3
-inline constexpr uint16_t kParamManuf0 = 4352;       // + N, N = 4..47
+inline constexpr uint16_t kOperatingParam0 = 4400;      // + N, N = 0..15
+inline constexpr uint16_t kOperatingStatus0 = 4352;     // + N, N = 0..3
+inline constexpr uint16_t kParamManuf0 = 4352;          // + N, N = 4..47
 inline constexpr uint16_t kParamManufEnDat22_0 = 4416;  // + N, N = 1..63
 inline constexpr uint16_t kOutputMtu = 4609;
 inline constexpr uint16_t kInputMtu = 4611;
@@ -60,10 +60,10 @@ inline constexpr uint16_t kForwardDelay = 4620;
 
 // EnDatMode (4097) bits.
 namespace endat_mode {
-inline constexpr uint8_t kEnable = 0x01;         // 1 = EnDat interface enabled
-inline constexpr uint8_t kSigned = 0x02;         // 1 = position format signed
-inline constexpr uint8_t kFastClockOff = 0x04;   // 1 = no 6 MHz clock
-inline constexpr uint8_t kSinCosUnused = 0x08;   // 1 = sin/cos track not used
+inline constexpr uint8_t kEnable = 0x01;        // 1 = EnDat interface enabled
+inline constexpr uint8_t kSigned = 0x02;        // 1 = position format signed
+inline constexpr uint8_t kFastClockOff = 0x04;  // 1 = no 6 MHz clock
+inline constexpr uint8_t kSinCosUnused = 0x08;  // 1 = sin/cos track not used
 }  // namespace endat_mode
 
 // ErrorInfo (261) / AckErrorInfo (325) bits.

@@ -13,7 +13,8 @@ namespace ds1928 {
 
 template <typename T, std::size_t Capacity>
 class SpscQueue {
-  static_assert(Capacity >= 2 && (Capacity & (Capacity - 1)) == 0, "Capacity must be a power of two");
+  static_assert(Capacity >= 2 && (Capacity & (Capacity - 1)) == 0,
+                "Capacity must be a power of two");
   static_assert(std::is_nothrow_copy_assignable_v<T> || std::is_nothrow_move_assignable_v<T>);
 
  public:
@@ -44,7 +45,8 @@ class SpscQueue {
 
   // Producer side: true when the next try_push would fail.
   [[nodiscard]] bool full() const noexcept {
-    return head_.load(std::memory_order_relaxed) - tail_.load(std::memory_order_acquire) == Capacity;
+    return head_.load(std::memory_order_relaxed) - tail_.load(std::memory_order_acquire) ==
+           Capacity;
   }
   [[nodiscard]] bool empty() const noexcept {
     return head_.load(std::memory_order_acquire) == tail_.load(std::memory_order_acquire);

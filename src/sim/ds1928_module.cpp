@@ -48,7 +48,8 @@ struct Ds1928Module::State {
   explicit State(EncoderDescription encoder)
       : steps_per_period(encoder.signal_periods == 0
                              ? 1.0
-                             : static_cast<double>(encoder.steps_per_revolution) / encoder.signal_periods),
+                             : static_cast<double>(encoder.steps_per_revolution) /
+                                   encoder.signal_periods),
         channel(channel_config(Registers{})),
         bridge(EnDatEncoder(std::move(encoder))) {}
   double steps_per_period;  // the encoder's measuring steps per sine period
@@ -57,13 +58,13 @@ struct Ds1928Module::State {
   Registers regs;
   ModuleInputs in;
   ModuleOutputs out;
-  uint8_t latched_errors = 0;   // present until acknowledged
-  uint8_t prev_ack = 0;         // AckErrorInfo acts on rising edges
+  uint8_t latched_errors = 0;  // present until acknowledged
+  uint8_t prev_ack = 0;        // AckErrorInfo acts on rising edges
   bool started = false;
-  int64_t origin_ns = 0;        // motion profile time zero
-  int64_t next_tick_ns = 0;     // next module system tick
-  uint64_t ticks = 0;           // module system ticks since power-up
-  int64_t now_ns = 0;           // time of the last tick
+  int64_t origin_ns = 0;     // motion profile time zero
+  int64_t next_tick_ns = 0;  // next module system tick
+  uint64_t ticks = 0;        // module system ticks since power-up
+  int64_t now_ns = 0;        // time of the last tick
   // Flatstream: stepped once per bus cycle (when the master's outputs arrive), not per tick —
   // the protocol counts bus cycles.
   flatstream::ModuleChannel channel;
@@ -73,7 +74,8 @@ struct Ds1928Module::State {
   uint32_t reply_tag = 0;
 };
 
-Ds1928Module::Ds1928Module(FunctionModel model, const SimAxisConfig& sim, EncoderDescription encoder)
+Ds1928Module::Ds1928Module(FunctionModel model, const SimAxisConfig& sim,
+                           EncoderDescription encoder)
     : state_(std::make_unique<State>(std::move(encoder))) {
   state_->model = model;
   state_->sim = sim;
@@ -83,7 +85,9 @@ Ds1928Module::Ds1928Module(FunctionModel model, const SimAxisConfig& sim, Encode
 
 Ds1928Module::~Ds1928Module() = default;
 
-FunctionModel Ds1928Module::function_model() const noexcept { return state_->model; }
+FunctionModel Ds1928Module::function_model() const noexcept {
+  return state_->model;
+}
 
 void Ds1928Module::power_up() noexcept {
   State& s = *state_;
@@ -101,24 +105,32 @@ void Ds1928Module::power_up() noexcept {
   (void)s.bridge.power_up(s.now_ns);  // a failed identification shows as EnDatParSetError
 }
 
-const flatstream::ModuleChannel& Ds1928Module::flatstream() const noexcept { return state_->channel; }
-EnDatBridge& Ds1928Module::endat() noexcept { return state_->bridge; }
+const flatstream::ModuleChannel& Ds1928Module::flatstream() const noexcept {
+  return state_->channel;
+}
+EnDatBridge& Ds1928Module::endat() noexcept {
+  return state_->bridge;
+}
 
 EncoderLoadResult load_encoder(const SimAxisConfig& sim) {
   if (sim.encoder_file.empty()) return {default_encoder_description(), {}};
   return load_encoder_description(sim.encoder_file);
 }
 
-void Ds1928Module::inject_error(uint8_t bits) noexcept { state_->latched_errors |= bits; }
+void Ds1928Module::inject_error(uint8_t bits) noexcept {
+  state_->latched_errors |= bits;
+}
 
 namespace {
 
 [[nodiscard]] double profile_position(const SimAxisConfig& sim, double t_s) noexcept {
   switch (sim.profile) {
-    case MotionProfile::ConstantVelocity: return sim.velocity_periods_per_s * t_s;
+    case MotionProfile::ConstantVelocity:
+      return sim.velocity_periods_per_s * t_s;
     case MotionProfile::Sine:
       return sim.amplitude_periods * std::sin(2.0 * std::numbers::pi * sim.frequency_hz * t_s);
-    case MotionProfile::Stop: return 0.0;
+    case MotionProfile::Stop:
+      return 0.0;
   }
   return 0.0;
 }
@@ -151,7 +163,8 @@ void Ds1928Module::tick(int64_t monotonic_ns, uint64_t net_time_us) noexcept {
     const int64_t at_ns = s.next_tick_ns;
     s.next_tick_ns += tick_ns;
     ++s.ticks;
-    if (s.model == FunctionModel::Standard) s.in.sdc_life_count = static_cast<int8_t>(s.in.sdc_life_count + 1);
+    if (s.model == FunctionModel::Standard)
+      s.in.sdc_life_count = static_cast<int8_t>(s.in.sdc_life_count + 1);
     const uint16_t prescaler = s.regs.prescaler == 0 ? 1 : s.regs.prescaler;
     if (s.ticks % prescaler != 0) continue;
     // One EnDat cycle: acquire a position when the interface is enabled.
@@ -161,7 +174,8 @@ void Ds1928Module::tick(int64_t monotonic_ns, uint64_t net_time_us) noexcept {
     const uint64_t raw = to_fixed_point(periods);
     // The absolute position comes over the EnDat wire (position frame with CRC); a frame that
     // fails leaves the last good position in place and no new PosCycle, as the module does.
-    s.bridge.set_position(static_cast<uint64_t>(static_cast<int64_t>(periods * s.steps_per_period)));
+    s.bridge.set_position(
+        static_cast<uint64_t>(static_cast<int64_t>(periods * s.steps_per_period)));
     if (s.bridge.read_position(at_ns).error) continue;
     s.in.position_hw = static_cast<uint32_t>(raw >> 32);
     s.in.position_lw = static_cast<uint32_t>(raw);
@@ -191,11 +205,11 @@ void Ds1928Module::run_flatstream(int64_t now_ns) noexcept {
   if (auto reply = s.bridge.poll(now_ns)) {
     (void)s.channel.submit(reply->bytes(), ++s.reply_tag);  // queue_full: the master is gone
   }
-  if (s.command && s.bridge.submit(s.command->payload(), now_ns))
-    s.command.reset();
+  if (s.command && s.bridge.submit(s.command->payload(), now_ns)) s.command.reset();
   if (!s.outputs_pending) return;
   s.outputs_pending = false;
-  const auto frame = s.channel.step(flatstream::output_frame(s.out), static_cast<uint64_t>(now_ns / 1000));
+  const auto frame =
+      s.channel.step(flatstream::output_frame(s.out), static_cast<uint64_t>(now_ns / 1000));
   flatstream::apply(frame, s.in);
   if (!s.command) {
     if (auto m = s.channel.take_received()) s.command = *m;
@@ -213,7 +227,9 @@ void Ds1928Module::apply_outputs(const ModuleOutputs& outputs) noexcept {
   update_error_info();
 }
 
-ModuleInputs Ds1928Module::inputs() const noexcept { return state_->in; }
+ModuleInputs Ds1928Module::inputs() const noexcept {
+  return state_->in;
+}
 
 std::error_code Ds1928Module::write_register(uint16_t r, uint8_t size, uint32_t v) noexcept {
   Registers& g = state_->regs;
@@ -283,7 +299,8 @@ std::error_code Ds1928Module::write_register(uint16_t r, uint8_t size, uint32_t 
       g.forward_delay_us = static_cast<uint16_t>(v);
       state_->channel.configure(channel_config(g));
       return {};
-    default: break;
+    default:
+      break;
   }
   uint32_t ignored = 0;
   if (!read_register(r, size, ignored)) return make_error_code(SimErrc::read_only);

@@ -37,7 +37,8 @@ class Ds1928Module {
 
   // Acyclic registers (configuration, identification, EnDatAck). `size` in bytes: 1, 2 or 4.
   [[nodiscard]] std::error_code write_register(uint16_t reg, uint8_t size, uint32_t value) noexcept;
-  [[nodiscard]] std::error_code read_register(uint16_t reg, uint8_t size, uint32_t& value) const noexcept;
+  [[nodiscard]] std::error_code read_register(uint16_t reg, uint8_t size,
+                                              uint32_t& value) const noexcept;
 
   // Fault injection: ErrorInfo bits that appear now and stay until acknowledged (AckErrorInfo).
   void inject_error(uint8_t error_info_bits) noexcept;
@@ -59,6 +60,7 @@ class Ds1928Module {
 [[nodiscard]] EncoderLoadResult load_encoder(const SimAxisConfig& sim);
 
 // Applies a configured axis' ModuleSettings through write_register (what a master does at boot).
-[[nodiscard]] std::error_code configure_module(Ds1928Module& module, const ModuleSettings& settings);
+[[nodiscard]] std::error_code configure_module(Ds1928Module& module,
+                                               const ModuleSettings& settings);
 
 }  // namespace ds1928::sim

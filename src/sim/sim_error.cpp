@@ -10,10 +10,14 @@ class SimCategory final : public std::error_category {
   const char* name() const noexcept override { return "ds1928.module-register"; }
   std::string message(int ev) const override {
     switch (static_cast<SimErrc>(ev)) {
-      case SimErrc::unknown_register: return "no such register in this function model";
-      case SimErrc::read_only: return "register is read-only";
-      case SimErrc::wrong_size: return "access size does not match the register's type";
-      case SimErrc::out_of_range: return "value out of the register's range";
+      case SimErrc::unknown_register:
+        return "no such register in this function model";
+      case SimErrc::read_only:
+        return "register is read-only";
+      case SimErrc::wrong_size:
+        return "access size does not match the register's type";
+      case SimErrc::out_of_range:
+        return "value out of the register's range";
     }
     return "unknown module register error";
   }

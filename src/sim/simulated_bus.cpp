@@ -37,7 +37,9 @@ std::error_code SimulatedBus::start() {
   return {};
 }
 
-void SimulatedBus::stop() noexcept { state_.store(BusState::Down, std::memory_order_release); }
+void SimulatedBus::stop() noexcept {
+  state_.store(BusState::Down, std::memory_order_release);
+}
 
 ExchangeResult SimulatedBus::exchange(std::span<AxisIo> axes, int64_t /*cycle_start_ns*/,
                                       uint64_t /*cycle_index*/) noexcept {
@@ -56,9 +58,11 @@ ExchangeResult SimulatedBus::exchange(std::span<AxisIo> axes, int64_t /*cycle_st
     if (request->axis >= modules_.size()) {
       result.error = std::make_error_code(std::errc::no_such_device);
     } else if (request->write) {
-      result.error = modules_[request->axis]->write_register(request->reg, request->size, request->value);
+      result.error =
+          modules_[request->axis]->write_register(request->reg, request->size, request->value);
     } else {
-      result.error = modules_[request->axis]->read_register(request->reg, request->size, result.value);
+      result.error =
+          modules_[request->axis]->read_register(request->reg, request->size, result.value);
     }
     (void)results_.try_push(result);  // room was checked above
   }
@@ -77,7 +81,9 @@ ExchangeResult SimulatedBus::exchange(std::span<AxisIo> axes, int64_t /*cycle_st
   return r;
 }
 
-bool SimulatedBus::submit(const RegisterRequest& request) noexcept { return requests_.try_push(request); }
+bool SimulatedBus::submit(const RegisterRequest& request) noexcept {
+  return requests_.try_push(request);
+}
 
 bool SimulatedBus::poll(RegisterResult& out) noexcept {
   auto r = results_.try_pop();

@@ -1,6 +1,7 @@
-// The daemon's whole cycle (simulated bus exchange, decoding, Flatstream tunnels with EnDat traffic,
-// acknowledgements, shared-memory publication) makes no heap allocation and takes no mutex on the
-// cycle thread, over 100 000 steady cycles, while the normal thread keeps feeding it requests.
+// The daemon's whole cycle (simulated bus exchange, decoding, Flatstream tunnels with EnDat
+// traffic, acknowledgements, shared-memory publication) makes no heap allocation and takes no mutex
+// on the cycle thread, over 100 000 steady cycles, while the normal thread keeps feeding it
+// requests.
 #include <unistd.h>
 
 #include <atomic>
@@ -81,7 +82,8 @@ TEST_CASE("the daemon's cycle work allocates nothing and locks no mutex in 100 0
 
   // The normal thread's traffic during the counted cycles: EnDat commands through every axis'
   // Flatstream tunnel, acknowledgements, acyclic register reads.
-  const auto read = endat::encode_request(endat::Request::read(0xA1, 8), endat::CommandSet::EnDat22);
+  const auto read =
+      endat::encode_request(endat::Request::read(0xA1, 8), endat::CommandSet::EnDat22);
   REQUIRE(read);
   uint64_t replies = 0, sent = 0, acks = 0, registers = 0;
   uint32_t tag = 1;

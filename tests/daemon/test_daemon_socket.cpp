@@ -70,7 +70,8 @@ class Client {
 
 struct RunningDaemon {
   explicit RunningDaemon(const std::string& tag) {
-    dir = std::filesystem::temp_directory_path() / ("ds1928d-test-" + tag + "-" + std::to_string(::getpid()));
+    dir = std::filesystem::temp_directory_path() /
+          ("ds1928d-test-" + tag + "-" + std::to_string(::getpid()));
     std::filesystem::create_directories(dir);
     DaemonConfig c;
     c.cycle.period_us = 1000;
@@ -101,7 +102,9 @@ struct RunningDaemon {
   int rc = -1;
 };
 
-json stats(const std::string& path) { return Client(path).request({{"cmd", "stats"}}); }
+json stats(const std::string& path) {
+  return Client(path).request({{"cmd", "stats"}});
+}
 
 }  // namespace
 
@@ -186,9 +189,15 @@ TEST_CASE("100 concurrent clients and abrupt disconnects leave the cycle untouch
       if (!c.connected()) return;
       for (int k = 0; k < 20; ++k) {
         switch ((i + k) % 4) {
-          case 0: ok += c.request({{"cmd", "status"}}).value("ok", false); break;
-          case 1: ok += c.request({{"cmd", "axes"}}).value("ok", false); break;
-          case 2: answered_errors += !c.request({{"cmd", "nope"}}).value("ok", true); break;
+          case 0:
+            ok += c.request({{"cmd", "status"}}).value("ok", false);
+            break;
+          case 1:
+            ok += c.request({{"cmd", "axes"}}).value("ok", false);
+            break;
+          case 2:
+            answered_errors += !c.request({{"cmd", "nope"}}).value("ok", true);
+            break;
           case 3:
             // Half a request, then gone.
             if (k == 19) {

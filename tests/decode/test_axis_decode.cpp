@@ -64,7 +64,8 @@ TEST_CASE("PosTime maps to monotonic time through the NetTime reference", "[deco
   CHECK(s.pos_time_ns == 5'000'000'000 - 250'000);
 }
 
-TEST_CASE("PosTime unwraps across the 32-bit NetTime wrap in both directions", "[decode][nettime]") {
+TEST_CASE("PosTime unwraps across the 32-bit NetTime wrap in both directions",
+          "[decode][nettime]") {
   // Reference 16 µs after the wrap; stamp 16 µs before it.
   NetTimeRef after_wrap{0x1'0000'0010ULL, 9'000'000'000, true};
   CHECK(net_time_to_monotonic_ns(0xFFFF'FFF0u, after_wrap) == 9'000'000'000 - 32'000);
