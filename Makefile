@@ -51,7 +51,7 @@ run: build
 test: deps-test build
 	cd $(BUILD) && ctest --output-on-failure --timeout 900 -j 2
 
-bench: build
+bench: deps-test build
 	./bench/run-all.sh $(BUILD)
 
 format:
