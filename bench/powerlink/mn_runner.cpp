@@ -395,11 +395,11 @@ int main(int argc, char** argv) {
     }
 
     // What would be published: positions against the simulated motion, NetTime stamps.
-    // Stamps are mapped as the daemon maps them: through the bus' NetTimeRef (nominal cycle
-    // start ↔ the SoC's RelativeTime). The CN anchors its NetTime at the SoC's arrival, which is
-    // the send delay W (cycle thread's wake-up latency) after the nominal start, so a mapped
-    // stamp is early by the W of the SoC it was anchored at: a constant offset normally, but
-    // around a stall W jumps. The position check allows the largest W of the last 8 cycles.
+    // Stamps are mapped as the daemon maps them: through the bus' NetTimeRef (the SoC's send
+    // instant ↔ its RelativeTime). The CN anchors its NetTime at the SoC's arrival, so a mapped
+    // stamp is early only by the residual W between the bus' clock read and the SoC reaching
+    // the socket (≈ 1 µs; more only if the thread is preempted right there). The position check
+    // allows the largest W of the last 8 cycles.
     const ds1928::NetTimeRef ref = res.net_time;
     if (ref.valid && link.soc_sent_ns != 0 && link.soc_sent_ns >= next) {
       const int64_t w = link.soc_sent_ns - ref.monotonic_ns;

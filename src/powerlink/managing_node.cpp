@@ -396,14 +396,12 @@ void ManagingNode::sdo_done(Cn& cn, std::error_code ec, std::span<const uint8_t>
 // ---- Cycle
 // ----------------------------------------------------------------------------------------
 
-void ManagingNode::begin_cycle(int64_t now_ns, NetTime net_time) noexcept {
+void ManagingNode::begin_cycle(int64_t now_ns) noexcept {
   if (start_ns_ < 0) {
     start_ns_ = now_ns;
     mn_state_since_ns_ = now_ns;
   }
   now_ns_ = now_ns;
-  net_time_ = net_time;
-  relative_time_us_ = static_cast<uint64_t>((now_ns - start_ns_) / 1000);
   soa_service_ = RequestedService::kNone;
   soa_target_ = 0;
   awaiting_asnd_ = false;
@@ -415,6 +413,19 @@ void ManagingNode::begin_cycle(int64_t now_ns, NetTime net_time) noexcept {
     const uint32_t mux = cn->cfg.multiplex;
     if (mux > 1 && counters_.cycles % mux != cn->cfg.node_id % mux) continue;
     iso_list_[iso_count_++] = cn->cfg.node_id;
+  }
+}
+
+void ManagingNode::stamp_soc(int64_t send_ns, NetTime net_time) noexcept {
+  net_time_ = net_time;
+  const uint64_t rel = send_ns > start_ns_ ? static_cast<uint64_t>((send_ns - start_ns_) / 1000) : 0;
+  if (rel >= relative_time_us_) {
+    relative_time_us_ = rel;
+    soc_time_ns_ = send_ns;
+  } else {
+    // A clock that went backwards: keep RelativeTime and pair it with the instant it denotes, so
+    // the NetTimeRef stays consistent with what the SoC carries.
+    soc_time_ns_ = start_ns_ + static_cast<int64_t>(relative_time_us_) * 1000;
   }
 }
 

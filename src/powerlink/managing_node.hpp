@@ -115,10 +115,15 @@ class ManagingNode {
   ManagingNode& operator=(const ManagingNode&) = delete;
 
   // ---- One cycle, in this order ----
-  // `now_ns`: the cycle's nominal start (CLOCK_MONOTONIC); `net_time`: wall clock for the SoC.
-  void begin_cycle(int64_t now_ns, NetTime net_time) noexcept;
+  // `now_ns`: the cycle's nominal start (CLOCK_MONOTONIC); boot timers run on it.
+  void begin_cycle(int64_t now_ns) noexcept;
   // False in PRE_OPERATIONAL_1: a reduced cycle has no SoC and no PReq/PRes.
   [[nodiscard]] bool full_cycle() const noexcept;
+  // The instant the SoC is sent (CLOCK_MONOTONIC, read just before build_soc) and the wall clock
+  // for its NetTime. The CNs anchor their NetTime at the SoC's arrival, so RelativeTime must
+  // describe when the SoC really leaves, not the nominal cycle start the cycle thread woke late
+  // for. RelativeTime never goes backwards, whatever the clock says.
+  void stamp_soc(int64_t send_ns, NetTime net_time) noexcept;
   [[nodiscard]] Result<std::size_t> build_soc(std::span<uint8_t> out) const noexcept;
   // Nodes to poll this cycle (continuous and the multiplexed ones due), in node order.
   [[nodiscard]] std::span<const uint8_t> isochronous_nodes() const noexcept;
@@ -146,6 +151,8 @@ class ManagingNode {
   // NetTime of this cycle's SoC (RelativeTime µs + offset), µs.
   [[nodiscard]] uint64_t net_time_us() const noexcept;
   [[nodiscard]] uint64_t relative_time_us() const noexcept { return relative_time_us_; }
+  // CLOCK_MONOTONIC instant of the last stamp_soc(): the reference for net_time_us().
+  [[nodiscard]] int64_t soc_time_ns() const noexcept { return soc_time_ns_; }
 
   // ---- Acyclic ----
   // False when the node is unknown or its queue is full.
@@ -209,6 +216,7 @@ class ManagingNode {
   int64_t start_ns_ = -1;
   int64_t mn_state_since_ns_ = 0;
   uint64_t relative_time_us_ = 0;
+  int64_t soc_time_ns_ = 0;
   NetTime net_time_{};
   MnCounters counters_;
   // Async slot of this cycle.

@@ -83,14 +83,19 @@ ExchangeResult PowerlinkBus::exchange(std::span<AxisIo> axes, int64_t cycle_star
     }
   }
 
-  mn_.begin_cycle(cycle_start_ns, wall_clock());
+  mn_.begin_cycle(cycle_start_ns);
   const std::size_t n_axes = std::min(axes.size(), axis_map_.size());
   for (std::size_t i = 0; i < n_axes; ++i) {
     const AxisMap& am = axis_map_[i];
     if (am.valid) (void)write_outputs(mn_.preq_payload(am.node), am.mapping, axes[i].outputs);
     rx_time_[i] = 0;
   }
-  if (mn_.full_cycle()) send(mn_.build_soc(tx_));
+  if (mn_.full_cycle()) {
+    // RelativeTime and the NetTimeRef describe the instant the SoC leaves, which is the cycle
+    // thread's wake-up latency (tens of µs, ms in a stall) after the nominal cycle start.
+    mn_.stamp_soc(clock_(), wall_clock());
+    send(mn_.build_soc(tx_));
+  }
   for (uint8_t node : mn_.isochronous_nodes()) {
     const CnStatus* st = mn_.node(node);
     const uint32_t before = st->pres_received;
@@ -142,7 +147,7 @@ ExchangeResult PowerlinkBus::exchange(std::span<AxisIo> axes, int64_t cycle_star
   SdoRegisterResult r;
   while (mn_.poll(r)) (void)results_.try_push({r.tag, r.error, r.value});
 
-  result.net_time = {mn_.net_time_us(), cycle_start_ns, mn_.full_cycle()};
+  result.net_time = {mn_.net_time_us(), mn_.soc_time_ns(), mn_.full_cycle()};
   result.bus_up = mn_.all_operational();
   state_.store(result.bus_up ? BusState::Operational : BusState::Booting,
                std::memory_order_relaxed);

@@ -50,7 +50,8 @@ class PowerlinkBus final : public BusDriver {
   // Cycle thread (or tests driving exchange() themselves).
   [[nodiscard]] const ManagingNode& managing_node() const noexcept { return mn_; }
 
-  // Clock for receive deadlines and the cycle-time check; tests may replace it.
+  // Clock (CLOCK_MONOTONIC) for the SoC send instant, receive deadlines and the cycle-time check;
+  // tests may replace it.
   using Clock = int64_t (*)() noexcept;
   void set_clock(Clock clock) noexcept { clock_ = clock; }
 

@@ -1,6 +1,7 @@
 #include <catch2/catch.hpp>
 #include <memory>
 
+#include "core/axis_sample.hpp"
 #include "powerlink/powerlink_bus.hpp"
 #include "test_cn.hpp"
 
@@ -13,9 +14,15 @@ namespace {
 
 constexpr int64_t kPeriodNs = 1'000'000;
 
+// Simulated CLOCK_MONOTONIC. Rig::step() sets it to the nominal cycle start plus the cycle
+// thread's wake-up latency; every read advances it by `g_clock_step_ns` (0: the exchange takes
+// no time).
+int64_t g_clock_ns = 0;
+int64_t g_clock_step_ns = 0;
 int64_t fake_clock() noexcept {
-  return 0;
-}  // exchanges take "no time" in memory
+  g_clock_ns += g_clock_step_ns;
+  return g_clock_ns;
+}
 
 struct Rig {
   MnConfig config;
@@ -26,6 +33,8 @@ struct Rig {
   uint64_t cycle = 0;
 
   explicit Rig(std::vector<uint8_t> nodes = {1}, uint8_t modules_per_node = 1) {
+    g_clock_ns = 0;
+    g_clock_step_ns = 0;
     config.cycle_us = 1000;
     config.mac = link.mac();
     for (uint8_t n : nodes) {
@@ -55,8 +64,11 @@ struct Rig {
     REQUIRE_FALSE(bus->start());
   }
 
-  ExchangeResult step() {
-    auto r = bus->exchange(axes, static_cast<int64_t>(cycle) * kPeriodNs, cycle);
+  // `wake_ns`: how late the cycle thread starts the exchange after the nominal cycle start.
+  ExchangeResult step(int64_t wake_ns = 0) {
+    const int64_t start = static_cast<int64_t>(cycle) * kPeriodNs;
+    g_clock_ns = start + wake_ns;
+    auto r = bus->exchange(axes, start, cycle);
     ++cycle;
     return r;
   }
@@ -130,6 +142,53 @@ TEST_CASE("MN boots an in-memory CN to OPERATIONAL and configures its modules by
   // PosTime = low 32 bits of the SoC's RelativeTime (offset 0).
   CHECK(rig.axes[0].inputs.pos_time_us == static_cast<uint32_t>(r.net_time.net_time_us));
   CHECK(r.net_time.net_time_us == (rig.cycle - 1) * 1000);
+}
+
+TEST_CASE("RelativeTime and the NetTimeRef are the SoC's send instant, not the nominal start",
+          "[powerlink][mn][nettime]") {
+  Rig rig({1}, 1);
+  REQUIRE(rig.run_until([&] { return rig.bus->state() == BusState::Operational; }));
+  // From here every clock read costs 1 µs, so the SoC's send instant differs from the nominal
+  // cycle start, from the wake-up instant and from any other instant of the exchange.
+  g_clock_step_ns = 1000;
+  int64_t soc_sent_at = -1;
+  uint64_t soc_relative_us = 0;
+  rig.link.on_send = [&](std::span<const uint8_t> frame) {
+    if (auto soc = parse_soc(frame)) {
+      soc_sent_at = g_clock_ns;  // the simulated time at which the SoC is handed to the link
+      soc_relative_us = soc->relative_time_us;
+    }
+  };
+  uint64_t previous_relative_us = 0;
+  // Wake-up latencies: none, typical, a p99 one, a 3 ms stall (the driver skips the missed
+  // cycles), typical again.
+  for (int64_t wake_ns : {int64_t{0}, int64_t{37'000}, int64_t{240'000}, int64_t{3'000'000},
+                          int64_t{45'000}}) {
+    const int64_t nominal = static_cast<int64_t>(rig.cycle) * kPeriodNs;
+    soc_sent_at = -1;
+    const ExchangeResult r = rig.step(wake_ns);
+    if (wake_ns >= kPeriodNs) rig.cycle += static_cast<uint64_t>(wake_ns / kPeriodNs);
+    REQUIRE(soc_sent_at >= nominal + wake_ns);
+    REQUIRE(r.net_time.valid);
+    CHECK(r.net_time.monotonic_ns == soc_sent_at);
+    // The first exchange's nominal start (0) is RelativeTime 0.
+    CHECK(soc_relative_us == static_cast<uint64_t>(soc_sent_at / 1000));
+    CHECK(r.net_time.net_time_us == soc_relative_us);
+    CHECK(soc_relative_us > previous_relative_us);
+    previous_relative_us = soc_relative_us;
+    // The CN stamps its inputs with the SoC's RelativeTime; mapped back through the NetTimeRef
+    // (as the daemon does) the stamp lands on the SoC's send instant, whatever the wake-up delay.
+    REQUIRE(rig.axes[0].inputs_fresh);
+    CHECK(net_time_to_monotonic_ns(rig.axes[0].inputs.pos_time_us, r.net_time) == soc_sent_at);
+  }
+  // A driver that does not skip the cycles missed in a stall calls exchange() with a nominal
+  // start before the previous SoC: RelativeTime still never goes backwards, and the reference
+  // stays the instant that RelativeTime denotes.
+  rig.cycle -= 3;
+  const ExchangeResult r = rig.step(10'000);
+  CHECK(soc_relative_us == previous_relative_us);
+  CHECK(r.net_time.net_time_us == soc_relative_us);
+  CHECK(r.net_time.monotonic_ns == static_cast<int64_t>(soc_relative_us) * 1000);
 }
 
 TEST_CASE("Register requests become SDO transfers", "[powerlink][mn]") {

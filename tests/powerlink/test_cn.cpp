@@ -132,6 +132,7 @@ void TestCn::on_frame(std::span<const uint8_t> bytes, std::deque<std::vector<uin
 
 std::error_code MemoryLink::send(std::span<const uint8_t> frame) noexcept {
   if (log) sent_log.emplace_back(frame.begin(), frame.end());
+  if (on_send) on_send(frame);
   for (TestCn* cn : cns) cn->on_frame(frame, rx);
   return {};
 }

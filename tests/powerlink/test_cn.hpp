@@ -3,6 +3,7 @@
 #pragma once
 
 #include <deque>
+#include <functional>
 #include <map>
 #include <vector>
 
@@ -59,6 +60,7 @@ class MemoryLink : public Link {
   std::vector<std::vector<uint8_t>> sent_log;  // when logging
   bool log = false;
   bool up = true;
+  std::function<void(std::span<const uint8_t>)> on_send;  // sees every frame the MN sends
   std::error_code send(std::span<const uint8_t> frame) noexcept override;
   Received receive(std::span<uint8_t> buffer, int64_t deadline_ns) noexcept override;
   bool link_up() const noexcept override { return up; }
