@@ -418,7 +418,8 @@ void ManagingNode::begin_cycle(int64_t now_ns) noexcept {
 
 void ManagingNode::stamp_soc(int64_t send_ns, NetTime net_time) noexcept {
   net_time_ = net_time;
-  const uint64_t rel = send_ns > start_ns_ ? static_cast<uint64_t>((send_ns - start_ns_) / 1000) : 0;
+  const uint64_t rel =
+      send_ns > start_ns_ ? static_cast<uint64_t>((send_ns - start_ns_) / 1000) : 0;
   if (rel >= relative_time_us_) {
     relative_time_us_ = rel;
     soc_time_ns_ = send_ns;
@@ -567,8 +568,14 @@ std::error_code ManagingNode::on_frame(std::span<const uint8_t> bytes) noexcept 
   const FrameHeader& h = frame->header;
   if (const PRes* pres = std::get_if<PRes>(&frame->message)) {
     Cn* cn = find(h.src_node);
-    if (!cn || !cn->polled) {
+    if (!cn) {
       ++counters_.unexpected_frames;
+      return {};
+    }
+    if (!cn->polled) {
+      // Not asked this cycle (yet): the late answer to an earlier PReq.
+      ++cn->st->stale_pres_dropped;
+      cn->late = true;
       return {};
     }
     if (cn->timed_out || cn->pres_seen) {

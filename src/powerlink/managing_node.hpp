@@ -59,6 +59,9 @@ struct CnStatus {
   DllCounter loss_of_pres;
   DllCounter late_pres;
   uint32_t pres_received = 0;
+  // PRes received before this cycle's PReq to the CN: the late answer to an earlier PReq
+  // (frames carry no cycle number), dropped instead of being taken as this cycle's inputs.
+  uint32_t stale_pres_dropped = 0;
   uint32_t pres_size_mismatches = 0;  // PRes payload size differed from pres_size
   uint16_t last_pres_size = 0;
   uint32_t status_error_entries = 0;  // error entries seen in StatusResponses

@@ -84,6 +84,10 @@ ExchangeResult PowerlinkBus::exchange(std::span<AxisIo> axes, int64_t cycle_star
   }
 
   mn_.begin_cycle(cycle_start_ns);
+  // Whatever arrived since the last cycle's end is late: a PRes among it would otherwise be taken
+  // for this cycle's answer (frames carry no cycle number). The MN drops such PRes (counted as
+  // stale); late ASnds are still served, they identify themselves (SDO sequence numbers).
+  drain(0);
   const std::size_t n_axes = std::min(axes.size(), axis_map_.size());
   for (std::size_t i = 0; i < n_axes; ++i) {
     const AxisMap& am = axis_map_[i];
@@ -99,6 +103,7 @@ ExchangeResult PowerlinkBus::exchange(std::span<AxisIo> axes, int64_t cycle_star
   for (uint8_t node : mn_.isochronous_nodes()) {
     const CnStatus* st = mn_.node(node);
     const uint32_t before = st->pres_received;
+    drain(0);  // the late PRes of an earlier PReq to this node must not pass for this one's
     send(mn_.build_preq(node, tx_));
     const int64_t deadline = clock_() + static_cast<int64_t>(mn_.pres_timeout_us(node)) * 1000;
     for (;;) {

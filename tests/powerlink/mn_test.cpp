@@ -162,8 +162,8 @@ TEST_CASE("RelativeTime and the NetTimeRef are the SoC's send instant, not the n
   uint64_t previous_relative_us = 0;
   // Wake-up latencies: none, typical, a p99 one, a 3 ms stall (the driver skips the missed
   // cycles), typical again.
-  for (int64_t wake_ns : {int64_t{0}, int64_t{37'000}, int64_t{240'000}, int64_t{3'000'000},
-                          int64_t{45'000}}) {
+  for (int64_t wake_ns :
+       {int64_t{0}, int64_t{37'000}, int64_t{240'000}, int64_t{3'000'000}, int64_t{45'000}}) {
     const int64_t nominal = static_cast<int64_t>(rig.cycle) * kPeriodNs;
     soc_sent_at = -1;
     const ExchangeResult r = rig.step(wake_ns);
@@ -255,6 +255,86 @@ TEST_CASE("Occasional PRes loss stays below the threshold", "[powerlink][mn]") {
   CHECK(rig.st(1).boots == 1);
   CHECK(rig.st(1).loss_of_pres.events == 40);
   CHECK(rig.st(1).loss_of_pres.fired == 0);
+}
+
+TEST_CASE("A late PRes is never taken for the next cycle's fresh input", "[powerlink][mn][stale]") {
+  Rig rig({1, 2}, 1);
+  // Several missing answers in a row are the point here, not a reason to reset the CN.
+  rig.config.bus.thresholds.loss_of_pres = 0;
+  rig.bus = std::make_unique<PowerlinkBus>(rig.config, rig.link);
+  rig.bus->set_clock(&fake_clock);
+  REQUIRE_FALSE(rig.bus->start());
+  REQUIRE(rig.run_until([&] { return rig.bus->state() == BusState::Operational; }));
+  TestCn& cn1 = *rig.cns[0];
+  TestCn& cn2 = *rig.cns[1];
+  cn1.inputs.position_lw = 0xAAAA;  // "old" data, answered too late
+  cn2.inputs.position_lw = 0xAAAA;
+
+  SECTION("arriving between two cycles") {
+    cn1.hold_pres = true;
+    rig.step();
+    CHECK_FALSE(rig.axes[0].inputs_fresh);
+    REQUIRE(cn1.held_pres.size() == 1);
+    // The PRes arrives after the MN's end of cycle, before the next SoC.
+    rig.link.rx.push_back(cn1.held_pres.front());
+    cn1.held_pres.clear();
+    cn1.hold_pres = false;
+    cn1.drop_pres = true;  // and the CN does not answer the next PReq
+    rig.step();
+    CHECK_FALSE(rig.axes[0].inputs_fresh);
+    CHECK(rig.st(1).stale_pres_dropped == 1);
+    // Answered again: the fresh data, never the late one.
+    cn1.drop_pres = false;
+    cn1.hold_pres = true;
+    rig.step();
+    rig.link.rx.push_back(cn1.held_pres.front());
+    cn1.held_pres.clear();
+    cn1.hold_pres = false;
+    cn1.inputs.position_lw = 0xBBBB;
+    const uint32_t preqs_before = rig.st(1).pres_received;
+    rig.step();
+    REQUIRE(rig.axes[0].inputs_fresh);
+    CHECK(rig.axes[0].inputs.position_lw == 0xBBBB);
+    CHECK(rig.axes[0].inputs.pos_time_us ==
+          static_cast<uint32_t>(rig.bus->managing_node().relative_time_us()));
+    CHECK(rig.st(1).pres_received == preqs_before + 1);
+    CHECK(rig.st(1).stale_pres_dropped == 2);
+    CHECK(rig.st(1).late_pres.events >= 2);
+  }
+  SECTION("arriving within the cycle, before the node's own PReq") {
+    cn2.hold_pres = true;
+    rig.step();
+    CHECK_FALSE(rig.axes[1].inputs_fresh);
+    REQUIRE(cn2.held_pres.size() == 1);
+    cn2.hold_pres = false;
+    // Node 2's late PRes arrives right after node 1's PRes, before the PReq to node 2.
+    rig.link.on_send = [&](std::span<const uint8_t> frame) {
+      auto preq = parse_frame(frame);
+      if (preq && preq->header.type == MessageType::kPReq && preq->header.dst_node == 1 &&
+          !cn2.held_pres.empty()) {
+        rig.link.rx.push_back(cn2.held_pres.front());
+        cn2.held_pres.clear();
+      }
+    };
+    cn2.drop_pres = true;
+    rig.step();
+    CHECK(rig.axes[0].inputs_fresh);
+    CHECK_FALSE(rig.axes[1].inputs_fresh);
+    CHECK(rig.st(2).stale_pres_dropped == 1);
+    // Same again, with the CN answering the new PReq: the new data is published.
+    cn2.drop_pres = false;
+    cn2.hold_pres = true;
+    rig.step();
+    cn2.hold_pres = false;
+    cn2.inputs.position_lw = 0xCCCC;
+    rig.step();
+    REQUIRE(rig.axes[1].inputs_fresh);
+    CHECK(rig.axes[1].inputs.position_lw == 0xCCCC);
+    CHECK(rig.st(2).stale_pres_dropped == 2);
+  }
+  CHECK(rig.st(1).boot == CnBootState::kOperational);
+  CHECK(rig.st(2).boot == CnBootState::kOperational);
+  CHECK(rig.bus->managing_node().counters().unexpected_frames == 0);
 }
 
 TEST_CASE("A power-cycled CN is detected and booted again", "[powerlink][mn]") {

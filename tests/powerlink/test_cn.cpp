@@ -67,6 +67,10 @@ void TestCn::on_frame(std::span<const uint8_t> bytes, std::deque<std::vector<uin
     pres.priority = 3;
     pres.payload = payload;
     emit(build_pres(buf, pres_header(mac, node), pres));
+    if (hold_pres && !out.empty()) {
+      held_pres.push_back(std::move(out.back()));
+      out.pop_back();
+    }
     return;
   }
   if (const auto* soa = std::get_if<SoA>(&frame->message)) {
@@ -132,8 +136,8 @@ void TestCn::on_frame(std::span<const uint8_t> bytes, std::deque<std::vector<uin
 
 std::error_code MemoryLink::send(std::span<const uint8_t> frame) noexcept {
   if (log) sent_log.emplace_back(frame.begin(), frame.end());
-  if (on_send) on_send(frame);
   for (TestCn* cn : cns) cn->on_frame(frame, rx);
+  if (on_send) on_send(frame);
   return {};
 }
 

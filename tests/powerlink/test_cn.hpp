@@ -37,6 +37,8 @@ class TestCn : public SdoObjectAccess {
   uint64_t last_relative_time_us = 0;
   // Faults.
   bool drop_pres = false;
+  bool hold_pres = false;                      // answer, but into held_pres (a late PRes)
+  std::deque<std::vector<uint8_t>> held_pres;  // the test delivers these when it wants
   int pres_size_delta = 0;
   std::vector<ErrorEntry> status_errors;
   uint32_t vendor_id = 0x1A;
@@ -60,7 +62,8 @@ class MemoryLink : public Link {
   std::vector<std::vector<uint8_t>> sent_log;  // when logging
   bool log = false;
   bool up = true;
-  std::function<void(std::span<const uint8_t>)> on_send;  // sees every frame the MN sends
+  std::function<void(std::span<const uint8_t>)>
+      on_send;  // every frame the MN sent, after the CNs' answers were queued
   std::error_code send(std::span<const uint8_t> frame) noexcept override;
   Received receive(std::span<uint8_t> buffer, int64_t deadline_ns) noexcept override;
   bool link_up() const noexcept override { return up; }
