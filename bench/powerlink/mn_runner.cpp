@@ -461,10 +461,11 @@ int main(int argc, char** argv) {
 
   uint32_t fired = 0, events = 0;
   loss_totals(fired, events);
-  uint32_t boots = 0, resets = 0;
+  uint32_t boots = 0, resets = 0, stale = 0;
   for (const pl::CnStatus& st : bus->managing_node().nodes()) {
     boots += st.boots;
     resets += st.resets;
+    stale += st.stale_pres_dropped;
   }
   const pl::MnCounters& mc = bus->managing_node().counters();
   std::printf(
@@ -472,14 +473,16 @@ int main(int argc, char** argv) {
       "boots=%u resets=%u loss_of_pres_events=%u loss_threshold_fired=%u "
       "measured_loss_events=%u measured_threshold_fired=%u overruns=%llu "
       "cycle_time_exceeded=%u invalid_frames=%u unexpected_frames=%u async_timeouts=%u "
+      "async_invites_unused=%u stale_pres_dropped=%u "
       "fresh=%llu moving=%llu wrong_positions=%llu bad_stamps=%llu\n",
       config.cycle.period_us, config.powerlink.nodes.size(),
       static_cast<unsigned long long>(cycles), static_cast<unsigned long long>(measured_cycles),
       all_op ? 1 : 0, boots, resets, events, fired, measuring ? events - events_at_start : 0,
       measuring ? fired - fired_at_start : 0, static_cast<unsigned long long>(overruns),
       mc.cycle_time_exceeded.events, mc.invalid_frames, mc.unexpected_frames, mc.async_timeouts,
-      static_cast<unsigned long long>(fresh), static_cast<unsigned long long>(moving),
-      static_cast<unsigned long long>(wrong), static_cast<unsigned long long>(bad_stamp));
+      mc.async_invites_unused, stale, static_cast<unsigned long long>(fresh),
+      static_cast<unsigned long long>(moving), static_cast<unsigned long long>(wrong),
+      static_cast<unsigned long long>(bad_stamp));
   std::printf(
       "STALLS mn_wake_later_than_pres_timeout=%llu losses_after_stall=%llu "
       "losses_other=%llu late_pres=%llu fired_after_stall=%llu fired_other=%llu\n",

@@ -555,7 +555,11 @@ Result<std::size_t> ManagingNode::build_mn_asnd(std::span<uint8_t> out) noexcept
 }
 
 void ManagingNode::on_async_timeout() noexcept {
-  if (awaiting_asnd_) ++counters_.async_timeouts;
+  if (awaiting_asnd_) {
+    const bool mandatory = soa_service_ == RequestedService::kIdentRequest ||
+                           soa_service_ == RequestedService::kStatusRequest;
+    ++(mandatory ? counters_.async_timeouts : counters_.async_invites_unused);
+  }
   awaiting_asnd_ = false;
 }
 

@@ -77,7 +77,11 @@ struct MnCounters {
   DllCounter cycle_time_exceeded;
   uint32_t unexpected_frames = 0;  // frames that fit no expected slot
   uint32_t invalid_frames = 0;     // rejected by the codec
-  uint32_t async_timeouts = 0;     // invited ASnd did not come
+  // IdentRequest/StatusRequest whose mandatory answer did not come within async_timeout.
+  uint32_t async_timeouts = 0;
+  // UnspecifiedInvite/NMTRequestInvite the CN let pass: it may legitimately have nothing to send
+  // (its RS was already served, an SDO answer is not ready yet), so this is no error.
+  uint32_t async_invites_unused = 0;
 };
 
 struct MnConfig {

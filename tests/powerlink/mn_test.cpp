@@ -337,6 +337,46 @@ TEST_CASE("A late PRes is never taken for the next cycle's fresh input", "[power
   CHECK(rig.bus->managing_node().counters().unexpected_frames == 0);
 }
 
+TEST_CASE("Async timeouts count only unanswered Ident/StatusRequests", "[powerlink][mn][async]") {
+  Rig rig({1}, 1);
+  TestCn& cn = *rig.cns[0];
+  int invites = 0, unspecified = 0;
+  rig.link.on_send = [&](std::span<const uint8_t> frame) {
+    if (auto soa = parse_soa(frame); soa && soa->target == 1) {
+      ++invites;
+      if (soa->service == RequestedService::kUnspecifiedInvite) ++unspecified;
+    }
+  };
+  REQUIRE(rig.run_until([&] { return rig.bus->state() == BusState::Operational; }));
+  const MnCounters& c = rig.bus->managing_node().counters();
+  // A CN that answers every Ident/StatusRequest: no timeout, whatever it did with the other
+  // invitations.
+  CHECK(cn.status_requests > 0);
+  CHECK(c.async_timeouts == 0);
+
+  // Operational, the CN claims RS > 0 but has nothing to send: invited every few cycles, never
+  // answers, and that is no timeout.
+  cn.fake_request_count = 2;
+  const uint32_t unused_before = c.async_invites_unused;
+  unspecified = 0;
+  for (int i = 0; i < 60; ++i) rig.step();
+  CHECK(unspecified >= 20);
+  CHECK(c.async_invites_unused - unused_before == static_cast<uint32_t>(unspecified));
+  CHECK(c.async_timeouts == 0);
+  cn.fake_request_count = 0;
+
+  // A CN that ignores StatusRequests (its boot stalls in wait_pre_operational_2): each one is a
+  // timeout, and nothing else is.
+  Rig mute({1}, 1);
+  mute.cns[0]->ignore_status_requests = true;
+  for (int i = 0; i < 600; ++i) mute.step();
+  CHECK(mute.st(1).boot == CnBootState::kWaitPreOp2);
+  CHECK(mute.cns[0]->status_requests >= 20);
+  CHECK(mute.bus->managing_node().counters().async_timeouts ==
+        static_cast<uint32_t>(mute.cns[0]->status_requests));
+  CHECK(invites > 0);
+}
+
 TEST_CASE("A power-cycled CN is detected and booted again", "[powerlink][mn]") {
   Rig rig({1}, 1);
   REQUIRE(rig.run_until([&] { return rig.bus->state() == BusState::Operational; }));

@@ -63,7 +63,8 @@ void TestCn::on_frame(std::span<const uint8_t> bytes, std::deque<std::vector<uin
     PRes pres;
     pres.nmt_state = state;
     pres.ready = state == NmtState::kOperational;
-    pres.request_count = static_cast<uint8_t>(std::min<std::size_t>(sdo_out_.size(), 7));
+    pres.request_count = static_cast<uint8_t>(
+        std::min<std::size_t>(sdo_out_.size() + static_cast<std::size_t>(fake_request_count), 7));
     pres.priority = 3;
     pres.payload = payload;
     emit(build_pres(buf, pres_header(mac, node), pres));
@@ -91,6 +92,7 @@ void TestCn::on_frame(std::span<const uint8_t> bytes, std::deque<std::vector<uin
       }
       case RequestedService::kStatusRequest: {
         ++status_requests;
+        if (ignore_status_requests) break;
         StatusResponse r;
         r.nmt_state = state;
         r.exception_new = !status_errors.empty();

@@ -37,6 +37,8 @@ class TestCn : public SdoObjectAccess {
   uint64_t last_relative_time_us = 0;
   // Faults.
   bool drop_pres = false;
+  bool ignore_status_requests = false;
+  int fake_request_count = 0;                  // RS reported in the PRes although nothing is queued
   bool hold_pres = false;                      // answer, but into held_pres (a late PRes)
   std::deque<std::vector<uint8_t>> held_pres;  // the test delivers these when it wants
   int pres_size_delta = 0;
