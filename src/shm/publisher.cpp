@@ -242,7 +242,11 @@ void Publisher::publish(uint64_t cycle, std::span<const AxisStatus> axes) noexce
   for (unsigned i = 0; i < DS1928_SHM_WAIT_SLOTS; ++i) {
     if (atomic(wait_->slots[i].waiters).load(std::memory_order_seq_cst) == 0) continue;
     const uint32_t factor = atomic(wait_->slots[i].factor).load(std::memory_order_relaxed);
-    if (factor <= 1 || first || cycle / factor != prev_cycle_ / factor) mask |= 1u << i;
+    // Due: a multiple of the factor was published since the last publication (before the
+    // first one, waiters hold DS1928_SHM_NO_CYCLE: only a multiple itself is due).
+    const bool due =
+        factor <= 1 || (first ? cycle % factor == 0 : cycle / factor != prev_cycle_ / factor);
+    if (due) mask |= 1u << i;
   }
   prev_cycle_ = cycle;
   if (mask != 0) wake(mask);

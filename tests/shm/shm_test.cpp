@@ -2,6 +2,7 @@
 #include "ds1928/shm.hpp"
 
 #include <sys/stat.h>
+#include <sys/syscall.h>
 
 #include <catch2/catch.hpp>
 #include <thread>
@@ -161,16 +162,88 @@ TEST_CASE("a waiting reader is woken at every publication, and with a factor onl
   REQUIRE_FALSE(pub.open(config_for(name), 1, 1'000'000));
   ShmReader reader;
   REQUIRE_FALSE(reader.open(name));
+  ShmProbe probe(name);
+  REQUIRE(probe.is_open());
   const uint32_t every = GENERATE(1u, 4u);
   const uint64_t cycles = 200;
+  const uint64_t expected = cycles / every;
 
   std::vector<uint64_t> woke;
+  woke.reserve(cycles);
+  std::atomic<uint64_t> woke_count{0};
+  std::atomic<pid_t> waiter_tid{0};
+  std::thread waiter([&] {
+    waiter_tid = static_cast<pid_t>(syscall(SYS_gettid));
+    uint64_t seen = reader.wait_start();
+    std::error_code ec;
+    while (reader.wait(seen, every, now_ns() + 10'000'000'000, ec) == ShmWait::Published) {
+      woke.push_back(seen);
+      woke_count.store(woke.size(), std::memory_order_release);
+      if (seen >= cycles) break;
+    }
+  });
+  struct Joiner {
+    std::thread& t;
+    ~Joiner() {
+      if (t.joinable()) t.join();
+    }
+  } joiner{waiter};
+
+  // Lock step instead of a pace: each publication waits until the waiter consumed every
+  // earlier due one and sleeps in the futex again, so every due publication must wake it
+  // exactly once, whatever the scheduler does. A generous deadline only turns a lost wake-up
+  // into a failure instead of a hang.
+  std::vector<AxisStatus> st(1);
+  bool in_step = true;
+  for (uint64_t c = 1; c <= cycles && in_step; ++c) {
+    const uint64_t due_before = (c - 1) / every;
+    const int64_t deadline = now_ns() + 10'000'000'000;
+    while (!(woke_count.load(std::memory_order_acquire) >= due_before &&
+             probe.waiters(every) == 1 && thread_sleeping(waiter_tid.load()))) {
+      if (now_ns() > deadline) {
+        in_step = false;
+        break;
+      }
+      std::this_thread::yield();
+    }
+    INFO("before cycle " << c << ": " << woke_count.load() << " wake-ups, " << due_before
+                         << " due");
+    CHECK(in_step);
+    st[0] = status_for(c, 0);
+    pub.publish(c, st);
+  }
+  waiter.join();
+
+  // Exactly the due publications, each once, in order; never one off the asked rate.
+  std::vector<uint64_t> due;
+  for (uint64_t c = every; c <= cycles; c += every) due.push_back(c);
+  CHECK(woke == due);
+  // The daemon side issued one wake-up per due publication, not one per cycle.
+  CHECK(pub.wake_calls() == expected);
+}
+
+TEST_CASE("a waiting reader never misses the last publication of a free-running writer") {
+  const auto name = unique_name("paced");
+  Publisher pub;
+  REQUIRE_FALSE(pub.open(config_for(name), 1, 1'000'000));
+  ShmReader reader;
+  REQUIRE_FALSE(reader.open(name));
+  const uint32_t every = GENERATE(1u, 4u);
+  const uint64_t cycles = 200;
+  const uint64_t expected = cycles / every;
+
+  // The writer does not wait for the reader: wake-ups race with the reader's way back into
+  // the futex. A reader that oversleeps gets the newer publication at once (merged), so only
+  // what holds on any schedule is checked: no wake-up without a due publication in between,
+  // none lost at the end, no more wake calls than due publications.
+  std::vector<uint64_t> woke;
+  woke.reserve(cycles);
   std::atomic<bool> ready{false};
   std::thread waiter([&] {
     uint64_t seen = reader.wait_start();
     ready = true;
     std::error_code ec;
-    while (reader.wait(seen, every, now_ns() + 2'000'000'000, ec) == ShmWait::Published) {
+    while (reader.wait(seen, every, now_ns() + 10'000'000'000, ec) == ShmWait::Published) {
       woke.push_back(seen);
       if (seen >= cycles) break;
     }
@@ -181,8 +254,7 @@ TEST_CASE("a waiting reader is woken at every publication, and with a factor onl
   clock_gettime(CLOCK_MONOTONIC, &next);
   for (uint64_t c = 1; c <= cycles; ++c) {
     st[0] = status_for(c, 0);
-    // Give the waiter time to go back to sleep: the test is about who gets woken.
-    next.tv_nsec += 1'000'000;
+    next.tv_nsec += 200'000;
     if (next.tv_nsec >= 1'000'000'000) {
       next.tv_nsec -= 1'000'000'000;
       ++next.tv_sec;
@@ -194,24 +266,18 @@ TEST_CASE("a waiting reader is woken at every publication, and with a factor onl
 
   REQUIRE_FALSE(woke.empty());
   CHECK(woke.back() == cycles);
-  const uint64_t expected = cycles / every;
-  // Under load the waiter may oversleep a publication (it then returns at once with the newer
-  // one), so allow a few merged wake-ups, but never a wake-up off the asked rate.
-  CHECK(woke.size() >= expected * 95 / 100);
   CHECK(woke.size() <= expected);
-  size_t on_multiple = 0;
-  for (size_t i = 0; i < woke.size(); ++i) {
-    if (woke[i] % every == 0) ++on_multiple;
-    if (i > 0) CHECK(woke[i] / every > woke[i - 1] / every);
+  CHECK(woke.front() >= every);
+  for (size_t i = 1; i < woke.size(); ++i) {
+    INFO("wake-up " << i << ": cycle " << woke[i] << " after " << woke[i - 1]);
+    CHECK(woke[i] / every > woke[i - 1] / every);  // a due publication lies in between
   }
-  CHECK(on_multiple >= woke.size() * 95 / 100);
-  // The daemon side issued one wake-up per due publication, not one per cycle.
-  CHECK(pub.wake_calls() <= expected + 2);
-  CHECK(pub.wake_calls() >= expected * 80 / 100);
+  CHECK(pub.wake_calls() <= expected);
 }
 
 TEST_CASE("a waiter times out when publications stop and returns 'stopped' when the daemon exits") {
   const auto name = unique_name("stop");
+  const ObjectsRemover remover{name};  // the writer dies without removing them
   WriterProcess writer;
   // 100 cycles at 1 ms, then alive but silent for 400 ms (hung), then exits without close.
   writer.start(name, 1, 1'000'000, 100, false, 400);
@@ -223,26 +289,32 @@ TEST_CASE("a waiter times out when publications stop and returns 'stopped' when 
   int published = 0;
   ShmWait r;
   int64_t t0 = 0;
+  // A writer descheduled for 50 ms on a loaded machine makes a wait time out early: that is a
+  // right answer too, so the reader waits on until the writer's last cycle was seen. Only the
+  // timeout after it is the one under test.
+  const int64_t give_up = now_ns() + 30'000'000'000;
   for (;;) {
     t0 = now_ns();
     r = reader.wait(seen, 1, t0 + 50'000'000, ec);
-    if (r != ShmWait::Published) break;
-    ++published;
+    if (r == ShmWait::Published) {
+      ++published;
+      continue;
+    }
+    if (r == ShmWait::Timeout && seen < 100 && now_ns() < give_up) continue;
+    break;
   }
   const int64_t waited = now_ns() - t0;
   CHECK_FALSE(ec);
   CHECK(r == ShmWait::Timeout);
   CHECK(seen == 100);
-  CHECK(published >= 90);
-  CHECK(waited >= 50'000'000);
-  CHECK(waited < 150'000'000);
+  CHECK(published >= 10);         // woken across processes (merged wake-ups allowed under load)
+  CHECK(waited >= 50'000'000);    // never before the deadline
+  CHECK(waited < 1'050'000'000);  // and not much after it (stalls allowed)
   // 100 ms tolerance: the daemon counts as dead once 100 ms passed since the last publication.
   usleep(120'000);
   CHECK_FALSE(reader.daemon_alive());
   CHECK(reader.daemon_state() == DS1928_DAEMON_RUNNING);  // it never said goodbye
   writer.join();
-  shm_unlink(name.c_str());
-  shm_unlink((name + ".wait").c_str());
 
   // A clean stop wakes a sleeping waiter at once.
   const auto name2 = unique_name("stop2");
@@ -288,8 +360,10 @@ TEST_CASE("a reader detects a restarted daemon by its generation") {
 
 TEST_CASE("a second daemon cannot take over a live daemon's name, but replaces a dead one's") {
   const auto name = unique_name("inuse");
+  const ObjectsRemover remover{name};
   {
     WriterProcess live;
+    live.fifo_priority = 20;  // keeps publishing on a loaded machine: alive for sure
     live.start(name, 1, 1'000'000, 0, true);  // publishes until killed
     REQUIRE(live.running());
     Publisher pub;

@@ -1,11 +1,15 @@
 // Helpers shared by the shared-memory tests: unique names, a child writer process.
 #pragma once
 
+#include <sched.h>
 #include <sys/prctl.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <csignal>
 #include <cstdint>
+#include <cstdio>
+#include <cstring>
 #include <ctime>
 #include <string>
 #include <vector>
@@ -61,6 +65,53 @@ inline int64_t now_ns() {
   return ds1928_shm_now_ns();
 }
 
+// Removes <name> and <name>.wait at scope exit, also when a REQUIRE ends the test early: a test
+// that plays a dead daemon leaves its objects behind on purpose.
+struct ObjectsRemover {
+  std::string name;
+  ~ObjectsRemover() {
+    shm_unlink(name.c_str());
+    shm_unlink((name + DS1928_SHM_WAIT_SUFFIX).c_str());
+  }
+};
+
+// A second mapping of <name>.wait, to watch the readers' registrations from the test.
+class ShmProbe {
+ public:
+  explicit ShmProbe(const std::string& name) {
+    (void)ds1928_shm_reader_open(&reader_, name.c_str());
+  }
+  ~ShmProbe() { ds1928_shm_reader_close(&reader_); }
+  ShmProbe(const ShmProbe&) = delete;
+  ShmProbe& operator=(const ShmProbe&) = delete;
+  bool is_open() const { return reader_.wait != nullptr; }
+  // Readers registered in the slot of `factor` (0 while no slot has that factor).
+  uint32_t waiters(uint32_t factor) const {
+    for (const auto& slot : reader_.wait->slots)
+      if (__atomic_load_n(&slot.factor, __ATOMIC_ACQUIRE) == factor)
+        return __atomic_load_n(&slot.waiters, __ATOMIC_SEQ_CST);
+    return 0;
+  }
+
+ private:
+  ds1928_shm_reader reader_{};
+};
+
+// True when thread `tid` of this process is asleep (state S). A waiter registered in its slot
+// and asleep sleeps in the futex: ds1928_shm_wait blocks nowhere else.
+inline bool thread_sleeping(pid_t tid) {
+  if (tid <= 0) return false;
+  const std::string path = "/proc/self/task/" + std::to_string(tid) + "/stat";
+  FILE* f = std::fopen(path.c_str(), "r");
+  if (f == nullptr) return false;
+  char buf[512];
+  const size_t n = std::fread(buf, 1, sizeof(buf) - 1, f);
+  std::fclose(f);
+  buf[n] = 0;
+  const char* close_paren = std::strrchr(buf, ')');  // the name may hold spaces and parens
+  return close_paren != nullptr && close_paren[1] == ' ' && close_paren[2] == 'S';
+}
+
 // Forks a writer process: opens a Publisher on `name`, publishes `axes` axes every `period_ns`
 // on an absolute timeline for `cycles` cycles (0: until killed; period 0: flat out), then
 // either closes (clean stop) or stays alive without publishing for `linger_ms` (a hung daemon).
@@ -68,16 +119,29 @@ inline int64_t now_ns() {
 struct WriterProcess {
   pid_t pid = -1;
   std::string name;
+  // SCHED_FIFO priority of the writer, as the daemon's cycle thread has one (0: none; ignored
+  // without the privilege). A real-time writer keeps its pace on a loaded machine and is not
+  // descheduled in the middle of a record by ordinary threads.
+  int fifo_priority = 0;
 
   void start(const std::string& name, uint32_t axes, int64_t period_ns, uint64_t cycles,
              bool close_at_end, int linger_ms = 0) {
     this->name = name;
     int fds[2];
     if (pipe(fds) != 0) return;
+    const pid_t parent = getpid();
     pid = fork();
     if (pid == 0) {
       ::close(fds[0]);
+      // A writer that publishes until killed must not outlive a test process that crashed.
+      prctl(PR_SET_PDEATHSIG, SIGKILL);
+      if (getppid() != parent) _exit(3);
       prctl(PR_SET_TIMERSLACK, 1UL);
+      if (fifo_priority > 0) {
+        sched_param param{};
+        param.sched_priority = fifo_priority;
+        (void)sched_setscheduler(0, SCHED_FIFO, &param);
+      }
       Publisher pub;
       char ok =
           pub.open(config_for(name), axes, static_cast<uint64_t>(period_ns > 0 ? period_ns : 1))
