@@ -14,6 +14,12 @@
 #     Wireshark's POWERLINK dissector with no malformed packet and no expert error/warning.
 # Namespaces, processes and files are cleaned up on every exit path.
 #
+# Built to run in CI next to other load on a 2-core machine that stalls for milliseconds now and
+# then: deadlines (process start, boot, re-boot) are generous and counted from the event they wait
+# for, time stamps are checked against the real instants around them (not the nominal cycle), and
+# a sample taken through the control socket is retried; what must hold on every sample — no
+# wrong position, no stamp outside its cycle, SDO read-back, frame decoding — stays strict.
+#
 # Usage: powerlink_veth_test.sh BUILD_DIR SOURCE_DIR     (root; exit 77 = skipped)
 set -u
 build=${1:?build dir}
@@ -60,7 +66,7 @@ pass() { echo "ok: $*"; }
 wait_for() {
   local file=$1 regex=$2 secs=$3 count=${4:-1} i
   for ((i = 0; i < secs * 20; i++)); do
-    [ "$(grep -cE "$regex" "$file" 2>/dev/null)" -ge "$count" ] && return 0
+    [ "$(grep -cE "$regex" "$file" 2>/dev/null || true)" -ge "$count" ] 2>/dev/null && return 0
     sleep 0.05
   done
   return 1
@@ -80,7 +86,7 @@ if [ $have_tshark = 1 ]; then
       >"$tmp/tshark.log" 2>&1 &
   pids+=($!)
   tshark_pid=$!
-  wait_for "$tmp/tshark.log" "Capturing on" 10 || fail "tshark did not start"
+  wait_for "$tmp/tshark.log" "Capturing on" 30 || fail "tshark did not start"
 fi
 
 # ---- Phase 1: boot, SDO configuration, positions, power cycle -------------------------------
@@ -93,19 +99,32 @@ ip netns exec "$ns_mn" "$mn" --iface "$if_mn" --config "$config" --warmup 0 \
 mn_pid=$!
 pids+=($mn_pid)
 
-wait_for "$tmp/mn1.log" "EVENT .* all-operational" 15 || fail "CN did not reach OPERATIONAL"
-wait_for "$tmp/sim1.log" "node 1: READY_TO_OPERATE -> OPERATIONAL" 2 ||
+wait_for "$tmp/mn1.log" "EVENT .* all-operational" 30 || fail "CN did not reach OPERATIONAL"
+wait_for "$tmp/sim1.log" "node 1: READY_TO_OPERATE -> OPERATIONAL" 10 ||
   fail "simulator did not report OPERATIONAL"
 pass "CN booted to OPERATIONAL ($(grep -m1 'all-operational' "$tmp/mn1.log"))"
-wait_for "$tmp/mn1.log" "sdo-readback .* ok" 5 || fail "EnDatMode read back over SDO does not match"
+wait_for "$tmp/mn1.log" "sdo-readback .* ok" 10 || fail "EnDatMode read back over SDO does not match"
 pass "module configured by SDO ($(grep -m1 -o 'sdo-readback.*' "$tmp/mn1.log"))"
 
 sleep 2  # positions flow
+# A stall of either side can cost a loss-of-PRes reset before the power cycle (by design at
+# threshold 15), so the power cycle's events are counted from here, not from the start. The CN
+# must be operational again first.
+mn_up() { [ "$(grep -cE "EVENT .* all-operational" "$tmp/mn1.log")" -gt \
+            "$(grep -cE "EVENT .* not-all-operational" "$tmp/mn1.log")" ]; }
+for ((i = 0; i < 600; i++)); do mn_up && break; sleep 0.05; done
+mn_up || fail "CN not operational before the power cycle"
+up_before=$(grep -cE "EVENT .* all-operational" "$tmp/mn1.log")
+down_before=$(grep -cE "EVENT .* not-all-operational" "$tmp/mn1.log")
+sim_up_before=$(grep -c "READY_TO_OPERATE -> OPERATIONAL" "$tmp/sim1.log")
 kill -USR1 "$sim_pid"  # power cycle: the node goes silent for 300 ms, then boots from scratch
-wait_for "$tmp/sim1.log" "power cycle" 2 || fail "simulator did not power-cycle"
-wait_for "$tmp/mn1.log" "EVENT .* not-all-operational" 5 || fail "MN did not notice the power cycle"
-wait_for "$tmp/mn1.log" "EVENT .* all-operational" 15 2 || fail "CN not booted again after power cycle"
-wait_for "$tmp/sim1.log" "READY_TO_OPERATE -> OPERATIONAL" 2 2 || fail "simulator not OPERATIONAL again"
+wait_for "$tmp/sim1.log" "power cycle" 10 || fail "simulator did not power-cycle"
+wait_for "$tmp/mn1.log" "EVENT .* not-all-operational" 10 $((down_before + 1)) ||
+  fail "MN did not notice the power cycle"
+wait_for "$tmp/mn1.log" "EVENT .* all-operational" 30 $((up_before + 1)) ||
+  fail "CN not booted again after power cycle"
+wait_for "$tmp/sim1.log" "READY_TO_OPERATE -> OPERATIONAL" 10 $((sim_up_before + 1)) ||
+  fail "simulator not OPERATIONAL again"
 pass "power cycle detected and CN re-booted"
 sleep 1
 kill -TERM "$mn_pid"
@@ -173,13 +192,25 @@ if [ -x "$daemon" ] && [ -x "$ctl" ]; then
   [ $up = 1 ] || fail "ds1928d did not bring the POWERLINK bus to operational"
   pass "ds1928d: $(grep -E 'bus:' "$tmp/status.txt" | tr -s ' ')"
   pos() { ip netns exec "$ns_mn" "$ctl" --json --shm "$shm_name" position --axis 0 2>>"$tmp/ctl.log"; }
-  p1=$(pos); sleep 0.3; p2=$(pos)
-  echo "$p1" >"$tmp/position.log"
   num() { echo "$1" | sed -n "s/.*\"$2\":\([-0-9]*\).*/\1/p"; }
-  echo "$p2" | grep -q '"state":"valid"' || fail "axis 0 not valid in shared memory: $p2"
-  echo "$p2" | grep -q '"time_source":"nettime"' || fail "position without NetTime stamp: $p2"
-  age_us=$(( ($(num "$p2" publish_ns) - $(num "$p2" pos_time_ns)) / 1000 ))
-  [ $age_us -ge -1000 ] && [ $age_us -le 10000 ] || fail "NetTime stamp $age_us us away from publication"
+  # Every sample must be valid, NetTime-stamped and never stamped after its publication; its age
+  # at publication is timing (a stall of the cycle thread between receiving and publishing ages
+  # it), so one sample of five within 10 ms suffices.
+  p1=$(pos)
+  echo "$p1" >"$tmp/position.log"
+  fresh_ok=0
+  for ((k = 0; k < 5; k++)); do
+    sleep 0.3
+    p2=$(pos)
+    echo "$p2" >>"$tmp/position.log"
+    echo "$p2" | grep -q '"state":"valid"' || fail "axis 0 not valid in shared memory: $p2"
+    echo "$p2" | grep -q '"time_source":"nettime"' || fail "position without NetTime stamp: $p2"
+    age_us=$(( ($(num "$p2" publish_ns) - $(num "$p2" pos_time_ns)) / 1000 ))
+    [ $age_us -ge -1000 ] || fail "NetTime stamp $age_us us after its publication"
+    [ $age_us -le 10000 ] && { fresh_ok=1; break; }
+    echo "note: NetTime stamp $age_us us before publication (stall?), sampling again"
+  done
+  [ $fresh_ok = 1 ] || fail "NetTime stamp $age_us us before publication in 5 samples"
   [ "$(num "$p2" position_raw)" != "$(num "$p1" position_raw)" ] || fail "position does not move"
   pass "shared memory: axis 0 valid, NetTime-stamped ($age_us us before publication), moving"
   ip netns exec "$ns_mn" "$ctl" --json -s "$sock" status >"$tmp/status.json" 2>/dev/null
