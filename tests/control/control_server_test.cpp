@@ -228,12 +228,14 @@ TEST_CASE("an idle client gets idle_timeout and is closed") {
   add_test_commands(t.server());
   REQUIRE_FALSE(t.start());
   LineClient c(t.server().path());
-  CHECK(c.request({{"cmd", "echo"}})["ok"] == true);  // activity re-arms the timer
+  // Taken before the request: the server re-arms the timer after it, so the idle reply cannot
+  // come earlier than 150 ms after this, however late this thread runs.
   const auto t0 = std::chrono::steady_clock::now();
+  CHECK(c.request({{"cmd", "echo"}})["ok"] == true);  // activity re-arms the timer
   const json r = c.reply();
   const auto waited = std::chrono::steady_clock::now() - t0;
   CHECK(error_code_of(r) == "idle_timeout");
-  CHECK(waited >= std::chrono::milliseconds(100));
+  CHECK(waited >= std::chrono::milliseconds(150));
   CHECK(c.at_eof());
   CHECK(t.wait_clients(0));
 }

@@ -1,5 +1,7 @@
 // ds1928ctl against a stand-in daemon in this process: requests and exit codes over the real
 // socket, and `position --follow` across a daemon that stops, hangs and restarts.
+#include <fcntl.h>
+#include <signal.h>
 #include <sys/wait.h>
 
 #include <atomic>
@@ -61,6 +63,59 @@ class Publishing {
   shm::Publisher& pub_;
   std::atomic<bool> run_{true};
   std::thread thread_;
+};
+
+// A ds1928ctl child whose stdout the test reads line by line. Killed and reaped when the test
+// ends, also early: a follower waiting for a daemon that never comes back would run forever.
+class Child {
+ public:
+  explicit Child(const std::string& args) {
+    int fds[2];
+    if (pipe2(fds, O_CLOEXEC) != 0) return;
+    pid_ = fork();
+    if (pid_ == 0) {
+      dup2(fds[1], STDOUT_FILENO);
+      const int null = ::open("/dev/null", O_WRONLY);
+      if (null >= 0) dup2(null, STDERR_FILENO);
+      execl("/bin/sh", "sh", "-c", ("exec " + std::string(DS1928CTL) + " " + args).c_str(),
+            static_cast<char*>(nullptr));
+      _exit(127);
+    }
+    ::close(fds[1]);
+    if (pid_ < 0) {
+      ::close(fds[0]);
+      return;
+    }
+    out_ = fdopen(fds[0], "r");
+  }
+  ~Child() {
+    if (pid_ > 0) {
+      kill(pid_, SIGKILL);
+      wait();
+    }
+    if (out_ != nullptr) fclose(out_);
+  }
+  Child(const Child&) = delete;
+  Child& operator=(const Child&) = delete;
+
+  [[nodiscard]] bool running() const { return pid_ > 0 && out_ != nullptr; }
+  // The next line as JSON; null at EOF.
+  json next() {
+    char line[4096];
+    if (out_ == nullptr || fgets(line, sizeof(line), out_) == nullptr) return nullptr;
+    return json::parse(line, nullptr, false);
+  }
+  // Waits for the exit; the wait status.
+  int wait() {
+    int status = -1;
+    if (pid_ > 0) waitpid(pid_, &status, 0);
+    pid_ = -1;
+    return status;
+  }
+
+ private:
+  pid_t pid_ = -1;
+  FILE* out_ = nullptr;
 };
 
 std::string shm_name() {
@@ -137,16 +192,9 @@ TEST_CASE("position --follow says when the daemon stops, hangs or restarts, and 
   CHECK(json::parse(once.out, nullptr, false)["axis"] == 1);
   CHECK(ctl("--shm " + name + " position --axis 2").exit == 2);
 
-  FILE* p = popen(
-      (std::string(DS1928CTL) + " --shm " + name + " position --axis 0 --follow --json --count 120")
-          .c_str(),
-      "r");
-  REQUIRE(p != nullptr);
-  auto next = [&]() -> json {
-    char line[4096];
-    if (fgets(line, sizeof(line), p) == nullptr) return nullptr;
-    return json::parse(line, nullptr, false);
-  };
+  Child follower("--shm " + name + " position --axis 0 --follow --json --count 120");
+  REQUIRE(follower.running());
+  auto next = [&]() -> json { return follower.next(); };
   int positions = 0;
   uint64_t last_cycle = 0;
   bool increasing = true;
@@ -201,7 +249,7 @@ TEST_CASE("position --follow says when the daemon stops, hangs or restarts, and 
   last_cycle = 0;
   while (positions < 120) expect_positions(1);
   CHECK(next().is_null());  // --count reached: the follower exits
-  const int status = pclose(p);
+  const int status = follower.wait();
   CHECK(WIFEXITED(status));
   CHECK(WEXITSTATUS(status) == 0);
   CHECK(increasing);

@@ -73,6 +73,7 @@ struct RunningDaemon {
     dir = std::filesystem::temp_directory_path() /
           ("ds1928d-test-" + tag + "-" + std::to_string(::getpid()));
     std::filesystem::create_directories(dir);
+    remove_dir.path = dir;
     DaemonConfig c;
     c.cycle.period_us = 1000;
     c.cycle.hold_cpu_dma_latency = false;
@@ -93,8 +94,15 @@ struct RunningDaemon {
   ~RunningDaemon() {
     daemon->request_stop();
     thread.join();
-    std::filesystem::remove_all(dir);
   }
+  // Removed last, also when the daemon's constructor throws.
+  struct RemoveDir {
+    std::filesystem::path path;
+    ~RemoveDir() {
+      std::error_code ec;
+      if (!path.empty()) std::filesystem::remove_all(path, ec);
+    }
+  } remove_dir;
   std::filesystem::path dir;
   std::string path;
   std::unique_ptr<Daemon> daemon;
@@ -153,7 +161,8 @@ TEST_CASE("every command answers with its documented fields", "[daemon][socket]"
   CHECK(reset.value("ok", false));
   // The cycle thread applies the reset at its next cycle.
   const json after_reset = request_until(c, {{"cmd", "stats"}}, [](const json& r) {
-    return r.is_object() && r["cycle"]["reset_generation"].get<uint64_t>() >= 1;
+    return r.is_object() && r.value("ok", false) &&
+           r["cycle"]["reset_generation"].get<uint64_t>() >= 1;
   });
   CHECK(after_reset["cycle"]["reset_generation"].get<uint64_t>() >= 1);
 

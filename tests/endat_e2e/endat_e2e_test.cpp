@@ -131,7 +131,7 @@ TEST_CASE("privileged commands need the privileged group", "[endat_e2e]") {
 
 TEST_CASE("echo mismatch, truncated reply and timeout are reported, and the next command is right",
           "[endat_e2e]") {
-  Rig rig({.peer = Peer::Scripted, .command_timeout_ms = 300});
+  Rig rig({.peer = Peer::Scripted, .command_timeout_ms = 400});
   LineClient c(rig.socket_path(), kClientTimeoutMs);
   auto read = [&](int param) {
     return c.request({{"cmd", "endat-read-param"}, {"mrs", 0xA9}, {"param", param}});
@@ -161,8 +161,10 @@ TEST_CASE("echo mismatch, truncated reply and timeout are reported, and the next
   CHECK(read(11)["value"] == (0xA9 << 8 | 11));
 
   // A late reply (after the timeout) is never taken for the next command's: let
-  // the reply of a read come 350 ms late, then read another parameter at once.
-  rig.scripted().inject(ScriptedModule::Fault::Late, 1, 350);
+  // the reply of a read come 600 cycles late, then read another parameter at once. 600 ms
+  // lies midway between the timeout (400 ms) and the end of the quiet period after it
+  // (800 ms), so a thread stalled for up to ~150 ms on a loaded machine changes nothing.
+  rig.scripted().inject(ScriptedModule::Fault::Late, 1, 600);
   const json late = read(12);
   CHECK(error_code_of(late) == "timeout");
   const json after = read(13);
@@ -176,9 +178,10 @@ TEST_CASE("echo mismatch, truncated reply and timeout are reported, and the next
 
 TEST_CASE("a client that disconnects: its queued command is dropped, its reply discarded",
           "[endat_e2e]") {
-  Rig rig({.peer = Peer::Scripted, .command_timeout_ms = 1000});
-  // A: in flight, answered 200 ms late (within the timeout). B: queued behind it.
-  rig.scripted().inject(ScriptedModule::Fault::Late, 1, 200);
+  Rig rig({.peer = Peer::Scripted, .command_timeout_ms = 3000});
+  // A: in flight, answered 800 cycles late (well within the timeout, and long after both
+  // clients left even if this thread stalls on a loaded machine). B: queued behind it.
+  rig.scripted().inject(ScriptedModule::Fault::Late, 1, 800);
   {
     LineClient a(rig.socket_path(), kClientTimeoutMs);
     LineClient b(rig.socket_path(), kClientTimeoutMs);

@@ -213,6 +213,7 @@ class Rig {
     config_.axes.push_back(axis);
     config_.shm.name = "/ds1928-e2e-" + std::to_string(getpid()) + "-" + std::to_string(n);
     config_.socket.path = control::test::temp_socket_path("endat");
+    socket_dir_.dir = std::filesystem::path(config_.socket.path).parent_path();
     config_.socket.privileged_group = "";
     sim_ = std::make_unique<sim::SimulatedBus>(config_);
     switch (o.peer) {
@@ -255,7 +256,6 @@ class Rig {
     stop_.store(true);
     cycle_thread_.join();
     publisher_.close();
-    std::filesystem::remove_all(std::filesystem::path(config_.socket.path).parent_path());
   }
 
   // Runs `f` on the io thread and waits for its result.
@@ -305,8 +305,18 @@ class Rig {
     }
   }
 
+  // Removes the socket's directory last, also when the constructor throws half-way.
+  struct RemoveDir {
+    std::filesystem::path dir;
+    ~RemoveDir() {
+      std::error_code ec;
+      if (!dir.empty()) std::filesystem::remove_all(dir, ec);
+    }
+  };
+
   RigOptions options_;
   DaemonConfig config_;
+  RemoveDir socket_dir_;
   std::unique_ptr<sim::SimulatedBus> sim_;
   std::unique_ptr<BusDriver> decorator_;
   BusDriver* bus_ = nullptr;
