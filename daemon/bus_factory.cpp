@@ -58,7 +58,8 @@ nlohmann::json bus_status_json(const BusDriver& bus) {
                    {"cycle_time_exceeded_fired", st.counters.cycle_time_exceeded.fired},
                    {"unexpected_frames", st.counters.unexpected_frames},
                    {"invalid_frames", st.counters.invalid_frames},
-                   {"async_timeouts", st.counters.async_timeouts}};
+                   {"async_timeouts", st.counters.async_timeouts},
+                   {"async_invites_unused", st.counters.async_invites_unused}};
   nlohmann::json nodes = nlohmann::json::array();
   for (std::size_t i = 0; i < st.node_count; ++i) {
     const auto& n = st.nodes[i];
@@ -76,6 +77,7 @@ nlohmann::json bus_status_json(const BusDriver& bus) {
                        {"counter", n.loss_of_pres.value},
                        {"fired", n.loss_of_pres.fired}}},
                      {"late_pres", {{"events", n.late_pres.events}, {"fired", n.late_pres.fired}}},
+                     {"stale_pres_dropped", n.stale_pres_dropped},
                      {"pres_size_mismatches", n.pres_size_mismatches},
                      {"last_pres_size", n.last_pres_size},
                      {"status_error_entries", n.status_error_entries},
