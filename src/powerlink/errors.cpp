@@ -143,6 +143,12 @@ class MnCategory final : public std::error_category {
         return "link down";
       case MnError::kInvalidLayout:
         return "invalid process image layout";
+      case MnError::kPreqRegionOwnedByModule:
+        return "PReq bytes belong to an X20DS1928 module";
+      case MnError::kPreqOutOfRange:
+        return "PReq write runs past the PReq payload";
+      case MnError::kPreqWriteTooLong:
+        return "PReq write too long for one request";
     }
     return "unknown MN error";
   }

@@ -2,6 +2,9 @@
 
 #include <time.h>
 
+#include <algorithm>
+#include <cstring>
+
 namespace ds1928::powerlink {
 namespace {
 
@@ -33,6 +36,82 @@ PowerlinkBus::PowerlinkBus(const MnConfig& config, Link& link)
     const NodeImageLayout* layout = mn_.layout(a.node);
     if (!layout) continue;  // axis on an unconfigured node: never fresh
     if (const ModuleMapping* m = layout->find(a.slot)) axis_map_[i] = {a.node, *m, true};
+  }
+  raw_.resize(config_.bus.nodes.size());
+  pres_.resize(config_.bus.nodes.size());
+  for (std::size_t i = 0; i < raw_.size(); ++i) {
+    const uint8_t node = config_.bus.nodes[i].node_id;
+    raw_[i].node = pres_[i].node = node;
+    if (const NodeImageLayout* layout = mn_.layout(node)) raw_[i].layout = *layout;
+  }
+}
+
+PowerlinkBus::NodeRaw* PowerlinkBus::raw(uint8_t node) noexcept {
+  for (NodeRaw& r : raw_)
+    if (r.node == node) return &r;
+  return nullptr;
+}
+const PowerlinkBus::NodeRaw* PowerlinkBus::raw(uint8_t node) const noexcept {
+  for (const NodeRaw& r : raw_)
+    if (r.node == node) return &r;
+  return nullptr;
+}
+
+PreqWriteCheck PowerlinkBus::set_preq(uint8_t node, uint16_t offset,
+                                      std::span<const uint8_t> bytes) {
+  PreqWriteCheck check;
+  const NodeRaw* r = raw(node);
+  if (!r) {
+    check.error = make_error_code(MnError::kNodeNotConfigured);
+    return check;
+  }
+  {
+    std::lock_guard lock(status_mutex_);
+    for (std::size_t i = 0; i < status_.node_count; ++i)
+      if (status_.nodes[i].node == node) check.preq_size = status_.nodes[i].preq_size;
+  }
+  if (bytes.size() > kMaxPreqWrite) {
+    check.error = make_error_code(MnError::kPreqWriteTooLong);
+    return check;
+  }
+  const std::size_t end = std::size_t{offset} + bytes.size();
+  if (end > check.preq_size) {
+    check.error = make_error_code(MnError::kPreqOutOfRange);
+    return check;
+  }
+  for (const ModuleMapping& m : r->layout.mappings()) {
+    const std::size_t lo = m.preq_offset;
+    const std::size_t hi = lo + preq_module_size(m.output_mtu);
+    if (offset < hi && end > lo) {
+      check.error = make_error_code(MnError::kPreqRegionOwnedByModule);
+      check.module = m;
+      return check;
+    }
+  }
+  PreqWrite w;
+  w.node = node;
+  w.offset = offset;
+  w.length = static_cast<uint16_t>(bytes.size());
+  std::copy(bytes.begin(), bytes.end(), w.bytes.begin());
+  if (!preq_writes_.try_push(w)) check.error = make_error_code(MnError::kQueueFull);
+  return check;
+}
+
+void PowerlinkBus::apply_preq_writes() noexcept {
+  while (auto w = preq_writes_.try_pop()) {
+    NodeRaw* r = raw(w->node);
+    // Checked by set_preq(); the image is kMaxIsoPayload bytes whatever the CN's size is now.
+    if (!r || std::size_t{w->offset} + w->length > kMaxIsoPayload || w->length == 0) continue;
+    std::memcpy(r->preq_set.data() + w->offset, w->bytes.data(), w->length);
+    for (std::size_t i = 0; i < w->length; ++i) r->preq_mask.set(w->offset + i);
+    const auto hi = static_cast<uint16_t>(w->offset + w->length);
+    if (r->set_lo == r->set_hi) {
+      r->set_lo = w->offset;
+      r->set_hi = hi;
+    } else {
+      r->set_lo = std::min(r->set_lo, w->offset);
+      r->set_hi = std::max(r->set_hi, hi);
+    }
   }
 }
 
@@ -83,6 +162,9 @@ ExchangeResult PowerlinkBus::exchange(std::span<AxisIo> axes, int64_t cycle_star
     }
   }
 
+  apply_preq_writes();
+  for (NodeRaw& r : raw_) r.pres_fresh = false;
+
   mn_.begin_cycle(cycle_start_ns);
   // Whatever arrived since the last cycle's end is late: a PRes among it would otherwise be taken
   // for this cycle's answer (frames carry no cycle number). The MN drops such PRes (counted as
@@ -103,6 +185,15 @@ ExchangeResult PowerlinkBus::exchange(std::span<AxisIo> axes, int64_t cycle_star
   for (uint8_t node : mn_.isochronous_nodes()) {
     const CnStatus* st = mn_.node(node);
     const uint32_t before = st->pres_received;
+    NodeRaw* nr = raw(node);
+    if (nr && nr->set_lo < nr->set_hi) {
+      // Set bytes are written every cycle: the MN clears the image when the CN is identified
+      // again, and the axes' bytes never overlap them (set_preq() refuses that).
+      std::span<uint8_t> preq = mn_.preq_payload(node);
+      const std::size_t hi = std::min<std::size_t>(nr->set_hi, preq.size());
+      for (std::size_t b = nr->set_lo; b < hi; ++b)
+        if (nr->preq_mask.test(b)) preq[b] = nr->preq_set[b];
+    }
     drain(0);  // the late PRes of an earlier PReq to this node must not pass for this one's
     send(mn_.build_preq(node, tx_));
     const int64_t deadline = clock_() + static_cast<int64_t>(mn_.pres_timeout_us(node)) * 1000;
@@ -118,6 +209,11 @@ ExchangeResult PowerlinkBus::exchange(std::span<AxisIo> axes, int64_t cycle_star
         const int64_t t = r.rx_time_ns ? r.rx_time_ns : clock_();
         for (std::size_t i = 0; i < n_axes; ++i)
           if (axis_map_[i].node == node) rx_time_[i] = t;
+        if (nr) {
+          nr->pres_fresh = nr->pres_received = true;
+          nr->pres_rx_ns = t;
+          nr->pres_cycle = mn_.counters().cycles;
+        }
         break;
       }
     }
@@ -170,6 +266,29 @@ void PowerlinkBus::publish_status() noexcept {
   const auto nodes = mn_.nodes();
   status_.node_count = std::min(nodes.size(), status_.nodes.size());
   std::copy_n(nodes.begin(), status_.node_count, status_.nodes.begin());
+  for (std::size_t i = 0; i < raw_.size(); ++i) {
+    const NodeRaw& r = raw_[i];
+    PresSnapshot& p = pres_[i];
+    p.fresh = r.pres_fresh;
+    p.received = r.pres_received;
+    p.cycle = r.pres_cycle;
+    p.rx_time_ns = r.pres_rx_ns;
+    // The MN keeps the last PRes payload until the next one: a snapshot skipped by the try-lock
+    // loses nothing.
+    const std::span<const uint8_t> bytes = mn_.pres_payload(r.node);
+    p.size = static_cast<uint16_t>(std::min(bytes.size(), p.payload.size()));
+    std::copy_n(bytes.begin(), p.size, p.payload.begin());
+  }
+}
+
+bool PowerlinkBus::pres_snapshot(uint8_t node, PresSnapshot& out) const {
+  std::lock_guard lock(status_mutex_);
+  for (const PresSnapshot& p : pres_) {
+    if (p.node != node) continue;
+    out = p;
+    return true;
+  }
+  return false;
 }
 
 PowerlinkStatus PowerlinkBus::status() const {

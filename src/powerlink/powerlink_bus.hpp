@@ -5,6 +5,7 @@
 
 #include <array>
 #include <atomic>
+#include <bitset>
 #include <cstdint>
 #include <memory>
 #include <mutex>
@@ -28,6 +29,30 @@ struct PowerlinkStatus {
   std::size_t node_count = 0;
 };
 
+// Bytes one raw PReq write request carries (pl-preq-set).
+inline constexpr std::size_t kMaxPreqWrite = 256;
+
+// The last PRes payload of one configured CN, as the cycle thread last published it. Raw bytes:
+// for a CN without X20DS1928 modules this is its whole process input.
+struct PresSnapshot {
+  uint8_t node = 0;
+  bool received = false;   // a PRes has arrived since the start
+  bool fresh = false;      // ... in the last published cycle
+  uint64_t cycle = 0;      // MN cycle count when it arrived
+  int64_t rx_time_ns = 0;  // CLOCK_MONOTONIC reception time
+  uint16_t size = 0;
+  std::array<uint8_t, kMaxIsoPayload> payload{};
+  [[nodiscard]] std::span<const uint8_t> bytes() const noexcept { return {payload.data(), size}; }
+};
+
+// Outcome of a raw PReq write request, with what the caller needs to word its error.
+struct PreqWriteCheck {
+  std::error_code error;   // MnError::kNodeNotConfigured, kPreqWriteTooLong, kPreqOutOfRange,
+                           // kPreqRegionOwnedByModule, kQueueFull; empty: queued
+  uint16_t preq_size = 0;  // the CN's PReq payload size the write was checked against
+  ModuleMapping module{};  // kPreqRegionOwnedByModule: the module whose bytes it overlaps
+};
+
 class PowerlinkBus final : public BusDriver {
  public:
   // `config.axes` are the axes in the order exchange() receives them. The link outlives the bus.
@@ -47,6 +72,14 @@ class PowerlinkBus final : public BusDriver {
 
   // Normal thread: the latest status published by the cycle thread (at most one cycle old).
   [[nodiscard]] PowerlinkStatus status() const;
+  // Normal thread: the last PRes of a configured CN; false when `node` is not configured.
+  [[nodiscard]] bool pres_snapshot(uint8_t node, PresSnapshot& out) const;
+  // Normal thread (the single producer): set `bytes` at `offset` of the PReq payload of `node`.
+  // The cycle thread applies it from its next cycle on and keeps it for all following cycles
+  // (also across a re-boot of the CN). Checked here against the CN's PReq size as last published
+  // (0 until the CN is identified) and against the module regions, which belong to the axes.
+  [[nodiscard]] PreqWriteCheck set_preq(uint8_t node, uint16_t offset,
+                                        std::span<const uint8_t> bytes);
   // Cycle thread (or tests driving exchange() themselves).
   [[nodiscard]] const ManagingNode& managing_node() const noexcept { return mn_; }
 
@@ -61,6 +94,28 @@ class PowerlinkBus final : public BusDriver {
     ModuleMapping mapping{};
     bool valid = false;
   };
+  // Per configured CN. `node` and `layout` are fixed at construction (read by both threads); the
+  // rest is the cycle thread's.
+  struct NodeRaw {
+    uint8_t node = 0;
+    NodeImageLayout layout{};
+    std::array<uint8_t, kMaxIsoPayload> preq_set{};  // raw PReq bytes set through set_preq()
+    std::bitset<kMaxIsoPayload> preq_mask;           // which of them were set
+    uint16_t set_lo = 0, set_hi = 0;                 // [lo, hi) spans every set byte
+    bool pres_fresh = false;
+    bool pres_received = false;
+    uint64_t pres_cycle = 0;
+    int64_t pres_rx_ns = 0;
+  };
+  struct PreqWrite {
+    uint8_t node = 0;
+    uint16_t offset = 0;
+    uint16_t length = 0;
+    std::array<uint8_t, kMaxPreqWrite> bytes{};
+  };
+  [[nodiscard]] NodeRaw* raw(uint8_t node) noexcept;
+  [[nodiscard]] const NodeRaw* raw(uint8_t node) const noexcept;
+  void apply_preq_writes() noexcept;
   void send(Result<std::size_t> len) noexcept;
   void drain(int64_t deadline_ns) noexcept;
   void publish_status() noexcept;
@@ -76,8 +131,11 @@ class PowerlinkBus final : public BusDriver {
   std::atomic<BusState> state_{BusState::Down};
   SpscQueue<RegisterRequest, 64> requests_;
   SpscQueue<RegisterResult, 64> results_;
+  std::vector<NodeRaw> raw_;
+  SpscQueue<PreqWrite, 16> preq_writes_;
   mutable std::mutex status_mutex_;
   PowerlinkStatus status_;
+  std::vector<PresSnapshot> pres_;  // per raw_ entry, under status_mutex_
   Clock clock_;
 };
 

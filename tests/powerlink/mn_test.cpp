@@ -488,3 +488,115 @@ TEST_CASE("Wireshark decodes the MN's boot traffic without errors", "[powerlink]
                            "NMTEnableReadyToOperate", "NMTStartNode", "WriteByIndex"})
     CHECK(summary.find(what) != std::string::npos);
 }
+
+namespace {
+
+// Node 1 carries one X20DS1928; node 2 has no module, 6 raw PRes bytes and a 10-byte PReq.
+struct RawRig : Rig {
+  TestCn* raw_cn = nullptr;
+  RawRig() {
+    PowerlinkNodeConfig nc;
+    nc.node_id = 2;
+    nc.preq_size = 10;
+    nc.pres_size = 6;
+    config.bus.nodes.push_back(nc);
+    // Node 1's PReq gets 4 bytes beyond its module's.
+    config.bus.nodes[0].preq_size = static_cast<uint16_t>(cns[0]->layout.preq_size + 4);
+    auto layout = make_layout({});
+    REQUIRE(layout);
+    cns.push_back(std::make_unique<TestCn>(2, *layout));
+    raw_cn = cns.back().get();
+    raw_cn->pres_extra = {0x0A, 0x1B, 0x2C, 0x3D, 0x4E, 0x5F};
+    link.cns.push_back(raw_cn);
+    bus = std::make_unique<PowerlinkBus>(config, link);
+    bus->set_clock(&fake_clock);
+    REQUIRE_FALSE(bus->start());
+  }
+};
+
+}  // namespace
+
+TEST_CASE("A CN without modules is booted and cycled; its raw PRes is published",
+          "[powerlink][mn][raw]") {
+  RawRig rig;
+  REQUIRE(rig.run_until([&] { return rig.bus->state() == BusState::Operational; }));
+  CHECK(rig.st(2).boot == CnBootState::kOperational);
+  CHECK(rig.raw_cn->state == NmtState::kOperational);
+  rig.step();
+  PresSnapshot snap;
+  REQUIRE(rig.bus->pres_snapshot(2, snap));
+  CHECK(snap.fresh);
+  CHECK(snap.received);
+  CHECK(snap.rx_time_ns > 0);
+  CHECK(std::vector<uint8_t>(snap.bytes().begin(), snap.bytes().end()) == rig.raw_cn->pres_extra);
+
+  // New bytes from the CN show in the next snapshot; a cycle without its PRes is not fresh but
+  // keeps the last bytes.
+  rig.raw_cn->pres_extra = {1, 2, 3, 4, 5, 6};
+  rig.step();
+  REQUIRE(rig.bus->pres_snapshot(2, snap));
+  CHECK(std::vector<uint8_t>(snap.bytes().begin(), snap.bytes().end()) == rig.raw_cn->pres_extra);
+  const uint64_t cycle = snap.cycle;
+  rig.raw_cn->drop_pres = true;
+  rig.step();
+  REQUIRE(rig.bus->pres_snapshot(2, snap));
+  CHECK_FALSE(snap.fresh);
+  CHECK(snap.cycle == cycle);
+  CHECK(snap.size == 6);
+  CHECK(snap.payload[0] == 1);
+  CHECK_FALSE(rig.bus->pres_snapshot(3, snap));
+}
+
+TEST_CASE("Raw PReq bytes set through the bus reach the CN in every following cycle",
+          "[powerlink][mn][raw]") {
+  RawRig rig;
+  REQUIRE(rig.run_until([&] { return rig.bus->state() == BusState::Operational; }));
+  const std::vector<uint8_t> set = {0xDE, 0xAD, 0xBE};
+  const PreqWriteCheck ok = rig.bus->set_preq(2, 7, set);
+  REQUIRE_FALSE(ok.error);
+  CHECK(ok.preq_size == 10);
+  rig.step();
+  REQUIRE(rig.raw_cn->last_preq_payload.size() == 10);
+  CHECK(rig.raw_cn->last_preq_payload[6] == 0);
+  CHECK(rig.raw_cn->last_preq_payload[7] == 0xDE);
+  CHECK(rig.raw_cn->last_preq_payload[8] == 0xAD);
+  CHECK(rig.raw_cn->last_preq_payload[9] == 0xBE);
+  rig.raw_cn->last_preq_payload.clear();
+  rig.step();
+  REQUIRE(rig.raw_cn->last_preq_payload.size() == 10);
+  CHECK(rig.raw_cn->last_preq_payload[8] == 0xAD);
+
+  // Bytes after node 1's module are free; the module's own belong to its axis.
+  const uint16_t module_end = rig.cns[0]->layout.preq_size;
+  const std::vector<uint8_t> two = {0x55, 0x66};
+  REQUIRE_FALSE(rig.bus->set_preq(1, module_end + 1, two).error);
+  const PreqWriteCheck overlap = rig.bus->set_preq(1, static_cast<uint16_t>(module_end - 1), two);
+  CHECK(overlap.error == make_error_code(MnError::kPreqRegionOwnedByModule));
+  CHECK(overlap.module.slot == 1);
+  CHECK(rig.bus->set_preq(1, 0, two).error == make_error_code(MnError::kPreqRegionOwnedByModule));
+  rig.step();
+  const auto& p1 = rig.cns[0]->last_preq_payload;
+  REQUIRE(p1.size() == module_end + 4u);
+  CHECK(p1[module_end] == 0);
+  CHECK(p1[module_end + 1] == 0x55);
+  CHECK(p1[module_end + 2] == 0x66);
+
+  // Past the PReq, too long, unknown node.
+  const PreqWriteCheck past = rig.bus->set_preq(2, 9, two);
+  CHECK(past.error == make_error_code(MnError::kPreqOutOfRange));
+  CHECK(past.preq_size == 10);
+  CHECK(rig.bus->set_preq(2, 10, std::span<const uint8_t>()).error ==
+        std::error_code());  // empty write at the end: nothing to do, accepted
+  const std::vector<uint8_t> huge(kMaxPreqWrite + 1, 0);
+  CHECK(rig.bus->set_preq(2, 0, huge).error == make_error_code(MnError::kPreqWriteTooLong));
+  CHECK(rig.bus->set_preq(9, 0, two).error == make_error_code(MnError::kNodeNotConfigured));
+  rig.step();
+  CHECK(rig.raw_cn->last_preq_payload[9] == 0xBE);  // the refused writes changed nothing
+
+  // A re-booted CN gets the set bytes again (the MN clears its PReq image on identification).
+  rig.raw_cn->power_cycle();
+  REQUIRE(rig.run_until([&] { return rig.st(2).boots == 2; }));
+  rig.step();
+  REQUIRE(rig.raw_cn->last_preq_payload.size() == 10);
+  CHECK(rig.raw_cn->last_preq_payload[7] == 0xDE);
+}

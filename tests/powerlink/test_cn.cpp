@@ -55,11 +55,14 @@ void TestCn::on_frame(std::span<const uint8_t> bytes, std::deque<std::vector<uin
     if (h.dst_node != node || drop_pres) return;
     if (state == NmtState::kNotActive || state == NmtState::kPreOperational1) return;
     last_preq_ready = preq->ready;
+    last_preq_payload.assign(preq->payload.begin(), preq->payload.end());
     if (layout.count > 0) (void)read_outputs(preq->payload, layout.modules[0], last_outputs);
     std::vector<uint8_t> payload(std::max<int>(0, layout.pres_size + pres_size_delta), 0);
     ModuleInputs in = inputs;
     in.pos_time_us = static_cast<uint32_t>(last_relative_time_us);
     for (const ModuleMapping& m : layout.mappings()) (void)write_inputs(payload, m, in);
+    payload.insert(payload.begin() + std::min<std::size_t>(layout.pres_size, payload.size()),
+                   pres_extra.begin(), pres_extra.end());
     PRes pres;
     pres.nmt_state = state;
     pres.ready = state == NmtState::kOperational;

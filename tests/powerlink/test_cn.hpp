@@ -34,6 +34,8 @@ class TestCn : public SdoObjectAccess {
   ModuleInputs inputs;         // what every module reports
   ModuleOutputs last_outputs;  // module 0's outputs from the last PReq
   bool last_preq_ready = false;
+  std::vector<uint8_t> last_preq_payload;  // whole payload of the last PReq to this CN
+  std::vector<uint8_t> pres_extra;         // raw PRes bytes after the modules' bytes
   uint64_t last_relative_time_us = 0;
   // Faults.
   bool drop_pres = false;
