@@ -7,6 +7,7 @@
 #include <cstdio>
 
 #include "config/config_loader.hpp"
+#include "powerlink_commands.hpp"
 #include "sim/simulated_bus.hpp"
 
 namespace ds1928 {
@@ -293,6 +294,7 @@ void Daemon::register_commands() {
   using control::Reply;
   using control::Request;
   server_->add_command("status", [this](const Request&, Reply reply) { reply.ok(status_json()); });
+  register_powerlink_commands(*server_, *bus_, config_.socket.privileged_group);
   server_->add_command("axes", [this](const Request&, Reply reply) { reply.ok(axes_json()); });
   server_->add_command("stats", [this](const Request&, Reply reply) { reply.ok(stats_json()); });
   server_->add_command("stats-reset", [this](const Request&, Reply reply) {
