@@ -15,5 +15,7 @@ void add_basic_commands(CLI::App& app, Context& ctx);
 void add_position_command(CLI::App& app, Context& ctx);
 // endat reset|ack|read-param|write-param|read-block|write-block|read-info|ident|dump.
 void add_endat_commands(CLI::App& app, Context& ctx);
+// `pl pres` / `pl preq-set`: raw process data of POWERLINK CNs.
+void add_powerlink_commands(CLI::App& app, Context& ctx);
 
 }  // namespace ds1928::ctl

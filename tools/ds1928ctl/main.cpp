@@ -25,6 +25,7 @@ int main(int argc, char** argv) {
   add_basic_commands(app, ctx);
   add_position_command(app, ctx);
   add_endat_commands(app, ctx);
+  add_powerlink_commands(app, ctx);
 
   try {
     app.parse(argc, argv);
