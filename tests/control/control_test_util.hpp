@@ -104,6 +104,7 @@ class LineClient {
     std::size_t off = 0;
     while (off < bytes.size()) {
       const ssize_t n = ::send(fd_, bytes.data() + off, bytes.size() - off, MSG_NOSIGNAL);
+      if (n < 0 && errno == EINTR) continue;
       if (n <= 0) return false;
       off += static_cast<std::size_t>(n);
     }
@@ -120,6 +121,8 @@ class LineClient {
       }
       char chunk[4096];
       const ssize_t n = ::recv(fd_, chunk, sizeof(chunk), 0);
+      // A process stopped and continued (a stalled machine, a debugger) sees EINTR here.
+      if (n < 0 && errno == EINTR) continue;
       if (n <= 0) return std::nullopt;
       buffer_.append(chunk, static_cast<std::size_t>(n));
     }
@@ -127,7 +130,10 @@ class LineClient {
   // True when the server closed the connection (EOF) within the timeout.
   bool at_eof() {
     char c;
-    return buffer_.empty() && ::recv(fd_, &c, 1, 0) == 0;
+    ssize_t n;
+    do n = ::recv(fd_, &c, 1, 0);
+    while (n < 0 && errno == EINTR);
+    return buffer_.empty() && n == 0;
   }
   nlohmann::json request(const nlohmann::json& body) {
     send_raw(body.dump() + "\n");

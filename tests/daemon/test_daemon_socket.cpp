@@ -37,6 +37,7 @@ class Client {
     std::size_t off = 0;
     while (off < bytes.size()) {
       const auto n = ::send(fd_, bytes.data() + off, bytes.size() - off, MSG_NOSIGNAL);
+      if (n < 0 && errno == EINTR) continue;
       if (n <= 0) return;
       off += static_cast<std::size_t>(n);
     }
@@ -52,14 +53,19 @@ class Client {
       }
       char chunk[4096];
       const auto n = ::recv(fd_, chunk, sizeof(chunk), 0);
+      // A process stopped and continued (a stalled machine, a debugger) sees EINTR here.
+      if (n < 0 && errno == EINTR) continue;
       if (n <= 0) return {};
       buffer_.append(chunk, static_cast<std::size_t>(n));
     }
   }
+  // The reply object; an empty one when there was none (a failure the caller's checks report,
+  // never an exception in a client thread that would abort the test without cleaning up).
   json request(const json& j) {
     send_raw(j.dump() + "\n");
     const auto line = read_line();
-    return line.empty() ? json() : json::parse(line);
+    const json r = json::parse(line, nullptr, false);
+    return r.is_object() ? r : json::object();
   }
 
  private:
@@ -213,8 +219,8 @@ TEST_CASE("100 concurrent clients and abrupt disconnects leave the cycle untouch
     const json q0 = stats(d.path);
     std::this_thread::sleep_for(std::chrono::milliseconds(1000));
     const json q1 = stats(d.path);
-    REQUIRE(q0.is_object());
-    REQUIRE(q1.is_object());
+    REQUIRE(q0.value("ok", false));
+    REQUIRE(q1.value("ok", false));
 
     std::vector<std::thread> clients;
     std::atomic<int> ok{0}, answered_errors{0};
@@ -247,7 +253,7 @@ TEST_CASE("100 concurrent clients and abrupt disconnects leave the cycle untouch
     }
     for (auto& t : clients) t.join();
     const json f1 = stats(d.path);
-    REQUIRE(f1.is_object());
+    REQUIRE(f1.value("ok", false));
 
     const auto overruns = [](const json& a, const json& b) {
       return b["cycle"]["overruns"].get<uint64_t>() - a["cycle"]["overruns"].get<uint64_t>();
