@@ -179,6 +179,15 @@ TEST_CASE("every command answers with its documented fields", "[daemon][socket]"
   CHECK_FALSE(bad_axis.value("ok", true));
   CHECK(bad_axis["error"]["code"] == "bad_argument");
   CHECK(bad_axis["error"]["message"].get<std::string>().find("axis") != std::string::npos);
+
+  // POWERLINK raw process data exists only on the powerlink bus: a named refusal here.
+  const json pres = c.request({{"cmd", "pl-pres"}, {"node", 1}});
+  CHECK(pres["error"]["code"] == "not_powerlink");
+  const json preq = c.request({{"cmd", "pl-preq-set"}, {"node", 1}, {"offset", 0}, {"hex", "0a"}});
+  CHECK_FALSE(preq.value("ok", true));
+  // The EnDat service answers through the same socket.
+  const json ident = c.request({{"cmd", "endat-ident"}, {"axis", 0}});
+  CHECK(ident.value("ok", false));
 }
 
 TEST_CASE("bad requests get precise errors and the connection survives", "[daemon][socket]") {
