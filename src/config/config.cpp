@@ -543,6 +543,8 @@ struct AxisSite {
   Loc name_at;
   Loc node_at;
   std::string path;
+  Loc pres_offset_at;
+  Loc preq_offset_at;
 };
 
 void parse_axis(Section s, AxisConfig& a, BusKind bus, size_t index) {
@@ -578,6 +580,17 @@ void parse_axis(Section s, AxisConfig& a, BusKind bus, size_t index) {
   parse_module(s.section("module"), a.module, a.function_model);
   s.integer("command_timeout_ms", a.command_timeout_ms, 1, 600000, "ms");
   s.integer("flatstream_timeout_cycles", a.flatstream_timeout_cycles, 1, 1000000);
+  for (auto [key, field] :
+       {std::pair{"pres_offset", &a.pres_offset}, std::pair{"preq_offset", &a.preq_offset}}) {
+    if (bus != BusKind::Powerlink && s.has(key)) {
+      std::optional<uint16_t> ignored;
+      s.optional_integer(key, ignored, 0, 1489);
+      s.error(key, std::string("is only meaningful on bus powerlink (the bus here is ") +
+                       std::string(to_string(bus)) + ")");
+      continue;
+    }
+    s.optional_integer(key, *field, 0, 1489);
+  }
   s.finish();
 }
 
@@ -752,6 +765,93 @@ Loc locate(const YAML::Node& node, std::initializer_list<std::string_view> keys,
   return here;
 }
 
+// POWERLINK process image of each CN (docs/powerlink.md §Process image): a module sits at its
+// pres_offset/preq_offset or at its offset in the all-default packed layout (slot order). Two
+// blocks must not share a byte and each must end within 1490 bytes and the node's configured
+// pres_size/preq_size. The MN checks the same at start (make_layout()); here the message can
+// point at the file.
+void check_process_image(Diagnostics& diag, const DaemonConfig& c,
+                         const std::vector<AxisSite>& axes) {
+  struct Block {
+    size_t axis;
+    size_t start[2];  // PRes, PReq
+    size_t size[2];
+  };
+  static constexpr const char* kFrame[2] = {"PRes", "PReq"};
+  static constexpr const char* kKey[2] = {"pres_offset", "preq_offset"};
+  std::map<uint8_t, std::vector<size_t>> by_node;
+  for (size_t i = 0; i < axes.size() && i < c.axes.size(); ++i)
+    by_node[c.axes[i].node].push_back(i);
+  for (auto& [node, members] : by_node) {
+    std::stable_sort(members.begin(), members.end(),
+                     [&](size_t x, size_t y) { return c.axes[x].slot < c.axes[y].slot; });
+    const PowerlinkNodeConfig* nc = nullptr;
+    for (const auto& n : c.powerlink.nodes)
+      if (n.node_id == node) nc = &n;
+    std::vector<Block> blocks;
+    size_t packed[2] = {0, 0};
+    for (size_t i : members) {
+      const AxisConfig& a = c.axes[i];
+      const std::optional<uint16_t> offset[2] = {a.pres_offset, a.preq_offset};
+      Block b{i, {}, {16u + a.module.input_mtu, 2u + a.module.output_mtu}};
+      for (int f = 0; f < 2; ++f) {
+        b.start[f] = offset[f] ? *offset[f] : packed[f];
+        packed[f] += b.size[f];
+      }
+      blocks.push_back(b);
+    }
+    for (size_t k = 0; k < blocks.size(); ++k) {
+      const Block& b = blocks[k];
+      const AxisConfig& a = c.axes[b.axis];
+      const std::optional<uint16_t> offset[2] = {a.pres_offset, a.preq_offset};
+      const std::optional<uint16_t> limit[2] = {nc ? nc->pres_size : std::nullopt,
+                                                nc ? nc->preq_size : std::nullopt};
+      for (int f = 0; f < 2; ++f) {
+        const Loc at = offset[f]
+                           ? (f == 0 ? axes[b.axis].pres_offset_at : axes[b.axis].preq_offset_at)
+                           : axes[b.axis].at;
+        const std::string path = axes[b.axis].path + (offset[f] ? std::string(".") + kKey[f] : "");
+        const std::string what = std::string(kFrame[f]) + " block of node " + std::to_string(node) +
+                                 " slot " + std::to_string(a.slot) + " (bytes " +
+                                 std::to_string(b.start[f]) + ".." +
+                                 std::to_string(b.start[f] + b.size[f] - 1) + ")";
+        const size_t end = b.start[f] + b.size[f];
+        const size_t max = limit[f] ? *limit[f] : 1490;
+        if (end > max) {
+          diag.error(at, path,
+                     what + " ends past the " + kFrame[f] + " payload of " + std::to_string(max) +
+                         " bytes" +
+                         (limit[f] ? std::string(" (powerlink.nodes ") +
+                                         (f == 0 ? "pres_size" : "preq_size") + ")"
+                                   : std::string()));
+        }
+        for (size_t j = 0; j < k; ++j) {
+          const Block& o = blocks[j];
+          if (!(b.start[f] < o.start[f] + o.size[f] && o.start[f] < end)) continue;
+          // Report at the moved block: a default place is not what the user wrote.
+          const bool here =
+              offset[f] || !(f == 0 ? c.axes[o.axis].pres_offset : c.axes[o.axis].preq_offset);
+          const Block& r = here ? b : o;  // reported
+          const Block& x = here ? o : b;  // the one it hits
+          const std::string key = offset[f] || !here ? std::string(".") + kKey[f] : "";
+          const Loc r_at =
+              key.empty() ? axes[r.axis].at
+                          : (f == 0 ? axes[r.axis].pres_offset_at : axes[r.axis].preq_offset_at);
+          auto bytes = [f](const Block& blk) {
+            return "(bytes " + std::to_string(blk.start[f]) + ".." +
+                   std::to_string(blk.start[f] + blk.size[f] - 1) + ")";
+          };
+          diag.error(r_at, axes[r.axis].path + key,
+                     std::string(kFrame[f]) + " block of node " + std::to_string(node) + " slot " +
+                         std::to_string(c.axes[r.axis].slot) + " " + bytes(r) + " overlaps slot " +
+                         std::to_string(c.axes[x.axis].slot) + " " + bytes(x) + " of axes[" +
+                         std::to_string(x.axis) + "] (" + where(axes[x.axis].at) + ")");
+        }
+      }
+    }
+  }
+}
+
 void check_cross_fields(Diagnostics& diag, const DaemonConfig& c, const std::vector<AxisSite>& axes,
                         const PowerlinkSites& pl_sites, Loc spin_at, Loc canio_timeout_at) {
   std::map<std::string, size_t> names;
@@ -785,6 +885,7 @@ void check_cross_fields(Diagnostics& diag, const DaemonConfig& c, const std::vec
                    ")");
   }
   if (c.bus == BusKind::Powerlink) {
+    check_process_image(diag, c, axes);
     for (size_t i = 0; i < c.powerlink.nodes.size() && i < pl_sites.pres_timeout_at.size(); ++i) {
       const auto& n = c.powerlink.nodes[i];
       if (n.pres_timeout_us >= c.cycle.period_us) {
@@ -849,7 +950,9 @@ DaemonConfig parse_document(Diagnostics& diag, const YAML::Node& doc, const std:
     parse_axis(Section(diag, item.node, item.path, item.at), axis, c.bus, i);
     const Loc name_at = item.node.IsMap() ? locate(item.node, {"name"}) : item.at;
     const Loc node_at = item.node.IsMap() ? locate(item.node, {"node"}) : item.at;
-    axis_sites.push_back({item.at, name_at, node_at, item.path});
+    const Loc pres_offset_at = item.node.IsMap() ? locate(item.node, {"pres_offset"}) : item.at;
+    const Loc preq_offset_at = item.node.IsMap() ? locate(item.node, {"preq_offset"}) : item.at;
+    axis_sites.push_back({item.at, name_at, node_at, item.path, pres_offset_at, preq_offset_at});
     c.axes.push_back(std::move(axis));
   }
   if (c.axes.empty()) {
@@ -1136,8 +1239,10 @@ std::string dump_config(const DaemonConfig& c) {
       << "    slot: " << +a.slot << "\n"
       << "    function_model: " << +static_cast<uint8_t>(a.function_model) << "\n"
       << "    command_timeout_ms: " << a.command_timeout_ms << "\n"
-      << "    flatstream_timeout_cycles: " << a.flatstream_timeout_cycles << "\n"
-      << "    module:\n"
+      << "    flatstream_timeout_cycles: " << a.flatstream_timeout_cycles << "\n";
+    if (a.pres_offset) o << "    pres_offset: " << *a.pres_offset << "\n";
+    if (a.preq_offset) o << "    preq_offset: " << *a.preq_offset << "\n";
+    o << "    module:\n"
       << "      endat_enable: " << yes(m.endat_enable) << "\n"
       << "      position_signed: " << yes(m.position_signed) << "\n"
       << "      fast_clock_off: " << yes(m.fast_clock_off) << "\n"

@@ -51,6 +51,10 @@ struct AxisConfig {
   ModuleSettings module;
   uint32_t command_timeout_ms = 2000;        // EnDat command over Flatstream
   uint32_t flatstream_timeout_cycles = 200;  // per-sequence timeout
+  // POWERLINK only: byte offset of this module's block in its CN's PRes / PReq payload
+  // (0..1489); unset = the default packed layout (docs/powerlink.md §Process image).
+  std::optional<uint16_t> pres_offset;
+  std::optional<uint16_t> preq_offset;
 };
 
 // Simulated node (also the test peer): motion and encoder of each simulated axis.

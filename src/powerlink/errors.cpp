@@ -149,6 +149,10 @@ class MnCategory final : public std::error_category {
         return "PReq write runs past the PReq payload";
       case MnError::kPreqWriteTooLong:
         return "PReq write too long for one request";
+      case MnError::kModuleBlocksOverlap:
+        return "two modules' process data blocks overlap";
+      case MnError::kModuleBlockOutsidePayload:
+        return "module's process data block runs past the PRes/PReq payload";
     }
     return "unknown MN error";
   }

@@ -48,9 +48,11 @@ enum class MnError : int {
   kQueueFull,
   kLinkDown,
   kInvalidLayout,  // process image: duplicate slot, too many modules, MTU or size too large
-  kPreqRegionOwnedByModule,  // raw PReq write overlaps the bytes of an X20DS1928 module (axis)
-  kPreqOutOfRange,           // raw PReq write runs past the CN's PReq payload size
-  kPreqWriteTooLong,         // raw PReq write longer than one request carries
+  kPreqRegionOwnedByModule,    // raw PReq write overlaps the bytes of an X20DS1928 module (axis)
+  kPreqOutOfRange,             // raw PReq write runs past the CN's PReq payload size
+  kPreqWriteTooLong,           // raw PReq write longer than one request carries
+  kModuleBlocksOverlap,        // process image: two modules of one CN share PRes or PReq bytes
+  kModuleBlockOutsidePayload,  // process image: a module's block ends past the PRes/PReq size
 };
 
 [[nodiscard]] const std::error_category& frame_category() noexcept;

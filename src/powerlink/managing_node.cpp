@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cstring>
+#include <string>
 
 namespace ds1928::powerlink {
 
@@ -126,7 +127,8 @@ ManagingNode::ManagingNode(const MnConfig& config)
     std::vector<ModuleSpec> specs;
     for (const AxisConfig& a : config_.axes) {
       if (a.node != nc.node_id) continue;
-      specs.push_back({a.slot, a.module.input_mtu, a.module.output_mtu});
+      specs.push_back(
+          {a.slot, a.module.input_mtu, a.module.output_mtu, a.pres_offset, a.preq_offset});
       const ModuleSettings& m = a.module;
       auto add = [&](uint16_t reg, uint32_t value) {
         cn->boot_ops.push_back(
@@ -147,8 +149,29 @@ ManagingNode::ManagingNode(const MnConfig& config)
       add(reg::kForward, m.forward);
       add(reg::kForwardDelay, m.forward_delay_us);
     }
-    auto layout = make_layout(specs);
-    if (!layout) throw std::system_error(layout.error(), "process image of node");
+    LayoutIssue issue;
+    auto layout = make_layout(specs, &issue);
+    if (!layout) {
+      std::string what = "process image of node " + std::to_string(nc.node_id) + ", " +
+                         (issue.in_preq ? "PReq" : "PRes") + ": slot " + std::to_string(issue.slot);
+      if (issue.other_slot != 0) what += " and slot " + std::to_string(issue.other_slot);
+      throw std::system_error(layout.error(), what);
+    }
+    // A configured payload size is what goes on the wire: every block must fit inside it.
+    for (const ModuleMapping& m : layout->mappings()) {
+      const bool pres_out =
+          nc.pres_size && m.pres_offset + pres_module_size(m.input_mtu) > *nc.pres_size;
+      const bool preq_out =
+          nc.preq_size && m.preq_offset + preq_module_size(m.output_mtu) > *nc.preq_size;
+      if (pres_out || preq_out) {
+        throw std::system_error(make_error_code(MnError::kModuleBlockOutsidePayload),
+                                "process image of node " + std::to_string(nc.node_id) + ", " +
+                                    (pres_out ? "PRes" : "PReq") + ": slot " +
+                                    std::to_string(m.slot) + " ends past the configured " +
+                                    (pres_out ? "pres_size " : "preq_size ") +
+                                    std::to_string(pres_out ? *nc.pres_size : *nc.preq_size));
+      }
+    }
     cn->layout = *layout;
     Cn* raw = cn.get();
     SdoClientConfig sc;

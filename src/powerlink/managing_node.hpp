@@ -114,8 +114,9 @@ struct SdoRegisterResult {
 
 class ManagingNode {
  public:
-  // Throws std::system_error (MnError::kInvalidLayout / kNodeNotConfigured) on a configuration
-  // that cannot run: called at start, never on the cycle path.
+  // Throws std::system_error (MnError::kInvalidLayout, kModuleBlocksOverlap,
+  // kModuleBlockOutsidePayload — what() names the node and slot(s) — or kNodeNotConfigured) on
+  // a configuration that cannot run: called at start, never on the cycle path.
   explicit ManagingNode(const MnConfig& config);
   ~ManagingNode();
   ManagingNode(const ManagingNode&) = delete;

@@ -7,29 +7,55 @@
 
 namespace ds1928::powerlink {
 
-Result<NodeImageLayout> make_layout(std::span<const ModuleSpec> modules) noexcept {
-  if (modules.size() > kMaxModulesPerNode) return MnError::kInvalidLayout;
+Result<NodeImageLayout> make_layout(std::span<const ModuleSpec> modules,
+                                    LayoutIssue* issue) noexcept {
+  auto fail = [issue](MnError e, uint8_t slot, uint8_t other, bool in_preq) {
+    if (issue) *issue = {slot, other, in_preq};
+    return e;
+  };
+  if (modules.size() > kMaxModulesPerNode) return fail(MnError::kInvalidLayout, 0, 0, false);
   std::array<ModuleSpec, kMaxModulesPerNode> sorted{};
   std::copy(modules.begin(), modules.end(), sorted.begin());
   std::sort(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(modules.size()),
             [](const ModuleSpec& a, const ModuleSpec& b) { return a.slot < b.slot; });
   NodeImageLayout layout;
-  std::size_t pres = 0;
-  std::size_t preq = 0;
+  std::size_t packed_pres = 0;
+  std::size_t packed_preq = 0;
+  std::size_t pres_end = 0;
+  std::size_t preq_end = 0;
   for (std::size_t i = 0; i < modules.size(); ++i) {
     const ModuleSpec& s = sorted[i];
-    if (s.slot == 0 || (i > 0 && sorted[i - 1].slot == s.slot)) return MnError::kInvalidLayout;
+    if (s.slot == 0 || (i > 0 && sorted[i - 1].slot == s.slot))
+      return fail(MnError::kInvalidLayout, s.slot, i > 0 ? sorted[i - 1].slot : 0, false);
     if (s.input_mtu > kMaxFlatstreamMtu || s.output_mtu > kMaxFlatstreamMtu)
-      return MnError::kInvalidLayout;
-    layout.modules[i] = {s.slot, s.input_mtu, s.output_mtu, static_cast<uint16_t>(pres),
-                         static_cast<uint16_t>(preq)};
-    pres += pres_module_size(s.input_mtu);
-    preq += preq_module_size(s.output_mtu);
+      return fail(MnError::kInvalidLayout, s.slot, 0, s.output_mtu > kMaxFlatstreamMtu);
+    // Default offsets are those of the all-default layout, whatever the overrides.
+    const std::size_t pres = s.pres_offset.value_or(static_cast<uint16_t>(packed_pres));
+    const std::size_t preq = s.preq_offset.value_or(static_cast<uint16_t>(packed_preq));
+    packed_pres += pres_module_size(s.input_mtu);
+    packed_preq += preq_module_size(s.output_mtu);
+    if (pres + pres_module_size(s.input_mtu) > kMaxIsoPayload)
+      return fail(MnError::kModuleBlockOutsidePayload, s.slot, 0, false);
+    if (preq + preq_module_size(s.output_mtu) > kMaxIsoPayload)
+      return fail(MnError::kModuleBlockOutsidePayload, s.slot, 0, true);
+    const ModuleMapping m{s.slot, s.input_mtu, s.output_mtu, static_cast<uint16_t>(pres),
+                          static_cast<uint16_t>(preq)};
+    for (std::size_t j = 0; j < i; ++j) {
+      const ModuleMapping& o = layout.modules[j];
+      if (m.pres_offset < o.pres_offset + pres_module_size(o.input_mtu) &&
+          o.pres_offset < m.pres_offset + pres_module_size(m.input_mtu))
+        return fail(MnError::kModuleBlocksOverlap, s.slot, o.slot, false);
+      if (m.preq_offset < o.preq_offset + preq_module_size(o.output_mtu) &&
+          o.preq_offset < m.preq_offset + preq_module_size(m.output_mtu))
+        return fail(MnError::kModuleBlocksOverlap, s.slot, o.slot, true);
+    }
+    layout.modules[i] = m;
+    pres_end = std::max(pres_end, pres + pres_module_size(s.input_mtu));
+    preq_end = std::max(preq_end, preq + preq_module_size(s.output_mtu));
   }
-  if (pres > kMaxIsoPayload || preq > kMaxIsoPayload) return MnError::kInvalidLayout;
   layout.count = modules.size();
-  layout.pres_size = static_cast<uint16_t>(pres);
-  layout.preq_size = static_cast<uint16_t>(preq);
+  layout.pres_size = static_cast<uint16_t>(pres_end);
+  layout.preq_size = static_cast<uint16_t>(preq_end);
   return layout;
 }
 

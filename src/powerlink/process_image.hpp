@@ -1,7 +1,8 @@
 // Process-data image of one Controlled Node: where each X20DS1928 (function model 0) sits in the
 // PRes and PReq payloads. Shared by the Managing Node and the simulated CN, so both ends agree.
 // Default layout (docs/powerlink.md §Process image): modules in ascending slot order, packed,
-// starting at payload offset 0.
+// starting at payload offset 0. A module may be placed elsewhere (ModuleSpec::pres_offset /
+// preq_offset); the others keep their default offsets, so overriding one never moves another.
 //   PRes per module: PositionHW u32 | PositionLW u32 | PosTime u32 | PosCycle i8 |
 //                    SDCLifeCount i8 | ErrorInfo u8 | InputSequence u8 | RxBytes[InputMTU]
 //   PReq per module: OutputSequence u8 | TxBytes[OutputMTU] | AckErrorInfo u8
@@ -11,6 +12,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <optional>
 #include <span>
 
 #include "core/module_image.hpp"
@@ -30,9 +32,28 @@ inline constexpr std::size_t kPreqModuleFixedSize = 2;
 }
 
 struct ModuleSpec {
-  uint8_t slot = 1;
-  uint8_t input_mtu = 7;
-  uint8_t output_mtu = 7;
+  // A constructor, not an aggregate: `ModuleSpec{slot, in, out}` stays warning-free.
+  constexpr ModuleSpec(uint8_t slot_ = 1, uint8_t input_mtu_ = 7, uint8_t output_mtu_ = 7,
+                       std::optional<uint16_t> pres_offset_ = std::nullopt,
+                       std::optional<uint16_t> preq_offset_ = std::nullopt) noexcept
+      : slot(slot_),
+        input_mtu(input_mtu_),
+        output_mtu(output_mtu_),
+        pres_offset(pres_offset_),
+        preq_offset(preq_offset_) {}
+
+  uint8_t slot;
+  uint8_t input_mtu;
+  uint8_t output_mtu;
+  std::optional<uint16_t> pres_offset;  // block start in the PRes payload; default: packed
+  std::optional<uint16_t> preq_offset;  // block start in the PReq payload; default: packed
+};
+
+// Why make_layout() refused, with the slots involved (for a message naming them).
+struct LayoutIssue {
+  uint8_t slot = 0;        // the module at fault
+  uint8_t other_slot = 0;  // the module it collides with (overlap), else 0
+  bool in_preq = false;    // overlap/overflow in the PReq (else the PRes)
 };
 
 struct ModuleMapping {
@@ -59,9 +80,13 @@ struct NodeImageLayout {
   }
 };
 
-// Default packed layout, modules sorted by slot. kInvalidLayout on a duplicate slot, more than
-// kMaxModulesPerNode modules, an MTU above kMaxFlatstreamMtu or a payload above 1490 bytes.
-[[nodiscard]] Result<NodeImageLayout> make_layout(std::span<const ModuleSpec> modules) noexcept;
+// Layout of one CN, modules sorted by slot, each at its override or its default packed offset;
+// pres_size/preq_size = the end of the last block. kInvalidLayout on a duplicate slot, more than
+// kMaxModulesPerNode modules or an MTU above kMaxFlatstreamMtu; kModuleBlocksOverlap when two
+// blocks share a byte; kModuleBlockOutsidePayload when a block ends past 1490 bytes. `issue`
+// (optional) receives the slots involved.
+[[nodiscard]] Result<NodeImageLayout> make_layout(std::span<const ModuleSpec> modules,
+                                                  LayoutIssue* issue = nullptr) noexcept;
 
 // Writers/readers of one module's bytes. `payload` is the whole PRes/PReq payload; false (and
 // nothing written/read) when the module's bytes do not fit in it.

@@ -158,7 +158,8 @@ PowerlinkCn::PowerlinkCn(const PowerlinkCnConfig& config, FrameSink send)
       rng_(config.faults.seed) {
   std::vector<pl::ModuleSpec> specs;
   for (const PowerlinkCnModuleConfig& m : config_.modules) {
-    specs.push_back(pl::ModuleSpec{m.slot, m.input_mtu, m.output_mtu});
+    specs.push_back(
+        pl::ModuleSpec{m.slot, m.input_mtu, m.output_mtu, m.pres_offset, m.preq_offset});
     HostedModule hosted;
     hosted.slot = m.slot;
     hosted.module = std::make_unique<Ds1928Module>(FunctionModel::Standard, m.sim);

@@ -10,10 +10,11 @@
 //   --NMTEnableReadyToOperate--> READY_TO_OPERATE --NMTStartNode--> OPERATIONAL
 //   loss of SoC in PRE_OPERATIONAL_2 and above → PRE_OPERATIONAL_1; reset commands → the
 //   matching RESET_* state → NOT_ACTIVE.
-// Process image: powerlink/process_image.hpp's default layout, fixed at construction from the
-// modules' MTUs, reported as PollInSize/PollOutSize in the IdentResponse.
-// NetTime: a module's NetTime at instant t is low32(RelativeTime of the last SoC + offset) plus
-// the time elapsed since that SoC arrived — the relation the MN maps PosTime back with.
+// Process image: powerlink/process_image.hpp's layout, fixed at construction from the modules'
+// MTUs and offset overrides (the same make_layout() the MN uses), reported as
+// PollInSize/PollOutSize in the IdentResponse. NetTime: a module's NetTime at instant t is
+// low32(RelativeTime of the last SoC + offset) plus the time elapsed since that SoC arrived — the
+// relation the MN maps PosTime back with.
 #pragma once
 
 #include <array>
@@ -21,6 +22,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <random>
 #include <span>
 #include <string_view>
@@ -41,6 +43,8 @@ struct PowerlinkCnModuleConfig {
   SimAxisConfig sim;
   uint8_t input_mtu = 7;   // Rx bytes room in the PRes (fixed PDO mapping of the bus controller)
   uint8_t output_mtu = 7;  // Tx bytes room in the PReq
+  std::optional<uint16_t> pres_offset;  // AxisConfig::pres_offset; unset = default layout
+  std::optional<uint16_t> preq_offset;  // AxisConfig::preq_offset
 };
 
 // Fault injection. Probabilities are per PRes.

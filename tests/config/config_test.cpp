@@ -70,6 +70,11 @@ const Expected kBadFiles[] = {
      "pres_timeout_us (250) must be less than cycle.period_us (200)"},
     {"shm_name.yaml", 2, 9, "shm.name", "is not a shared-memory name"},
     {"not_a_map.yaml", 1, 8, "cycle", "expected a map of settings, got '1000'"},
+    {"offset_overlap.yaml", 13, 18, "axes[1].pres_offset",
+     "PRes block of node 1 slot 2 (bytes 10..32) overlaps slot 1 (bytes 0..22) of axes[0] "
+     "(line 7)"},
+    {"offset_bus.yaml", 4, 18, "axes[0].preq_offset",
+     "is only meaningful on bus powerlink (the bus here is simulated)"},
 };
 
 void check_bad(const Expected& e) {
@@ -140,6 +145,8 @@ BAD_FIXTURE("function_model_bus.yaml")
 BAD_FIXTURE("pres_timeout.yaml")
 BAD_FIXTURE("shm_name.yaml")
 BAD_FIXTURE("not_a_map.yaml")
+BAD_FIXTURE("offset_overlap.yaml")
+BAD_FIXTURE("offset_bus.yaml")
 
 TEST_CASE("every bad fixture has an expectation and fails", "[config][bad]") {
   std::set<std::string> listed;
@@ -355,6 +362,40 @@ TEST_CASE("cross-field and list rules", "[config]") {
   SECTION("more than one YAML document") {
     CHECK_THAT(one_error("bus: simulated\n---\nbus: canio\n"),
                Catch::Contains("test.yaml:2:1: the file holds more than one YAML document"));
+  }
+  SECTION("PRes/PReq offset overrides (POWERLINK)") {
+    const std::string head =
+        "bus: powerlink\npowerlink: {interface: eth1, nodes: [{node_id: 1, preq_size: 60}]}\n";
+    const ConfigResult r = from(head +
+                                "axes: [{node: 1, slot: 1}, {node: 1, slot: 2, pres_offset: 100, "
+                                "preq_offset: 40}]");
+    INFO(r.error_report());
+    REQUIRE(r.ok());
+    CHECK_FALSE(r.config().axes[0].pres_offset);
+    CHECK_FALSE(r.config().axes[0].preq_offset);
+    CHECK(r.config().axes[1].pres_offset == uint16_t{100});
+    CHECK(r.config().axes[1].preq_offset == uint16_t{40});
+    // Survives dump_config.
+    const ConfigResult again = from(dump_config(r.config()));
+    INFO(again.error_report());
+    REQUIRE(again.ok());
+    CHECK(again.config().axes[1].pres_offset == uint16_t{100});
+    // Out of range, past the payload, past the node's preq_size, wrong bus.
+    CHECK_THAT(one_error(head + "axes: [{node: 1, pres_offset: 1490}]"),
+               Catch::Contains("axes[0].pres_offset: 1490 is out of range 0..1489"));
+    CHECK_THAT(one_error(head + "axes: [{node: 1, pres_offset: 1480}]"),
+               Catch::Contains("axes[0].pres_offset: PRes block of node 1 slot 1 (bytes "
+                               "1480..1502) ends past the PRes payload of 1490 bytes"));
+    CHECK_THAT(one_error(head + "axes: [{node: 1, preq_offset: 55}]"),
+               Catch::Contains("axes[0].preq_offset: PReq block of node 1 slot 1 (bytes 55..63) "
+                               "ends past the PReq payload of 60 bytes"));
+    CHECK_THAT(one_error("bus: canio\ncanio: {}\naxes: [{pres_offset: 0}]"),
+               Catch::Contains("axes[0].pres_offset: is only meaningful on bus powerlink (the "
+                               "bus here is canio)"));
+    // A default-placed module is hit by a moved one: reported at the moved one's key.
+    CHECK_THAT(one_error(head + "axes: [{node: 1, slot: 1, preq_offset: 9}, {node: 1, slot: 2}]"),
+               Catch::Contains("axes[0].preq_offset: PReq block of node 1 slot 1 (bytes 9..17) "
+                               "overlaps slot 2 (bytes 9..17) of axes[1]"));
   }
   SECTION("a stray comma at document level") {
     CHECK(one_error(",") ==

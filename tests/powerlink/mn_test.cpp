@@ -1,5 +1,7 @@
 #include <catch2/catch.hpp>
+#include <functional>
 #include <memory>
+#include <string>
 
 #include "core/axis_sample.hpp"
 #include "powerlink/powerlink_bus.hpp"
@@ -32,7 +34,9 @@ struct Rig {
   std::vector<AxisIo> axes;
   uint64_t cycle = 0;
 
-  explicit Rig(std::vector<uint8_t> nodes = {1}, uint8_t modules_per_node = 1) {
+  // `place`: per-axis changes (e.g. PRes/PReq offset overrides) before the CNs are built.
+  explicit Rig(std::vector<uint8_t> nodes = {1}, uint8_t modules_per_node = 1,
+               const std::function<void(AxisConfig&)>& place = {}) {
     g_clock_ns = 0;
     g_clock_step_ns = 0;
     config.cycle_us = 1000;
@@ -46,13 +50,16 @@ struct Rig {
         a.node = n;
         a.slot = s;
         a.module.prescaler = static_cast<uint16_t>(3 + s);
+        if (place) place(a);
         config.axes.push_back(a);
       }
     }
     for (uint8_t n : nodes) {
       std::vector<ModuleSpec> specs;
       for (const auto& a : config.axes)
-        if (a.node == n) specs.push_back({a.slot, a.module.input_mtu, a.module.output_mtu});
+        if (a.node == n)
+          specs.push_back(
+              {a.slot, a.module.input_mtu, a.module.output_mtu, a.pres_offset, a.preq_offset});
       auto layout = make_layout(specs);
       REQUIRE(layout);
       cns.push_back(std::make_unique<TestCn>(n, *layout));
@@ -599,4 +606,131 @@ TEST_CASE("Raw PReq bytes set through the bus reach the CN in every following cy
   rig.step();
   REQUIRE(rig.raw_cn->last_preq_payload.size() == 10);
   CHECK(rig.raw_cn->last_preq_payload[7] == 0xDE);
+}
+
+TEST_CASE("a module at an overridden PRes/PReq offset is decoded from and encoded at it",
+          "[powerlink][mn][layout]") {
+  // Slot 2 moved past a gap; slot 1 keeps its default place (0 in both payloads).
+  static constexpr uint16_t kPresAt = 60;
+  static constexpr uint16_t kPreqAt = 30;
+  Rig rig({1}, 2, [](AxisConfig& a) {
+    if (a.slot == 2) {
+      a.pres_offset = kPresAt;
+      a.preq_offset = kPreqAt;
+    }
+  });
+  const NodeImageLayout* layout = rig.bus->managing_node().layout(1);
+  REQUIRE(layout);
+  REQUIRE(layout->find(2));
+  CHECK(layout->find(1)->pres_offset == 0);
+  CHECK(layout->find(2)->pres_offset == kPresAt);
+  CHECK(layout->find(2)->preq_offset == kPreqAt);
+  CHECK(layout->pres_size == kPresAt + pres_module_size(7));
+  CHECK(layout->preq_size == kPreqAt + preq_module_size(7));
+
+  TestCn& cn = *rig.cns[0];
+  cn.inputs.position_lw = 0xCAFE;
+  cn.inputs.position_hw = 0x1234;
+  REQUIRE(rig.run_until([&] { return rig.bus->state() == BusState::Operational; }));
+  rig.axes[0].outputs.output_sequence = 0x11;
+  rig.axes[1].outputs.output_sequence = 0x5A;
+  rig.axes[1].outputs.tx_bytes[0] = 0x77;
+  rig.axes[1].outputs.ack_error_info = 0x03;
+  auto r = rig.step();
+  REQUIRE(r.bus_up);
+  // Slot 2's inputs come from bytes 60.. of the PRes; the default place (23..) holds zeros.
+  REQUIRE(rig.axes[1].inputs_fresh);
+  CHECK(rig.axes[1].inputs.position_lw == 0xCAFE);
+  CHECK(rig.axes[1].inputs.position_hw == 0x1234);
+  // Slot 2's outputs went to bytes 30.. of the PReq, slot 1's to 0...
+  const std::vector<uint8_t>& preq = cn.last_preq_payload;
+  REQUIRE(preq.size() >= kPreqAt + preq_module_size(7));
+  CHECK(preq[0] == 0x11);
+  CHECK(preq[kPreqAt] == 0x5A);
+  CHECK(preq[kPreqAt + 1] == 0x77);
+  CHECK(preq[kPreqAt + 1 + 7] == 0x03);
+  // ... and nothing at slot 2's default place (9..).
+  CHECK(preq[preq_module_size(7)] == 0);
+}
+
+TEST_CASE("overlapping or oversized module blocks are refused, naming the slots",
+          "[powerlink][mn][layout]") {
+  SECTION("make_layout: overlap in the PRes") {
+    LayoutIssue issue;
+    const std::array specs{ModuleSpec{1, 7, 7}, ModuleSpec{2, 7, 7, uint16_t{22}, std::nullopt}};
+    auto layout = make_layout(specs, &issue);
+    REQUIRE_FALSE(layout);
+    CHECK(layout.error() == make_error_code(MnError::kModuleBlocksOverlap));
+    CHECK(issue.slot == 2);
+    CHECK(issue.other_slot == 1);
+    CHECK_FALSE(issue.in_preq);
+    // Adjacent (ends where the other starts) is fine.
+    const std::array ok{ModuleSpec{1, 7, 7}, ModuleSpec{2, 7, 7, uint16_t{23}, uint16_t{9}}};
+    CHECK(make_layout(ok));
+  }
+  SECTION("make_layout: overlap in the PReq") {
+    LayoutIssue issue;
+    const std::array specs{ModuleSpec{3, 7, 7, std::nullopt, uint16_t{100}},
+                           ModuleSpec{5, 7, 7, std::nullopt, uint16_t{105}}};
+    auto layout = make_layout(specs, &issue);
+    REQUIRE_FALSE(layout);
+    CHECK(layout.error() == make_error_code(MnError::kModuleBlocksOverlap));
+    CHECK(issue.slot == 5);
+    CHECK(issue.other_slot == 3);
+    CHECK(issue.in_preq);
+  }
+  SECTION("make_layout: block past 1490 bytes") {
+    LayoutIssue issue;
+    const std::array specs{ModuleSpec{1, 7, 7, uint16_t{1480}, std::nullopt}};
+    auto layout = make_layout(specs, &issue);
+    REQUIRE_FALSE(layout);
+    CHECK(layout.error() == make_error_code(MnError::kModuleBlockOutsidePayload));
+    CHECK(issue.slot == 1);
+  }
+  auto construct = [](const std::function<void(PowerlinkNodeConfig&)>& node,
+                      const std::function<void(AxisConfig&)>& place) -> std::string {
+    MnConfig config;
+    PowerlinkNodeConfig nc;
+    nc.node_id = 4;
+    if (node) node(nc);
+    config.bus.nodes.push_back(nc);
+    for (uint8_t s = 1; s <= 2; ++s) {
+      AxisConfig a;
+      a.node = 4;
+      a.slot = s;
+      place(a);
+      config.axes.push_back(a);
+    }
+    try {
+      ManagingNode mn(config);
+    } catch (const std::system_error& e) {
+      return std::string(e.code().category().name()) + "/" + std::to_string(e.code().value()) +
+             ": " + e.what();
+    }
+    return "constructed";
+  };
+  SECTION("ManagingNode: overlap names both slots") {
+    const std::string what = construct({}, [](AxisConfig& a) {
+      if (a.slot == 1) a.preq_offset = 4;
+    });
+    CHECK_THAT(what,
+               Catch::StartsWith(std::string(mn_category().name()) + "/" +
+                                 std::to_string(static_cast<int>(MnError::kModuleBlocksOverlap))));
+    CHECK_THAT(what, Catch::Contains("node 4, PReq: slot 2 and slot 1"));
+  }
+  SECTION("ManagingNode: a block past the configured pres_size") {
+    const std::string what = construct([](PowerlinkNodeConfig& n) { n.pres_size = 60; },
+                                       [](AxisConfig& a) {
+                                         if (a.slot == 2) a.pres_offset = 40;
+                                       });
+    CHECK_THAT(what, Catch::Contains("slot 2 ends past the configured pres_size 60"));
+    CHECK_THAT(what, Catch::StartsWith(
+                         std::string(mn_category().name()) + "/" +
+                         std::to_string(static_cast<int>(MnError::kModuleBlockOutsidePayload))));
+  }
+  SECTION("ManagingNode: non-overlapping overrides construct") {
+    CHECK(construct({}, [](AxisConfig& a) {
+            if (a.slot == 1) a.pres_offset = 100;
+          }) == "constructed");
+  }
 }

@@ -98,6 +98,8 @@ void try_realtime(int priority, int cpu) {
     m.slot = axis.slot;
     m.input_mtu = axis.module.input_mtu;
     m.output_mtu = axis.module.output_mtu;
+    m.pres_offset = axis.pres_offset;
+    m.preq_offset = axis.preq_offset;
     if (i < config.simulated.axes.size()) m.sim = config.simulated.axes[i];
     cn.modules.push_back(m);
   }
