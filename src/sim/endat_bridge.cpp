@@ -83,64 +83,59 @@ endat::Result<endat::wire::PositionReply> EnDatBridge::decode_position(const Bit
   return endat::wire::decode_position_reply(f, fmt);
 }
 
-std::error_code EnDatBridge::param_tx(int64_t& t, Mode mode, uint8_t address, uint16_t parameter,
-                                      bool echo_value, uint16_t* value_out) {
-  const BitFrame frame = endat::wire::encode_master_frame({mode, address, parameter});
+// One wire transaction with the module's retries: `decode` turns the encoder's reply frame into a
+// value or an error (no response, CRC), `accept` checks the value (echo) and stores it; the
+// simulated time advances by what each attempt costs on the wire and in the encoder.
+template <class Decode, class Accept>
+std::error_code EnDatBridge::transact_retrying(int64_t& t, const BitFrame& frame, Decode decode,
+                                               Accept accept) {
   std::error_code last;
   for (unsigned attempt = 0; attempt <= config_.max_retries; ++attempt) {
     if (attempt > 0) ++stats_.retries;
     ++stats_.transactions;
     const auto resp = encoder_.transact(frame, t);
-    const auto reply = endat::wire::decode_parameter_reply(resp.reply);
-    if (!reply) {
+    const auto reply = decode(resp.reply);
+    if (!reply && reply.error() == Errc::no_response) {
       last = reply.error();
-      if (last == Errc::no_response) {
-        ++stats_.no_responses;
-        t += wire_ns(frame.size()) + config_.no_response_timeout_ns;
-      } else {
-        ++stats_.crc_errors;
-        t += wire_ns(frame.size() + resp.reply.size()) + resp.processing_ns;
-      }
+      ++stats_.no_responses;
+      t += wire_ns(frame.size()) + config_.no_response_timeout_ns;
       continue;
     }
     t += wire_ns(frame.size() + resp.reply.size()) + resp.processing_ns;
-    if (reply->address != address || (echo_value && reply->value != parameter)) {
-      last = Errc::module_wire_echo_mismatch;
+    if (!reply) {
+      last = reply.error();
+      ++stats_.crc_errors;
       continue;
     }
-    if (value_out != nullptr) *value_out = reply->value;
-    return {};
+    last = accept(*reply);
+    if (!last) return {};
   }
   note_failure(last);
   return last;
 }
 
+std::error_code EnDatBridge::param_tx(int64_t& t, Mode mode, uint8_t address, uint16_t parameter,
+                                      bool echo_value, uint16_t* value_out) {
+  return transact_retrying(
+      t, endat::wire::encode_master_frame({mode, address, parameter}),
+      [](const BitFrame& f) { return endat::wire::decode_parameter_reply(f); },
+      [&](const auto& reply) -> std::error_code {
+        if (reply.address != address || (echo_value && reply.value != parameter))
+          return Errc::module_wire_echo_mismatch;
+        if (value_out != nullptr) *value_out = reply.value;
+        return {};
+      });
+}
+
 std::error_code EnDatBridge::position_tx(int64_t& t, Mode mode, uint8_t address, uint16_t parameter,
                                          endat::wire::PositionReply* out) {
-  const BitFrame frame = endat::wire::encode_master_frame({mode, address, parameter});
-  std::error_code last;
-  for (unsigned attempt = 0; attempt <= config_.max_retries; ++attempt) {
-    if (attempt > 0) ++stats_.retries;
-    ++stats_.transactions;
-    const auto resp = encoder_.transact(frame, t);
-    const auto reply = decode_position(resp.reply, CommandSet::EnDat22);
-    if (!reply) {
-      last = reply.error();
-      if (last == Errc::no_response) {
-        ++stats_.no_responses;
-        t += wire_ns(frame.size()) + config_.no_response_timeout_ns;
-      } else {
-        ++stats_.crc_errors;
-        t += wire_ns(frame.size() + resp.reply.size()) + resp.processing_ns;
-      }
-      continue;
-    }
-    t += wire_ns(frame.size() + resp.reply.size()) + resp.processing_ns;
-    if (out != nullptr) *out = *reply;
-    return {};
-  }
-  note_failure(last);
-  return last;
+  return transact_retrying(
+      t, endat::wire::encode_master_frame({mode, address, parameter}),
+      [this](const BitFrame& f) { return decode_position(f, CommandSet::EnDat22); },
+      [&](const endat::wire::PositionReply& reply) -> std::error_code {
+        if (out != nullptr) *out = reply;
+        return {};
+      });
 }
 
 std::error_code EnDatBridge::read_area(int64_t& t, uint8_t mrs, unsigned first,

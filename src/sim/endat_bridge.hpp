@@ -119,6 +119,9 @@ class EnDatBridge {
   std::error_code run_status_refresh(int64_t& t);
   std::error_code run_info(const endat::Request& r, int64_t& t, std::array<uint16_t, 4>& words);
 
+  template <class Decode, class Accept>
+  std::error_code transact_retrying(int64_t& t, const endat::wire::BitFrame& frame, Decode decode,
+                                    Accept accept);
   // One parameter-type transaction (select/read/write/reset) with echo check and retries.
   std::error_code param_tx(int64_t& t, endat::wire::Mode mode, uint8_t address, uint16_t parameter,
                            bool echo_value, uint16_t* value_out);
