@@ -11,6 +11,7 @@
 #include <thread>
 #include <vector>
 
+#include "../control/control_test_util.hpp"
 #include "daemon.hpp"
 
 using namespace ds1928;
@@ -18,60 +19,23 @@ using json = nlohmann::json;
 
 namespace {
 
+// The control tests' line client, with replies that never throw: a failure shows up as an empty
+// object in the caller's checks, never as an exception in a client thread that would abort the
+// test without cleaning up.
 class Client {
  public:
-  explicit Client(const std::string& path) {
-    fd_ = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
-    sockaddr_un addr{};
-    addr.sun_family = AF_UNIX;
-    std::snprintf(addr.sun_path, sizeof(addr.sun_path), "%s", path.c_str());
-    connected_ = ::connect(fd_, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) == 0;
-    timeval tv{5, 0};
-    ::setsockopt(fd_, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof(tv));
-  }
-  ~Client() {
-    if (fd_ >= 0) ::close(fd_);
-  }
-  [[nodiscard]] bool connected() const { return connected_; }
-  void send_raw(const std::string& bytes) {
-    std::size_t off = 0;
-    while (off < bytes.size()) {
-      const auto n = ::send(fd_, bytes.data() + off, bytes.size() - off, MSG_NOSIGNAL);
-      if (n < 0 && errno == EINTR) continue;
-      if (n <= 0) return;
-      off += static_cast<std::size_t>(n);
-    }
-  }
+  explicit Client(const std::string& path) : line_(path, 5000) {}
+  [[nodiscard]] bool connected() const { return line_.connected(); }
+  void send_raw(const std::string& bytes) { (void)line_.send_raw(bytes); }
   // One reply line, or "" when the daemon closed the connection / timed out.
-  std::string read_line() {
-    while (true) {
-      const auto nl = buffer_.find('\n');
-      if (nl != std::string::npos) {
-        std::string line = buffer_.substr(0, nl);
-        buffer_.erase(0, nl + 1);
-        return line;
-      }
-      char chunk[4096];
-      const auto n = ::recv(fd_, chunk, sizeof(chunk), 0);
-      // A process stopped and continued (a stalled machine, a debugger) sees EINTR here.
-      if (n < 0 && errno == EINTR) continue;
-      if (n <= 0) return {};
-      buffer_.append(chunk, static_cast<std::size_t>(n));
-    }
-  }
-  // The reply object; an empty one when there was none (a failure the caller's checks report,
-  // never an exception in a client thread that would abort the test without cleaning up).
+  std::string read_line() { return line_.read_line().value_or(std::string()); }
   json request(const json& j) {
-    send_raw(j.dump() + "\n");
-    const auto line = read_line();
-    const json r = json::parse(line, nullptr, false);
+    const json r = line_.request(j);
     return r.is_object() ? r : json::object();
   }
 
  private:
-  int fd_ = -1;
-  bool connected_ = false;
-  std::string buffer_;
+  control::test::LineClient line_;
 };
 
 struct RunningDaemon {
