@@ -84,10 +84,47 @@ nlohmann::json bus_status_json(const BusDriver& bus) {
                      {"boots", n.boots},
                      {"resets", n.resets},
                      {"sdo_errors", n.sdo_errors},
-                     {"last_error", n.last_error ? n.last_error.message() : std::string()}});
+                     {"last_error", n.last_error ? n.last_error.message() : std::string()},
+                     {"last_reset_reason",
+                      n.last_reset_reason ? n.last_reset_reason.message() : std::string()}});
   }
   j["nodes"] = std::move(nodes);
   return j;
+}
+
+std::vector<BusEvent> BusWatch::poll(const BusDriver& bus) {
+  std::vector<BusEvent> events;
+  const BusState state = bus.state();
+  if (!seen_ || state != state_) {
+    // The first look reports nothing: the start is logged on its own.
+    if (seen_)
+      events.push_back(
+          {state != BusState::Operational,
+           fmt::format("bus {}: {} -> {}", bus.name(), to_string(state_), to_string(state))});
+    state_ = state;
+  }
+  if (const auto* pl = dynamic_cast<const powerlink::PowerlinkBus*>(&bus)) {
+    const auto st = pl->status();
+    if (nodes_.size() < st.node_count) nodes_.resize(st.node_count);
+    for (std::size_t i = 0; i < st.node_count; ++i) {
+      const auto& n = st.nodes[i];
+      NodeSeen& seen = nodes_[i];
+      if (seen_ && n.resets > seen.resets) {
+        const std::string reason =
+            n.last_reset_reason ? n.last_reset_reason.message() : std::string("unknown reason");
+        events.push_back(
+            {true, fmt::format("powerlink node {}: reset by the MN ({}; resets {}, PRes losses {})",
+                               n.node, reason, n.resets, n.loss_of_pres.events)});
+      }
+      if (seen_ && n.boots > seen.boots)
+        events.push_back(
+            {false, fmt::format("powerlink node {}: operational (boot {})", n.node, n.boots)});
+      seen.resets = n.resets;
+      seen.boots = n.boots;
+    }
+  }
+  seen_ = true;
+  return events;
 }
 
 }  // namespace ds1928

@@ -162,6 +162,12 @@ void Daemon::on_tick() {
     notifier_.ready(summary_line());
     spdlog::info("first data exchanged: ready");
   }
+  for (const BusEvent& e : bus_watch_.poll(*bus_)) {
+    if (e.warning)
+      spdlog::warn("{}", e.text);
+    else
+      spdlog::info("{}", e.text);
+  }
   const auto now = std::chrono::steady_clock::now();
   if (now - last_log_ >= std::chrono::seconds(1)) {
     last_log_ = now;

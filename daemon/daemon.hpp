@@ -9,6 +9,7 @@
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <vector>
 
 #include "config/config.hpp"
 #include "control/control_server.hpp"
@@ -21,6 +22,26 @@
 #include "shm/publisher.hpp"
 
 namespace ds1928 {
+
+// What changed on the bus since the last look, worded for the log: state transitions and, on
+// POWERLINK, nodes reset or booted by the MN (with the reason). Normal thread.
+struct BusEvent {
+  bool warning = false;
+  std::string text;
+};
+class BusWatch {
+ public:
+  [[nodiscard]] std::vector<BusEvent> poll(const BusDriver& bus);
+
+ private:
+  struct NodeSeen {
+    uint32_t resets = 0;
+    uint32_t boots = 0;
+  };
+  bool seen_ = false;
+  BusState state_ = BusState::Down;
+  std::vector<NodeSeen> nodes_;
+};
 
 class Daemon {
  public:
@@ -70,6 +91,7 @@ class Daemon {
   std::chrono::steady_clock::time_point started_at_;
   std::chrono::steady_clock::time_point stats_reset_at_;
   std::chrono::steady_clock::time_point last_log_;
+  BusWatch bus_watch_;
   bool ready_sent_ = false;
   bool started_ = false;
 };

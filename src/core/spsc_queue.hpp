@@ -43,6 +43,20 @@ class SpscQueue {
     return out;
   }
 
+  // Consumer side: the oldest element without taking it (nullptr when empty), so a consumer that
+  // cannot serve it yet leaves it queued; drop_front() then takes it.
+  [[nodiscard]] T* front() noexcept {
+    const auto tail = tail_.load(std::memory_order_relaxed);
+    if (tail == head_cached_) {
+      head_cached_ = head_.load(std::memory_order_acquire);
+      if (tail == head_cached_) return nullptr;
+    }
+    return &slots_[tail & (Capacity - 1)];
+  }
+  void drop_front() noexcept {
+    tail_.store(tail_.load(std::memory_order_relaxed) + 1, std::memory_order_release);
+  }
+
   // Producer side: true when the next try_push would fail.
   [[nodiscard]] bool full() const noexcept {
     return head_.load(std::memory_order_relaxed) - tail_.load(std::memory_order_acquire) ==

@@ -153,6 +153,10 @@ class MnCategory final : public std::error_category {
         return "two modules' process data blocks overlap";
       case MnError::kModuleBlockOutsidePayload:
         return "module's process data block runs past the PRes/PReq payload";
+      case MnError::kLossOfPresThreshold:
+        return "loss of PRes threshold reached";
+      case MnError::kBootStepTimeout:
+        return "boot step timed out";
     }
     return "unknown MN error";
   }

@@ -53,6 +53,8 @@ enum class MnError : int {
   kPreqWriteTooLong,           // raw PReq write longer than one request carries
   kModuleBlocksOverlap,        // process image: two modules of one CN share PRes or PReq bytes
   kModuleBlockOutsidePayload,  // process image: a module's block ends past the PRes/PReq size
+  kLossOfPresThreshold,        // reset reason: the CN's loss-of-PRes counter reached its threshold
+  kBootStepTimeout,            // reset reason: the CN did not finish a boot step in time
 };
 
 [[nodiscard]] const std::error_category& frame_category() noexcept;

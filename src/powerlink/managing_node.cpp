@@ -236,6 +236,7 @@ void ManagingNode::reported_state(Cn& cn, NmtState s) noexcept {
 
 void ManagingNode::reset_node(Cn& cn, std::error_code reason) noexcept {
   cn.st->last_error = reason;
+  cn.st->last_reset_reason = reason;
   enter(cn, CnBootState::kReset);
 }
 
@@ -330,7 +331,7 @@ void ManagingNode::on_timeout_reset(Cn& cn) noexcept {
   enter(cn, CnBootState::kIdentify);
 }
 void ManagingNode::on_timeout_boot(Cn& cn) noexcept {
-  reset_node(cn, make_error_code(SdoError::kTimeout));
+  reset_node(cn, make_error_code(MnError::kBootStepTimeout));
 }
 
 // ---- SDO
@@ -343,6 +344,11 @@ bool ManagingNode::submit(const SdoRegisterOp& op) noexcept {
   ++cn->ops_count;
   start_next_sdo(*cn);
   return true;
+}
+
+bool ManagingNode::can_submit(uint8_t node) const noexcept {
+  const Cn* cn = find(node);
+  return cn != nullptr && cn->ops_count < kOpQueueDepth;
 }
 
 bool ManagingNode::poll(SdoRegisterResult& out) noexcept {
@@ -729,7 +735,7 @@ void ManagingNode::end_cycle(bool cycle_time_exceeded) noexcept {
     if (cn.polled) {
       const bool lost = !cn.pres_seen;
       if (cn.st->loss_of_pres.step(lost, th.loss_of_pres)) {
-        reset_node(cn, make_error_code(SdoError::kConnectionLost));
+        reset_node(cn, make_error_code(MnError::kLossOfPresThreshold));
       }
       (void)cn.st->late_pres.step(cn.late, th.late_pres);
     }

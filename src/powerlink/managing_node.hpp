@@ -70,6 +70,8 @@ struct CnStatus {
   uint32_t resets = 0;                // NMTResetNode sent
   uint32_t sdo_errors = 0;
   std::error_code last_error;
+  // Why the MN last reset the CN (kept when it boots again, unlike last_error).
+  std::error_code last_reset_reason;
 };
 
 struct MnCounters {
@@ -165,6 +167,8 @@ class ManagingNode {
   // ---- Acyclic ----
   // False when the node is unknown or its queue is full.
   [[nodiscard]] bool submit(const SdoRegisterOp& op) noexcept;
+  // True when submit() for `node` would find room in the node's queue.
+  [[nodiscard]] bool can_submit(uint8_t node) const noexcept;
   [[nodiscard]] bool poll(SdoRegisterResult& out) noexcept;
 
   // ---- State ----

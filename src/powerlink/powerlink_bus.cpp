@@ -146,16 +146,21 @@ ExchangeResult PowerlinkBus::exchange(std::span<AxisIo> axes, int64_t cycle_star
     publish_status();
     return result;
   }
-  // Register requests from the normal thread become SDO transfers.
-  while (auto req = requests_.try_pop()) {
+  // Register requests from the normal thread become SDO transfers. One the node's SDO queue has
+  // no room for yet stays in the request queue (in order) until it has: a burst longer than the
+  // node's queue (the identification reads 44 registers) waits instead of failing.
+  while (RegisterRequest* req = requests_.front()) {
     RegisterResult failed{req->tag, make_error_code(MnError::kNodeNotConfigured), 0};
     if (req->axis >= axis_map_.size() || !axis_map_[req->axis].valid) {
+      requests_.drop_front();
       (void)results_.try_push(failed);
       continue;
     }
     const AxisMap& am = axis_map_[req->axis];
+    if (!mn_.can_submit(am.node)) break;
     SdoRegisterOp op{req->tag,  am.node,    am.mapping.slot, req->reg,
                      req->size, req->write, req->value};
+    requests_.drop_front();
     if (!mn_.submit(op)) {
       failed.error = make_error_code(MnError::kQueueFull);
       (void)results_.try_push(failed);

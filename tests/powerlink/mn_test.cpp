@@ -224,6 +224,31 @@ TEST_CASE("Register requests become SDO transfers", "[powerlink][mn]") {
   CHECK(rig.bus->state() == BusState::Operational);
 }
 
+TEST_CASE("A burst of register requests longer than the node's SDO queue waits, none fails",
+          "[powerlink][mn]") {
+  Rig rig({1}, 1);
+  REQUIRE(rig.run_until([&] { return rig.bus->state() == BusState::Operational; }));
+  // As many as the request queue takes (64): twice the MN's per-node SDO queue.
+  uint32_t submitted = 0;
+  while (
+      rig.bus->submit(RegisterRequest{100 + submitted, 0, reg::kSystemCyclePrescaler, 2, false, 0}))
+    ++submitted;
+  REQUIRE(submitted == 64);
+  std::vector<uint32_t> tags;
+  RegisterResult res;
+  REQUIRE(rig.run_until(
+      [&] {
+        while (rig.bus->poll(res)) {
+          CHECK_FALSE(res.error);
+          CHECK(res.value == 4);
+          tags.push_back(res.tag);
+        }
+        return tags.size() == submitted;
+      },
+      5000));
+  for (uint32_t i = 0; i < submitted; ++i) CHECK(tags[i] == 100 + i);  // served in order
+}
+
 TEST_CASE("Loss-of-PRes threshold removes, resets and re-boots the CN", "[powerlink][mn]") {
   Rig rig({1, 2}, 1);
   REQUIRE(rig.run_until([&] { return rig.bus->state() == BusState::Operational; }));
@@ -236,6 +261,7 @@ TEST_CASE("Loss-of-PRes threshold removes, resets and re-boots the CN", "[powerl
   rig.step();                                          // second: 16 ≥ 15
   CHECK(rig.st(1).boot == CnBootState::kReset);
   CHECK(rig.st(1).loss_of_pres.fired == 1);
+  CHECK(rig.st(1).last_reset_reason == MnError::kLossOfPresThreshold);
   CHECK_FALSE(rig.st(1).in_isochronous);
   CHECK(rig.st(2).boot == CnBootState::kOperational);  // the other CN is untouched
   cn.drop_pres = false;
@@ -243,6 +269,9 @@ TEST_CASE("Loss-of-PRes threshold removes, resets and re-boots the CN", "[powerl
   CHECK(cn.nmt_commands > nmt_before);  // NMTResetNode, EnableReadyToOperate, StartNode
   CHECK(rig.st(1).boots == 2);
   CHECK(rig.st(1).resets == 1);
+  // The reason outlives the re-boot (status shows why the last reset happened).
+  CHECK(rig.st(1).last_reset_reason == MnError::kLossOfPresThreshold);
+  CHECK_FALSE(rig.st(1).last_error);
   CHECK(rig.bus->state() == BusState::Operational);
 }
 
@@ -382,6 +411,22 @@ TEST_CASE("Async timeouts count only unanswered Ident/StatusRequests", "[powerli
   CHECK(mute.bus->managing_node().counters().async_timeouts ==
         static_cast<uint32_t>(mute.cns[0]->status_requests));
   CHECK(invites > 0);
+}
+
+TEST_CASE("A CN stuck in a boot step is reset after the boot step timeout", "[powerlink][mn]") {
+  Rig rig({1}, 1);
+  rig.config.boot_step_timeout_ms = 200;  // cycles are 1 ms
+  rig.bus = std::make_unique<PowerlinkBus>(rig.config, rig.link);
+  rig.bus->set_clock(&fake_clock);
+  REQUIRE_FALSE(rig.bus->start());
+  rig.cns[0]->ignore_status_requests = true;  // never confirms PRE_OPERATIONAL_2
+  REQUIRE(rig.run_until([&] { return rig.st(1).boot == CnBootState::kWaitPreOp2; }));
+  const uint64_t entered = rig.cycle;
+  REQUIRE(rig.run_until([&] { return rig.st(1).resets == 1; }, 400));
+  CHECK(rig.cycle - entered >= 200);
+  CHECK(rig.cycle - entered <= 202);
+  CHECK(rig.st(1).last_reset_reason == MnError::kBootStepTimeout);
+  CHECK(rig.st(1).last_reset_reason.message() == "boot step timed out");
 }
 
 TEST_CASE("A power-cycled CN is detected and booted again", "[powerlink][mn]") {

@@ -87,7 +87,19 @@ void print_status(const json& r) {
   std::cout << "\n";
   const json b = r.value("bus", json::object());
   std::cout << "  bus:       " << get<std::string>(b, "kind", "?") << ", "
-            << get<std::string>(b, "state", "?") << "\n";
+            << get<std::string>(b, "state", "?");
+  if (b.contains("mn_state")) std::cout << " (MN " << get<std::string>(b, "mn_state", "?") << ")";
+  std::cout << "\n";
+  for (const auto& n : b.value("nodes", json::array())) {
+    std::cout << "    node " << get<uint64_t>(n, "node", 0) << ": "
+              << get<std::string>(n, "boot", "?") << " (NMT " << get<std::string>(n, "nmt", "?")
+              << "), boots " << get<uint64_t>(n, "boots", 0) << ", resets "
+              << get<uint64_t>(n, "resets", 0);
+    if (const auto why = get<std::string>(n, "last_reset_reason", ""); !why.empty())
+      std::cout << " (last: " << why << ")";
+    std::cout << ", PRes losses "
+              << get<uint64_t>(n.value("loss_of_pres", json::object()), "events", 0) << "\n";
+  }
   print_cycle(r.value("cycle", json()));
   const json axes = r.value("axes", json::array());
   std::cout << "  axes:      " << axes.size() << "\n";
