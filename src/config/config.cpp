@@ -668,6 +668,12 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites) {
   t.integer("cycle_time_exceeded", p.thresholds.cycle_time_exceeded, 0, kU32, "(0 = disabled)");
   t.integer("late_pres", p.thresholds.late_pres, 0, kU32, "(0 = disabled)");
   t.finish();
+  Section nmt = s.section("nmt");
+  nmt.integer("pre_op1_timeout_ms", p.nmt.pre_op1_timeout_ms, 1, 600000, "ms");
+  nmt.integer("boot_step_timeout_ms", p.nmt.boot_step_timeout_ms, 1, 600000, "ms");
+  nmt.integer("reset_wait_ms", p.nmt.reset_wait_ms, 0, 600000, "ms");
+  nmt.integer("status_request_every", p.nmt.status_request_every, 1, 10000, "cycles");
+  nmt.finish();
   s.integer("async_timeout_us", p.async_timeout_us, 1, 100000, "µs");
   s.integer("sdo_timeout_ms", p.sdo_timeout_ms, 1, 60000, "ms");
   s.integer("nettime_offset_us", p.nettime_offset_us, std::numeric_limits<int64_t>::min(),
@@ -1218,6 +1224,11 @@ std::string dump_config(const DaemonConfig& c) {
     << "    loss_of_pres: " << p.thresholds.loss_of_pres << "\n"
     << "    cycle_time_exceeded: " << p.thresholds.cycle_time_exceeded << "\n"
     << "    late_pres: " << p.thresholds.late_pres << "\n"
+    << "  nmt:\n"
+    << "    pre_op1_timeout_ms: " << p.nmt.pre_op1_timeout_ms << "\n"
+    << "    boot_step_timeout_ms: " << p.nmt.boot_step_timeout_ms << "\n"
+    << "    reset_wait_ms: " << p.nmt.reset_wait_ms << "\n"
+    << "    status_request_every: " << p.nmt.status_request_every << "\n"
     << "  async_timeout_us: " << p.async_timeout_us << "\n"
     << "  sdo_timeout_ms: " << p.sdo_timeout_ms << "\n"
     << "  nettime_offset_us: " << p.nettime_offset_us << "\n"

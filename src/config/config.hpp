@@ -88,10 +88,19 @@ struct DllThresholds {
   uint32_t cycle_time_exceeded = 15;
   uint32_t late_pres = 15;
 };
+// The MN's NMT timing while booting CNs (docs/powerlink.md, boot sequence).
+struct PowerlinkNmtConfig {
+  uint32_t pre_op1_timeout_ms = 500;     // reduced cycle before the MN starts full cycles
+  uint32_t boot_step_timeout_ms = 5000;  // a CN stuck in a boot step is reset
+  uint32_t reset_wait_ms = 100;          // after NMTResetNode, before identifying again
+  uint32_t status_request_every = 8;     // cycles between StatusRequests to a booting CN
+};
+
 struct PowerlinkBusConfig {
   std::string interface;  // raw-socket interface, e.g. "eth1"
   std::vector<PowerlinkNodeConfig> nodes;
   DllThresholds thresholds;
+  PowerlinkNmtConfig nmt;
   uint32_t async_timeout_us = 50;  // wait for the invited ASnd
   uint32_t sdo_timeout_ms = 500;
   // PosTime relation: PosTime = low 32 bits of (SoC RelativeTime µs + offset).

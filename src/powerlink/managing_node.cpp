@@ -542,7 +542,8 @@ Result<std::size_t> ManagingNode::build_soa(std::span<uint8_t> out) noexcept {
           if (cn.st->boot == CnBootState::kIdentify) {
             soa_service_ = RequestedService::kIdentRequest;
           } else if (cn.st->boot != CnBootState::kReset &&
-                     counters_.cycles - cn.last_status_request >= config_.status_request_every &&
+                     counters_.cycles - cn.last_status_request >=
+                         config_.bus.nmt.status_request_every &&
                      cn.st->boot != CnBootState::kOperational) {
             soa_service_ = RequestedService::kStatusRequest;
             cn.last_status_request = counters_.cycles;
@@ -699,7 +700,7 @@ void ManagingNode::update_mn_state() noexcept {
     bool all_identified = !cns_.empty();
     for (const auto& cn : cns_)
       if (cn->cfg.mandatory && !cn->st->identified) all_identified = false;
-    if (all_identified || now_ns_ - mn_state_since_ns_ >= ms(config_.pre_op1_timeout_ms)) {
+    if (all_identified || now_ns_ - mn_state_since_ns_ >= ms(config_.bus.nmt.pre_op1_timeout_ms)) {
       mn_state_ = NmtState::kPreOperational2;
       mn_state_since_ns_ = now_ns_;
     }
@@ -742,8 +743,8 @@ void ManagingNode::end_cycle(bool cycle_time_exceeded) noexcept {
     cn.sdo->tick(now_ns_);
     const Handler& h = kHandlers[static_cast<int>(cn.st->boot)];
     if (h.timeout) {
-      const int64_t limit =
-          h.reset_timer ? ms(config_.reset_wait_ms) : ms(config_.boot_step_timeout_ms);
+      const int64_t limit = h.reset_timer ? ms(config_.bus.nmt.reset_wait_ms)
+                                          : ms(config_.bus.nmt.boot_step_timeout_ms);
       if (now_ns_ - cn.state_since_ns >= limit) (this->*h.timeout)(cn);
     }
   }

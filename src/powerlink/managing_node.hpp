@@ -91,11 +91,6 @@ struct MnConfig {
   std::vector<AxisConfig> axes;  // modules per CN (node, slot) and their settings
   uint32_t cycle_us = 1000;
   MacAddress mac{};
-  // NMT timeouts (powerlink.md §5).
-  uint32_t pre_op1_timeout_ms = 500;     // reduced cycle before the MN starts full cycles
-  uint32_t boot_step_timeout_ms = 5000;  // a CN stuck in a boot step is reset
-  uint32_t reset_wait_ms = 100;          // after NMTResetNode, before identifying again
-  uint32_t status_request_every = 8;     // cycles between StatusRequests to a booting CN
 };
 
 // A register access the MN turns into an SDO transfer (configuration, identification, EnDatAck).

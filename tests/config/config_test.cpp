@@ -69,6 +69,7 @@ const Expected kBadFiles[] = {
     {"pres_timeout.yaml", 8, 24, "powerlink.nodes[0].pres_timeout_us",
      "pres_timeout_us (250) must be less than cycle.period_us (200)"},
     {"shm_name.yaml", 2, 9, "shm.name", "is not a shared-memory name"},
+    {"nmt.yaml", 7, 27, "powerlink.nmt.status_request_every", "0 is out of range 1..10000 cycles"},
     {"not_a_map.yaml", 1, 8, "cycle", "expected a map of settings, got '1000'"},
     {"offset_overlap.yaml", 13, 18, "axes[1].pres_offset",
      "PRes block of node 1 slot 2 (bytes 10..32) overlaps slot 1 (bytes 0..22) of axes[0] "
@@ -144,6 +145,7 @@ BAD_FIXTURE("slframe.yaml")
 BAD_FIXTURE("function_model_bus.yaml")
 BAD_FIXTURE("pres_timeout.yaml")
 BAD_FIXTURE("shm_name.yaml")
+BAD_FIXTURE("nmt.yaml")
 BAD_FIXTURE("not_a_map.yaml")
 BAD_FIXTURE("offset_overlap.yaml")
 BAD_FIXTURE("offset_bus.yaml")

@@ -415,7 +415,7 @@ TEST_CASE("Async timeouts count only unanswered Ident/StatusRequests", "[powerli
 
 TEST_CASE("A CN stuck in a boot step is reset after the boot step timeout", "[powerlink][mn]") {
   Rig rig({1}, 1);
-  rig.config.boot_step_timeout_ms = 200;  // cycles are 1 ms
+  rig.config.bus.nmt.boot_step_timeout_ms = 200;  // cycles are 1 ms
   rig.bus = std::make_unique<PowerlinkBus>(rig.config, rig.link);
   rig.bus->set_clock(&fake_clock);
   REQUIRE_FALSE(rig.bus->start());
