@@ -84,6 +84,8 @@ nlohmann::json bus_status_json(const BusDriver& bus) {
                      {"boots", n.boots},
                      {"resets", n.resets},
                      {"sdo_errors", n.sdo_errors},
+                     {"nmt_requests", n.nmt_requests},
+                     {"nmt_requests_refused", n.nmt_requests_refused},
                      {"last_error", n.last_error ? n.last_error.message() : std::string()},
                      {"last_reset_reason",
                       n.last_reset_reason ? n.last_reset_reason.message() : std::string()}});

@@ -157,6 +157,10 @@ class MnCategory final : public std::error_category {
         return "loss of PRes threshold reached";
       case MnError::kBootStepTimeout:
         return "boot step timed out";
+      case MnError::kResetRequested:
+        return "reset requested by the node (NMTRequest)";
+      case MnError::kNmtRequestRefused:
+        return "NMTRequest refused (only a node's own reset is served)";
     }
     return "unknown MN error";
   }

@@ -55,6 +55,8 @@ enum class MnError : int {
   kModuleBlockOutsidePayload,  // process image: a module's block ends past the PRes/PReq size
   kLossOfPresThreshold,        // reset reason: the CN's loss-of-PRes counter reached its threshold
   kBootStepTimeout,            // reset reason: the CN did not finish a boot step in time
+  kResetRequested,             // reset reason: the CN asked for its reset (NMTRequest)
+  kNmtRequestRefused,          // an NMTRequest this MN does not serve (see docs/powerlink.md)
 };
 
 [[nodiscard]] const std::error_category& frame_category() noexcept;

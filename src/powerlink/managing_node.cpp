@@ -689,10 +689,25 @@ void ManagingNode::handle_asnd(const FrameHeader& h, const Asnd& asnd) noexcept 
     if (h.dst_node != kNodeMn) return;
     cn->sdo_wait_answer = false;
     cn->sdo->receive(*sdo, now_ns_);
-  } else {
-    // NMTRequests and others: accepted, not served (no NMT services requested by CNs).
-    cn->rs = 0;
+  } else if (const auto* request = std::get_if<NmtRequest>(&asnd.body)) {
+    handle_nmt_request(*cn, *request);
   }
+}
+
+void ManagingNode::handle_nmt_request(Cn& from, const NmtRequest& request) noexcept {
+  ++from.st->nmt_requests;
+  // The MN alone drives a CN through its boot: a CN may ask to be reset (it is then booted and
+  // configured again from the start) but not to be started, stopped or reset elsewhere, which
+  // would move the machine behind the MN's back.
+  const bool reset = request.command >= static_cast<uint8_t>(NmtCommandId::kResetNode) &&
+                     request.command <= static_cast<uint8_t>(NmtCommandId::kSwReset);
+  if (!reset || request.target != from.cfg.node_id) {
+    ++from.st->nmt_requests_refused;
+    from.st->last_error = make_error_code(MnError::kNmtRequestRefused);
+    return;
+  }
+  if (from.st->boot != CnBootState::kReset)
+    reset_node(from, make_error_code(MnError::kResetRequested));
 }
 
 void ManagingNode::update_mn_state() noexcept {

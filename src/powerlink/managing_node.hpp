@@ -69,6 +69,8 @@ struct CnStatus {
   uint32_t boots = 0;                 // times the CN reached OPERATIONAL
   uint32_t resets = 0;                // NMTResetNode sent
   uint32_t sdo_errors = 0;
+  uint32_t nmt_requests = 0;          // NMTRequests received from the CN
+  uint32_t nmt_requests_refused = 0;  // ... of them not served
   std::error_code last_error;
   // Why the MN last reset the CN (kept when it boots again, unlike last_error).
   std::error_code last_reset_reason;
@@ -186,6 +188,7 @@ class ManagingNode {
   void queue_nmt(Cn& cn, NmtCommandId command) noexcept;
   void handle_pres(Cn& cn, const PRes& pres, std::span<const uint8_t> frame) noexcept;
   void handle_asnd(const FrameHeader& h, const Asnd& asnd) noexcept;
+  void handle_nmt_request(Cn& from, const NmtRequest& request) noexcept;
   void reported_state(Cn& cn, NmtState state) noexcept;
   void start_next_sdo(Cn& cn) noexcept;
   void sdo_done(Cn& cn, std::error_code ec, std::span<const uint8_t> data) noexcept;

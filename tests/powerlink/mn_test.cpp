@@ -429,6 +429,43 @@ TEST_CASE("A CN stuck in a boot step is reset after the boot step timeout", "[po
   CHECK(rig.st(1).last_reset_reason.message() == "boot step timed out");
 }
 
+TEST_CASE("NMTRequests: a CN's own reset is served, anything else refused", "[powerlink][mn]") {
+  Rig rig({1, 2}, 1);
+  REQUIRE(rig.run_until([&] { return rig.bus->state() == BusState::Operational; }));
+  TestCn& cn = *rig.cns[0];
+
+  SECTION("a CN asks for its own reset: booted and configured again") {
+    cn.objects.clear();  // the MN must write the configuration again
+    cn.nmt_request = NmtRequest{static_cast<uint8_t>(NmtCommandId::kResetNode), 1, {}};
+    REQUIRE(rig.run_until([&] { return rig.st(1).resets == 1; }, 50));
+    CHECK(cn.nmt_request_invites == 1);
+    CHECK(rig.st(1).nmt_requests == 1);
+    CHECK(rig.st(1).nmt_requests_refused == 0);
+    CHECK(rig.st(1).last_reset_reason == MnError::kResetRequested);
+    REQUIRE(rig.run_until([&] { return rig.st(1).boots == 2; }));
+    CHECK(le(cn.objects[{0x2001, 0x01}]) == ModuleSettings{}.endat_mode());  // reconfigured
+    CHECK(rig.st(2).resets == 0);
+  }
+  SECTION("a CN asks to stop itself: refused, the cycle goes on") {
+    cn.nmt_request = NmtRequest{static_cast<uint8_t>(NmtCommandId::kStopNode), 1, {}};
+    REQUIRE(rig.run_until([&] { return rig.st(1).nmt_requests == 1; }, 50));
+    for (int i = 0; i < 50; ++i) rig.step();
+    CHECK(rig.st(1).nmt_requests_refused == 1);
+    CHECK(rig.st(1).last_error == MnError::kNmtRequestRefused);
+    CHECK(rig.st(1).resets == 0);
+    CHECK(rig.st(1).boot == CnBootState::kOperational);
+    CHECK(rig.bus->state() == BusState::Operational);
+  }
+  SECTION("a CN asks to reset another node: refused") {
+    cn.nmt_request = NmtRequest{static_cast<uint8_t>(NmtCommandId::kResetNode), 2, {}};
+    REQUIRE(rig.run_until([&] { return rig.st(1).nmt_requests == 1; }, 50));
+    for (int i = 0; i < 50; ++i) rig.step();
+    CHECK(rig.st(1).nmt_requests_refused == 1);
+    CHECK(rig.st(2).resets == 0);
+    CHECK(rig.st(1).resets == 0);
+  }
+}
+
 TEST_CASE("A power-cycled CN is detected and booted again", "[powerlink][mn]") {
   Rig rig({1}, 1);
   REQUIRE(rig.run_until([&] { return rig.bus->state() == BusState::Operational; }));

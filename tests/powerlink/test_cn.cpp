@@ -66,9 +66,9 @@ void TestCn::on_frame(std::span<const uint8_t> bytes, std::deque<std::vector<uin
     PRes pres;
     pres.nmt_state = state;
     pres.ready = state == NmtState::kOperational;
-    pres.request_count = static_cast<uint8_t>(
-        std::min<std::size_t>(sdo_out_.size() + static_cast<std::size_t>(fake_request_count), 7));
-    pres.priority = 3;
+    pres.request_count = static_cast<uint8_t>(std::min<std::size_t>(
+        sdo_out_.size() + static_cast<std::size_t>(fake_request_count) + (nmt_request ? 1 : 0), 7));
+    pres.priority = nmt_request ? 7 : 3;
     pres.payload = payload;
     emit(build_pres(buf, pres_header(mac, node), pres));
     if (hold_pres && !out.empty()) {
@@ -102,6 +102,13 @@ void TestCn::on_frame(std::span<const uint8_t> bytes, std::deque<std::vector<uin
         emit(build_status_response(buf, ah, r, status_errors));
         break;
       }
+      case RequestedService::kNmtRequestInvite:
+        ++nmt_request_invites;
+        if (nmt_request) {
+          emit(build_nmt_request(buf, ah, *nmt_request));
+          nmt_request.reset();
+        }
+        break;
       case RequestedService::kUnspecifiedInvite:
         if (!sdo_out_.empty()) {
           out.push_back(std::move(sdo_out_.front()));

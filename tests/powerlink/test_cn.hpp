@@ -5,6 +5,7 @@
 #include <deque>
 #include <functional>
 #include <map>
+#include <optional>
 #include <vector>
 
 #include "powerlink/link.hpp"
@@ -45,6 +46,9 @@ class TestCn : public SdoObjectAccess {
   std::deque<std::vector<uint8_t>> held_pres;  // the test delivers these when it wants
   int pres_size_delta = 0;
   std::vector<ErrorEntry> status_errors;
+  // An NMTRequest to send when invited (RS/PR = 7 announced in the PRes until then).
+  std::optional<NmtRequest> nmt_request;
+  int nmt_request_invites = 0;
   uint32_t vendor_id = 0x1A;
   uint32_t product_code = 0x1928;
   // Seen.
