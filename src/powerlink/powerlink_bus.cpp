@@ -38,12 +38,14 @@ PowerlinkBus::PowerlinkBus(const MnConfig& config, Link& link)
     if (const ModuleMapping* m = layout->find(a.slot)) axis_map_[i] = {a.node, *m, true};
   }
   raw_.resize(config_.bus.nodes.size());
-  pres_.resize(config_.bus.nodes.size());
+  Snapshot initial;
+  initial.pres.resize(config_.bus.nodes.size());
   for (std::size_t i = 0; i < raw_.size(); ++i) {
     const uint8_t node = config_.bus.nodes[i].node_id;
-    raw_[i].node = pres_[i].node = node;
+    raw_[i].node = initial.pres[i].node = node;
     if (const NodeImageLayout* layout = mn_.layout(node)) raw_[i].layout = *layout;
   }
+  snapshot_.for_each([&](Snapshot& s) { s = initial; });
 }
 
 PowerlinkBus::NodeRaw* PowerlinkBus::raw(uint8_t node) noexcept {
@@ -66,9 +68,9 @@ PreqWriteCheck PowerlinkBus::set_preq(uint8_t node, uint16_t offset,
     return check;
   }
   {
-    std::lock_guard lock(status_mutex_);
-    for (std::size_t i = 0; i < status_.node_count; ++i)
-      if (status_.nodes[i].node == node) check.preq_size = status_.nodes[i].preq_size;
+    const PowerlinkStatus& st = snapshot_.read().status;
+    for (std::size_t i = 0; i < st.node_count; ++i)
+      if (st.nodes[i].node == node) check.preq_size = st.nodes[i].preq_size;
   }
   if (bytes.size() > kMaxPreqWrite) {
     check.error = make_error_code(MnError::kPreqWriteTooLong);
@@ -262,33 +264,32 @@ ExchangeResult PowerlinkBus::exchange(std::span<AxisIo> axes, int64_t cycle_star
 }
 
 void PowerlinkBus::publish_status() noexcept {
-  // Never blocks the cycle: when a reader holds the lock, this cycle's snapshot is skipped.
-  std::unique_lock lock(status_mutex_, std::try_to_lock);
-  if (!lock.owns_lock()) return;
-  status_.mn_state = mn_.mn_state();
-  status_.counters = mn_.counters();
-  status_.link_up = link_.link_up();
+  // Never waits for the reader: the triple buffer always has a free buffer for the cycle thread.
+  Snapshot& snap = snapshot_.back();
+  PowerlinkStatus& st = snap.status;
+  st.mn_state = mn_.mn_state();
+  st.counters = mn_.counters();
+  st.link_up = link_.link_up();
   const auto nodes = mn_.nodes();
-  status_.node_count = std::min(nodes.size(), status_.nodes.size());
-  std::copy_n(nodes.begin(), status_.node_count, status_.nodes.begin());
+  st.node_count = std::min(nodes.size(), st.nodes.size());
+  std::copy_n(nodes.begin(), st.node_count, st.nodes.begin());
   for (std::size_t i = 0; i < raw_.size(); ++i) {
     const NodeRaw& r = raw_[i];
-    PresSnapshot& p = pres_[i];
+    PresSnapshot& p = snap.pres[i];
     p.fresh = r.pres_fresh;
     p.received = r.pres_received;
     p.cycle = r.pres_cycle;
     p.rx_time_ns = r.pres_rx_ns;
-    // The MN keeps the last PRes payload until the next one: a snapshot skipped by the try-lock
-    // loses nothing.
+    // The MN keeps the last PRes payload until the next one arrives.
     const std::span<const uint8_t> bytes = mn_.pres_payload(r.node);
     p.size = static_cast<uint16_t>(std::min(bytes.size(), p.payload.size()));
     std::copy_n(bytes.begin(), p.size, p.payload.begin());
   }
+  snapshot_.publish();
 }
 
 bool PowerlinkBus::pres_snapshot(uint8_t node, PresSnapshot& out) const {
-  std::lock_guard lock(status_mutex_);
-  for (const PresSnapshot& p : pres_) {
+  for (const PresSnapshot& p : snapshot_.read().pres) {
     if (p.node != node) continue;
     out = p;
     return true;
@@ -297,8 +298,7 @@ bool PowerlinkBus::pres_snapshot(uint8_t node, PresSnapshot& out) const {
 }
 
 PowerlinkStatus PowerlinkBus::status() const {
-  std::lock_guard lock(status_mutex_);
-  return status_;
+  return snapshot_.read().status;
 }
 
 bool PowerlinkBus::submit(const RegisterRequest& request) noexcept {

@@ -8,11 +8,11 @@
 #include <bitset>
 #include <cstdint>
 #include <memory>
-#include <mutex>
 #include <vector>
 
 #include "core/bus.hpp"
 #include "core/spsc_queue.hpp"
+#include "core/triple_buffer.hpp"
 #include "powerlink/link.hpp"
 #include "powerlink/managing_node.hpp"
 
@@ -70,7 +70,8 @@ class PowerlinkBus final : public BusDriver {
   [[nodiscard]] bool submit(const RegisterRequest& request) noexcept override;
   [[nodiscard]] bool poll(RegisterResult& out) noexcept override;
 
-  // Normal thread: the latest status published by the cycle thread (at most one cycle old).
+  // Normal thread (one thread: status(), pres_snapshot() and set_preq() share the reading side
+  // of the snapshot): the latest status published by the cycle thread (at most one cycle old).
   [[nodiscard]] PowerlinkStatus status() const;
   // Normal thread: the last PRes of a configured CN; false when `node` is not configured.
   [[nodiscard]] bool pres_snapshot(uint8_t node, PresSnapshot& out) const;
@@ -133,9 +134,12 @@ class PowerlinkBus final : public BusDriver {
   SpscQueue<RegisterResult, 64> results_;
   std::vector<NodeRaw> raw_;
   SpscQueue<PreqWrite, 16> preq_writes_;
-  mutable std::mutex status_mutex_;
-  PowerlinkStatus status_;
-  std::vector<PresSnapshot> pres_;  // per raw_ entry, under status_mutex_
+  // What the cycle thread publishes each cycle for the normal thread; `pres` per raw_ entry.
+  struct Snapshot {
+    PowerlinkStatus status;
+    std::vector<PresSnapshot> pres;
+  };
+  mutable TripleBuffer<Snapshot> snapshot_;
   Clock clock_;
 };
 

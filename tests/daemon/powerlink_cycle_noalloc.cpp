@@ -1,0 +1,160 @@
+// The daemon's whole cycle work over POWERLINK — PowerlinkBus on a real raw socket (SoC, PReq/PRes,
+// SoA, ASnd with SDO transfers for register reads), axis decoding, the Flatstream tunnel with
+// EnDat traffic, acknowledgements, shared-memory publication — makes no heap allocation and takes
+// no mutex on the cycle thread once the bus is operational. Run by powerlink_veth_test.sh in the
+// MN's network namespace with ds1928-sim answering on the other end of a veth pair:
+//
+//   powerlink_cycle_noalloc CONFIG [CYCLES]
+//
+// Exit 0: zero allocations and mutex locks with the traffic really flowing; 1: something counted
+// or the traffic did not get through; 2: the bus did not come up (or a setup error).
+#include <unistd.h>
+
+#include <atomic>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <string>
+#include <thread>
+
+#include "config/config_loader.hpp"
+#include "core/cycle_engine.hpp"
+#include "cycle_work.hpp"
+#include "daemon.hpp"
+#include "endat/command.hpp"
+#include "shm/publisher.hpp"
+#include "support/alloc_counter.hpp"
+
+using namespace ds1928;
+
+namespace {
+
+// Counts `counted` cycles from the first cycle after `arm()`.
+class CountingTask final : public CycleTask {
+ public:
+  CountingTask(CycleTask& inner, uint64_t counted) : inner_(inner), counted_(counted) {}
+  void run_cycle(const CycleContext& ctx) noexcept override {
+    if (!counting_ && armed_.load(std::memory_order_acquire) && !done()) {
+      counting_ = true;
+      test::begin_counting();
+    }
+    inner_.run_cycle(ctx);
+    if (counting_ && ++executed_ == counted_) {
+      counting_ = false;
+      result_ = test::end_counting();
+      done_.store(true, std::memory_order_release);
+    }
+  }
+  void arm() noexcept { armed_.store(true, std::memory_order_release); }
+  [[nodiscard]] bool done() const noexcept { return done_.load(std::memory_order_acquire); }
+  [[nodiscard]] const test::HeapCounts& result() const noexcept { return result_; }
+
+ private:
+  CycleTask& inner_;
+  uint64_t counted_;
+  uint64_t executed_ = 0;
+  bool counting_ = false;
+  std::atomic<bool> armed_{false};
+  std::atomic<bool> done_{false};
+  test::HeapCounts result_;
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc < 2) {
+    std::fprintf(stderr, "usage: %s CONFIG [CYCLES]\n", argv[0]);
+    return 2;
+  }
+  const uint64_t cycles = argc > 2 ? std::strtoull(argv[2], nullptr, 10) : 3000;
+  const ConfigResult loaded = load_config(argv[1]);
+  if (!loaded.ok()) {
+    std::fprintf(stderr, "%s", loaded.error_report().c_str());
+    return 2;
+  }
+  DaemonConfig config = loaded.config();
+  config.shm.name = "/ds1928d-pl-noalloc-" + std::to_string(::getpid());
+  config.cycle.hold_cpu_dma_latency = false;
+  std::string why_not;
+  std::unique_ptr<BusDriver> bus = make_bus(config, why_not);
+  if (!bus) {
+    std::fprintf(stderr, "bus: %s\n", why_not.c_str());
+    return 2;
+  }
+  if (auto ec = bus->start()) {
+    std::fprintf(stderr, "bus start: %s\n", ec.message().c_str());
+    return 2;
+  }
+  shm::Publisher publisher;
+  if (auto ec = publisher.open(config.shm, static_cast<uint32_t>(config.axes.size()),
+                               config.cycle.period_us)) {
+    std::fprintf(stderr, "shm: %s\n", ec.message().c_str());
+    return 2;
+  }
+  CycleWork work(config, *bus, publisher);
+  CountingTask task(work, cycles);
+  auto engine = std::make_unique<CycleEngine>(config.cycle, task);
+  if (auto started = engine->start(); !started) {
+    std::fprintf(stderr, "cycle engine: %s\n", started.error.message().c_str());
+    return 2;
+  }
+
+  const auto up_deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+  while (bus->state() != BusState::Operational) {
+    if (std::chrono::steady_clock::now() > up_deadline) {
+      std::fprintf(stderr, "bus not operational within 20 s (state %s)\n",
+                   std::string(to_string(bus->state())).c_str());
+      engine->stop();
+      bus->stop();
+      return 2;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  task.arm();
+
+  // The normal thread's traffic while the cycles are counted: EnDat read-param through the
+  // Flatstream tunnel of every axis, error acknowledgements, register reads (SDO over ASnd).
+  const auto read =
+      endat::encode_request(endat::Request::read(0xA1, 13), endat::CommandSet::EnDat22);
+  if (!read) return 2;
+  uint64_t sent = 0, replies = 0, acks = 0, registers = 0, register_results = 0;
+  uint32_t tag = 1;
+  while (!task.done()) {
+    for (std::size_t axis = 0; axis < config.axes.size(); ++axis) {
+      TunnelRequest r;
+      r.tag = tag++;
+      r.size = read->size;
+      std::copy_n(read->bytes.begin(), read->size, r.bytes.begin());
+      if (work.submit_tunnel(axis, r)) ++sent;
+      while (auto e = work.poll_tunnel(axis)) replies += e->kind == TunnelEvent::Kind::Received;
+    }
+    if (work.post({AxisCommand::Kind::AckErrors, 0, 0x10})) ++acks;
+    if (bus->submit({tag++, 0, reg::kEnDatMode, 1, false, 0})) ++registers;
+    RegisterResult rr;
+    while (bus->poll(rr)) register_results += !rr.error;
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  engine->stop();
+  bus->stop();
+  const test::HeapCounts counts = task.result();
+  std::printf(
+      "counted %llu cycles over POWERLINK: new %llu, malloc %llu (first size %zu), delete %llu, "
+      "free %llu, mutex locks %llu\n",
+      static_cast<unsigned long long>(cycles), static_cast<unsigned long long>(counts.new_calls),
+      static_cast<unsigned long long>(counts.malloc_calls), counts.first_size,
+      static_cast<unsigned long long>(counts.delete_calls),
+      static_cast<unsigned long long>(counts.free_calls),
+      static_cast<unsigned long long>(counts.mutex_locks));
+  std::printf(
+      "traffic: %llu EnDat messages sent, %llu replies, %llu acks, %llu register reads "
+      "(%llu answered)\n",
+      static_cast<unsigned long long>(sent), static_cast<unsigned long long>(replies),
+      static_cast<unsigned long long>(acks), static_cast<unsigned long long>(registers),
+      static_cast<unsigned long long>(register_results));
+  const bool clean =
+      counts.allocations() == 0 && counts.deallocations() == 0 && counts.mutex_locks == 0;
+  const bool traffic = replies >= 10 && acks >= 10 && register_results >= 10;
+  if (!clean) std::printf("FAIL: the cycle thread allocated or locked a mutex\n");
+  if (!traffic) std::printf("FAIL: too little traffic went through the counted cycles\n");
+  return clean && traffic ? 0 : 1;
+}
