@@ -19,6 +19,7 @@
 
 #include "config/config_loader.hpp"
 #include "core/cycle_engine.hpp"
+#include "cycle_traffic.hpp"
 #include "cycle_work.hpp"
 #include "daemon.hpp"
 #include "endat/command.hpp"
@@ -117,21 +118,9 @@ int main(int argc, char** argv) {
   const auto read =
       endat::encode_request(endat::Request::read(0xA1, 13), endat::CommandSet::EnDat22);
   if (!read) return 2;
-  uint64_t sent = 0, replies = 0, acks = 0, registers = 0, register_results = 0;
-  uint32_t tag = 1;
+  test::CycleTraffic t;
   while (!task.done()) {
-    for (std::size_t axis = 0; axis < config.axes.size(); ++axis) {
-      TunnelRequest r;
-      r.tag = tag++;
-      r.size = read->size;
-      std::copy_n(read->bytes.begin(), read->size, r.bytes.begin());
-      if (work.submit_tunnel(axis, r)) ++sent;
-      while (auto e = work.poll_tunnel(axis)) replies += e->kind == TunnelEvent::Kind::Received;
-    }
-    if (work.post({AxisCommand::Kind::AckErrors, 0, 0x10})) ++acks;
-    if (bus->submit({tag++, 0, reg::kEnDatMode, 1, false, 0})) ++registers;
-    RegisterResult rr;
-    while (bus->poll(rr)) register_results += !rr.error;
+    t.round(work, *bus, config.axes.size(), *read, 0, 0);
     std::this_thread::sleep_for(std::chrono::milliseconds(5));
   }
   engine->stop();
@@ -148,12 +137,12 @@ int main(int argc, char** argv) {
   std::printf(
       "traffic: %llu EnDat messages sent, %llu replies, %llu acks, %llu register reads "
       "(%llu answered)\n",
-      static_cast<unsigned long long>(sent), static_cast<unsigned long long>(replies),
-      static_cast<unsigned long long>(acks), static_cast<unsigned long long>(registers),
-      static_cast<unsigned long long>(register_results));
+      static_cast<unsigned long long>(t.sent), static_cast<unsigned long long>(t.replies),
+      static_cast<unsigned long long>(t.acks), static_cast<unsigned long long>(t.registers),
+      static_cast<unsigned long long>(t.register_results));
   const bool clean =
       counts.allocations() == 0 && counts.deallocations() == 0 && counts.mutex_locks == 0;
-  const bool traffic = replies >= 10 && acks >= 10 && register_results >= 10;
+  const bool traffic = t.replies >= 10 && t.acks >= 10 && t.register_results >= 10;
   if (!clean) std::printf("FAIL: the cycle thread allocated or locked a mutex\n");
   if (!traffic) std::printf("FAIL: too little traffic went through the counted cycles\n");
   return clean && traffic ? 0 : 1;

@@ -9,6 +9,7 @@
 #include <thread>
 
 #include "core/cycle_engine.hpp"
+#include "cycle_traffic.hpp"
 #include "cycle_work.hpp"
 #include "endat/command.hpp"
 #include "shm/publisher.hpp"
@@ -85,35 +86,22 @@ TEST_CASE("the daemon's cycle work allocates nothing and locks no mutex in 100 0
   const auto read =
       endat::encode_request(endat::Request::read(0xA1, 8), endat::CommandSet::EnDat22);
   REQUIRE(read);
-  uint64_t replies = 0, sent = 0, acks = 0, registers = 0;
-  uint32_t tag = 1;
+  test::CycleTraffic traffic;
   while (!task.done()) {
-    for (std::size_t axis = 0; axis < 4; ++axis) {
-      TunnelRequest r;
-      r.tag = tag++;
-      r.size = read->size;
-      std::copy_n(read->bytes.begin(), read->size, r.bytes.begin());
-      if (work.submit_tunnel(axis, r)) ++sent;
-      while (auto e = work.poll_tunnel(axis)) replies += e->kind == TunnelEvent::Kind::Received;
-    }
-    if (work.post({AxisCommand::Kind::AckErrors, 1, 0x10})) ++acks;
-    if (bus.submit({tag, 2, reg::kEnDatMode, 1, false, 0})) ++registers;
-    RegisterResult rr;
-    while (bus.poll(rr)) {
-    }
+    traffic.round(work, bus, 4, *read, 1, 2);
     std::this_thread::sleep_for(std::chrono::milliseconds(5));
   }
   engine->stop();
   const auto counts = task.result();
   INFO("new " << counts.new_calls << ", malloc " << counts.malloc_calls << " (first size "
               << counts.first_size << "), mutex locks " << counts.mutex_locks);
-  INFO("traffic: " << sent << " messages submitted, " << replies << " replies, " << acks
-                   << " acks, " << registers << " register reads");
+  INFO("traffic: " << traffic.sent << " messages submitted, " << traffic.replies << " replies, "
+                   << traffic.acks << " acks, " << traffic.registers << " register reads");
   CHECK(counts.allocations() == 0);
   CHECK(counts.deallocations() == 0);
   CHECK(counts.mutex_locks == 0);
   // The traffic really went through the counted cycles.
-  CHECK(replies > 100);
-  CHECK(acks > 100);
-  CHECK(registers > 100);
+  CHECK(traffic.replies > 100);
+  CHECK(traffic.acks > 100);
+  CHECK(traffic.registers > 100);
 }

@@ -4,6 +4,7 @@
 #include <string>
 
 #include "core/axis_sample.hpp"
+#include "mn_rig.hpp"
 #include "powerlink/powerlink_bus.hpp"
 #include "test_cn.hpp"
 
@@ -14,82 +15,11 @@ using test::TestCn;
 
 namespace {
 
-constexpr int64_t kPeriodNs = 1'000'000;
-
-// Simulated CLOCK_MONOTONIC. Rig::step() sets it to the nominal cycle start plus the cycle
-// thread's wake-up latency; every read advances it by `g_clock_step_ns` (0: the exchange takes
-// no time).
-int64_t g_clock_ns = 0;
-int64_t g_clock_step_ns = 0;
-int64_t fake_clock() noexcept {
-  g_clock_ns += g_clock_step_ns;
-  return g_clock_ns;
-}
-
-struct Rig {
-  MnConfig config;
-  MemoryLink link;
-  std::vector<std::unique_ptr<TestCn>> cns;
-  std::unique_ptr<PowerlinkBus> bus;
-  std::vector<AxisIo> axes;
-  uint64_t cycle = 0;
-
-  // `place`: per-axis changes (e.g. PRes/PReq offset overrides) before the CNs are built.
-  explicit Rig(std::vector<uint8_t> nodes = {1}, uint8_t modules_per_node = 1,
-               const std::function<void(AxisConfig&)>& place = {}) {
-    g_clock_ns = 0;
-    g_clock_step_ns = 0;
-    config.cycle_us = 1000;
-    config.mac = link.mac();
-    for (uint8_t n : nodes) {
-      PowerlinkNodeConfig nc;
-      nc.node_id = n;
-      config.bus.nodes.push_back(nc);
-      for (uint8_t s = 1; s <= modules_per_node; ++s) {
-        AxisConfig a;
-        a.node = n;
-        a.slot = s;
-        a.module.prescaler = static_cast<uint16_t>(3 + s);
-        if (place) place(a);
-        config.axes.push_back(a);
-      }
-    }
-    for (uint8_t n : nodes) {
-      std::vector<ModuleSpec> specs;
-      for (const auto& a : config.axes)
-        if (a.node == n)
-          specs.push_back(
-              {a.slot, a.module.input_mtu, a.module.output_mtu, a.pres_offset, a.preq_offset});
-      auto layout = make_layout(specs);
-      REQUIRE(layout);
-      cns.push_back(std::make_unique<TestCn>(n, *layout));
-      link.cns.push_back(cns.back().get());
-    }
-    bus = std::make_unique<PowerlinkBus>(config, link);
-    bus->set_clock(&fake_clock);
-    axes.resize(config.axes.size());
-    REQUIRE_FALSE(bus->start());
-  }
-
-  // `wake_ns`: how late the cycle thread starts the exchange after the nominal cycle start.
-  ExchangeResult step(int64_t wake_ns = 0) {
-    const int64_t start = static_cast<int64_t>(cycle) * kPeriodNs;
-    g_clock_ns = start + wake_ns;
-    auto r = bus->exchange(axes, start, cycle);
-    ++cycle;
-    return r;
-  }
-  // Runs until `pred` holds; fails after `max` cycles.
-  template <class P>
-  bool run_until(P pred, int max = 5000) {
-    for (int i = 0; i < max; ++i) {
-      step();
-      if (pred()) return true;
-    }
-    return false;
-  }
-  const CnStatus& st(uint8_t node) const { return *bus->managing_node().node(node); }
-};
+using test::fake_clock;
+using test::g_clock_ns;
+using test::g_clock_step_ns;
+using test::kPeriodNs;
+using test::Rig;
 
 uint32_t le(const std::vector<uint8_t>& v) {
   uint32_t x = 0;
