@@ -94,7 +94,17 @@ nlohmann::json bus_status_json(const BusDriver& bus) {
   return j;
 }
 
-std::vector<BusEvent> BusWatch::poll(const BusDriver& bus) {
+bool BusWatch::Said::due(uint32_t value, std::chrono::steady_clock::time_point now,
+                         uint32_t& more) {
+  if (value <= said || now - at < kRepeat) return false;
+  more = value - said;
+  said = value;
+  at = now;
+  return true;
+}
+
+std::vector<BusEvent> BusWatch::poll(const BusDriver& bus,
+                                     std::chrono::steady_clock::time_point now) {
   std::vector<BusEvent> events;
   const BusState state = bus.state();
   if (!seen_ || state != state_) {
@@ -105,25 +115,51 @@ std::vector<BusEvent> BusWatch::poll(const BusDriver& bus) {
            fmt::format("bus {}: {} -> {}", bus.name(), to_string(state_), to_string(state))});
     state_ = state;
   }
-  if (const auto* pl = dynamic_cast<const powerlink::PowerlinkBus*>(&bus)) {
-    const auto st = pl->status();
-    if (nodes_.size() < st.node_count) nodes_.resize(st.node_count);
-    for (std::size_t i = 0; i < st.node_count; ++i) {
-      const auto& n = st.nodes[i];
-      NodeSeen& seen = nodes_[i];
-      if (seen_ && n.resets > seen.resets) {
+  const auto* pl = dynamic_cast<const powerlink::PowerlinkBus*>(&bus);
+  if (pl == nullptr) {
+    seen_ = true;
+    return events;
+  }
+  const auto st = pl->status();
+  uint32_t more = 0;
+  const uint32_t ct_fired = st.counters.cycle_time_exceeded.fired;
+  if (!seen_) {
+    cycle_time_exceeded_.said = ct_fired;
+  } else if (cycle_time_exceeded_.due(ct_fired, now, more)) {
+    events.push_back(
+        {true, fmt::format("powerlink: cycle time exceeded threshold reached {} time(s) (a cycle's "
+                           "exchange took longer than the period; {} in total)",
+                           more, ct_fired)});
+  }
+  if (nodes_.size() < st.node_count) nodes_.resize(st.node_count);
+  for (std::size_t i = 0; i < st.node_count; ++i) {
+    const auto& n = st.nodes[i];
+    NodeSeen& seen = nodes_[i];
+    if (!seen_) {
+      seen.late_pres.said = n.late_pres.fired;
+      seen.nmt_refused.said = n.nmt_requests_refused;
+    } else {
+      if (n.resets > seen.resets) {
         const std::string reason =
             n.last_reset_reason ? n.last_reset_reason.message() : std::string("unknown reason");
         events.push_back(
             {true, fmt::format("powerlink node {}: reset by the MN ({}; resets {}, PRes losses {})",
                                n.node, reason, n.resets, n.loss_of_pres.events)});
       }
-      if (seen_ && n.boots > seen.boots)
+      if (n.boots > seen.boots)
         events.push_back(
             {false, fmt::format("powerlink node {}: operational (boot {})", n.node, n.boots)});
-      seen.resets = n.resets;
-      seen.boots = n.boots;
+      if (seen.late_pres.due(n.late_pres.fired, now, more))
+        events.push_back({true, fmt::format("powerlink node {}: late PRes threshold reached {} "
+                                            "time(s) (answers after the PRes timeout; {} in total)",
+                                            n.node, more, n.late_pres.fired)});
+      if (seen.nmt_refused.due(n.nmt_requests_refused, now, more))
+        events.push_back({true, fmt::format("powerlink node {}: {} NMTRequest(s) refused (only a "
+                                            "node's own reset is served; {} in total)",
+                                            n.node, more, n.nmt_requests_refused)});
     }
+    seen.resets = n.resets;
+    seen.boots = n.boots;
   }
   seen_ = true;
   return events;

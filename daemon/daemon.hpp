@@ -31,15 +31,31 @@ struct BusEvent {
 };
 class BusWatch {
  public:
-  [[nodiscard]] std::vector<BusEvent> poll(const BusDriver& bus);
+  // Thresholds that only count (cycle time exceeded, late PRes) are said at most once per
+  // `repeat` per source, with how often they fired meanwhile: a cycle that is too short for its
+  // network must not flood the journal.
+  [[nodiscard]] std::vector<BusEvent> poll(
+      const BusDriver& bus,
+      std::chrono::steady_clock::time_point now = std::chrono::steady_clock::now());
+  static constexpr std::chrono::seconds kRepeat{1};
 
  private:
+  // A counter whose increases are reported, rate-limited.
+  struct Said {
+    uint32_t said = 0;  // value when last reported
+    std::chrono::steady_clock::time_point at{};
+    // True (and `more` set) when `value` grew and the last report is old enough.
+    bool due(uint32_t value, std::chrono::steady_clock::time_point now, uint32_t& more);
+  };
   struct NodeSeen {
     uint32_t resets = 0;
     uint32_t boots = 0;
+    Said late_pres;
+    Said nmt_refused;
   };
   bool seen_ = false;
   BusState state_ = BusState::Down;
+  Said cycle_time_exceeded_;
   std::vector<NodeSeen> nodes_;
 };
 

@@ -1,5 +1,7 @@
 // BusWatch: the log lines that explain gaps in the positions — bus state changes and nodes the
 // POWERLINK MN reset (with the reason) or booted — from a real PowerlinkBus over an in-memory CN.
+#include <fmt/format.h>
+
 #include <catch2/catch.hpp>
 
 #include "daemon.hpp"
@@ -54,4 +56,43 @@ TEST_CASE("BusWatch names state changes, resets with their reason and boots", "[
   REQUIRE(events.size() == 2);
   CHECK(events[0].text == "bus powerlink: booting -> operational");
   CHECK(events[1].text == "powerlink node 1: operational (boot 2)");
+}
+
+TEST_CASE("BusWatch says counting-only thresholds at most once a second, with the count",
+          "[daemon][log]") {
+  Rig rig({1}, 1);
+  BusWatch watch;
+  const auto t0 = std::chrono::steady_clock::now();
+  (void)watch.poll(*rig.bus, t0);
+  REQUIRE(rig.run_until([&] { return rig.bus->state() == BusState::Operational; }));
+  (void)watch.poll(*rig.bus, t0);  // the boot's lines
+
+  // Every clock read inside the exchange advances 300 µs: each cycle's exchange outlasts the
+  // 1 ms period, the counter (+8, threshold 15) fires every second cycle.
+  test::g_clock_step_ns = 300'000;
+  for (int i = 0; i < 20; ++i) rig.step();
+  const uint32_t fired_first = rig.bus->status().counters.cycle_time_exceeded.fired;
+  REQUIRE(fired_first >= 5);
+  auto events = watch.poll(*rig.bus, t0 + std::chrono::milliseconds(10));
+  INFO(joined(events));
+  REQUIRE(events.size() == 1);
+  CHECK(events[0].warning);
+  CHECK(events[0].text ==
+        fmt::format("powerlink: cycle time exceeded threshold reached {} time(s) (a cycle's "
+                    "exchange took longer than the period; {} in total)",
+                    fired_first, fired_first));
+
+  for (int i = 0; i < 20; ++i) rig.step();
+  CHECK(watch.poll(*rig.bus, t0 + std::chrono::milliseconds(500)).empty());  // too soon
+  const uint32_t fired_second = rig.bus->status().counters.cycle_time_exceeded.fired;
+  REQUIRE(fired_second > fired_first);
+  events = watch.poll(*rig.bus, t0 + std::chrono::milliseconds(1100));
+  INFO(joined(events));
+  REQUIRE(events.size() == 1);
+  CHECK_THAT(events[0].text,
+             Catch::StartsWith(fmt::format("powerlink: cycle time exceeded threshold reached {} ",
+                                           fired_second - fired_first)));
+  test::g_clock_step_ns = 0;
+  for (int i = 0; i < 20; ++i) rig.step();
+  CHECK(watch.poll(*rig.bus, t0 + std::chrono::seconds(5)).empty());  // nothing new: silent
 }
