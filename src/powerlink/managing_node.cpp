@@ -691,6 +691,10 @@ void ManagingNode::handle_asnd(const FrameHeader& h, const Asnd& asnd) noexcept 
     cn->sdo->receive(*sdo, now_ns_);
   } else if (const auto* request = std::get_if<NmtRequest>(&asnd.body)) {
     handle_nmt_request(*cn, *request);
+  } else {
+    // Services this MN does not use (SyncResponse, manufacturer-specific): accepted, and the
+    // invitation is not repeated until the CN announces a request again.
+    cn->rs = 0;
   }
 }
 
