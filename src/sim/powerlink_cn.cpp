@@ -30,6 +30,7 @@ constexpr uint16_t kErrorLossOfPReq = 0x8242;
 constexpr uint16_t kErrorEntryTypeHistory = 0x1001;  // mode history, profile DLL
 
 constexpr uint8_t kPriorityGeneric = 3;
+constexpr uint8_t kPriorityNmtRequest = 7;
 
 [[nodiscard]] uint32_t abort_for(std::error_code ec) noexcept {
   if (ec == SimErrc::unknown_register) return kAbortNoObject;
@@ -239,6 +240,7 @@ void PowerlinkCn::reset(pl::NmtCommandId command, int64_t now_ns) noexcept {
 
 void PowerlinkCn::power_cycle(int64_t now_ns) noexcept {
   ++stats_.power_cycles;
+  nmt_request_pending_ = false;
   powered_ = false;
   power_on_at_ns_ = now_ns + config_.power_off_ns;
   pres_pending_ = false;
@@ -402,7 +404,7 @@ void PowerlinkCn::send_pres(int64_t now_ns) noexcept {
   pres.ready = state_ == NmtState::kOperational;
   pres.exception_new = exception_new_;
   pres.request_count = request_count();
-  pres.priority = pres.request_count != 0 ? kPriorityGeneric : 0;
+  pres.priority = request_priority();
   pres.payload = std::span<const uint8_t>(payload.data(), size);
   auto len = pl::build_pres(tx_, pl::pres_header(config_.mac, config_.node_id), pres);
   if (!len) return;
@@ -443,8 +445,22 @@ void PowerlinkCn::soa_answer(const pl::SoA& soa, int64_t now_ns) noexcept {
         --async_count_;
       }
       break;
+    case pl::RequestedService::kNmtRequestInvite:
+      if (nmt_request_pending_) {
+        pl::NmtRequest request;
+        request.command = static_cast<uint8_t>(pl::NmtCommandId::kResetNode);
+        request.target = config_.node_id;
+        auto len = pl::build_nmt_request(
+            tx_, pl::asnd_header(config_.mac, config_.node_id, pl::kNodeMn), request);
+        if (len) {
+          emit({tx_.data(), *len});
+          ++stats_.nmt_requests_sent;
+          nmt_request_pending_ = false;
+        }
+      }
+      break;
     default:
-      // NMTRequestInvite / SyncRequest: this node has no NMT requests and no sync support.
+      // SyncRequest: no sync support.
       break;
   }
 }
@@ -495,7 +511,7 @@ void PowerlinkCn::send_ident_response() noexcept {
   ident.nmt_state = state_;
   ident.exception_new = exception_new_;
   ident.request_count = request_count();
-  ident.priority = ident.request_count != 0 ? kPriorityGeneric : 0;
+  ident.priority = request_priority();
   ident.mtu = 300;
   ident.poll_in_size = layout_.pres_size;
   ident.poll_out_size = layout_.preq_size;
@@ -525,7 +541,7 @@ void PowerlinkCn::send_status_response() noexcept {
   status.nmt_state = state_;
   status.exception_new = exception_new_;
   status.request_count = request_count();
-  status.priority = status.request_count != 0 ? kPriorityGeneric : 0;
+  status.priority = request_priority();
   status.static_error_bits = error_count_ != 0 ? 1 : 0;  // bit 0: generic error present
   auto len = pl::build_status_response(
       tx_, pl::asnd_header(config_.mac, config_.node_id, pl::kNodeMn), status,
@@ -546,7 +562,13 @@ void PowerlinkCn::queue_async(std::span<const uint8_t> frame) noexcept {
 }
 
 uint8_t PowerlinkCn::request_count() const noexcept {
-  return static_cast<uint8_t>(std::min<std::size_t>(async_count_, 7));
+  return static_cast<uint8_t>(
+      std::min<std::size_t>(async_count_ + (nmt_request_pending_ ? 1 : 0), 7));
+}
+
+uint8_t PowerlinkCn::request_priority() const noexcept {
+  if (nmt_request_pending_) return kPriorityNmtRequest;
+  return async_count_ != 0 ? kPriorityGeneric : 0;
 }
 
 void PowerlinkCn::log_error(uint16_t code, int64_t now_ns) noexcept {

@@ -90,6 +90,7 @@ struct PowerlinkCnStats {
   uint64_t loss_of_soc = 0;
   uint64_t loss_of_preq = 0;
   uint64_t power_cycles = 0;
+  uint64_t nmt_requests_sent = 0;
   uint64_t resets = 0;
   uint64_t bad_frames = 0;  // rejected by the codec
 };
@@ -115,6 +116,10 @@ class PowerlinkCn {
   // Fault injection: the node loses power now and boots again after config.power_off_ns.
   void power_cycle(int64_t now_ns) noexcept;
   void set_faults(const PowerlinkCnFaults& faults) noexcept;
+  // The node asks the MN for its own reset: announced with priority 7 (PRIO_NMT_REQUEST) in its
+  // PRes/StatusResponse, sent as an NMTRequest (NMTResetNode, target = itself) when the MN invites
+  // it with NMTRequestInvite. A power cycle forgets it.
+  void request_own_reset() noexcept { nmt_request_pending_ = true; }
 
   [[nodiscard]] powerlink::NmtState nmt_state() const noexcept { return state_; }
   [[nodiscard]] uint8_t node_id() const noexcept { return config_.node_id; }
@@ -166,6 +171,7 @@ class PowerlinkCn {
   void send_status_response() noexcept;
   void queue_async(std::span<const uint8_t> frame) noexcept;
   [[nodiscard]] uint8_t request_count() const noexcept;
+  [[nodiscard]] uint8_t request_priority() const noexcept;
   void log_error(uint16_t code, int64_t now_ns) noexcept;
   void emit(std::span<const uint8_t> frame) noexcept;
 
@@ -179,6 +185,7 @@ class PowerlinkCn {
   std::unique_ptr<Objects> objects_;
   std::unique_ptr<powerlink::SdoServer> sdo_;
   PowerlinkCnStats stats_;
+  bool nmt_request_pending_ = false;
   std::mt19937_64 rng_;
   std::uniform_real_distribution<double> uniform_{0.0, 1.0};
 

@@ -8,11 +8,14 @@
 #  2. the module was configured by SDO (EnDatMode read back over SDO = configured value, the
 #     encoder delivers moving positions — with EnDat left disabled it would deliver zeros);
 #  3. positions arrive with NetTime stamps mapped to the cycle's time, none wrong;
-#  4. a CN power cycle is detected (loss of PRes → reset) and the CN is booted again;
+#  4. a CN power cycle is detected (loss of PRes → reset) and the CN is booted again; a CN asking
+#     for its own reset (NMTRequest) is reset and booted again;
 #  5. with 5 % random PRes loss no wrong position is published (losses really happened);
 #  6. the daemon's cycle work over POWERLINK allocates nothing and takes no mutex;
-#  7. every frame type the MN sent (SoC, PReq, SoA, ASnd NMTCommand, ASnd SDO) is decoded by
-#     Wireshark's POWERLINK dissector with no malformed packet and no expert error/warning.
+#  7. every frame type the MN sent (SoC, PReq, SoA incl. NMTRequestInvite, ASnd NMTCommand, ASnd
+#     SDO) and every one the CN sent (PRes, IdentResponse, StatusResponse, NMTRequest, SDO) is
+#     decoded by Wireshark's POWERLINK dissector with no malformed packet and no expert
+#     error/warning.
 # Namespaces, processes and files are cleaned up on every exit path.
 #
 # Built to run in CI next to other load on a 2-core machine that stalls for milliseconds now and
@@ -81,13 +84,19 @@ ip -n "$ns_mn" link set "$if_mn" up
 ip -n "$ns_cn" link set "$if_cn" up
 
 if [ $have_tshark = 1 ]; then
-  # Capture on the peer end: with PACKET_QDISC_BYPASS the MN's own interface does not see its
-  # frames.
+  # Capture each side's frames on the peer end: with PACKET_QDISC_BYPASS an interface does not
+  # see the frames its own raw socket sends. capture.pcapng: the MN's frames, seen by the CN's
+  # end; capture_cn.pcapng: the CN's frames, seen by the MN's end.
   ip netns exec "$ns_cn" tshark -i "$if_cn" -f "ether proto 0x88ab" -w "$tmp/capture.pcapng" \
       >"$tmp/tshark.log" 2>&1 &
   pids+=($!)
   tshark_pid=$!
+  ip netns exec "$ns_mn" tshark -i "$if_mn" -f "ether proto 0x88ab" -w "$tmp/capture_cn.pcapng" \
+      >"$tmp/tshark_cn.log" 2>&1 &
+  pids+=($!)
+  tshark_cn_pid=$!
   wait_for "$tmp/tshark.log" "Capturing on" 30 || fail "tshark did not start"
+  wait_for "$tmp/tshark_cn.log" "Capturing on" 30 || fail "tshark (MN end) did not start"
 fi
 
 # ---- Phase 1: boot, SDO configuration, positions, power cycle -------------------------------
@@ -127,6 +136,18 @@ wait_for "$tmp/mn1.log" "EVENT .* all-operational" 30 $((up_before + 1)) ||
 wait_for "$tmp/sim1.log" "READY_TO_OPERATE -> OPERATIONAL" 10 $((sim_up_before + 1)) ||
   fail "simulator not OPERATIONAL again"
 pass "power cycle detected and CN re-booted"
+# The CN asks for its own reset (NMTRequest after an NMTRequestInvite): the MN resets it, names
+# the reason, and boots it again.
+mn_up_wait() { for ((i = 0; i < 600; i++)); do mn_up && return 0; sleep 0.05; done; return 1; }
+mn_up_wait || fail "CN not operational before its NMTRequest"
+up_before=$(grep -cE "EVENT .* all-operational" "$tmp/mn1.log")
+kill -USR2 "$sim_pid"
+wait_for "$tmp/sim1.log" "NMTRequest: reset of own node queued" 10 || fail "simulator did not queue the NMTRequest"
+wait_for "$tmp/mn1.log" 'boot=reset .*last_error="reset requested by the node \(NMTRequest\)"' 10 ||
+  fail "MN did not reset the CN on its NMTRequest"
+wait_for "$tmp/mn1.log" "EVENT .* all-operational" 30 $((up_before + 1)) ||
+  fail "CN not booted again after its NMTRequest"
+pass "NMTRequest for the CN's own reset served: reset, re-booted"
 sleep 1
 kill -TERM "$mn_pid"
 wait "$mn_pid"
@@ -144,8 +165,8 @@ wait "$sim_pid" 2>/dev/null
 
 if [ $have_tshark = 1 ]; then
   sleep 0.5
-  kill -INT "$tshark_pid"
-  wait "$tshark_pid" 2>/dev/null
+  kill -INT "$tshark_pid" "$tshark_cn_pid"
+  wait "$tshark_pid" "$tshark_cn_pid" 2>/dev/null
 fi
 
 # ---- Phase 2: 5 % random PRes loss -------------------------------------------------------------
@@ -241,7 +262,7 @@ if [ -x "$daemon" ] && [ -x "$ctl" ]; then
   if [ $gaps_down -gt 0 ]; then
     grep -q "powerlink node 1: reset by the MN (" "$tmp/daemon.log" ||
       fail "axis 0 was bus_down but the daemon's log names no reset of node 1"
-    pass "each bus_down gap explained in the daemon's log: $(grep -m1 "reset by the MN" "$tmp/daemon.log" | sed 's/^.*warn *//')"
+    pass "each bus_down gap explained in the daemon's log: $(grep -m1 "reset by the MN" "$tmp/daemon.log" | sed 's/^.* warning *//')"
   fi
   ip netns exec "$ns_mn" "$ctl" --json -s "$sock" status >"$tmp/status.json" 2>/dev/null
   b0=$(sed -n 's/.*"boots":\([0-9]*\).*/\1/p' "$tmp/status.json")
@@ -276,6 +297,16 @@ if [ -x "$daemon" ] && [ -x "$ctl" ]; then
   else
     fail "EnDat read-param over Flatstream failed: $(cat "$tmp/endat.log")"
   fi
+  # The CN asks for its own reset: the daemon's MN serves it and the journal names the reason.
+  kill -USR2 "$sim_pid"
+  requested=0
+  for ((i = 0; i < 150; i++)); do
+    grep -q "powerlink node 1: reset by the MN (reset requested by the node (NMTRequest);" \
+        "$tmp/daemon.log" && { requested=1; break; }
+    sleep 0.1
+  done
+  [ $requested = 1 ] || fail "ds1928d did not reset the CN on its NMTRequest (or did not log it)"
+  pass "ds1928d served the CN's NMTRequest: $(grep -m1 'NMTRequest);' "$tmp/daemon.log" | sed 's/^.*warning *//')"
   kill -TERM "$daemon_pid" "$sim_pid"
   wait "$daemon_pid" "$sim_pid" 2>/dev/null
 else
@@ -317,10 +348,11 @@ if [ $have_tshark = 1 ]; then
   ident_req=$(awk -F'\t' '$1 == 5 && $3 == 1' "$tmp/mn_frames.txt" | wc -l)
   status_req=$(awk -F'\t' '$1 == 5 && $3 == 2' "$tmp/mn_frames.txt" | wc -l)
   echo "MN frames decoded: $total (SoC $soc, PReq $preq, SoA $soa [IdentRequest $ident_req, StatusRequest $status_req], NMTCommand $nmt, SDO $sdo)"
-  for n in soc preq soa nmt sdo ident_req status_req; do
+  nmt_invite=$(awk -F'\t' '$1 == 5 && $3 == 3' "$tmp/mn_frames.txt" | wc -l)
+  for n in soc preq soa nmt sdo ident_req status_req nmt_invite; do
     [ "${!n}" -gt 0 ] || fail "no $n frame from the MN was decoded as such"
   done
-  # Every frame of the capture (MN and CN): no malformed packet, no expert error or warning.
+  # Every frame of the capture (the MN's): no malformed packet, no expert error or warning.
   tshark -r "$cap" -Y "_ws.malformed || _ws.expert.severity >= 0x00600000" \
       -T fields -e frame.number -e epl.src -e epl.mtyp -e _ws.expert.message \
       >"$tmp/expert.txt" 2>>"$tmp/tshark_read.log"
@@ -331,5 +363,29 @@ if [ $have_tshark = 1 ]; then
   non_epl=$(tshark -r "$cap" -Y "eth.type == 0x88ab && !epl" 2>/dev/null | wc -l)
   [ "$non_epl" = 0 ] || fail "$non_epl POWERLINK frames not decoded by the epl dissector"
   pass "Wireshark decodes every MN frame type with no malformed packet or expert error"
+
+  # The simulated CN's frames (the peer the MN must understand): PRes, IdentResponse,
+  # StatusResponse, SDO and the NMTRequest, all decoded without error.
+  cap_cn=$tmp/capture_cn.pcapng
+  [ -s "$cap_cn" ] || fail "empty capture on the MN's end"
+  tshark -r "$cap_cn" -Y "epl.src == 1" -T fields -e epl.mtyp -e epl.asnd.svid \
+      >"$tmp/cn_frames.txt" 2>>"$tmp/tshark_read.log" || fail "tshark could not read the CN capture"
+  cn_pres=$(awk -F'\t' '$1 == 4' "$tmp/cn_frames.txt" | wc -l)
+  cn_ident=$(awk -F'\t' '$1 == 6 && $2 == 1' "$tmp/cn_frames.txt" | wc -l)
+  cn_status=$(awk -F'\t' '$1 == 6 && $2 == 2' "$tmp/cn_frames.txt" | wc -l)
+  cn_nmt_request=$(awk -F'\t' '$1 == 6 && $2 == 3' "$tmp/cn_frames.txt" | wc -l)
+  cn_sdo=$(awk -F'\t' '$1 == 6 && $2 == 5' "$tmp/cn_frames.txt" | wc -l)
+  echo "CN frames decoded: $(wc -l <"$tmp/cn_frames.txt") (PRes $cn_pres, IdentResponse $cn_ident, StatusResponse $cn_status, NMTRequest $cn_nmt_request, SDO $cn_sdo)"
+  for n in cn_pres cn_ident cn_status cn_nmt_request cn_sdo; do
+    [ "${!n}" -gt 0 ] || fail "no $n frame from the CN was decoded as such"
+  done
+  tshark -r "$cap_cn" -Y "_ws.malformed || _ws.expert.severity >= 0x00600000" \
+      -T fields -e frame.number -e epl.src -e epl.mtyp -e _ws.expert.message \
+      >"$tmp/expert_cn.txt" 2>>"$tmp/tshark_read.log"
+  if [ -s "$tmp/expert_cn.txt" ]; then
+    head -n 20 "$tmp/expert_cn.txt"
+    fail "Wireshark reports malformed CN frames or expert errors/warnings ($(wc -l <"$tmp/expert_cn.txt") frames)"
+  fi
+  pass "Wireshark decodes every CN frame type, the NMTRequest included, with no malformed packet or expert error"
 fi
 echo "PASS"

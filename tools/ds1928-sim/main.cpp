@@ -2,7 +2,8 @@
 //   ds1928-sim powerlink --iface IF --node N [--modules K] [--drop-pres P] [--delay-pres-us U]
 //                        [--power-cycle-after S] [--config FILE] ...
 // runs POWERLINK Controlled Node(s) with simulated X20DS1928 modules on a raw socket and prints
-// every NMT state change. SIGUSR1 power-cycles the node(s); SIGINT/SIGTERM stop.
+// every NMT state change. SIGUSR1 power-cycles the node(s); SIGUSR2 makes them ask the MN for
+// their own reset (NMTRequest); SIGINT/SIGTERM stop.
 // Further buses (CAN-I/O) become further subcommands.
 #include <sched.h>
 #include <sys/mman.h>
@@ -27,11 +28,15 @@ namespace {
 
 std::atomic<bool> g_stop{false};
 std::atomic<bool> g_power_cycle{false};
+std::atomic<bool> g_request_reset{false};
 void on_stop(int) {
   g_stop.store(true);
 }
 void on_usr1(int) {
   g_power_cycle.store(true);
+}
+void on_usr2(int) {
+  g_request_reset.store(true);
 }
 
 struct PowerlinkOptions {
@@ -200,6 +205,12 @@ int run_powerlink(const PowerlinkOptions& o) {
       std::fflush(stdout);
       for (auto* n : node_ptrs) n->power_cycle(now);
     }
+    if (g_request_reset.exchange(false)) {
+      std::printf("%10.6f NMTRequest: reset of own node queued\n",
+                  static_cast<double>(now - start) / 1e9);
+      std::fflush(stdout);
+      for (auto* n : node_ptrs) n->request_own_reset();
+    }
     if (link.link_up() != link_was_up) {
       link_was_up = link.link_up();
       std::printf("%10.6f link %s\n", static_cast<double>(now - start) / 1e9,
@@ -270,6 +281,7 @@ int main(int argc, char** argv) {
   std::signal(SIGINT, on_stop);
   std::signal(SIGTERM, on_stop);
   std::signal(SIGUSR1, on_usr1);
+  std::signal(SIGUSR2, on_usr2);
   setvbuf(stdout, nullptr, _IOLBF, 0);
   if (plk->parsed()) return run_powerlink(o);
   return 1;
