@@ -185,3 +185,23 @@ TEST_CASE("With random PRes loss the MN never hands out stale inputs as fresh") 
   CHECK(fresh > 1800);
   CHECK(s.mn->managing_node().node(1)->resets == 0);
 }
+
+TEST_CASE("The simulated CN asks for its own reset and the MN serves it") {
+  Setup s;
+  REQUIRE(s.run_until_operational(3000));
+  s.cn->request_own_reset();
+  bool left = false;
+  for (int i = 0; i < 100 && !left; ++i) left = !s.step().bus_up;
+  REQUIRE(left);
+  CHECK(s.cn->stats().nmt_requests_sent == 1);
+  const pl::CnStatus* st = s.mn->managing_node().node(1);
+  REQUIRE(st != nullptr);
+  CHECK(st->nmt_requests == 1);
+  CHECK(st->nmt_requests_refused == 0);
+  CHECK(st->last_reset_reason == pl::MnError::kResetRequested);
+  REQUIRE(s.run_until_operational(5000));
+  CHECK(st->boots == 2);
+  CHECK(st->resets == 1);
+  CHECK(s.cn->stats().power_cycles == 0);
+  CHECK(s.cn->stats().nmt_requests_sent == 1);  // asked once, not again after the reset
+}
