@@ -23,20 +23,30 @@ void LatencyHistogram::record(int64_t ns) noexcept {
   if (ns > max_.load(std::memory_order_relaxed)) max_.store(ns, std::memory_order_relaxed);
 }
 
-void LatencyHistogram::reset() noexcept {
+LatencyHistogram::LatencyHistogram() noexcept {
   for (auto& b : bins_) b.store(0, std::memory_order_relaxed);
-  overflow_.store(0, std::memory_order_relaxed);
+  for (auto& b : base_) b.store(0, std::memory_order_relaxed);
+  restart_scalars();
+}
+
+void LatencyHistogram::restart_scalars() noexcept {
   count_.store(0, std::memory_order_relaxed);
   sum_.store(0, std::memory_order_relaxed);
   min_.store(kNoMin, std::memory_order_relaxed);
   max_.store(0, std::memory_order_relaxed);
 }
 
+void LatencyHistogram::rebase() noexcept {
+  for (std::size_t i = 0; i < kBins; ++i)
+    base_[i].store(bins_[i].load(std::memory_order_relaxed), std::memory_order_relaxed);
+  overflow_base_.store(overflow_.load(std::memory_order_relaxed), std::memory_order_relaxed);
+}
+
 int64_t LatencyHistogram::quantile(double q) const noexcept {
   // The total is summed from the bins themselves so that the walk below always reaches the
   // target, even when the writer is between two of its stores.
   uint64_t total = overflow();
-  for (const auto& b : bins_) total += b.load(std::memory_order_relaxed);
+  for (std::size_t i = 0; i < kBins; ++i) total += bin(i);
   if (total == 0) return 0;
   q = std::clamp(q, 0.0, 1.0);
   auto target = static_cast<uint64_t>(std::ceil(q * static_cast<double>(total)));
@@ -44,7 +54,7 @@ int64_t LatencyHistogram::quantile(double q) const noexcept {
   const int64_t max = max_ns();
   uint64_t seen = 0;
   for (std::size_t i = 0; i < kBins; ++i) {
-    seen += bins_[i].load(std::memory_order_relaxed);
+    seen += bin(i);
     if (seen >= target) {
       return std::min(static_cast<int64_t>(i + 1) * kBinWidthNs, max);
     }
@@ -67,11 +77,17 @@ HistogramSummary LatencyHistogram::summary() const noexcept {
   return s;
 }
 
+void CycleStats::request_reset() noexcept {
+  wake_latency_.rebase();
+  work_.rebase();
+  reset_requested_.fetch_add(1, std::memory_order_release);
+}
+
 void CycleStats::apply_pending_reset() noexcept {
   const auto requested = reset_requested_.load(std::memory_order_acquire);
   if (requested == reset_applied_.load(std::memory_order_relaxed)) return;
-  wake_latency_.reset();
-  work_.reset();
+  wake_latency_.restart_scalars();
+  work_.restart_scalars();
   cycles_.store(0, std::memory_order_relaxed);
   overruns_.store(0, std::memory_order_relaxed);
   skipped_.store(0, std::memory_order_relaxed);

@@ -1,11 +1,15 @@
 // Per-cycle statistics of the cycle engine: fixed-size histograms written by the cycle thread
 // alone and read by any other thread without locks.
 //
-// Writer discipline: exactly one thread (the cycle thread) calls record()/apply_reset(). Every
-// word is a relaxed atomic updated with load+store (no read-modify-write, so no locked bus
+// Writer discipline: exactly one thread (the cycle thread) calls record()/apply_pending_reset().
+// Every word is a relaxed atomic updated with load+store (no read-modify-write, so no locked bus
 // cycle on the hot path). A reader sees each word torn-free but not the set of words as one
 // instant: a summary may mix the state of two consecutive cycles, which for a distribution of
 // thousands of samples is irrelevant, and costs the writer nothing.
+//
+// A reset never zeroes the bins on the cycle thread (256 KiB, tens of µs): the thread that asks
+// for it copies the bins into a baseline that readers subtract, and the cycle thread only
+// restarts the handful of scalar counters and extremes between two cycles.
 #pragma once
 
 #include <array>
@@ -37,33 +41,45 @@ class LatencyHistogram {
   static constexpr std::size_t kBins = 16384;  // 0 .. 4.096 ms
   static constexpr int64_t kRangeNs = kBinWidthNs * static_cast<int64_t>(kBins);
 
-  LatencyHistogram() noexcept { reset(); }
+  LatencyHistogram() noexcept;
   LatencyHistogram(const LatencyHistogram&) = delete;
   LatencyHistogram& operator=(const LatencyHistogram&) = delete;
 
   // Writer side.
   void record(int64_t ns) noexcept;
-  void reset() noexcept;
+  // Restarts count, sum, minimum and maximum (a few stores); the bins restart by rebase().
+  void restart_scalars() noexcept;
 
-  // Reader side (any thread).
+  // Requester side (the thread that asks for a reset, before the writer's restart_scalars()):
+  // the current bins become the baseline, so they read as zero from now on.
+  void rebase() noexcept;
+
+  // Reader side (any thread). Bin counts are since the last rebase().
   [[nodiscard]] HistogramSummary summary() const noexcept;
   // Value at quantile q (0 < q ≤ 1) by the rule of HistogramSummary; 0 when empty.
   [[nodiscard]] int64_t quantile(double q) const noexcept;
   [[nodiscard]] uint64_t bin(std::size_t i) const noexcept {
-    return bins_[i].load(std::memory_order_relaxed);
+    return since_base(bins_[i], base_[i]);
   }
-  [[nodiscard]] uint64_t overflow() const noexcept {
-    return overflow_.load(std::memory_order_relaxed);
-  }
+  [[nodiscard]] uint64_t overflow() const noexcept { return since_base(overflow_, overflow_base_); }
   [[nodiscard]] int64_t max_ns() const noexcept { return max_.load(std::memory_order_relaxed); }
 
  private:
   static void bump(std::atomic<uint64_t>& a) noexcept {
     a.store(a.load(std::memory_order_relaxed) + 1, std::memory_order_relaxed);
   }
+  // Counts only grow, so a count below its baseline is a reader racing a rebase(): zero.
+  static uint64_t since_base(const std::atomic<uint64_t>& count,
+                             const std::atomic<uint64_t>& base) noexcept {
+    const uint64_t b = base.load(std::memory_order_relaxed);
+    const uint64_t c = count.load(std::memory_order_relaxed);
+    return c > b ? c - b : 0;
+  }
 
   std::array<std::atomic<uint64_t>, kBins> bins_;
+  std::array<std::atomic<uint64_t>, kBins> base_;
   std::atomic<uint64_t> overflow_{0};
+  std::atomic<uint64_t> overflow_base_{0};
   std::atomic<uint64_t> count_{0};
   std::atomic<int64_t> sum_{0};
   std::atomic<int64_t> min_{0};
@@ -97,8 +113,12 @@ class CycleStats {
   // reset never races the writer and needs no lock.
   void apply_pending_reset() noexcept;
 
+  // Any thread other than the writer (one at a time): asks for a reset. The histograms restart
+  // at once (this call copies their bins into the baseline); cycles, overruns, counts and
+  // extremes restart when the writer applies the request between two cycles.
+  void request_reset() noexcept;
+
   // Reader side (any thread).
-  void request_reset() noexcept { reset_requested_.fetch_add(1, std::memory_order_release); }
   [[nodiscard]] CycleStatsSnapshot snapshot() const noexcept;
   [[nodiscard]] const LatencyHistogram& wake_latency() const noexcept { return wake_latency_; }
   [[nodiscard]] const LatencyHistogram& work() const noexcept { return work_; }

@@ -133,4 +133,38 @@ TEST_CASE("stats reset is applied by the writer only when requested", "[cycle_st
   CHECK(s.cycles == 1);
   CHECK(s.wake_latency.min_ns == 500);
   CHECK(s.wake_latency.max_ns == 500);
+  // Quantiles count only what came after the reset (the ten 7000 ns samples are gone).
+  CHECK(s.work.p50_ns == 900);
+  CHECK(s.work.p999_ns == 900);
+  CHECK(s.work.count == 1);
+}
+
+TEST_CASE("stats reset leaves the bins to the requester: the writer restarts scalars only",
+          "[cycle_stats]") {
+  auto stats = std::make_unique<CycleStats>();
+  for (int i = 0; i < 100; ++i) stats->record_cycle(1000 + 250 * i, 5000);
+  stats->record_cycle(LatencyHistogram::kRangeNs + 1, 5000);  // one in the overflow bin
+  REQUIRE(stats->wake_latency().overflow() == 1);
+  stats->request_reset();
+  // The histogram restarts at the request (its bins read zero), before the writer applies it.
+  for (std::size_t i = 0; i < LatencyHistogram::kBins; ++i)
+    REQUIRE(stats->wake_latency().bin(i) == 0);
+  CHECK(stats->wake_latency().overflow() == 0);
+  CHECK(stats->wake_latency().quantile(0.5) == 0);
+  stats->apply_pending_reset();
+  // New samples in the very bins that held old ones count from zero.
+  stats->record_cycle(1000, 5000);
+  stats->record_cycle(1100, 5000);
+  CHECK(stats->wake_latency().bin(1000 / kBin) == 2);
+  const auto s = stats->snapshot();
+  CHECK(s.wake_latency.count == 2);
+  CHECK(s.wake_latency.overflow == 0);
+  CHECK(s.wake_latency.p50_ns == 1100);  // upper edge 1250, clamped to the maximum
+  CHECK(s.wake_latency.max_ns == 1100);
+  // A second reset works the same way.
+  stats->request_reset();
+  stats->apply_pending_reset();
+  CHECK(stats->snapshot().wake_latency.count == 0);
+  CHECK(stats->wake_latency().bin(1000 / kBin) == 0);
+  CHECK(stats->snapshot().reset_generation == 2);
 }
