@@ -67,6 +67,19 @@ bool cpu_usable(int cpu) noexcept {
 
 // noinline keeps the frame where the caller expects it: the pages touched here are the ones the
 // caller's callees will use.
+SetupStep limit_default_thread_stack(std::size_t bytes) noexcept {
+  pthread_attr_t attr;
+  if (int e = pthread_getattr_default_np(&attr); e != 0) return SetupStep{e};
+  std::size_t current = 0;
+  int e = pthread_attr_getstacksize(&attr, &current);
+  if (e == 0 && current > bytes) {
+    e = pthread_attr_setstacksize(&attr, bytes);
+    if (e == 0) e = pthread_setattr_default_np(&attr);
+  }
+  pthread_attr_destroy(&attr);
+  return SetupStep{e};
+}
+
 __attribute__((noinline)) void prefault_stack(std::size_t bytes) noexcept {
   constexpr std::size_t kPage = 4096;
   constexpr std::size_t kMax = 1024 * 1024;

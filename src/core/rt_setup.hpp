@@ -33,6 +33,12 @@ struct SetupStep {
 // mlockall(MCL_CURRENT | MCL_FUTURE): process-wide, never undone (a daemon that locked its
 // memory once wants it locked for its lifetime).
 [[nodiscard]] SetupStep lock_all_memory() noexcept;
+// Makes `bytes` the stack size of threads created from now on without their own attributes
+// (glibc's default follows RLIMIT_STACK, usually 8 MiB). With mlockall(MCL_FUTURE) every thread's
+// whole stack is locked in RAM, so the default decides the daemon's resident size. Never raises
+// the default. Call before the first thread is started.
+[[nodiscard]] SetupStep limit_default_thread_stack(std::size_t bytes) noexcept;
+
 // Touches `bytes` of the calling thread's stack so that the first deep call on the RT path does
 // not page-fault.
 void prefault_stack(std::size_t bytes) noexcept;
