@@ -19,7 +19,7 @@
 
 #include "config/config_loader.hpp"
 #include "core/cycle_engine.hpp"
-#include "cycle_traffic.hpp"
+#include "cycle_proof.hpp"
 #include "cycle_work.hpp"
 #include "daemon.hpp"
 #include "endat/command.hpp"
@@ -27,40 +27,6 @@
 #include "support/alloc_counter.hpp"
 
 using namespace ds1928;
-
-namespace {
-
-// Counts `counted` cycles from the first cycle after `arm()`.
-class CountingTask final : public CycleTask {
- public:
-  CountingTask(CycleTask& inner, uint64_t counted) : inner_(inner), counted_(counted) {}
-  void run_cycle(const CycleContext& ctx) noexcept override {
-    if (!counting_ && armed_.load(std::memory_order_acquire) && !done()) {
-      counting_ = true;
-      test::begin_counting();
-    }
-    inner_.run_cycle(ctx);
-    if (counting_ && ++executed_ == counted_) {
-      counting_ = false;
-      result_ = test::end_counting();
-      done_.store(true, std::memory_order_release);
-    }
-  }
-  void arm() noexcept { armed_.store(true, std::memory_order_release); }
-  [[nodiscard]] bool done() const noexcept { return done_.load(std::memory_order_acquire); }
-  [[nodiscard]] const test::HeapCounts& result() const noexcept { return result_; }
-
- private:
-  CycleTask& inner_;
-  uint64_t counted_;
-  uint64_t executed_ = 0;
-  bool counting_ = false;
-  std::atomic<bool> armed_{false};
-  std::atomic<bool> done_{false};
-  test::HeapCounts result_;
-};
-
-}  // namespace
 
 int main(int argc, char** argv) {
   if (argc < 2) {
@@ -93,7 +59,7 @@ int main(int argc, char** argv) {
     return 2;
   }
   CycleWork work(config, *bus, publisher);
-  CountingTask task(work, cycles);
+  test::CountingTask task(work, cycles, 0, false);  // armed once the bus is operational
   auto engine = std::make_unique<CycleEngine>(config.cycle, task);
   if (auto started = engine->start(); !started) {
     std::fprintf(stderr, "cycle engine: %s\n", started.error.message().c_str());
@@ -111,7 +77,7 @@ int main(int argc, char** argv) {
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
-  task.arm();
+  task.arm();  // count from here on
 
   // The normal thread's traffic while the cycles are counted: EnDat read-param through the
   // Flatstream tunnel of every axis, error acknowledgements, register reads (SDO over ASnd).

@@ -9,7 +9,7 @@
 #include <thread>
 
 #include "core/cycle_engine.hpp"
-#include "cycle_traffic.hpp"
+#include "cycle_proof.hpp"
 #include "cycle_work.hpp"
 #include "endat/command.hpp"
 #include "shm/publisher.hpp"
@@ -19,31 +19,6 @@
 using namespace ds1928;
 
 namespace {
-
-class CountingTask final : public CycleTask {
- public:
-  CountingTask(CycleTask& inner, uint64_t warmup, uint64_t counted)
-      : inner_(inner), warmup_(warmup), last_(warmup + counted) {}
-  void run_cycle(const CycleContext& ctx) noexcept override {
-    if (executed_ == warmup_) test::begin_counting();
-    inner_.run_cycle(ctx);
-    ++executed_;
-    if (executed_ == last_) {
-      result_ = test::end_counting();
-      done_.store(true, std::memory_order_release);
-    }
-  }
-  [[nodiscard]] bool done() const noexcept { return done_.load(std::memory_order_acquire); }
-  [[nodiscard]] bool counting() const noexcept { return executed_ > warmup_; }
-  [[nodiscard]] const test::HeapCounts& result() const noexcept { return result_; }
-
- private:
-  CycleTask& inner_;
-  uint64_t warmup_, last_;
-  uint64_t executed_ = 0;
-  std::atomic<bool> done_{false};
-  test::HeapCounts result_;
-};
 
 DaemonConfig four_axes(uint32_t period_us) {
   DaemonConfig c;
@@ -76,7 +51,7 @@ TEST_CASE("the daemon's cycle work allocates nothing and locks no mutex in 100 0
   CycleWork work(config, bus, publisher);
   constexpr uint64_t kWarmup = 2000;
   constexpr uint64_t kCounted = 100'000;
-  CountingTask task(work, kWarmup, kCounted);
+  test::CountingTask task(work, kCounted, kWarmup);
   auto engine = std::make_unique<CycleEngine>(config.cycle, task);
   auto started = engine->start();
   REQUIRE(started);

@@ -1,0 +1,78 @@
+// The two halves of the allocation proofs of the daemon's cycle work (simulated bus and
+// POWERLINK): CountingTask counts heap allocations and mutex locks on the cycle thread over a
+// window of cycles; CycleTraffic is the normal thread's side, one round of the traffic a running
+// daemon puts through its cycle work — an EnDat command into every axis' Flatstream tunnel,
+// replies collected, an error acknowledgement, an acyclic register read — counted so the proofs
+// can require that it really went through the counted cycles.
+#pragma once
+
+#include <algorithm>
+#include <atomic>
+#include <cstdint>
+
+#include "core/bus.hpp"
+#include "core/cycle_engine.hpp"
+#include "cycle_work.hpp"
+#include "endat/command.hpp"
+#include "support/alloc_counter.hpp"
+
+namespace ds1928::test {
+
+// Wraps the daemon's CycleTask and counts `counted` cycles: from the first cycle after `warmup`
+// cycles once armed (from the start when `armed`, else from arm()).
+class CountingTask final : public CycleTask {
+ public:
+  CountingTask(CycleTask& inner, uint64_t counted, uint64_t warmup = 0, bool armed = true)
+      : inner_(inner), counted_(counted), warmup_(warmup), armed_(armed) {}
+  void run_cycle(const CycleContext& ctx) noexcept override {
+    if (!counting_ && !done() && executed_ >= warmup_ && armed_.load(std::memory_order_acquire)) {
+      counting_ = true;
+      begin_counting();
+    }
+    inner_.run_cycle(ctx);
+    ++executed_;
+    if (counting_ && ++in_window_ == counted_) {
+      counting_ = false;
+      result_ = end_counting();
+      done_.store(true, std::memory_order_release);
+    }
+  }
+  void arm() noexcept { armed_.store(true, std::memory_order_release); }
+  [[nodiscard]] bool done() const noexcept { return done_.load(std::memory_order_acquire); }
+  // Valid once done().
+  [[nodiscard]] const HeapCounts& result() const noexcept { return result_; }
+
+ private:
+  CycleTask& inner_;
+  uint64_t counted_, warmup_;
+  uint64_t executed_ = 0, in_window_ = 0;
+  bool counting_ = false;
+  std::atomic<bool> armed_;
+  std::atomic<bool> done_{false};
+  HeapCounts result_;
+};
+
+struct CycleTraffic {
+  uint64_t sent = 0, replies = 0, acks = 0, registers = 0, register_results = 0;
+  uint32_t tag = 1;
+
+  // `command`: an encoded EnDat request; `ack_axis`/`register_axis`: where the acknowledgement
+  // and the register read go.
+  void round(CycleWork& work, BusDriver& bus, std::size_t axes,
+             const endat::RequestMessage& command, uint16_t ack_axis, uint16_t register_axis) {
+    for (std::size_t axis = 0; axis < axes; ++axis) {
+      TunnelRequest r;
+      r.tag = tag++;
+      r.size = command.size;
+      std::copy_n(command.bytes.begin(), command.size, r.bytes.begin());
+      if (work.submit_tunnel(axis, r)) ++sent;
+      while (auto e = work.poll_tunnel(axis)) replies += e->kind == TunnelEvent::Kind::Received;
+    }
+    if (work.post({AxisCommand::Kind::AckErrors, ack_axis, 0x10})) ++acks;
+    if (bus.submit({tag++, register_axis, reg::kEnDatMode, 1, false, 0})) ++registers;
+    RegisterResult rr;
+    while (bus.poll(rr)) register_results += !rr.error;
+  }
+};
+
+}  // namespace ds1928::test
