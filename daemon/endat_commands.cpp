@@ -1,6 +1,7 @@
 // The endat-* socket commands: argument parsing, privilege check, reply formatting. The command
 // engine itself is in endat_service.cpp.
 #include <cstdio>
+#include <optional>
 #include <string>
 
 #include "endat/names.hpp"
@@ -51,6 +52,20 @@ using nlohmann::json;
   json j{{"value", value}, {"value_hex", hex(value, 4)}};
   if (auto meaning = endat::describe_word(mrs, param, value); !meaning.empty())
     j["meaning"] = std::move(meaning);
+  return j;
+}
+
+// The reply of the parameter and block commands: area, parameter (and block), the value the
+// last step read, and whether it was a verified write.
+[[nodiscard]] json param_reply(const char* command, uint8_t mrs, uint8_t param,
+                               const EnDatService::JobResult& r, bool verified,
+                               std::optional<uint8_t> block = std::nullopt) {
+  json j = area_json(mrs);
+  j["command"] = command;
+  if (block) j["block"] = *block;
+  j["param"] = param;
+  j.update(value_json(mrs, param, r.steps.back().reply.value()));
+  if (verified) j["verified"] = true;
   return j;
 }
 
@@ -133,11 +148,7 @@ void EnDatService::register_commands(control::Server& server) {
     const auto mrs = static_cast<uint8_t>(number_arg(req, "mrs", 0, 0xFF));
     const auto param = static_cast<uint8_t>(number_arg(req, "param", 0, 0xFF));
     run(req, reply, JobKind::Single, {Request::read(mrs, param)}, [mrs, param](const JobResult& r) {
-      json j = area_json(mrs);
-      j["command"] = "read-param";
-      j["param"] = param;
-      j.update(value_json(mrs, param, r.steps.back().reply.value()));
-      return j;
+      return param_reply("read-param", mrs, param, r, false);
     });
   });
 
@@ -150,12 +161,7 @@ void EnDatService::register_commands(control::Server& server) {
         run(req, reply, JobKind::WriteVerify,
             {Request::write(mrs, param, value), Request::read(mrs, param)},
             [mrs, param](const JobResult& r) {
-              json j = area_json(mrs);
-              j["command"] = "write-param";
-              j["param"] = param;
-              j.update(value_json(mrs, param, r.steps.back().reply.value()));
-              j["verified"] = true;
-              return j;
+              return param_reply("write-param", mrs, param, r, true);
             });
       });
 
@@ -165,12 +171,7 @@ void EnDatService::register_commands(control::Server& server) {
     const auto param = static_cast<uint8_t>(number_arg(req, "param", 0, 0xFF));
     run(req, reply, JobKind::Single, {Request::read_block(mrs, block, param)},
         [mrs, block, param](const JobResult& r) {
-          json j = area_json(mrs);
-          j["command"] = "read-block";
-          j["block"] = block;
-          j["param"] = param;
-          j.update(value_json(mrs, param, r.steps.back().reply.value()));
-          return j;
+          return param_reply("read-block", mrs, param, r, false, block);
         });
   });
 
@@ -184,13 +185,7 @@ void EnDatService::register_commands(control::Server& server) {
     run(req, reply, JobKind::WriteVerify,
         {Request::write_block(mrs, block, param, value), Request::read_block(mrs, block, param)},
         [mrs, block, param](const JobResult& r) {
-          json j = area_json(mrs);
-          j["command"] = "write-block";
-          j["block"] = block;
-          j["param"] = param;
-          j.update(value_json(mrs, param, r.steps.back().reply.value()));
-          j["verified"] = true;
-          return j;
+          return param_reply("write-block", mrs, param, r, true, block);
         });
   });
 

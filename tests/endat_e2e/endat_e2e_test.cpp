@@ -69,6 +69,18 @@ TEST_CASE("ident, read-param, write-param round trip and protected write over th
   CHECK(r["value"] == 0xBEEF);
   CHECK(r["value_hex"] == "0xBEEF");
 
+  // Block-addressed area (MRS 0xB1, 4 blocks of 16 words): the reply names block and parameter.
+  const json blk = c.request(
+      {{"cmd", "endat-read-block"}, {"axis", 0}, {"mrs", 0xB1}, {"block", 2}, {"param", 5}});
+  INFO(blk.dump());
+  REQUIRE(blk.value("ok", false));
+  CHECK(blk["command"] == "read-block");
+  CHECK(blk["mrs"] == 0xB1);
+  CHECK(blk["block"] == 2);
+  CHECK(blk["param"] == 5);
+  CHECK(blk["value"] == 0);
+  CHECK_FALSE(blk.contains("verified"));
+
   // Manufacturer page: the encoder keeps its word; the read-back shows it.
   const json p = c.request(
       {{"cmd", "endat-write-param"}, {"axis", 0}, {"mrs", 0xA1}, {"param", 13}, {"value", 0x1234}});
