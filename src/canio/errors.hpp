@@ -27,7 +27,6 @@ enum class CanError : int {
   kInterfaceNameInvalid, // empty, or longer than IFNAMSIZ-1
   kNetlink,              // rtnetlink answer missing or malformed
   kNotOpen,              // the port is not open
-  kVirtualBusFull,       // the virtual bus has no free port slot
   kVirtualBusMismatch,   // a shared virtual bus of that name has another layout/version
 };
 

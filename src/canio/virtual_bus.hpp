@@ -60,6 +60,8 @@ struct FaultCounters {
   uint64_t delayed = 0;         // frames that went through the delay queue
   uint64_t delay_overflow = 0;  // delay queue full: frame dropped
   uint64_t errors_injected = 0;
+  uint64_t sends_failed = 0;    // by fail_next_sends
+  uint64_t missed_off_bus = 0;  // frames on the bus while this port was bus-off or down
 };
 
 class VirtualCanBus;
@@ -102,6 +104,9 @@ class VirtualCanPort final : public CanPort {
   void restart() noexcept;
   // Administrative up/down: down → send() InterfaceDown, receive() kInterfaceDown.
   void set_up(bool up) noexcept;
+  // The next `count` send() calls fail with `status` (QueueFull: as ENOBUFS, InterfaceDown: as
+  // ENETDOWN, Failed: as EIO) without reaching the bus.
+  void fail_next_sends(uint32_t count, SendStatus status = SendStatus::QueueFull) noexcept;
 
   [[nodiscard]] FaultCounters fault_counters() const noexcept;
 
@@ -131,7 +136,7 @@ class VirtualCanBus : public std::enable_shared_from_this<VirtualCanBus> {
   VirtualCanBus(const VirtualCanBus&) = delete;
   VirtualCanBus& operator=(const VirtualCanBus&) = delete;
 
-  // A new port on this bus; it sees frames sent from now on. kVirtualBusFull past 64 ports.
+  // A new port on this bus; it sees frames sent from now on (by any other port).
   [[nodiscard]] Result<std::unique_ptr<VirtualCanPort>> open_port(VirtualPortOptions options = {});
 
   [[nodiscard]] int64_t now_ns() const noexcept;
