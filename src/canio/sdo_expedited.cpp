@@ -15,7 +15,9 @@ constexpr uint8_t kCsAbort = 4;      // either side
 constexpr uint8_t kExpedited = 0x02;
 constexpr uint8_t kSizeIndicated = 0x01;
 
-constexpr bool valid_node(uint8_t node) noexcept { return node >= 1 && node <= 127; }
+constexpr bool valid_node(uint8_t node) noexcept {
+  return node >= 1 && node <= 127;
+}
 
 uint8_t expedited_specifier(uint8_t cs, uint8_t size) noexcept {
   return static_cast<uint8_t>((cs << 5) | ((4 - size) << 2) | kExpedited | kSizeIndicated);

@@ -39,8 +39,8 @@ static_assert(std::atomic<uint64_t>::is_always_lock_free,
               "the ring lives in shared memory: its atomics must be address-free");
 
 uint64_t pack_header(const CanFrame& f, uint16_t sender) noexcept {
-  return uint64_t{f.id & kMaxExtendedId} | (uint64_t{f.extended} << 29) |
-         (uint64_t{f.rtr} << 30) | (uint64_t{f.dlc} << 32) | (uint64_t{sender} << 48);
+  return uint64_t{f.id & kMaxExtendedId} | (uint64_t{f.extended} << 29) | (uint64_t{f.rtr} << 30) |
+         (uint64_t{f.dlc} << 32) | (uint64_t{sender} << 48);
 }
 
 uint64_t pack_data(const CanFrame& f) noexcept {
@@ -60,7 +60,9 @@ long futex(std::atomic<uint32_t>* word, int op, uint32_t val, const timespec* ti
   return syscall(SYS_futex, reinterpret_cast<uint32_t*>(word), op, val, timeout, nullptr, 0);
 }
 
-std::string shm_object_name(std::string_view name) { return "/ds1928-vcan." + std::string(name); }
+std::string shm_object_name(std::string_view name) {
+  return "/ds1928-vcan." + std::string(name);
+}
 
 bool valid_bus_name(std::string_view name) noexcept {
   if (name.empty() || name.size() > 200) return false;
@@ -74,12 +76,12 @@ bool valid_bus_name(std::string_view name) noexcept {
 struct VirtualCanBus::Ring {
   uint64_t magic;
   uint32_t version;
-  uint32_t capacity;               // slots, power of two
-  std::atomic<uint32_t> ready;     // 1 once the creator initialised the header
-  std::atomic<uint32_t> next_port;  // sender ids
-  alignas(64) std::atomic<uint64_t> head;  // next ticket
+  uint32_t capacity;                            // slots, power of two
+  std::atomic<uint32_t> ready;                  // 1 once the creator initialised the header
+  std::atomic<uint32_t> next_port;              // sender ids
+  alignas(64) std::atomic<uint64_t> head;       // next ticket
   alignas(64) std::atomic<uint32_t> published;  // futex word: bumped after every frame
-  std::atomic<uint32_t> sleepers;              // readers inside futex wait
+  std::atomic<uint32_t> sleepers;               // readers inside futex wait
 
   Slot* slots() noexcept { return reinterpret_cast<Slot*>(this + 1); }
   static std::size_t bytes(uint32_t capacity) noexcept {
@@ -163,7 +165,9 @@ struct AtomicCounters {
       sends_failed{0}, missed_off_bus{0};
 };
 
-void bump(std::atomic<uint64_t>& c) noexcept { c.fetch_add(1, std::memory_order_relaxed); }
+void bump(std::atomic<uint64_t>& c) noexcept {
+  c.fetch_add(1, std::memory_order_relaxed);
+}
 
 struct Delayed {
   CanFrame frame;
@@ -345,8 +349,8 @@ ReceiveResult VirtualCanPort::receive(std::span<CanFrame> out, int64_t deadline_
       p.own_count -= i;
     }
 
-    const bool on_bus = p.up.load(std::memory_order_acquire) &&
-                        p.current_state() != CanState::BusOff;
+    const bool on_bus =
+        p.up.load(std::memory_order_acquire) && p.current_state() != CanState::BusOff;
     const bool delaying = p.delay_polls.load(std::memory_order_relaxed) != 0 ||
                           p.delay_ns.load(std::memory_order_relaxed) != 0 || p.delay_size != 0;
 
@@ -569,7 +573,9 @@ void VirtualCanPort::restart() noexcept {
   impl_->restart_requested.store(true, std::memory_order_release);
 }
 
-void VirtualCanPort::set_up(bool up) noexcept { impl_->up.store(up, std::memory_order_release); }
+void VirtualCanPort::set_up(bool up) noexcept {
+  impl_->up.store(up, std::memory_order_release);
+}
 
 void VirtualCanPort::fail_next_sends(uint32_t count, SendStatus status) noexcept {
   impl_->fail_status.store(static_cast<uint8_t>(status), std::memory_order_relaxed);
@@ -589,7 +595,7 @@ std::shared_ptr<VirtualCanBus> VirtualCanBus::create_local(VirtualBusOptions opt
   bus->options_ = std::move(options);
   bus->options_.ring_frames = cap;
   bus->mapped_bytes_ = Ring::bytes(cap);
-  void* mem = ::operator new(bus->mapped_bytes_, std::align_val_t{64});
+  void* mem = ::operator new (bus->mapped_bytes_, std::align_val_t{64});
   std::memset(mem, 0, bus->mapped_bytes_);
   bus->ring_ = static_cast<Ring*>(mem);
   bus->ring_->magic = kMagic;
@@ -600,8 +606,8 @@ std::shared_ptr<VirtualCanBus> VirtualCanBus::create_local(VirtualBusOptions opt
 }
 
 Result<std::shared_ptr<VirtualCanBus>> VirtualCanBus::open_shared(std::string_view name,
-                                                                   VirtualBusOptions options,
-                                                                   bool unlink_on_close) {
+                                                                  VirtualBusOptions options,
+                                                                  bool unlink_on_close) {
   if (!valid_bus_name(name)) return CanError::kInterfaceNameInvalid;
   uint32_t cap = options.ring_frames < 2 ? 2 : options.ring_frames;
   if ((cap & (cap - 1)) != 0) cap = 1u << (32 - __builtin_clz(cap));
@@ -622,7 +628,7 @@ Result<std::shared_ptr<VirtualCanBus>> VirtualCanBus::open_shared(std::string_vi
   }
   if (!creator) {
     // The creator may still be sizing it: wait (bounded) for the size, then for `ready`.
-    struct stat st{};
+    struct stat st {};
     for (int i = 0; i < 1000; ++i) {
       if (fstat(fd, &st) == 0 && static_cast<std::size_t>(st.st_size) >= sizeof(Ring)) break;
       timespec pause{0, 1'000'000};
@@ -683,7 +689,7 @@ VirtualCanBus::~VirtualCanBus() {
     munmap(ring_, mapped_bytes_);
     if (unlink_on_close_) shm_unlink(shm_name_.c_str());
   } else {
-    ::operator delete(static_cast<void*>(ring_), std::align_val_t{64});
+    ::operator delete (static_cast<void*>(ring_), std::align_val_t{64});
   }
 }
 

@@ -8,11 +8,12 @@
 // Medium: one ring of frame slots, written by any port (ticket = fetch_add on the head), read by
 // every port at its own pace (a reader lapped by the writers loses the overwritten frames and
 // counts them as rx_kernel_drops, like SO_RXQ_OVFL). Slots are plain atomics, waiting is a futex
-// on the publish counter, so the ring works the same in process memory (VirtualCanBus::create_local)
-// and in POSIX shared memory between processes (VirtualCanBus::open_shared): ds1928d and
-// `ds1928-sim canio` talk over it without AF_CAN. Shared memory was chosen over a Unix datagram
-// socket per port because a broadcast needs no peer list, send is one slot write with no syscall
-// unless a reader sleeps, and nothing on the send/receive path allocates.
+// on the publish counter, so the ring works the same in process memory
+// (VirtualCanBus::create_local) and in POSIX shared memory between processes
+// (VirtualCanBus::open_shared): ds1928d and `ds1928-sim canio` talk over it without AF_CAN. Shared
+// memory was chosen over a Unix datagram socket per port because a broadcast needs no peer list,
+// send is one slot write with no syscall unless a reader sleeps, and nothing on the send/receive
+// path allocates.
 //
 // Fault injection is per port and thread-safe (atomics; error frames through a small SPSC queue
 // with one injecting thread): random loss with a seeded RNG, "drop the next k frames with id X",
@@ -43,7 +44,7 @@ struct VirtualBusOptions {
 };
 
 struct VirtualPortOptions {
-  std::string name = "vcan";  // for messages and query_interface()
+  std::string name = "vcan";   // for messages and query_interface()
   uint32_t bitrate = 500'000;  // reported by query_interface() (the bus has no timing)
   // After an injected bus-off, the port restarts by itself this long after (bus clock), as the
   // kernel does with `restart-ms`; 0: stays bus-off until restart().
