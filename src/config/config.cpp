@@ -283,7 +283,7 @@ DaemonConfig parse_document(Diagnostics& diag, const YAML::Node& doc, const std:
   const bool have_powerlink = root.has("powerlink");
   pl_sites.present = have_powerlink;
   const bool have_canio = root.has("canio");
-  parse_powerlink(root.section("powerlink"), c.powerlink, pl_sites);
+  parse_powerlink(root.section("powerlink"), c.powerlink, pl_sites, base_dir);
   parse_canio(root.section("canio"), c.canio);
   if (c.bus == BusKind::Powerlink && !have_powerlink) {
     root.error("bus",
@@ -310,7 +310,9 @@ DaemonConfig parse_document(Diagnostics& diag, const YAML::Node& doc, const std:
     c.axes.push_back(std::move(axis));
   }
   if (c.axes.empty()) {
-    if (c.bus == BusKind::Simulated) {
+    if (c.bus == BusKind::Powerlink) {
+      // Valid: the MN then runs CNs without X20DS1928 only (generic CNs, raw process data).
+    } else if (c.bus == BusKind::Simulated) {
       AxisConfig axis;
       axis.name = "axis0";
       c.axes.push_back(axis);

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cstdint>
+#include <filesystem>
 #include <map>
 #include <ostream>
 #include <vector>
@@ -19,7 +20,9 @@ struct PowerlinkSites {
   std::vector<Loc> pres_timeout_at;  // per nodes[] entry
 };
 
-void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites);
+// `base_dir`: where relative file names (cdc) are resolved.
+void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
+                     const std::filesystem::path& base_dir);
 
 // Checks of the section against the axes and the cycle (only called on bus powerlink).
 void check_powerlink(Diagnostics& diag, const DaemonConfig& c, const std::vector<AxisSite>& axes,
