@@ -57,7 +57,9 @@ deb: deps-deb
 	mkdir -p $(DEB_DIR)/src
 	tar -C . --exclude-vcs --exclude='./build*' --exclude='./obj-*' -cf - . | tar -C $(DEB_DIR)/src -xf -
 	cp -r packaging/debian $(DEB_DIR)/src/debian
-	cd $(DEB_DIR)/src && dpkg-buildpackage -us -uc -b -j$(JOBS)
+	# ccache's compiler wrappers when installed: a rebuild of the same tree is fast.
+	cd $(DEB_DIR)/src && PATH="$$(test -d /usr/lib/ccache && echo /usr/lib/ccache:)$$PATH" \
+	  dpkg-buildpackage -us -uc -b -j$(JOBS)
 	lintian --fail-on error,warning --info --display-info $(DEB_DIR)/*.changes
 
 # Installs the packages into a fresh Debian 12 root (mmdebstrap; the base root is cached in
