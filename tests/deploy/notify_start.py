@@ -6,7 +6,9 @@
 Binds a notification socket in DIR (which the daemon's user can reach), starts COMMAND with
 NOTIFY_SOCKET pointing there and its output in LOG, and prints the daemon's PID once READY=1
 arrives (exit 0). If the daemon exits first or TIMEOUT_S passes, prints LOG and exits 1 (the
-daemon is killed on timeout). The daemon keeps running after this returns.
+daemon is killed on timeout). The daemon keeps running after this returns. With
+NOTIFY_START_ROOT=R in the environment the daemon runs in a chroot R (DIR is under R): its
+NOTIFY_SOCKET is the path as seen inside.
 """
 import os
 import socket
@@ -21,7 +23,9 @@ def main() -> int:
     sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
     sock.bind(path)
     os.chmod(path, 0o777)  # the daemon runs as another user; the directory limits who reaches it
-    env = dict(os.environ, NOTIFY_SOCKET=path)
+    root = os.environ.pop("NOTIFY_START_ROOT", "").rstrip("/")
+    seen = path[len(root):] if root and path.startswith(root + "/") else path
+    env = dict(os.environ, NOTIFY_SOCKET=seen)
     with open(log, "wb") as out:
         proc = subprocess.Popen(command, env=env, stdout=out, stderr=subprocess.STDOUT,
                                 start_new_session=True)
