@@ -195,6 +195,9 @@ struct VirtualCanPort::Impl {
   std::atomic<bool> up{true};
   std::atomic<int64_t> bus_off_at{0};
   std::atomic<bool> restart_requested{false};
+  // Bus-off error frames announced by inject_bus_off() (state already applied there), waiting
+  // for receive().
+  std::atomic<uint32_t> bus_off_frames{0};
 
   LossControl rx_loss, tx_loss;
   std::atomic<uint32_t> delay_polls{0};
@@ -311,6 +314,7 @@ SendResult VirtualCanPort::send(const CanFrame& frame) noexcept {
 ReceiveResult VirtualCanPort::receive(std::span<CanFrame> out, int64_t deadline_ns) noexcept {
   Impl& p = *impl_;
   Ring& ring = *p.ring;
+  if (out.empty()) return {};
   ++p.polls;
   const uint64_t mask = ring.capacity - 1;
   for (;;) {
@@ -329,6 +333,16 @@ ReceiveResult VirtualCanPort::receive(std::span<CanFrame> out, int64_t deadline_
       bump(p.counters.rx_error_frames);
     };
 
+    // Bus-off announced by inject_bus_off(): the frame only, its state change is made.
+    for (uint32_t n = p.bus_off_frames.load(std::memory_order_acquire);
+         n != 0 && count < out.size();) {
+      if (!p.bus_off_frames.compare_exchange_weak(n, n - 1, std::memory_order_acq_rel)) continue;
+      CanErrorEvent e;
+      e.bus_off = true;
+      e.classes = err_class::kBusOff;
+      deliver_event(e);
+      n = p.bus_off_frames.load(std::memory_order_acquire);
+    }
     // Injected error frames: the state change happens whether or not the class is subscribed,
     // as in the kernel.
     while (count < out.size()) {
@@ -559,14 +573,13 @@ bool VirtualCanPort::inject_error(const CanErrorEvent& event) noexcept {
 }
 
 bool VirtualCanPort::inject_bus_off() noexcept {
-  CanErrorEvent e;
-  e.bus_off = true;
-  e.classes = err_class::kBusOff;
-  // Refuse sends at once (the injecting thread expects it); the event itself, with its error
-  // frame, reaches the port's thread through the queue.
+  // The state changes at once (the injecting thread expects sends to be refused from now on);
+  // the bus-off error frame reaches the port's thread with its next receive().
   impl_->bus_off_at.store(bus_->now_ns(), std::memory_order_release);
   impl_->set_state(CanState::BusOff);
-  return inject_error(e);
+  impl_->bus_off_frames.fetch_add(1, std::memory_order_acq_rel);
+  bump(impl_->counters.errors_injected);
+  return true;
 }
 
 void VirtualCanPort::restart() noexcept {

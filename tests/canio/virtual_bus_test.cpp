@@ -184,6 +184,23 @@ TEST_CASE("bus-off: sends refused, restarted after restart-ms, error-active agai
   CHECK(c.tx_bus_off == 1);
 }
 
+TEST_CASE("a port that only sends through bus-off and restart reports both, in order",
+          "[canio][vbus]") {
+  FakeClock clock;
+  auto bus = VirtualCanBus::create_local(clock.options());
+  auto p = port(bus);  // restart-ms 100
+  REQUIRE_FALSE(p->set_error_mask(kDefaultErrorMask));
+  REQUIRE(p->inject_bus_off());
+  CHECK(p->send(data_frame(1, 1)).status == SendStatus::BusOff);
+  clock.advance_ms(150);
+  CHECK(p->send(data_frame(1, 2)).sent());  // restarted by the send path
+  auto got = drain(*p);
+  REQUIRE(got.size() == 2);
+  CHECK(decode_error_frame(got[0])->bus_off);
+  CHECK(decode_error_frame(got[1])->restarted);
+  CHECK(p->state() == CanState::ErrorActive);  // the late bus-off frame does not undo the restart
+}
+
 TEST_CASE("bus-off without restart-ms waits for restart()", "[canio][vbus]") {
   FakeClock clock;
   auto bus = VirtualCanBus::create_local(clock.options());
