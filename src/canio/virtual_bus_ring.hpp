@@ -25,7 +25,7 @@ inline constexpr uint32_t kLayoutVersion = 1;
 struct Slot {
   // 0: never written; 2t+1: ticket t being written; 2t+2: ticket t complete.
   std::atomic<uint64_t> seq;
-  // id (bits 0..28) | extended (29) | rtr (30) | dlc (32..35) | sender (48..63)
+  // id (bits 0..28) | extended (29) | rtr (30) | error frame (31) | dlc (32..35) | sender (48..63)
   std::atomic<uint64_t> header;
   std::atomic<uint64_t> data;
   std::atomic<int64_t> wire_ns;  // bus clock when sent
@@ -35,7 +35,7 @@ static_assert(std::atomic<uint64_t>::is_always_lock_free,
 
 inline uint64_t pack_header(const CanFrame& f, uint16_t sender) noexcept {
   return uint64_t{f.id & kMaxExtendedId} | (uint64_t{f.extended} << 29) | (uint64_t{f.rtr} << 30) |
-         (uint64_t{f.dlc} << 32) | (uint64_t{sender} << 48);
+         (uint64_t{f.error} << 31) | (uint64_t{f.dlc} << 32) | (uint64_t{sender} << 48);
 }
 
 inline uint64_t pack_data(const CanFrame& f) noexcept {

@@ -148,6 +148,16 @@ struct VirtualCanPort::Impl {
     }
   }
 
+  // The state change an error event announces, as the kernel makes it whether or not the port
+  // subscribed to the event's class.
+  void apply_event(const CanErrorEvent& e, int64_t now) noexcept {
+    const auto s = e.state_change();
+    if (!s) return;
+    if (*s == CanState::BusOff && current_state() != CanState::BusOff)
+      bus_off_at.store(now, std::memory_order_release);
+    set_state(*s);
+  }
+
   void count_event(const CanErrorEvent& e) noexcept {
     if (e.bus_off) bump(counters.bus_off_events);
     if (e.restarted) bump(counters.restarts);
@@ -248,11 +258,7 @@ ReceiveResult VirtualCanPort::receive(std::span<CanFrame> out, int64_t deadline_
     while (count < out.size()) {
       auto e = p.injected.try_pop();
       if (!e) break;
-      if (auto s = e->state_change()) {
-        if (*s == CanState::BusOff && p.current_state() != CanState::BusOff)
-          p.bus_off_at.store(now, std::memory_order_release);
-        p.set_state(*s);
-      }
+      p.apply_event(*e, now);
       deliver_event(*e);
     }
     p.maybe_restart(now, options_.restart_ms);
@@ -298,6 +304,23 @@ ReceiveResult VirtualCanPort::receive(std::span<CanFrame> out, int64_t deadline_
       ++p.read_pos;
       const auto sender = static_cast<uint16_t>(header >> 48);
       if (sender == p.sender) continue;  // like CAN_RAW without RECV_OWN_MSGS
+      if (((header >> 31) & 1) != 0) {
+        // broadcast_error() from another port: as if this port's controller had reported it.
+        CanFrame ef;
+        ef.error = true;
+        ef.id = static_cast<uint32_t>(header & err_class::kAll);
+        ef.dlc = 8;
+        std::memcpy(ef.data.data(), &data, 8);
+        if (auto e = decode_error_frame(ef)) {
+          if (count == out.size()) {
+            --p.read_pos;  // no room: take it with the next call
+            break;
+          }
+          p.apply_event(*e, now);
+          deliver_event(*e);
+        }
+        continue;
+      }
       if (!on_bus) {
         bump(p.counters.missed_off_bus);
         continue;
@@ -478,6 +501,12 @@ bool VirtualCanPort::inject_bus_off() noexcept {
   impl_->bus_off_at.store(bus_->now_ns(), std::memory_order_release);
   impl_->set_state(CanState::BusOff);
   impl_->bus_off_frames.fetch_add(1, std::memory_order_acq_rel);
+  bump(impl_->counters.errors_injected);
+  return true;
+}
+
+bool VirtualCanPort::broadcast_error(const CanErrorEvent& event) noexcept {
+  publish(*impl_->ring, encode_error_frame(event), impl_->sender, bus_->now_ns());
   bump(impl_->counters.errors_injected);
   return true;
 }
