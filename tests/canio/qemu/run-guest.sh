@@ -48,9 +48,10 @@ fail() { echo "FAIL: $*"; exit 1; }
 # --- packages (same list as the Makefile's TEST_DEPS) ------------------------------------------
 packages="qemu-system-x86 busybox-static cpio kmod can-utils iproute2"
 ensure_packages() {
-  local p missing=""
+  local p missing="" installed
+  installed=" $(dpkg-query -W -f='${db:Status-Abbrev}${Package} ' $packages 2>/dev/null) "
   for p in $packages; do
-    dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing="$missing $p"
+    [[ $installed == *" ii $p "* ]] || missing="$missing $p"
   done
   [ -z "$missing" ] && return 0
   note "installing Debian packages:$missing"
@@ -63,9 +64,15 @@ ensure_packages() {
 guest_modules="virtio_pci 9pnet_virtio 9p overlay can can_raw can_dev sja1000 kvaser_pci vcan"
 
 kernel_package() {
-  # linux-image-amd64 depends on the current linux-image-X.Y.Z-N-amd64.
+  # linux-image-amd64 depends on the current linux-image-X.Y.Z-N-amd64. apt-cache parses every
+  # package list (seconds): its answer is kept until the lists change (apt-get update).
+  local stamp=$cache/kernel-package
+  if [ -s "$stamp" ] && [ -z "$(find /var/lib/apt/lists -maxdepth 1 -newer "$stamp" -print -quit 2>/dev/null)" ]; then
+    cat "$stamp"
+    return
+  fi
   apt-cache depends linux-image-amd64 2>/dev/null |
-    sed -n 's/^ *Depends: \(linux-image-[0-9][^ ]*-amd64\)$/\1/p' | head -n1
+    sed -n 's/^ *Depends: \(linux-image-[0-9][^ ]*-amd64\)$/\1/p' | head -n1 | tee "$stamp"
 }
 
 prepare_kernel() {
@@ -163,6 +170,7 @@ trap 'exit 1' INT TERM
 {
   echo '#!/bin/bash'
   printf 'export CANIO_WORK=%q CANIO_BUILD=%q CANIO_SOURCE=%q\n' "$work" "$build" "$(cd "$here/../../.." && pwd)"
+  printf 'cd %q && ' "$PWD"
   printf 'exec %q' "$here/guest-main.sh"
   printf ' %q' "$script" "$@"
   echo
