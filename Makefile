@@ -14,7 +14,7 @@ BUILD_DEPS := cmake make g++ pkg-config libyaml-cpp-dev libspdlog-dev libfmt-dev
 # qemu-system-x86 … can-utils: the real-kernel CAN test (tests/canio/qemu), which also downloads
 # Debian's linux-image package into the build tree with apt-get download.
 TEST_DEPS  := $(BUILD_DEPS) rt-tests tshark iproute2 python3 \
-              qemu-system-x86 busybox-static cpio kmod can-utils
+              qemu-system-x86 busybox-static cpio kmod xz-utils can-utils
 
 .PHONY: all build run test deps-build deps-test format clean bench
 
