@@ -92,10 +92,20 @@ start_daemon() {
   daemon_pid=$!
   pids+=($daemon_pid)
 }
-# status NAME: the daemon's status as shell variables (status_vars.py), the JSON in NAME-status.txt.
+# status NAME: the daemon's status as shell variables (status_vars.py, one coprocess for the whole
+# test), the JSON in NAME-status.txt.
+coproc STATUS_VARS { exec python3 "$here/status_vars.py" --serve; }
+pids+=($STATUS_VARS_PID)
 status() {
+  local line vars=""
   "$ctl" --json --timeout 20000 -s "$sock" status > "$tmp/$1-status.txt" 2>> "$tmp/ctl.log" || return 1
-  eval "$(python3 "$here/status_vars.py" "$tmp/$1-status.txt" 0)"
+  echo "$tmp/$1-status.txt 0" >&"${STATUS_VARS[1]}"
+  while read -r -t 60 line <&"${STATUS_VARS[0]}"; do
+    [ "$line" = "#end" ] && break
+    vars+="$line"$'\n'
+  done
+  [ "$line" = "#end" ] || fail "status_vars.py does not answer"
+  eval "$vars"
 }
 operational() { status "$1" && [ "$bus_state" = operational ]; }
 stop_daemon() {

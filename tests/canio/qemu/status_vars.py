@@ -2,6 +2,9 @@
 """Prints the CAN-I/O part of `ds1928ctl --json status` as shell assignments (for eval).
 
 Usage: status_vars.py STATUS_JSON_FILE [AXIS]
+       status_vars.py --serve   (a coprocess: reads "FILE AXIS" lines, answers each with the
+                                 assignments and a line "#end"; one interpreter start, which in
+                                 the TCG guest costs seconds, for the whole test)
 Prints bus_kind, bus_state, transport, interface, can_state, bitrate, restart_ms, the bus counters
 (c_<name>), and for the axis' node: configured (1/0), silent, in_id0, in_id1, out_id (decimal) and
 its counters (n_<name>), last_error. Unknown or missing fields print empty values, so a check on
@@ -12,16 +15,13 @@ import shlex
 import sys
 
 
-def main() -> int:
-    path = sys.argv[1]
-    axis = int(sys.argv[2]) if len(sys.argv) > 2 else 0
+def assignments(path: str, axis: int) -> list:
     try:
         with open(path) as f:
             lines = [l for l in f.read().splitlines() if l.strip()]
         doc = json.loads(lines[-1]) if lines else {}
     except (OSError, json.JSONDecodeError) as e:
-        print(f"status_error={shlex.quote(str(e))}")
-        return 0
+        return [f"status_error={shlex.quote(str(e))}"]
     if "bus" not in doc and isinstance(doc.get("result"), dict):
         doc = doc["result"]
     bus = doc.get("bus", {}) if isinstance(doc.get("bus"), dict) else {}
@@ -52,8 +52,17 @@ def main() -> int:
         for k, v in node.items():
             if isinstance(v, int) and not isinstance(v, bool) and k not in ("axis", "node", "output_id"):
                 out[f"n_{k}"] = v
-    for k, v in out.items():
-        print(f"{k}={shlex.quote(str(v))}")
+    return [f"{k}={shlex.quote(str(v))}" for k, v in out.items()]
+
+
+def main() -> int:
+    if sys.argv[1:] == ["--serve"]:
+        for line in sys.stdin:
+            path, _, axis = line.strip().partition(" ")
+            print("\n".join(assignments(path, int(axis or 0))))
+            print("#end", flush=True)
+        return 0
+    print("\n".join(assignments(sys.argv[1], int(sys.argv[2]) if len(sys.argv) > 2 else 0)))
     return 0
 
 
