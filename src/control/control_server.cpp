@@ -12,6 +12,7 @@
 #include <set>
 
 #include "control/asio.hpp"
+#include "control/request_parser.hpp"
 #include "control/socket_path.hpp"
 
 namespace ds1928::control {
@@ -354,35 +355,17 @@ void Session::handle_line(std::string_view line) {
          false);
     return;
   }
-  json body;
-  try {
-    body = json::parse(line);
-  } catch (const json::exception& e) {
-    // parse_error, and out_of_range for numbers beyond a double (a 400-digit "id").
-    std::string what = e.what();
-    if (const auto p = what.find("] "); p != std::string::npos) what.erase(0, p + 2);
-    send(error_reply(to_string(ErrorCode::BadJson), bounded(std::move(what))), false);
-    return;
-  }
-  if (!body.is_object()) {
-    send(error_reply(to_string(ErrorCode::BadJson),
-                     std::string("request must be a JSON object, got ") + body.type_name()),
-         false);
-    return;
-  }
-  json id;
-  if (const auto it = body.find("id"); it != body.end()) id = *it;
+  ParsedRequest parsed = parse_request(line);
+  if (parsed.error) parsed.message = bounded(std::move(parsed.message));
+  const json& id = parsed.id;
   auto fail = [&](ErrorCode code, std::string message) {
     json reply = error_reply(to_string(code), std::move(message));
     if (!id.is_null()) reply["id"] = id;
     send(std::move(reply), false);
   };
-  const auto cmd = body.find("cmd");
-  if (cmd == body.end()) return fail(ErrorCode::BadArgument, "argument 'cmd' (string) is required");
-  if (!cmd->is_string())
-    return fail(ErrorCode::BadArgument,
-                std::string("argument 'cmd': expected string, got ") + cmd->type_name());
-  const std::string name = cmd->get<std::string>();
+  if (parsed.error) return fail(*parsed.error, std::move(parsed.message));
+  const std::string& name = parsed.command;
+  const json& body = parsed.body;
   const auto handler = server_.commands.find(name);
   if (handler == server_.commands.end()) {
     std::string known;

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "control_test_util.hpp"
+#include "support/wait.hpp"
 
 using namespace ds1928;
 using namespace ds1928::control;
@@ -276,28 +277,24 @@ TEST_CASE(
   REQUIRE_FALSE(t.start());
 
   auto take = [&]() -> std::optional<Reply> {
-    for (int i = 0; i < 400; ++i) {
-      {
-        std::lock_guard lock(mutex);
-        if (!parked.empty()) {
-          Reply r = parked.back();
-          parked.pop_back();
-          return r;
-        }
-      }
-      std::this_thread::sleep_for(std::chrono::milliseconds(5));
-    }
-    return std::nullopt;
+    if (!ds1928::test::wait_until([&] {
+          std::lock_guard lock(mutex);
+          return !parked.empty();
+        }))
+      return std::nullopt;
+    std::lock_guard lock(mutex);
+    Reply r = parked.back();
+    parked.pop_back();
+    return r;
   };
 
-  // Completed from another thread 50 ms later; requests behind it wait their turn.
+  // Completed later from another thread; the request behind it waits its turn.
   LineClient c(t.server().path());
   c.send_raw(json{{"cmd", "slow"}, {"id", 1}}.dump() + "\n" +
              json{{"cmd", "drop"}, {"id", 2}}.dump() + "\n");
   auto reply = take();
   REQUIRE(reply);
   std::thread later([r = *reply] {
-    std::this_thread::sleep_for(std::chrono::milliseconds(50));
     r.ok({{"value", 5}});
     r.error("late", "second completion is ignored");
   });
@@ -321,13 +318,10 @@ TEST_CASE(
   REQUIRE(reply);
   CHECK_FALSE(reply->cancelled());
   d.reset();
-  for (int i = 0; i < 400 && !reply->cancelled(); ++i)
-    std::this_thread::sleep_for(std::chrono::milliseconds(5));
-  CHECK(reply->cancelled());
+  CHECK(ds1928::test::wait_until([&] { return reply->cancelled(); }));
   reply->ok({{"value", 1}});  // harmless
   CHECK(t.wait_clients(1));
-  for (int i = 0; i < 400 && cancel_callbacks == 0; ++i)
-    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  CHECK(ds1928::test::wait_until([&] { return cancel_callbacks != 0; }));
   CHECK(cancel_callbacks == 1);
   CHECK(c.request({{"cmd", "drop"}})["ok"] == false);  // c is unaffected
 }
