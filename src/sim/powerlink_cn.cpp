@@ -3,9 +3,9 @@
 #include <time.h>
 
 #include <algorithm>
-#include <cmath>
 #include <cerrno>
 #include <climits>
+#include <cmath>
 #include <cstring>
 
 #include "sim/sim_error.hpp"

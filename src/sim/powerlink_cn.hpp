@@ -95,7 +95,7 @@ struct PowerlinkCnStats {
   uint64_t preq = 0;
   uint64_t pres_sent = 0;
   uint64_t pres_dropped = 0;
-  uint64_t pres_delayed = 0;   // by the delay fault or the software response model
+  uint64_t pres_delayed = 0;  // by the delay fault or the software response model
   uint64_t soa = 0;
   uint64_t asnd_sent = 0;
   uint64_t nmt_commands = 0;

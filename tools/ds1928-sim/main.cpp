@@ -206,8 +206,8 @@ int run_powerlink(const PowerlinkOptions& o) {
         "sigma %.2f, ready %.0f us after SoC)\n",
         node_id, node->module_count(), node->layout().pres_size, node->layout().preq_size,
         cn.mac[0], cn.mac[1], cn.mac[2], cn.mac[3], cn.mac[4], cn.mac[5], o.iface.c_str(),
-        pl::to_string(link.rx_mode()), o.profile.c_str(), o.pres_latency_us,
-        o.pres_latency_sigma, o.ready_after_soc_us);
+        pl::to_string(link.rx_mode()), o.profile.c_str(), o.pres_latency_us, o.pres_latency_sigma,
+        o.ready_after_soc_us);
     node_ptrs.push_back(node.get());
     nodes.push_back(std::move(node));
   }
@@ -332,7 +332,8 @@ int main(int argc, char** argv) {
   if (plk->parsed()) {
     std::vector<std::string> given;
     for (const CLI::Option* opt : plk->get_options())
-      if (opt->count() > 0 && !opt->get_lnames().empty()) given.push_back("--" + opt->get_lnames()[0]);
+      if (opt->count() > 0 && !opt->get_lnames().empty())
+        given.push_back("--" + opt->get_lnames()[0]);
     apply_profile(o, given);
     return run_powerlink(o);
   }
