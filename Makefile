@@ -1,6 +1,9 @@
 # ds1928d — the two commands of the README:
 #   make run    build and run the daemon on the simulated node
 #   make test   build and run every test (warnings are errors in this build)
+# and for deployment:
+#   make deb            build the Debian packages ds1928d and libds1928-dev (+ lintian)
+#   make test-package   install them into a fresh Debian 12 root and check them there
 # and the deeper checks (docs/testing.md):
 #   make check-asan       the tests under ASan+UBSan (build-asan/)
 #   make check-tsan       the tests under TSan (build-tsan/)
@@ -16,7 +19,16 @@ JOBS       ?= $(shell nproc)
 
 BUILD_DEPS := cmake make g++ pkg-config libyaml-cpp-dev libspdlog-dev libfmt-dev libboost-dev \
               catch2 nlohmann-json3-dev libcli11-dev libsystemd-dev
-TEST_DEPS  := $(BUILD_DEPS) rt-tests tshark iproute2 python3
+# qemu-system-x86 … can-utils: the real-kernel CAN test (tests/canio/qemu), which also downloads
+# Debian's linux-image package into the build tree with apt-get download.
+TEST_DEPS  := $(BUILD_DEPS) rt-tests tshark iproute2 python3 util-linux passwd \
+              qemu-system-x86 busybox-static cpio kmod xz-utils can-utils
+# dpkg-buildpackage and the Build-Depends of packaging/debian/control.
+DEB_DEPS   := $(BUILD_DEPS) build-essential debhelper devscripts fakeroot lintian help2man
+PKGTEST_DEPS := mmdebstrap util-linux systemd
+# Where make deb builds: a copy of the source tree (the packaging expects debian/ at the top).
+DEB_DIR    ?= build-deb
+
 FUZZ_DEPS  := $(BUILD_DEPS) clang libclang-rt-14-dev
 STRESS_DEPS := $(TEST_DEPS) stress-ng
 
@@ -30,8 +42,8 @@ ASAN_ENV   := ASAN_OPTIONS=detect_leaks=1:abort_on_error=1:strict_string_checks=
               UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
 TSAN_ENV   := TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1 suppressions=$(CURDIR)/tests/tsan.supp"
 
-.PHONY: all build run test deps-build deps-test deps-fuzz deps-stress format clean bench \
-        check-asan check-tsan check-sanitize fuzz stress
+.PHONY: all build run test deps-build deps-test deps-deb deb test-package deps-fuzz deps-stress \
+        format clean bench check-asan check-tsan check-sanitize fuzz stress
 
 all: build
 
@@ -56,6 +68,27 @@ deps-build:
 
 deps-test:
 	$(call ensure_packages,$(TEST_DEPS))
+
+deps-deb:
+	$(call ensure_packages,$(DEB_DEPS))
+
+# The packages are built from a copy of the working tree with packaging/debian as debian/, so the
+# tree itself stays as it is; the .debs, .buildinfo and .changes land in $(DEB_DIR)/.
+deb: deps-deb
+	rm -rf $(DEB_DIR)/src $(DEB_DIR)/*.deb $(DEB_DIR)/*.changes $(DEB_DIR)/*.buildinfo
+	mkdir -p $(DEB_DIR)/src
+	tar -C . --exclude-vcs --exclude='./build*' --exclude='./obj-*' -cf - . | tar -C $(DEB_DIR)/src -xf -
+	cp -r packaging/debian $(DEB_DIR)/src/debian
+	# ccache's compiler wrappers when installed: a rebuild of the same tree is fast.
+	cd $(DEB_DIR)/src && PATH="$$(test -d /usr/lib/ccache && echo /usr/lib/ccache:)$$PATH" \
+	  dpkg-buildpackage -us -uc -b -j$(JOBS)
+	lintian --fail-on error,warning --info --display-info $(DEB_DIR)/*.changes
+
+# Installs the packages into a fresh Debian 12 root (mmdebstrap; the base root is cached in
+# $(DEB_DIR)/) and checks files, users, groups, units and configuration (tests/package/).
+test-package: deb
+	$(call ensure_packages,$(PKGTEST_DEPS))
+	tests/package/install_test.sh $(DEB_DIR)
 
 deps-fuzz:
 	$(call ensure_packages,$(FUZZ_DEPS))
@@ -116,4 +149,4 @@ format:
 	find daemon include src tools tests bench -name '*.[ch]pp' -o -name '*.[ch]' | xargs clang-format -i
 
 clean:
-	rm -rf $(BUILD) build-asan build-tsan build-fuzz
+	rm -rf $(BUILD) $(DEB_DIR) build-asan build-tsan build-fuzz
