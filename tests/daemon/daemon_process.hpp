@@ -18,6 +18,7 @@
 #include <thread>
 
 #include "ds1928/shm.hpp"
+#include "support/wait.hpp"
 
 namespace ds1928::test {
 
@@ -59,8 +60,7 @@ class DaemonProcess {
     if (pid_ > 0) {
       ::kill(pid_, SIGTERM);
       // A daemon that ignores SIGTERM fails the test elsewhere; here it must not outlive it.
-      for (int i = 0; i < 1000 && running(); ++i)
-        std::this_thread::sleep_for(std::chrono::milliseconds(10));
+      (void)ds1928::test::wait_until([&] { return !running(); });
       if (running()) {
         ::kill(pid_, SIGKILL);
         waitpid(pid_, nullptr, 0);
@@ -77,17 +77,17 @@ class DaemonProcess {
   DaemonProcess(const DaemonProcess&) = delete;
   DaemonProcess& operator=(const DaemonProcess&) = delete;
 
-  // Waits (bounded: 20 s) until the daemon publishes cycles and its socket exists.
+  // Waits (bounded, support/wait.hpp) until the daemon publishes cycles and its socket exists.
   [[nodiscard]] bool wait_ready() {
-    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(20);
-    while (std::chrono::steady_clock::now() < until && running()) {
+    bool ready = false;
+    (void)ds1928::test::wait_until([&] {
+      if (!running()) return true;  // gone: no use waiting
       if (!reader_.is_open()) (void)reader_.open(shm_name_);
-      if (reader_.is_open() && reader_.header().publish_count > 0 &&
-          std::filesystem::exists(socket_path_))
-        return true;
-      std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    }
-    return false;
+      ready = reader_.is_open() && reader_.header().publish_count > 0 &&
+              std::filesystem::exists(socket_path_);
+      return ready;
+    });
+    return ready;
   }
 
   // Still running (not exited, not killed by a signal).
