@@ -61,8 +61,10 @@ class ServerThread {
     return run([this] { return server_.client_count(); });
   }
   // Waits until the client count reaches `n` (connections are closed asynchronously).
-  bool wait_clients(std::size_t n) {
-    return ds1928::test::wait_until([&] { return clients() == n; });
+  // `bound_ms` only stops a failing test (support/wait.hpp).
+  bool wait_clients(std::size_t n, int bound_ms = 60'000) {
+    return ds1928::test::wait_until([&] { return clients() == n; },
+                                    std::chrono::milliseconds(bound_ms));
   }
 
  private:
