@@ -24,7 +24,7 @@ for ((run = 1; run <= runs; run++)); do
   # shellcheck disable=SC2086
   if (cd "$build" && ctest --output-on-failure --timeout 900 -j 2 ${CTEST_ARGS:-}) \
       >"$logs/run$run.log" 2>&1; then
-    echo "run $run/$runs: passed ($(($(date +%s) - t0)) s, $(grep -o '[0-9]* tests passed' "$logs/run$run.log" | head -n1 || true))"
+    echo "run $run/$runs: passed ($(($(date +%s) - t0)) s, $(grep -o 'tests passed.*' "$logs/run$run.log" | head -n1 || true))"
     rm -f "$logs/run$run.log"
   else
     failed_runs=$((failed_runs + 1))
