@@ -2,7 +2,9 @@
 // small "section" reader that knows which keys it was asked for, so every key left over is an
 // unknown key; each value is parsed by hand (not yaml-cpp's as<T>) to get precise messages for
 // hex numbers, octal modes, quoted numbers and out-of-range values.
+#include <fcntl.h>
 #include <unistd.h>
+#include <yaml-cpp/depthguard.h>
 #include <yaml-cpp/eventhandler.h>
 #include <yaml-cpp/yaml.h>
 
@@ -64,6 +66,16 @@ class Diagnostics {
 // ---------------------------------------------------------------------------------------------
 // Scalar parsing
 
+// A value as quoted in a message: a bounded prefix of it (a 50 MB string is not repeated).
+// Files the configuration names (itself, encoder files) are read whole: bounded.
+constexpr std::uintmax_t kMaxFileBytes = 1024 * 1024;
+
+std::string excerpt(std::string_view s) {
+  constexpr std::size_t kMax = 80;
+  if (s.size() <= kMax) return std::string(s);
+  return std::string(s.substr(0, kMax)) + "... (" + std::to_string(s.size()) + " characters)";
+}
+
 std::string describe(const YAML::Node& n) {
   switch (n.Type()) {
     case YAML::NodeType::Map:
@@ -76,7 +88,8 @@ std::string describe(const YAML::Node& n) {
     case YAML::NodeType::Scalar:
       break;
   }
-  return n.Tag() == "?" ? "'" + n.Scalar() + "'" : "the string \"" + n.Scalar() + "\"";
+  return n.Tag() == "?" ? "'" + excerpt(n.Scalar()) + "'"
+                        : "the string \"" + excerpt(n.Scalar()) + "\"";
 }
 
 bool is_plain(const YAML::Node& n) {
@@ -292,7 +305,7 @@ class Section {
       return false;
     }
     if (*parsed < lo || *parsed > hi) {
-      error(key, v->Scalar() + " is out of range " + real_text(lo) + ".." + real_text(hi));
+      error(key, excerpt(v->Scalar()) + " is out of range " + real_text(lo) + ".." + real_text(hi));
       return false;
     }
     out = *parsed;
@@ -347,7 +360,7 @@ class Section {
       names.emplace_back(name);
     }
     std::string message = describe(*v) + " is not allowed; expected one of: " + join(names);
-    if (v->IsScalar()) {
+    if (v->IsScalar() && v->Scalar().size() <= 64) {
       if (const auto hint = closest(v->Scalar(), names))
         message += " (did you mean '" + *hint + "'?)";
     }
@@ -368,7 +381,7 @@ class Section {
       return false;
     }
     if (value > 0777) {
-      error(key, v->Scalar() + " is out of range 0000..0777 (permission bits only)");
+      error(key, excerpt(v->Scalar()) + " is out of range 0000..0777 (permission bits only)");
       return false;
     }
     out = value;
@@ -401,8 +414,8 @@ class Section {
   void finish() {
     for (const auto& [key, entry] : entries_) {
       if (std::find(known_.begin(), known_.end(), key) != known_.end()) continue;
-      std::string message = "unknown key '" + key + "'";
-      if (const auto hint = closest(key, known_)) {
+      std::string message = "unknown key '" + excerpt(key) + "'";
+      if (const auto hint = key.size() <= 64 ? closest(key, known_) : std::nullopt) {
         message += " (did you mean '" + *hint + "'?)";
       } else {
         message += "; allowed keys here: " + join(known_);
@@ -438,18 +451,18 @@ class Section {
       case IntParse::Status::Ok:
         break;
       case IntParse::Status::LeadingZero:
-        error(key, "'" + v->Scalar() +
+        error(key, "'" + excerpt(v->Scalar()) +
                        "' has a leading zero; write a decimal number without it, or 0x hex");
         return false;
       case IntParse::Status::Overflow:
-        error(key, v->Scalar() + " is out of range " + range_text(lo, hi) + suffix);
+        error(key, excerpt(v->Scalar()) + " is out of range " + range_text(lo, hi) + suffix);
         return false;
       case IntParse::Status::Syntax:
         error(key, "expected " + expected_syntax + ", got " + describe(*v));
         return false;
     }
     if (parsed.value < lo || parsed.value > hi) {
-      error(key, v->Scalar() + " is out of range " + range_text(lo, hi) + suffix);
+      error(key, excerpt(v->Scalar()) + " is out of range " + range_text(lo, hi) + suffix);
       return false;
     }
     out = parsed.value;
@@ -594,6 +607,34 @@ void parse_axis(Section s, AxisConfig& a, BusKind bus, size_t index) {
   s.finish();
 }
 
+// Why `p` cannot serve as a small text file ("" when it can): missing, not a regular file, too
+// large, or unreadable although stat calls it regular (/proc/self/mem).
+std::string unusable_file(const std::filesystem::path& p) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  const fs::file_status st = fs::status(p, ec);
+  if (!fs::exists(st)) return "no such file: " + p.string();
+  if (!fs::is_regular_file(st)) {
+    const char* kind = fs::is_directory(st)        ? "a directory"
+                       : fs::is_character_file(st) ? "a character device"
+                       : fs::is_block_file(st)     ? "a block device"
+                       : fs::is_fifo(st)           ? "a FIFO"
+                       : fs::is_socket(st)         ? "a socket"
+                                                   : "not a file";
+    return "not a regular file: " + p.string() + " is " + kind;
+  }
+  if (const auto size = fs::file_size(p, ec); !ec && size > kMaxFileBytes)
+    return p.string() + " is " + std::to_string(size) + " bytes; at most " +
+           std::to_string(kMaxFileBytes) + " are accepted";
+  const int fd = ::open(p.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
+  char byte;
+  const bool readable = fd >= 0 && ::read(fd, &byte, 1) >= 0;
+  const int err = errno;
+  if (fd >= 0) ::close(fd);
+  if (!readable) return "cannot read " + p.string() + ": " + std::generic_category().message(err);
+  return {};
+}
+
 void parse_sim_axis(Section s, SimAxisConfig& a, const std::filesystem::path& base_dir) {
   s.choice("profile", a.profile,
            {{"constant_velocity", MotionProfile::ConstantVelocity},
@@ -606,9 +647,8 @@ void parse_sim_axis(Section s, SimAxisConfig& a, const std::filesystem::path& ba
   if (s.text("encoder_file", a.encoder_file) && !a.encoder_file.empty()) {
     std::filesystem::path p(a.encoder_file);
     if (p.is_relative()) p = base_dir / p;
-    std::error_code ec;
-    if (!std::filesystem::is_regular_file(p, ec)) {
-      s.error("encoder_file", "no such file: " + p.string());
+    if (const std::string why = unusable_file(p); !why.empty()) {
+      s.error("encoder_file", why);
     } else {
       a.encoder_file = p.lexically_normal().string();
     }
@@ -627,13 +667,15 @@ bool valid_interface_name(const std::string& name) {
 
 struct PowerlinkSites {
   bool present = false;
+  bool interface_refused = false;    // given but invalid: reported already, not "missing"
   std::map<uint8_t, Loc> nodes;      // node id → where it is listed
   std::vector<Loc> pres_timeout_at;  // per nodes[] entry
 };
 
 void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites) {
-  if (s.text("interface", p.interface, 15) && !p.interface.empty() &&
-      !valid_interface_name(p.interface)) {
+  if (!s.text("interface", p.interface, 15)) {
+    sites.interface_refused = s.has("interface");
+  } else if (!p.interface.empty() && !valid_interface_name(p.interface)) {
     s.error("interface", "'" + p.interface + "' is not a network interface name");
   }
   for (auto& item : s.list("nodes")) {
@@ -942,7 +984,8 @@ DaemonConfig parse_document(Diagnostics& diag, const YAML::Node& doc, const std:
   if (c.bus == BusKind::Powerlink && !have_powerlink) {
     root.error("bus",
                "bus is 'powerlink' but the file has no powerlink section (interface, nodes)");
-  } else if (c.bus == BusKind::Powerlink && c.powerlink.interface.empty()) {
+  } else if (c.bus == BusKind::Powerlink && c.powerlink.interface.empty() &&
+             !pl_sites.interface_refused) {
     diag.error(root.value_at("powerlink"), "powerlink.interface",
                "missing: bus powerlink needs the network interface of the POWERLINK segment");
   }
@@ -1049,6 +1092,12 @@ ConfigResult load_text(std::string_view text, const std::string& name,
       return ConfigResult(diag.take());
     }
     doc = YAML::Load(std::string(text));
+  } catch (const YAML::DeepRecursion& e) {
+    // yaml-cpp's own guard against stack exhaustion; its message is a bare "bad file".
+    diag.error(loc_of(e.mark), "",
+               "YAML nested deeper than " + std::to_string(e.depth()) +
+                   " lists/maps; a ds1928d configuration nests 4 levels");
+    return ConfigResult(diag.take());
   } catch (const YAML::Exception& e) {
     diag.error(loc_of(e.mark), "", "YAML syntax error: " + e.msg);
     return ConfigResult(diag.take());
@@ -1137,12 +1186,22 @@ ConfigResult load_config(const std::string& path) {
   if (!in) {
     return ConfigResult(std::vector{ConfigError{path, 0, 0, "", "cannot open the file"}});
   }
-  std::ostringstream text;
-  text << in.rdbuf();
+  // Read at most one byte past the cap: the path may be /dev/zero or a pipe that never ends.
+  std::string text;
+  std::array<char, 65536> chunk;
+  while (in.read(chunk.data(), chunk.size()) || in.gcount() > 0) {
+    text.append(chunk.data(), static_cast<std::size_t>(in.gcount()));
+    if (text.size() > kMaxFileBytes) {
+      return ConfigResult(
+          std::vector{ConfigError{path, 0, 0, "",
+                                  "larger than " + std::to_string(kMaxFileBytes) +
+                                      " bytes; a ds1928d configuration is a few kB"}});
+    }
+  }
   if (in.bad()) {
     return ConfigResult(std::vector{ConfigError{path, 0, 0, "", "cannot read the file"}});
   }
-  return load_text(text.str(), path, std::filesystem::path(path).parent_path());
+  return load_text(text, path, std::filesystem::path(path).parent_path());
 }
 
 ConfigResult load_config_from_string(std::string_view text, const std::string& name) {
