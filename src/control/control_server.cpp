@@ -12,6 +12,7 @@
 #include <set>
 
 #include "control/asio.hpp"
+#include "control/socket_path.hpp"
 
 namespace ds1928::control {
 
@@ -600,19 +601,9 @@ std::error_code Server::start() {
       return std::make_error_code(std::errc::invalid_argument);
     gid = found->gr_gid;
   }
-  std::error_code fs_ec;
-  const auto dir = std::filesystem::path(path).parent_path();
-  if (!dir.empty()) std::filesystem::create_directories(dir, fs_ec);
+  if (auto e = prepare_socket_path(path)) return e;
 
   boost::system::error_code ec;
-  struct stat st {};
-  if (lstat(path.c_str(), &st) == 0) {
-    if (!S_ISSOCK(st.st_mode)) return std::make_error_code(std::errc::file_exists);
-    local::socket probe(impl.io);
-    probe.connect(local::endpoint(path), ec);
-    if (!ec) return std::make_error_code(std::errc::address_in_use);
-    ::unlink(path.c_str());  // stale: nobody listens
-  }
   impl.acceptor.open(local(), ec);
   if (!ec) impl.acceptor.bind(local::endpoint(path), ec);
   if (ec) {
@@ -620,7 +611,11 @@ std::error_code Server::start() {
     impl.acceptor.close(ignored);
     return {ec.value(), std::system_category()};
   }
-  if (gid != static_cast<gid_t>(-1) && ::chown(path.c_str(), static_cast<uid_t>(-1), gid) != 0) {
+  // The socket takes the daemon's group; chown only to change it (the packaged unit's syscall
+  // filter refuses chown, and its group already is the readers' group).
+  struct stat st {};
+  if (gid != static_cast<gid_t>(-1) && (lstat(path.c_str(), &st) != 0 || st.st_gid != gid) &&
+      ::chown(path.c_str(), static_cast<uid_t>(-1), gid) != 0) {
     const std::error_code e{errno, std::system_category()};
     stop();
     return e;

@@ -131,6 +131,7 @@ TEST_CASE("privileged commands need the privileged group", "[endat_e2e]") {
       c.request({{"cmd", "endat-write-param"}, {"mrs", 0xA9}, {"param", 1}, {"value", 1}});
   CHECK(error_code_of(w) == "permission_denied");
   CHECK(error_code_of(c.request({{"cmd", "endat-reset"}})) == "permission_denied");
+  CHECK(error_code_of(c.request({{"cmd", "endat-ack"}})) == "permission_denied");
   CHECK(error_code_of(c.request({{"cmd", "endat-write-block"},
                                  {"mrs", 0xB1},
                                  {"block", 0},
