@@ -2,7 +2,9 @@
 // small "section" reader that knows which keys it was asked for, so every key left over is an
 // unknown key; each value is parsed by hand (not yaml-cpp's as<T>) to get precise messages for
 // hex numbers, octal modes, quoted numbers and out-of-range values.
+#include <fcntl.h>
 #include <unistd.h>
+#include <yaml-cpp/depthguard.h>
 #include <yaml-cpp/eventhandler.h>
 #include <yaml-cpp/yaml.h>
 
@@ -157,9 +159,8 @@ void parse_sim_axis(Section s, SimAxisConfig& a, const std::filesystem::path& ba
   if (s.text("encoder_file", a.encoder_file) && !a.encoder_file.empty()) {
     std::filesystem::path p(a.encoder_file);
     if (p.is_relative()) p = base_dir / p;
-    std::error_code ec;
-    if (!std::filesystem::is_regular_file(p, ec)) {
-      s.error("encoder_file", "no such file: " + p.string());
+    if (const std::string why = unusable_file(p); !why.empty()) {
+      s.error("encoder_file", why);
     } else {
       a.encoder_file = p.lexically_normal().string();
     }
@@ -288,7 +289,8 @@ DaemonConfig parse_document(Diagnostics& diag, const YAML::Node& doc, const std:
   if (c.bus == BusKind::Powerlink && !have_powerlink) {
     root.error("bus",
                "bus is 'powerlink' but the file has no powerlink section (interface, nodes)");
-  } else if (c.bus == BusKind::Powerlink && c.powerlink.interface.empty()) {
+  } else if (c.bus == BusKind::Powerlink && c.powerlink.interface.empty() &&
+             !pl_sites.interface_refused) {
     diag.error(root.value_at("powerlink"), "powerlink.interface",
                "missing: bus powerlink needs the network interface of the POWERLINK segment");
   }
@@ -397,6 +399,12 @@ ConfigResult load_text(std::string_view text, const std::string& name,
       return ConfigResult(diag.take());
     }
     doc = YAML::Load(std::string(text));
+  } catch (const YAML::DeepRecursion& e) {
+    // yaml-cpp's own guard against stack exhaustion; its message is a bare "bad file".
+    diag.error(loc_of(e.mark), "",
+               "YAML nested deeper than " + std::to_string(e.depth()) +
+                   " lists/maps; a ds1928d configuration nests 4 levels");
+    return ConfigResult(diag.take());
   } catch (const YAML::Exception& e) {
     diag.error(loc_of(e.mark), "", "YAML syntax error: " + e.msg);
     return ConfigResult(diag.take());
@@ -456,12 +464,22 @@ ConfigResult load_config(const std::string& path) {
   if (!in) {
     return ConfigResult(std::vector{ConfigError{path, 0, 0, "", "cannot open the file"}});
   }
-  std::ostringstream text;
-  text << in.rdbuf();
+  // Read at most one byte past the cap: the path may be /dev/zero or a pipe that never ends.
+  std::string text;
+  std::array<char, 65536> chunk;
+  while (in.read(chunk.data(), chunk.size()) || in.gcount() > 0) {
+    text.append(chunk.data(), static_cast<std::size_t>(in.gcount()));
+    if (text.size() > kMaxFileBytes) {
+      return ConfigResult(
+          std::vector{ConfigError{path, 0, 0, "",
+                                  "larger than " + std::to_string(kMaxFileBytes) +
+                                      " bytes; a ds1928d configuration is a few kB"}});
+    }
+  }
   if (in.bad()) {
     return ConfigResult(std::vector{ConfigError{path, 0, 0, "", "cannot read the file"}});
   }
-  return load_text(text.str(), path, std::filesystem::path(path).parent_path());
+  return load_text(text, path, std::filesystem::path(path).parent_path());
 }
 
 ConfigResult load_config_from_string(std::string_view text, const std::string& name) {

@@ -110,9 +110,8 @@ std::optional<std::vector<powerlink::CdcEntry>> load_cdc(Section& s, std::string
   std::filesystem::path file(path);
   if (file.is_relative()) file = base_dir / file;
   file = file.lexically_normal();
-  std::error_code ec;
-  if (!std::filesystem::is_regular_file(file, ec)) {
-    s.error(key, "no such file: " + file.string());
+  if (const std::string why = unusable_file(file); !why.empty()) {
+    s.error(key, why);
     return std::nullopt;
   }
   std::ifstream in(file, std::ios::binary);
@@ -256,8 +255,9 @@ void apply_mn_cdc(Section& n, PowerlinkNodeConfig& node, std::span<const powerli
 
 void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
                      const std::filesystem::path& base_dir) {
-  if (s.text("interface", p.interface, 15) && !p.interface.empty() &&
-      !valid_interface_name(p.interface)) {
+  if (!s.text("interface", p.interface, 15)) {
+    sites.interface_refused = s.has("interface");
+  } else if (!p.interface.empty() && !valid_interface_name(p.interface)) {
     s.error("interface", "'" + p.interface + "' is not a network interface name");
   }
   std::vector<powerlink::CdcEntry> mn_cdc;

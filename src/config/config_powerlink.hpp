@@ -16,6 +16,7 @@ namespace ds1928::config_detail {
 // Where the parts of the section were written, for messages of later cross-field checks.
 struct PowerlinkSites {
   bool present = false;
+  bool interface_refused = false;    // given but invalid: reported already, not "missing"
   std::map<uint8_t, Loc> nodes;      // node id → where it is listed
   std::vector<Loc> pres_timeout_at;  // per nodes[] entry
   Loc async_timeout_at;              // where the budget check points when the cycle is too long

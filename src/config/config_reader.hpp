@@ -2,6 +2,8 @@
 // Section reader every config_*.cpp file uses. Internal to src/config.
 #pragma once
 
+#include <fcntl.h>
+#include <unistd.h>
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
@@ -9,13 +11,16 @@
 #include <cctype>
 #include <charconv>
 #include <cmath>
+#include <cstddef>
 #include <cstdint>
+#include <filesystem>
 #include <initializer_list>
 #include <limits>
 #include <map>
 #include <optional>
 #include <string>
 #include <string_view>
+#include <system_error>
 #include <utility>
 #include <vector>
 
@@ -60,6 +65,44 @@ class Diagnostics {
 // ---------------------------------------------------------------------------------------------
 // Scalar parsing
 
+// Files the configuration names (itself, encoder files) are read whole: bounded.
+inline constexpr std::uintmax_t kMaxFileBytes = 1024 * 1024;
+
+// A value as quoted in a message: a bounded prefix of it (a 50 MB string is not repeated).
+inline std::string excerpt(std::string_view s) {
+  constexpr std::size_t kMax = 80;
+  if (s.size() <= kMax) return std::string(s);
+  return std::string(s.substr(0, kMax)) + "... (" + std::to_string(s.size()) + " characters)";
+}
+
+// Why `p` cannot serve as a small text file ("" when it can): missing, not a regular file, too
+// large, or unreadable although stat calls it regular (/proc/self/mem).
+inline std::string unusable_file(const std::filesystem::path& p) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  const fs::file_status st = fs::status(p, ec);
+  if (!fs::exists(st)) return "no such file: " + p.string();
+  if (!fs::is_regular_file(st)) {
+    const char* kind = fs::is_directory(st)        ? "a directory"
+                       : fs::is_character_file(st) ? "a character device"
+                       : fs::is_block_file(st)     ? "a block device"
+                       : fs::is_fifo(st)           ? "a FIFO"
+                       : fs::is_socket(st)         ? "a socket"
+                                                   : "not a file";
+    return "not a regular file: " + p.string() + " is " + kind;
+  }
+  if (const auto size = fs::file_size(p, ec); !ec && size > kMaxFileBytes)
+    return p.string() + " is " + std::to_string(size) + " bytes; at most " +
+           std::to_string(kMaxFileBytes) + " are accepted";
+  const int fd = ::open(p.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
+  char byte;
+  const bool readable = fd >= 0 && ::read(fd, &byte, 1) >= 0;
+  const int err = errno;
+  if (fd >= 0) ::close(fd);
+  if (!readable) return "cannot read " + p.string() + ": " + std::generic_category().message(err);
+  return {};
+}
+
 inline std::string describe(const YAML::Node& n) {
   switch (n.Type()) {
     case YAML::NodeType::Map:
@@ -72,7 +115,8 @@ inline std::string describe(const YAML::Node& n) {
     case YAML::NodeType::Scalar:
       break;
   }
-  return n.Tag() == "?" ? "'" + n.Scalar() + "'" : "the string \"" + n.Scalar() + "\"";
+  return n.Tag() == "?" ? "'" + excerpt(n.Scalar()) + "'"
+                        : "the string \"" + excerpt(n.Scalar()) + "\"";
 }
 
 inline bool is_plain(const YAML::Node& n) {
@@ -289,7 +333,7 @@ class Section {
       return false;
     }
     if (*parsed < lo || *parsed > hi) {
-      error(key, v->Scalar() + " is out of range " + real_text(lo) + ".." + real_text(hi));
+      error(key, excerpt(v->Scalar()) + " is out of range " + real_text(lo) + ".." + real_text(hi));
       return false;
     }
     out = *parsed;
@@ -344,7 +388,7 @@ class Section {
       names.emplace_back(name);
     }
     std::string message = describe(*v) + " is not allowed; expected one of: " + join(names);
-    if (v->IsScalar()) {
+    if (v->IsScalar() && v->Scalar().size() <= 64) {
       if (const auto hint = closest(v->Scalar(), names))
         message += " (did you mean '" + *hint + "'?)";
     }
@@ -365,7 +409,7 @@ class Section {
       return false;
     }
     if (value > 0777) {
-      error(key, v->Scalar() + " is out of range 0000..0777 (permission bits only)");
+      error(key, excerpt(v->Scalar()) + " is out of range 0000..0777 (permission bits only)");
       return false;
     }
     out = value;
@@ -398,8 +442,8 @@ class Section {
   void finish() {
     for (const auto& [key, entry] : entries_) {
       if (std::find(known_.begin(), known_.end(), key) != known_.end()) continue;
-      std::string message = "unknown key '" + key + "'";
-      if (const auto hint = closest(key, known_)) {
+      std::string message = "unknown key '" + excerpt(key) + "'";
+      if (const auto hint = key.size() <= 64 ? closest(key, known_) : std::nullopt) {
         message += " (did you mean '" + *hint + "'?)";
       } else {
         message += "; allowed keys here: " + join(known_);
@@ -435,18 +479,18 @@ class Section {
       case IntParse::Status::Ok:
         break;
       case IntParse::Status::LeadingZero:
-        error(key, "'" + v->Scalar() +
+        error(key, "'" + excerpt(v->Scalar()) +
                        "' has a leading zero; write a decimal number without it, or 0x hex");
         return false;
       case IntParse::Status::Overflow:
-        error(key, v->Scalar() + " is out of range " + range_text(lo, hi) + suffix);
+        error(key, excerpt(v->Scalar()) + " is out of range " + range_text(lo, hi) + suffix);
         return false;
       case IntParse::Status::Syntax:
         error(key, "expected " + expected_syntax + ", got " + describe(*v));
         return false;
     }
     if (parsed.value < lo || parsed.value > hi) {
-      error(key, v->Scalar() + " is out of range " + range_text(lo, hi) + suffix);
+      error(key, excerpt(v->Scalar()) + " is out of range " + range_text(lo, hi) + suffix);
       return false;
     }
     out = parsed.value;

@@ -209,6 +209,11 @@ void SdoClient::receive(const Sdo& sdo, int64_t now_ns) noexcept {
   }
   deadline_ns_ = now_ns + config_.timeout_ns;
   if (c.abort) {
+    // The abort code is 4 bytes; a shorter payload would read past it (into padding or beyond).
+    if (c.payload.size() < 4) {
+      finish(make_error_code(SdoError::kProtocol), {});
+      return;
+    }
     finish(make_sdo_abort_error(load_le32(c.payload.data())), {});
     return;
   }

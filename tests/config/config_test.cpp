@@ -76,6 +76,13 @@ const Expected kBadFiles[] = {
      "(line 7)"},
     {"offset_bus.yaml", 4, 18, "axes[0].preq_offset",
      "is only meaningful on bus powerlink (the bus here is simulated)"},
+    {"huge_value.yaml", 3, 14, "cycle.period_us", "xxxxxxxx... (5000 characters)'"},
+    {"interface_too_long.yaml", 4, 14, "powerlink.interface",
+     "is 17 characters long; at most 15 are allowed"},
+    {"encoder_not_regular.yaml", 4, 21, "simulated.axes[0].encoder_file",
+     "not a regular file: /dev/zero is a character device"},
+    {"deep_nesting.yaml", 3, 1, "", "YAML nested deeper than"},
+    {"billion_laughs.yaml", 4, 3, "log_level", "a list is not allowed"},
 };
 
 void check_bad(const Expected& e) {
@@ -149,6 +156,11 @@ BAD_FIXTURE("nmt.yaml")
 BAD_FIXTURE("not_a_map.yaml")
 BAD_FIXTURE("offset_overlap.yaml")
 BAD_FIXTURE("offset_bus.yaml")
+BAD_FIXTURE("huge_value.yaml")
+BAD_FIXTURE("interface_too_long.yaml")
+BAD_FIXTURE("encoder_not_regular.yaml")
+BAD_FIXTURE("deep_nesting.yaml")
+BAD_FIXTURE("billion_laughs.yaml")
 
 TEST_CASE("every bad fixture has an expectation and fails", "[config][bad]") {
   std::set<std::string> listed;
@@ -497,4 +509,28 @@ TEST_CASE("mutated files never crash the loader and every error is located", "[c
     }
   }
   CHECK(rejected > 500);  // the mutations must actually exercise the error paths
+}
+
+TEST_CASE("a file is read up to 1 MiB; devices and unreadable files say why", "[config]") {
+  for (const char* endless : {"/dev/zero", "/dev/urandom"}) {
+    const ConfigResult r = load_config(endless);
+    REQUIRE(r.errors().size() == 1);
+    CHECK_THAT(r.errors().front().message, Catch::Contains("larger than 1048576 bytes"));
+  }
+  const auto big = std::filesystem::temp_directory_path() /
+                   ("ds1928-config-big-" + std::to_string(getpid()) + ".yaml");
+  {
+    std::ofstream f(big);
+    f << "# " << std::string(1048576, 'x') << "\n";
+  }
+  const ConfigResult r = load_config(big.string());
+  std::filesystem::remove(big);
+  REQUIRE(r.errors().size() == 1);
+  CHECK_THAT(r.errors().front().message, Catch::Contains("larger than 1048576 bytes"));
+
+  // stat calls /proc/self/mem a regular file of size 0; reading it fails.
+  CHECK_THAT(one_error("simulated:\n  axes: [{encoder_file: /proc/self/mem}]\naxes: [{name: x}]\n"),
+             Catch::Contains("cannot read /proc/self/mem"));
+  CHECK_THAT(one_error("simulated:\n  axes: [{encoder_file: /tmp}]\naxes: [{name: x}]\n"),
+             Catch::Contains("not a regular file: /tmp is a directory"));
 }

@@ -353,3 +353,36 @@ TEST_CASE("under a lossy bus every result is the right value or an explicit erro
   const uint64_t cycles = rig.cycles() - cycles_before;
   CHECK(publish_count(rig.shm_name()) - published_before + 5 >= cycles);
 }
+
+TEST_CASE("an axis queues 16 EnDat commands behind the one in flight; one more is busy",
+          "[endat_e2e]") {
+  // The first command is never answered (timeout 60 s): it stays in flight, nothing leaves the
+  // queue while the test fills it.
+  Rig rig({.peer = Peer::Scripted, .command_timeout_ms = 60000});
+  rig.scripted().inject(ScriptedModule::Fault::Silent, 1);
+  using State = std::pair<bool, std::size_t>;  // in flight, queued
+  auto state = [&] {
+    return rig.run([&] {
+      const json c = rig.service().status_json(0)["commands"];
+      return State{c["in_flight"].get<bool>(), c["queued"].get<std::size_t>()};
+    });
+  };
+  std::vector<std::unique_ptr<LineClient>> waiting;
+  for (std::size_t i = 0; i <= EnDatService::kQueueDepth; ++i) {
+    waiting.push_back(std::make_unique<LineClient>(rig.socket_path(), kClientTimeoutMs));
+    REQUIRE(waiting.back()->send_raw(
+        json{{"cmd", "endat-read-param"}, {"mrs", 0xA9}, {"param", i}}.dump() + "\n"));
+    // Bounded wait for the service to take it (the socket is read asynchronously).
+    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+    while (state() != State{true, i} && std::chrono::steady_clock::now() < until)
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    REQUIRE(state() == State{true, i});
+  }
+  LineClient extra(rig.socket_path(), kClientTimeoutMs);
+  const json r = extra.request({{"cmd", "endat-read-param"}, {"mrs", 0xA9}, {"param", 99}});
+  INFO(r.dump());
+  CHECK(error_code_of(r) == "busy");
+  CHECK_THAT(control::test::error_message_of(r), Catch::Contains("queue is full"));
+  CHECK(state() == State{true, EnDatService::kQueueDepth});
+  CHECK(rig.scripted().received_with_param(99) == 0);
+}

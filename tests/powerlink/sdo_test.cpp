@@ -174,3 +174,32 @@ TEST_CASE("SDO transfer fails with connection lost on node reset", "[powerlink][
   REQUIRE(b.completions == 1);
   CHECK(b.result == SdoError::kConnectionLost);
 }
+
+TEST_CASE("an SDO abort without its 4-byte code is a protocol error, not a code read past it",
+          "[powerlink][sdo]") {
+  for (std::size_t n = 0; n < 4; ++n) {
+    Bench b;
+    REQUIRE_FALSE(b.client.read(0x2005, 0x01, 0));  // no such object: the server aborts
+    for (int step = 0; step < 100 && b.completions == 0; ++step) {
+      if (!b.to_server.empty()) {
+        auto f = std::move(b.to_server.front());
+        b.to_server.pop_front();
+        auto a = parse_asnd(f);
+        REQUIRE(a);
+        b.server.receive(std::get<Sdo>(a->body), 0);
+      }
+      if (!b.to_client.empty()) {
+        auto f = std::move(b.to_client.front());
+        b.to_client.pop_front();
+        auto a = parse_asnd(f);
+        REQUIRE(a);
+        Sdo sdo = std::get<Sdo>(a->body);
+        if (sdo.command.abort) sdo.command.payload = sdo.command.payload.first(n);
+        b.client.receive(sdo, 0);
+      }
+    }
+    INFO(n << " bytes of abort code");
+    REQUIRE(b.completions == 1);
+    CHECK(b.result == make_error_code(SdoError::kProtocol));
+  }
+}
