@@ -76,8 +76,14 @@ in_root() { chroot "$root" "$@"; }
 
 # --- 2. install ---------------------------------------------------------------------------------
 cp "$daemon_deb" "$dev_deb" "$root/tmp/"
-if ! in_root env DEBIAN_FRONTEND=noninteractive dpkg -i "/tmp/${daemon_deb##*/}" "/tmp/${dev_deb##*/}"; then
-  echo "FAIL: dpkg -i"; exit 1
+# As an administrator installs them: apt resolves what the cached root lacks (then it needs the
+# mirror's package lists).
+apt_install() {
+  in_root env DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends \
+    "/tmp/${daemon_deb##*/}" "/tmp/${dev_deb##*/}"
+}
+if ! apt_install; then
+  in_root apt-get update -qq && apt_install || { echo "FAIL: apt-get install"; exit 1; }
 fi
 check "both packages installed" \
   test "$(in_root dpkg-query -W -f='${db:Status-Status} ' ds1928d libds1928-dev)" = "installed installed "
