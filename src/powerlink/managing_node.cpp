@@ -173,6 +173,16 @@ ManagingNode::ManagingNode(const MnConfig& config)
       throw std::system_error(make_error_code(MnError::kNodeNotConfigured), "node id");
     auto cn = std::make_unique<Cn>();
     cn->cfg = nc;
+    // Payload sizes the objects written to the CN define (0x1F98/4,5 or its PDO mappings), when
+    // the configuration gives none: the CN's IdentResponse predates its configuration.
+    if (!nc.preq_size || !nc.pres_size) {
+      std::vector<CdcEntry> written;
+      for (const CnObjectWrite& w : nc.object_writes)
+        written.push_back({w.index, w.subindex, w.data});
+      const ImageSizes sizes = image_sizes_from_objects(written);
+      if (!cn->cfg.preq_size) cn->cfg.preq_size = sizes.preq_size;
+      if (!cn->cfg.pres_size) cn->cfg.pres_size = sizes.pres_size;
+    }
     status_view_.emplace_back();
     cn->st = &status_view_.back();
     cn->st->node = nc.node_id;
@@ -797,7 +807,12 @@ void ManagingNode::handle_pres(Cn& cn, const PRes& pres, std::span<const uint8_t
   const std::size_t size = pres.payload.size();
   cn.st->last_pres_size = static_cast<uint16_t>(size);
   std::memcpy(cn.pres.data(), pres.payload.data(), size);
-  if (size != cn.st->pres_size) {
+  // Until its configuration is written a CN's PRes need not have the configured size yet
+  // (its mapping is among the objects written): counted from then on.
+  const bool configured = cn.st->boot == CnBootState::kWaitReadyToOperate ||
+                          cn.st->boot == CnBootState::kWaitOperational ||
+                          cn.st->boot == CnBootState::kOperational;
+  if (size != cn.st->pres_size && configured) {
     ++cn.st->pres_size_mismatches;
     cn.st->last_error = make_error_code(MnError::kPresSizeMismatch);
   }

@@ -84,7 +84,8 @@ TEST_CASE(
 
   Wire wire;
   sim::PowerlinkCnConfig cn_config;
-  cn_config.node_id = 9;  // no modules: a generic CN
+  cn_config.node_id = 9;
+  cn_config.modules.clear();  // no modules: a generic CN
   sim::PowerlinkCn cn(
       cn_config, [&](std::span<const uint8_t> f) { wire.to_mn.emplace_back(f.begin(), f.end()); });
   wire.cn = &cn;
@@ -147,7 +148,7 @@ TEST_CASE("The simulated CN's communication objects: typed access, mapping rules
   CHECK(od.pres_size(23) == 23);
   // Mapping: entries only while disabled (sub 0 = 0), then enabled with the count.
   CHECK(od.write(0x1A00, 1, le(pl::PdoMapEntry{0x6000, 1, 0, 32}.to_u64(), 8)) == 0);
-  CHECK(od.write(0x1A00, 0, {1}) == 0);
+  CHECK(od.write(0x1A00, 0, std::vector<uint8_t>{1}) == 0);
   CHECK(od.pres_size(0) == 4);
   CHECK(od.pres_size(23) == 23);  // the modules' image stays whole
   CHECK(od.write(0x1A00, 2, le(1, 8)) == 0x08000022);
@@ -155,7 +156,7 @@ TEST_CASE("The simulated CN's communication objects: typed access, mapping rules
   CHECK((size == 1 && out[0] == 1));
   CHECK(od.write(0x1F98, 5, le(40, 2)) == 0);
   CHECK(od.pres_size(23) == 40);  // the configured limit wins
-  CHECK(od.write(0x1F22, 9, {1, 2, 3}) == 0);
+  CHECK(od.write(0x1F22, 9, std::vector<uint8_t>{1, 2, 3}) == 0);
   CHECK(od.read(0x1F22, 9, out, size) == 0);
   CHECK(size == 3);
   od.reset();

@@ -11,8 +11,8 @@
 #     (0x1F98/4);
 #  3. the raw PRes is published (`ds1928ctl pl pres`), PReq bytes set with `pl preq-set` reach
 #     the CN (its PReq payload carries them on the wire);
-#  4. the MN sent the CN nothing but NMT, Ident/StatusRequests and the configuration's SDO
-#     writes (no module register access);
+#  4. the MN sent the CN nothing but NMT, Ident/StatusRequests, the identity read (0x1018/1) and
+#     the configuration's SDO writes (no module register access);
 #  5. Wireshark decodes every frame of both directions with no malformed packet or expert
 #     error/warning.
 # Usage: powerlink_generic_cn_test.sh BUILD_DIR SOURCE_DIR     (root; exit 77 = skipped)
@@ -105,7 +105,11 @@ powerlink:
   cdc: mnobd.cdc
   nodes:
     - node_id: 9
-      pres_timeout_us: 300
+      pres_timeout_us: 500
+  # Holding a CN through the stalls of a busy 2-core machine is another test's subject; here a
+  # reset would only restart the configuration being checked.
+  thresholds:
+    loss_of_pres: 0
   async_timeout_us: 200
 shm:
   name: /ds1928d_plg_$tag
@@ -156,13 +160,15 @@ done
 grep -q "modules 0\|0 module" "$tmp/sim.log" || true
 n=$(node9)
 echo "node 9: $(echo "$n" | jq -c '{boot, preq_size, pres_size, configuration}')"
-[ "$(echo "$n" | jq .configuration.objects_written)" = ${#cn_entries[@]} ] ||
-  fail "not every object of 0x1F22/9 was written"
+# objects_written counts every boot (a loss-of-PRes reset boots the CN again).
+written=$(echo "$n" | jq .configuration.objects_written)
+[ "$written" -ge ${#cn_entries[@]} ] && [ $((written % ${#cn_entries[@]})) = 0 ] ||
+  fail "not every object of 0x1F22/9 was written ($written)"
 [ "$(echo "$n" | jq .configuration.object_failures)" = 0 ] || fail "the CN refused objects"
 [ "$(echo "$n" | jq .pres_size)" = 10 ] || fail "PRes size is not the mapped 10 bytes"
 [ "$(echo "$n" | jq .preq_size)" = 4 ] || fail "PReq size is not the written limit of 4"
 [ "$(echo "$n" | jq .pres_size_mismatches)" = 0 ] || fail "the CN's PRes size differs from the configured"
-pass "node 9 OPERATIONAL, configured from mnobd.cdc: $(echo "$n" | jq .configuration.objects_written) objects written, PRes 10 / PReq 4 bytes"
+pass "node 9 OPERATIONAL, configured from mnobd.cdc: ${#cn_entries[@]} objects written per boot, none refused, PRes 10 / PReq 4 bytes"
 
 pres=$(ctlj pl pres 9) || fail "pl pres failed"
 [ "$(echo "$pres" | jq .size)" = 10 ] || fail "raw PRes of node 9 is not 10 bytes: $pres"
@@ -178,13 +184,18 @@ if [ $have_tshark = 1 ]; then
   wait "$tshark_pid" "$tshark_cn_pid" 2>/dev/null
   tshark() { command tshark --disable-protocol opensafety "$@"; }
   # The PReq to node 9 carries the bytes set, 4 bytes payload.
-  preqs=$(tshark -r "$tmp/mn_frames.pcapng" -Y "epl.preq && epl.dest == 9 && epl.preq.size == 4" \
-      -T fields -e epl.preq.pl 2>/dev/null | grep -ci "00:a5:c3\|00a5c3")
+  # (the payload starts at frame byte 24; the dissector shows it as no field of its own)
+  preqs=$(tshark -r "$tmp/mn_frames.pcapng" \
+      -Y "epl.preq && epl.dest == 9 && epl.preq.size == 4 && frame[24:4] == 00:a5:c3:00" \
+      2>/dev/null | wc -l)
   [ "$preqs" -gt 0 ] || fail "no PReq carried the bytes set with pl preq-set"
-  # Nothing but NMT, Ident/Status and SDO from the MN; the SDO commands are writes only
-  # (command id 0x01 WriteByIndex).
-  sdo_reads=$(tshark -r "$tmp/mn_frames.pcapng" -Y "epl.asnd.sdo.cmd.command.id == 0x02" 2>/dev/null | wc -l)
-  [ "$sdo_reads" = 0 ] || fail "the MN read $sdo_reads objects of a CN with no identity to check"
+  # Nothing but NMT, Ident/Status and SDO from the MN; one SDO read (0x1018/1: the vendor id
+  # 0x1F85/9 gives), the rest writes (command id 0x01 WriteByIndex) — no module register access.
+  sdo_reads=$(tshark -r "$tmp/mn_frames.pcapng" -Y "epl.asnd.sdo.cmd.command.id == 0x02 && epl.src == 240" 2>/dev/null | wc -l)
+  # One identity read per configuration run (a reset starts one more; one may be under way).
+  runs=$(($(node9 | jq .configuration.objects_written) / ${#cn_entries[@]}))
+  [ "$sdo_reads" -ge 1 ] && [ "$sdo_reads" -le $((runs + 1)) ] ||
+    fail "the MN read $sdo_reads objects in $runs configuration runs; one identity read per run expected"
   sdo_writes=$(tshark -r "$tmp/mn_frames.pcapng" -Y "epl.asnd.sdo.cmd.command.id == 0x01 && epl.src == 240" 2>/dev/null | wc -l)
   [ "$sdo_writes" -ge ${#cn_entries[@]} ] || fail "only $sdo_writes SDO writes on the wire"
   for cap in mn_frames cn_frames; do
@@ -194,6 +205,6 @@ if [ $have_tshark = 1 ]; then
     undecoded=$(tshark -r "$tmp/$cap.pcapng" -Y "eth.type == 0x88ab && !epl" 2>/dev/null | wc -l)
     [ "$undecoded" = 0 ] || fail "$undecoded frames of $cap not decoded"
   done
-  pass "Wireshark decodes both directions cleanly ($sdo_writes SDO writes, no SDO read, PReq with the set bytes)"
+  pass "Wireshark decodes both directions cleanly ($sdo_writes SDO writes, $sdo_reads identity read(s), PReq with the set bytes)"
 fi
 echo "PASS"
