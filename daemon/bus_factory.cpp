@@ -4,6 +4,7 @@
 #include "daemon.hpp"
 #include "powerlink/powerlink_bus.hpp"
 #include "powerlink/raw_link.hpp"
+#include "powerlink/rx_wait.hpp"
 #include "sim/simulated_bus.hpp"
 
 namespace ds1928 {
@@ -16,6 +17,7 @@ std::unique_ptr<BusDriver> make_bus(const DaemonConfig& config, std::string& why
       auto link = std::make_unique<powerlink::RawLink>();
       powerlink::RawLinkOptions options;
       options.interface = config.powerlink.interface;
+      powerlink::apply_rx_wait(config.powerlink.rx_wait, config.powerlink.rx_spin_us, options);
       if (auto ec = link->open(options)) {
         why_not = fmt::format(
             "powerlink: cannot open raw socket on '{}': {}{}", config.powerlink.interface,
@@ -75,6 +77,7 @@ nlohmann::json bus_status_json(const BusDriver& bus) {
                    {"cycle_time_exceeded_fired", st.counters.cycle_time_exceeded.fired},
                    {"unexpected_frames", st.counters.unexpected_frames},
                    {"invalid_frames", st.counters.invalid_frames},
+                   {"short_frames", st.counters.short_frames},
                    {"async_timeouts", st.counters.async_timeouts},
                    {"async_invites_unused", st.counters.async_invites_unused}};
   nlohmann::json nodes = nlohmann::json::array();
@@ -92,7 +95,8 @@ nlohmann::json bus_status_json(const BusDriver& bus) {
                      {"loss_of_pres",
                       {{"events", n.loss_of_pres.events},
                        {"counter", n.loss_of_pres.value},
-                       {"fired", n.loss_of_pres.fired}}},
+                       {"fired", n.loss_of_pres.fired},
+                       {"threshold", n.loss_of_pres_threshold}}},
                      {"late_pres", {{"events", n.late_pres.events}, {"fired", n.late_pres.fired}}},
                      {"stale_pres_dropped", n.stale_pres_dropped},
                      {"pres_size_mismatches", n.pres_size_mismatches},

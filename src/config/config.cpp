@@ -211,6 +211,8 @@ void parse_socket(Section s, SocketConfig& c) {
   s.integer("max_clients", c.max_clients, 1, 1024);
   s.integer("max_request_bytes", c.max_request_bytes, 256, 1048576, "bytes");
   s.integer("idle_timeout_ms", c.idle_timeout_ms, 0, 86400000, "ms (0 = never)");
+  s.integer("reply_buffer_bytes", c.reply_buffer_bytes, 4096, 67108864, "bytes");
+  s.integer("reply_stall_timeout_ms", c.reply_stall_timeout_ms, 100, 86400000, "ms");
   s.finish();
 }
 
@@ -569,7 +571,9 @@ std::string dump_config(const DaemonConfig& c) {
     << "  privileged_group: " << quote(k.privileged_group) << "\n"
     << "  max_clients: " << k.max_clients << "\n"
     << "  max_request_bytes: " << k.max_request_bytes << "\n"
-    << "  idle_timeout_ms: " << k.idle_timeout_ms << "\n";
+    << "  idle_timeout_ms: " << k.idle_timeout_ms << "\n"
+    << "  reply_buffer_bytes: " << k.reply_buffer_bytes << "\n"
+    << "  reply_stall_timeout_ms: " << k.reply_stall_timeout_ms << "\n";
   return o.str();
 }
 

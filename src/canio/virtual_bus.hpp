@@ -1,0 +1,164 @@
+// The virtual CAN bus: a TEST TRANSPORT standing in for a CAN network where the kernel has no
+// CAN (unit tests, the simulator, fault injection). It is not a CAN implementation: no
+// arbitration, no bit timing, no ACK. What it keeps from CAN is what the drivers depend on:
+// a broadcast medium (every port sees every other port's frames, not its own), per-port
+// identifier filters and error-frame subscription, RX time stamps, and the controller states
+// with bus-off and restart behaving as the kernel reports them.
+//
+// Medium: one ring of frame slots, written by any port (ticket = fetch_add on the head), read by
+// every port at its own pace (a reader lapped by the writers loses the overwritten frames and
+// counts them as rx_kernel_drops, like SO_RXQ_OVFL). Slots are plain atomics, waiting is a futex
+// on the publish counter, so the ring works the same in process memory
+// (VirtualCanBus::create_local) and in POSIX shared memory between processes
+// (VirtualCanBus::open_shared): ds1928d and `ds1928-sim canio` talk over it without AF_CAN. Shared
+// memory was chosen over a Unix datagram socket per port because a broadcast needs no peer list,
+// send is one slot write with no syscall unless a reader sleeps, and nothing on the send/receive
+// path allocates.
+//
+// Fault injection is per port and thread-safe (atomics; error frames through a small SPSC queue
+// with one injecting thread): random loss with a seeded RNG, "drop the next k frames with id X",
+// delivery delayed by receive polls or by time, injected error frames, bus-off with the kernel's
+// recovery (restart-ms on the bus clock, or restart()).
+#pragma once
+
+#include <atomic>
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <span>
+#include <string>
+#include <string_view>
+
+#include "canio/can_error_frame.hpp"
+#include "canio/can_port.hpp"
+
+namespace ds1928::canio {
+
+struct VirtualBusOptions {
+  // Frame slots in the ring (power of two). A reader falling this many frames behind loses frames.
+  uint32_t ring_frames = 1024;
+  // Clock for RX stamps, delays and bus-off restart (CLOCK_MONOTONIC ns). Empty: the real
+  // CLOCK_MONOTONIC. Tests pass a fake clock; receive() deadlines are read on the same clock.
+  std::function<int64_t()> clock;
+};
+
+struct VirtualPortOptions {
+  std::string name = "vcan";   // for messages and query_interface()
+  uint32_t bitrate = 500'000;  // reported by query_interface() (the bus has no timing)
+  // After an injected bus-off, the port restarts by itself this long after (bus clock), as the
+  // kernel does with `restart-ms`; 0: stays bus-off until restart().
+  uint32_t restart_ms = 100;
+};
+
+// Which way a fault applies: frames this port receives, or frames it sends (then no port sees
+// them).
+enum class FaultDirection : uint8_t { Rx = 0, Tx = 1 };
+
+struct FaultCounters {
+  uint64_t rx_lost = 0;         // dropped on receive by random loss or drop_next
+  uint64_t tx_lost = 0;         // dropped on send by random loss or drop_next (send said Sent)
+  uint64_t delayed = 0;         // frames that went through the delay queue
+  uint64_t delay_overflow = 0;  // delay queue full: frame dropped
+  uint64_t errors_injected = 0;
+  uint64_t sends_failed = 0;    // by fail_next_sends
+  uint64_t missed_off_bus = 0;  // frames on the bus while this port was bus-off or down
+};
+
+class VirtualCanBus;
+
+class VirtualCanPort final : public CanPort {
+ public:
+  ~VirtualCanPort() override;
+  VirtualCanPort(const VirtualCanPort&) = delete;
+  VirtualCanPort& operator=(const VirtualCanPort&) = delete;
+
+  // CanPort
+  SendResult send(const CanFrame& frame) noexcept override;
+  ReceiveResult receive(std::span<CanFrame> frames, int64_t deadline_ns) noexcept override;
+  [[nodiscard]] CanState state() const noexcept override;
+  [[nodiscard]] CanPortCounters counters() const noexcept override;
+  [[nodiscard]] std::error_code set_filters(std::span<const CanIdFilter> ids) noexcept override;
+  [[nodiscard]] std::error_code set_error_mask(uint32_t classes) noexcept override;
+  [[nodiscard]] Result<CanInterfaceInfo> query_interface() noexcept override;
+  [[nodiscard]] std::string_view name() const noexcept override { return options_.name; }
+
+  // ---- fault injection (any thread) ---------------------------------------------------------
+
+  // Random loss: each frame is dropped with `probability` (0..1), from a xorshift RNG seeded
+  // with `seed` (reproducible runs).
+  void set_loss(FaultDirection dir, double probability, uint64_t seed) noexcept;
+  // Drops the next `count` frames with identifier `id` (standard or extended alike).
+  void drop_next(FaultDirection dir, uint32_t id, uint32_t count) noexcept;
+  // Received frames are handed out only after `polls` further receive() calls (0: off).
+  void set_delay_polls(uint32_t polls) noexcept;
+  // Received frames are handed out only `ns` after they were sent (bus clock; 0: off). Their
+  // RX stamp is the delivery time, as a late frame on a real bus would be stamped.
+  void set_delay_ns(int64_t ns) noexcept;
+  // Delivers `event` to this port as an error frame (if its class is subscribed) and applies its
+  // state change. False when the injection queue (16) is full. One injecting thread at a time.
+  bool inject_error(const CanErrorEvent& event) noexcept;
+  // Every OTHER port on the bus (in any process) takes `event` as if its own controller had
+  // reported it: state change, and the error frame if subscribed. The way a simulator process
+  // makes the daemon's port go bus-off or error-passive. Any thread.
+  bool broadcast_error(const CanErrorEvent& event) noexcept;
+  // The controller goes bus-off at once: state BusOff, send() answers BusOff, a bus-off error
+  // frame for the next receive(); after restart_ms on the bus clock (if not 0) the port restarts
+  // by itself: restarted error frame, error-active. Always true.
+  bool inject_bus_off() noexcept;
+  // Manual restart of a bus-off controller (`ip link set canX type can restart`).
+  void restart() noexcept;
+  // Administrative up/down: down → send() InterfaceDown, receive() kInterfaceDown.
+  void set_up(bool up) noexcept;
+  // The next `count` send() calls fail with `status` (QueueFull: as ENOBUFS, InterfaceDown: as
+  // ENETDOWN, Failed: as EIO) without reaching the bus.
+  void fail_next_sends(uint32_t count, SendStatus status = SendStatus::QueueFull) noexcept;
+
+  [[nodiscard]] FaultCounters fault_counters() const noexcept;
+
+ private:
+  friend class VirtualCanBus;
+  struct Impl;
+  VirtualCanPort(std::shared_ptr<VirtualCanBus> bus, uint16_t index, VirtualPortOptions options);
+
+  std::shared_ptr<VirtualCanBus> bus_;
+  VirtualPortOptions options_;
+  std::unique_ptr<Impl> impl_;  // allocated once at open; the hot path only uses it
+};
+
+class VirtualCanBus : public std::enable_shared_from_this<VirtualCanBus> {
+ public:
+  // A bus in this process' memory.
+  [[nodiscard]] static std::shared_ptr<VirtualCanBus> create_local(VirtualBusOptions options = {});
+  // A bus in POSIX shared memory "/ds1928-vcan.<name>", created by whichever process opens it
+  // first (same ring size required: kVirtualBusMismatch otherwise). With unlink_on_close the
+  // name is removed when this object goes (the mapping stays valid in other processes).
+  [[nodiscard]] static Result<std::shared_ptr<VirtualCanBus>> open_shared(
+      std::string_view name, VirtualBusOptions options = {}, bool unlink_on_close = false);
+  // Removes the shared-memory name of a bus (leftovers of a crashed run).
+  static std::error_code remove_shared(std::string_view name) noexcept;
+
+  ~VirtualCanBus();
+  VirtualCanBus(const VirtualCanBus&) = delete;
+  VirtualCanBus& operator=(const VirtualCanBus&) = delete;
+
+  // A new port on this bus; it sees frames sent from now on (by any other port).
+  [[nodiscard]] Result<std::unique_ptr<VirtualCanPort>> open_port(VirtualPortOptions options = {});
+
+  [[nodiscard]] int64_t now_ns() const noexcept;
+
+  struct Ring;  // shared layout (virtual_bus.cpp)
+
+ private:
+  VirtualCanBus() = default;
+  friend class VirtualCanPort;
+
+  VirtualBusOptions options_;
+  Ring* ring_ = nullptr;
+  std::size_t mapped_bytes_ = 0;
+  bool shared_ = false;
+  std::string shm_name_;
+  bool unlink_on_close_ = false;
+};
+
+}  // namespace ds1928::canio
