@@ -102,9 +102,10 @@ std::vector<uint8_t> encode_cdc(std::span<const CdcEntry> entries) {
 
 const CdcEntry* find_cdc_entry(std::span<const CdcEntry> entries, uint16_t index,
                                uint8_t subindex) noexcept {
+  const CdcEntry* last = nullptr;
   for (const CdcEntry& e : entries)
-    if (e.index == index && e.subindex == subindex) return &e;
-  return nullptr;
+    if (e.index == index && e.subindex == subindex) last = &e;
+  return last;
 }
 
 }  // namespace ds1928::powerlink

@@ -48,7 +48,8 @@ struct CdcDecodeResult {
 // The inverse (tests, tools); entries as given.
 [[nodiscard]] std::vector<uint8_t> encode_cdc(std::span<const CdcEntry> entries);
 
-// The entry index/subindex of `entries`, or nullptr.
+// The last entry for index/subindex in `entries` (the value the object ends up with when the
+// list is written in order), or nullptr.
 [[nodiscard]] const CdcEntry* find_cdc_entry(std::span<const CdcEntry> entries, uint16_t index,
                                              uint8_t subindex) noexcept;
 

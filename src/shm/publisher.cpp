@@ -157,7 +157,8 @@ std::error_code Publisher::open(const ShmConfig& config, uint32_t axis_count,
                                 uint64_t cycle_period_ns) {
   close();
   if (!valid_name(config.name)) return ShmError::kInvalidName;
-  if (axis_count == 0) return ShmError::kNoAxes;
+  // No axes is valid (a POWERLINK MN with generic CNs only): the header alone still tells
+  // readers that the daemon runs and at which cycle.
   if (axis_count > kMaxAxes) return ShmError::kTooManyAxes;
   int gid = -1;
   if (!config.group.empty()) {

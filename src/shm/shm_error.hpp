@@ -8,7 +8,7 @@ namespace ds1928::shm {
 
 enum class ShmError {
   kInvalidName = 1,  // not "/name" without further slashes, or too long
-  kNoAxes,           // axis count 0
+  kNoAxes,           // axis count 0 (no longer refused: a daemon may run without axes)
   kTooManyAxes,      // more axes than the layout allows
   kUnknownGroup,     // ShmConfig.group names no group
   kNameInUse,        // another live daemon publishes under this name

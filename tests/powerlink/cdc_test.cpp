@@ -54,6 +54,11 @@ TEST_CASE("PDO mapping entries give the payload size; 0x1F98 limits take precede
   ImageSizes s = image_sizes_from_objects(objects);
   CHECK(s.pres_size == uint16_t{6});  // entry 3 is beyond the count: not mapped
   CHECK(s.preq_size == uint16_t{2});  // 12 bits round up
+  // Written in order: disabled, entries, enabled — the last value of sub 0 counts.
+  objects.insert(objects.begin(), {kObjTxPdoMapping, 0, {0}});
+  CHECK(image_sizes_from_objects(objects).pres_size == uint16_t{6});
+  objects.push_back({kObjTxPdoMapping, 0, {1}});
+  CHECK(image_sizes_from_objects(objects).pres_size == uint16_t{1});
   objects.push_back({kObjCycleTiming, 4, {40, 0}});
   s = image_sizes_from_objects(objects);
   CHECK(s.preq_size == uint16_t{40});

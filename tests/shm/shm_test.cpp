@@ -64,12 +64,22 @@ TEST_CASE("publisher rejects bad parameters with precise errors") {
   CHECK(pub.open(config_for("no-slash"), 1, 1000) == ShmError::kInvalidName);
   CHECK(pub.open(config_for("/a/b"), 1, 1000) == ShmError::kInvalidName);
   CHECK(pub.open(config_for("/" + std::string(300, 'x')), 1, 1000) == ShmError::kInvalidName);
-  CHECK(pub.open(config_for(unique_name("bad")), 0, 1000) == ShmError::kNoAxes);
   CHECK(pub.open(config_for(unique_name("bad")), kMaxAxes + 1, 1000) == ShmError::kTooManyAxes);
   ShmConfig cfg = config_for(unique_name("bad"));
   cfg.group = "no-such-group-ds1928";
   CHECK(pub.open(cfg, 1, 1000) == ShmError::kUnknownGroup);
   CHECK_FALSE(pub.is_open());
+}
+
+TEST_CASE("a daemon without axes publishes the header alone") {
+  const auto name = unique_name("none");
+  Publisher pub;
+  REQUIRE_FALSE(pub.open(config_for(name), 0, 1000));
+  ds1928_shm_reader r{};
+  REQUIRE(ds1928_shm_reader_open(&r, name.c_str()) == 0);
+  CHECK(r.header->axis_count == 0);
+  ds1928_shm_reader_close(&r);
+  pub.close();
 }
 
 TEST_CASE("a reader gets exactly what was published, field by field") {
