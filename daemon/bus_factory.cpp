@@ -47,6 +47,23 @@ std::unique_ptr<BusDriver> make_bus(const DaemonConfig& config, std::string& why
   return nullptr;
 }
 
+namespace {
+
+// Boot step "configure" of a CN: objects written, the failures of the last run (index/subindex,
+// abort code), and an identity mismatch.
+nlohmann::json configuration_json(const powerlink::CnStatus& n) {
+  nlohmann::json failures = nlohmann::json::array();
+  for (std::size_t i = 0; i < n.last_failure_count; ++i)
+    failures.push_back(powerlink::describe(n.last_failures[i]));
+  return {{"objects_written", n.objects_written},
+          {"object_failures", n.object_failures},
+          {"last_failures", std::move(failures)},
+          {"identity_mismatch",
+           n.identity_mismatch ? nlohmann::json(powerlink::describe(n.mismatch)) : nullptr}};
+}
+
+}  // namespace
+
 nlohmann::json bus_status_json(const BusDriver& bus) {
   nlohmann::json j{{"kind", std::string(bus.name())},
                    {"state", std::string(to_string(bus.state()))}};
@@ -93,6 +110,10 @@ nlohmann::json bus_status_json(const BusDriver& bus) {
                      {"last_error", n.last_error ? n.last_error.message() : std::string()},
                      {"last_reset_reason",
                       n.last_reset_reason ? n.last_reset_reason.message() : std::string()}});
+    nodes.back()["configuration"] = configuration_json(n);
+    nodes.back()["exception"] = {{"new", n.exception_new},
+                                 {"acknowledged", n.exception_acknowledge},
+                                 {"signalled", n.exceptions_signalled}};
   }
   j["nodes"] = std::move(nodes);
   return j;
@@ -144,11 +165,21 @@ std::vector<BusEvent> BusWatch::poll(const BusDriver& bus,
       seen.nmt_refused.said = n.nmt_requests_refused;
     } else {
       if (n.resets > seen.resets) {
-        const std::string reason =
+        std::string reason =
             n.last_reset_reason ? n.last_reset_reason.message() : std::string("unknown reason");
+        if (n.identity_mismatch) reason += ": " + powerlink::describe(n.mismatch);
         events.push_back(
             {true, fmt::format("powerlink node {}: reset by the MN ({}; resets {}, PRes losses {})",
                                n.node, reason, n.resets, n.loss_of_pres.events)});
+      }
+      if (n.object_failures > seen.object_failures) {
+        std::string list;
+        for (std::size_t k = 0; k < n.last_failure_count; ++k)
+          list += (k ? "; " : "") + powerlink::describe(n.last_failures[k]);
+        events.push_back(
+            {true, fmt::format("powerlink node {}: {} object(s) of its configuration "
+                               "refused ({})",
+                               n.node, n.object_failures - seen.object_failures, list)});
       }
       if (n.boots > seen.boots)
         events.push_back(
@@ -164,6 +195,7 @@ std::vector<BusEvent> BusWatch::poll(const BusDriver& bus,
     }
     seen.resets = n.resets;
     seen.boots = n.boots;
+    seen.object_failures = n.object_failures;
   }
   seen_ = true;
   return events;

@@ -50,6 +50,7 @@ class BusWatch {
   struct NodeSeen {
     uint32_t resets = 0;
     uint32_t boots = 0;
+    uint32_t object_failures = 0;
     Said late_pres;
     Said nmt_refused;
   };

@@ -175,6 +175,9 @@ class MnCategory final : public std::error_category {
         return "reset requested by the node (NMTRequest)";
       case MnError::kNmtRequestRefused:
         return "NMTRequest refused (only a node's own reset is served)";
+      case MnError::kIdentityCheckFailed:
+        return "identity check failed (0x1000/0x1018 differ from the configuration or cannot be "
+               "read)";
     }
     return "unknown MN error";
   }

@@ -66,6 +66,8 @@ enum class MnError : int {
   kBootStepTimeout,            // reset reason: the CN did not finish a boot step in time
   kResetRequested,             // reset reason: the CN asked for its reset (NMTRequest)
   kNmtRequestRefused,          // an NMTRequest this MN does not serve (see docs/powerlink.md)
+  kIdentityCheckFailed,  // reset reason: 0x1000/0x1018 read by SDO differs from the configuration
+                         // or cannot be read
 };
 
 [[nodiscard]] const std::error_category& frame_category() noexcept;

@@ -1,9 +1,12 @@
 #include "powerlink/managing_node.hpp"
 
 #include <algorithm>
+#include <cstdio>
 #include <cstring>
 #include <numeric>
 #include <string>
+
+#include "powerlink/concise_dcf.hpp"
 
 namespace ds1928::powerlink {
 
@@ -27,6 +30,27 @@ std::string_view to_string(CnBootState s) noexcept {
   return "?";
 }
 
+std::string describe(const ObjectAccessFailure& f) {
+  return object_name(f.index, f.subindex) + (f.read ? " read: " : " write: ") + f.error.message();
+}
+
+std::string describe(const IdentityMismatch& m) {
+  const char* what = m.index == 0x1000 ? "device type"
+                     : m.subindex == 1 ? "vendor id"
+                     : m.subindex == 2 ? "product code"
+                     : m.subindex == 3 ? "revision number"
+                                       : "serial number";
+  std::array<char, 96> buf{};
+  if (m.unreadable) {
+    std::snprintf(buf.data(), buf.size(), " (%s): expected 0x%08X, cannot be read", what,
+                  m.expected);
+  } else {
+    std::snprintf(buf.data(), buf.size(), " (%s): expected 0x%08X, found 0x%08X", what, m.expected,
+                  m.found);
+  }
+  return object_name(m.index, m.subindex) + buf.data();
+}
+
 bool DllCounter::step(bool error, uint32_t threshold) noexcept {
   if (error) {
     ++events;
@@ -43,6 +67,24 @@ bool DllCounter::step(bool error, uint32_t threshold) noexcept {
 namespace {
 constexpr std::size_t kOutboxDepth = 4;
 constexpr std::size_t kOpQueueDepth = 32;
+
+// What an SDO transfer of a CN is for.
+enum class OpKind : uint8_t {
+  kRegister,      // a module register (boot configuration or a client's request)
+  kIdentityRead,  // 0x1000 / 0x1018 read back and compared
+  kObjectWrite,   // an object of the CN's configuration (concise DCF, sdo_writes, cycle objects)
+};
+// Where an object write's value comes from: fixed bytes, or what is known only at boot.
+enum class ValueSource : uint8_t { kData, kCycleUs, kPreqSize, kPresSize };
+struct ObjectOp {
+  OpKind kind = OpKind::kObjectWrite;
+  uint16_t index = 0;
+  uint8_t subindex = 0;
+  ValueSource source = ValueSource::kData;
+  uint32_t expected = 0;  // identity read
+  std::size_t data_offset = 0;
+  std::size_t data_size = 0;
+};
 }  // namespace
 
 struct ManagingNode::Cn {
@@ -69,8 +111,18 @@ struct ManagingNode::Cn {
   std::size_t outbox_count = 0;
   uint32_t outbox_overflows = 0;
   std::unique_ptr<SdoClient> sdo;
-  std::vector<SdoRegisterOp> boot_ops;  // module configuration, built once
+  // Boot step "configure", built once: identity reads and object writes first, then the module
+  // registers. Object values live in object_data.
+  std::vector<ObjectOp> object_ops;
+  std::vector<uint8_t> object_data;
+  std::size_t object_next = 0;
+  std::vector<SdoRegisterOp> boot_ops;  // module configuration
   std::size_t boot_next = 0;
+  OpKind op_kind = OpKind::kRegister;
+  std::array<uint8_t, 4> op_value{};  // value of a ValueSource other than kData
+  // Exception signalling: EN changed since the last acknowledgement; ER still to be sent.
+  bool exception_pending = false;
+  bool exception_reset_due = false;
   bool configuring = false;
   std::array<SdoRegisterOp, kOpQueueDepth> ops{};
   std::size_t ops_head = 0;
@@ -181,6 +233,28 @@ ManagingNode::ManagingNode(const MnConfig& config)
       }
     }
     cn->layout = *layout;
+    // Identity read back by SDO where configured (as a configuration manager does), then the
+    // cycle objects, then the configured objects in the order given.
+    auto identity = [&](uint16_t index, uint8_t sub, const std::optional<uint32_t>& expected) {
+      if (expected)
+        cn->object_ops.push_back(
+            {OpKind::kIdentityRead, index, sub, ValueSource::kData, *expected, 0, 0});
+    };
+    identity(0x1000, 0, nc.device_type);
+    identity(0x1018, 1, nc.vendor_id);
+    identity(0x1018, 2, nc.product_code);
+    identity(0x1018, 3, nc.revision_no);
+    identity(0x1018, 4, nc.serial_no);
+    if (nc.cycle_objects) {
+      cn->object_ops.push_back({OpKind::kObjectWrite, 0x1006, 0, ValueSource::kCycleUs, 0, 0, 4});
+      cn->object_ops.push_back({OpKind::kObjectWrite, 0x1F98, 4, ValueSource::kPreqSize, 0, 0, 2});
+      cn->object_ops.push_back({OpKind::kObjectWrite, 0x1F98, 5, ValueSource::kPresSize, 0, 0, 2});
+    }
+    for (const CnObjectWrite& w : nc.object_writes) {
+      cn->object_ops.push_back({OpKind::kObjectWrite, w.index, w.subindex, ValueSource::kData, 0,
+                                cn->object_data.size(), w.data.size()});
+      cn->object_data.insert(cn->object_data.end(), w.data.begin(), w.data.end());
+    }
     Cn* raw = cn.get();
     SdoClientConfig sc;
     sc.node = nc.node_id;
@@ -280,6 +354,8 @@ void ManagingNode::on_state_wait_preop2(Cn& cn, NmtState s) noexcept {
 
 void ManagingNode::on_enter_configure(Cn& cn) noexcept {
   cn.st->in_isochronous = true;
+  cn.object_next = 0;
+  cn.st->last_failure_count = 0;
   cn.boot_next = 0;
   cn.configuring = true;
   start_next_sdo(cn);
@@ -376,9 +452,14 @@ void ManagingNode::start_next_sdo(Cn& cn) noexcept {
   while (!cn.op_active) {
     const CnBootState b = cn.st->boot;
     if (b == CnBootState::kIdentify || b == CnBootState::kReset) return;
+    if (cn.configuring && cn.object_next < cn.object_ops.size()) {
+      start_object_op(cn);
+      continue;
+    }
     if (cn.configuring && cn.boot_next < cn.boot_ops.size()) {
       cn.current = cn.boot_ops[cn.boot_next];
       cn.op_internal = true;
+      cn.op_kind = OpKind::kRegister;
     } else if (cn.configuring) {
       cn.configuring = false;
       enter(cn, CnBootState::kWaitReadyToOperate);
@@ -388,6 +469,7 @@ void ManagingNode::start_next_sdo(Cn& cn) noexcept {
       cn.ops_head = (cn.ops_head + 1) % kOpQueueDepth;
       --cn.ops_count;
       cn.op_internal = false;
+      cn.op_kind = OpKind::kRegister;
     } else {
       return;
     }
@@ -415,9 +497,70 @@ void ManagingNode::start_next_sdo(Cn& cn) noexcept {
   }
 }
 
+void ManagingNode::start_object_op(Cn& cn) noexcept {
+  const ObjectOp& op = cn.object_ops[cn.object_next];
+  cn.op_active = true;
+  cn.op_internal = true;
+  cn.op_kind = op.kind;
+  std::error_code ec;
+  if (op.kind == OpKind::kIdentityRead) {
+    ec = cn.sdo->read(op.index, op.subindex, now_ns_);
+  } else {
+    std::span<const uint8_t> value(cn.object_data.data() + op.data_offset, op.data_size);
+    if (op.source != ValueSource::kData) {
+      const uint32_t v = op.source == ValueSource::kCycleUs    ? config_.cycle_us
+                         : op.source == ValueSource::kPreqSize ? cn.st->preq_size
+                                                               : cn.st->pres_size;
+      store_le32(cn.op_value.data(), v);
+      value = std::span<const uint8_t>(cn.op_value.data(), op.data_size);
+    }
+    ec = cn.sdo->write(op.index, op.subindex, value, now_ns_);
+  }
+  if (ec) {
+    cn.op_active = false;
+    sdo_done(cn, ec, {});
+  }
+}
+
+void ManagingNode::object_done(Cn& cn, std::error_code ec, std::span<const uint8_t> data) noexcept {
+  const ObjectOp& op = cn.object_ops[cn.object_next++];
+  CnStatus& st = *cn.st;
+  if (ec) {
+    ++st.object_failures;
+    if (st.last_failure_count < st.last_failures.size())
+      st.last_failures[st.last_failure_count++] = {op.index, op.subindex,
+                                                   op.kind == OpKind::kIdentityRead, ec};
+  } else if (op.kind == OpKind::kObjectWrite) {
+    ++st.objects_written;
+  }
+  if (op.kind != OpKind::kIdentityRead) return;
+  uint32_t found = 0;
+  for (std::size_t i = 0; i < std::min<std::size_t>(data.size(), 4); ++i)
+    found |= static_cast<uint32_t>(data[i]) << (8 * i);
+  if (!ec && found == op.expected) {
+    if (st.identity_mismatch && st.mismatch.index == op.index &&
+        st.mismatch.subindex == op.subindex)
+      st.identity_mismatch = false;
+    return;
+  }
+  // Not the configured device (or one that cannot say): it is not booted, and is tried again
+  // after a reset in case it is replaced.
+  st.identity_mismatch = true;
+  st.mismatch = {op.index, op.subindex, op.expected, found, static_cast<bool>(ec)};
+  reset_node(cn, make_error_code(MnError::kIdentityCheckFailed));
+}
+
 void ManagingNode::sdo_done(Cn& cn, std::error_code ec, std::span<const uint8_t> data) noexcept {
   cn.op_active = false;
   cn.sdo_wait_answer = false;
+  if (cn.op_internal && cn.op_kind != OpKind::kRegister) {
+    if (ec) cn.st->last_error = ec;
+    if (ec == SdoError::kConnectionLost) return;  // the node is being reset
+    object_done(cn, ec, data);
+    if (cn.st->boot == CnBootState::kReset) return;
+    start_next_sdo(cn);
+    return;
+  }
   uint32_t value = 0;
   for (std::size_t i = 0; i < std::min<std::size_t>(data.size(), 4); ++i)
     value |= static_cast<uint32_t>(data[i]) << (8 * i);
@@ -521,6 +664,7 @@ Result<std::size_t> ManagingNode::build_preq(uint8_t node, std::span<uint8_t> ou
   PReq preq;
   preq.ready = mn_state_ == NmtState::kOperational;
   preq.multiplexed_slot = cn->cfg.multiplex > 1;
+  preq.exception_acknowledge = cn->st->exception_acknowledge;
   preq.payload = std::span<const uint8_t>(cn->preq.data(), cn->st->preq_size);
   return powerlink::build_preq(out, preq_header(config_.mac, cn->st->mac, node), preq);
 }
@@ -559,6 +703,10 @@ Result<std::size_t> ManagingNode::build_soa(std::span<uint8_t> out) noexcept {
         default:
           if (cn.st->boot == CnBootState::kIdentify) {
             soa_service_ = RequestedService::kIdentRequest;
+          } else if (cn.exception_pending && cn.st->boot != CnBootState::kReset) {
+            // Exception signalled: fetch its error entries, whatever the boot state.
+            soa_service_ = RequestedService::kStatusRequest;
+            cn.last_status_request = counters_.cycles;
           } else if (cn.st->boot != CnBootState::kReset &&
                      counters_.cycles - cn.last_status_request >=
                          config_.bus.nmt.status_request_every &&
@@ -585,6 +733,13 @@ Result<std::size_t> ManagingNode::build_soa(std::span<uint8_t> out) noexcept {
   soa.mn_nmt_state = mn_state_;
   soa.service = soa_service_;
   soa.target = soa_target_;
+  if (soa_service_ == RequestedService::kStatusRequest) {
+    if (Cn* t = find(soa_target_)) {
+      soa.exception_acknowledge = t->st->exception_acknowledge;
+      soa.exception_reset = t->exception_reset_due;
+      t->exception_reset_due = false;
+    }
+  }
   return powerlink::build_soa(out, soa_header(config_.mac), soa);
 }
 
@@ -652,6 +807,12 @@ void ManagingNode::handle_pres(Cn& cn, const PRes& pres, std::span<const uint8_t
   ++cn.st->pres_received;
   cn.rs = pres.request_count;
   cn.pr = pres.priority;
+  // EN differing from the EA the MN last sent: the CN has new error entries to fetch.
+  cn.st->exception_new = pres.exception_new;
+  if (pres.exception_new != cn.st->exception_acknowledge && !cn.exception_pending) {
+    cn.exception_pending = true;
+    ++cn.st->exceptions_signalled;
+  }
   const std::size_t size = pres.payload.size();
   cn.st->last_pres_size = static_cast<uint16_t>(size);
   std::memcpy(cn.pres.data(), pres.payload.data(), size);
@@ -678,7 +839,9 @@ void ManagingNode::handle_asnd(const FrameHeader& h, const Asnd& asnd) noexcept 
       const auto& c = cn->cfg;
       if ((c.vendor_id && *c.vendor_id != ident->vendor_id) ||
           (c.product_code && *c.product_code != ident->product_code) ||
-          (c.device_type && *c.device_type != ident->device_type)) {
+          (c.device_type && *c.device_type != ident->device_type) ||
+          (c.revision_no && *c.revision_no != ident->revision_no) ||
+          (c.serial_no && *c.serial_no != ident->serial_no)) {
         cn->st->last_error = make_error_code(MnError::kIdentMismatch);
         cn->st->nmt = ident->nmt_state;
         return;
@@ -693,6 +856,10 @@ void ManagingNode::handle_asnd(const FrameHeader& h, const Asnd& asnd) noexcept 
           c.pres_size.value_or(ident->poll_in_size ? ident->poll_in_size : cn->layout.pres_size);
       cn->st->preq_size = std::min<uint16_t>(cn->st->preq_size, kMaxIsoPayload);
       std::fill(cn->preq.begin(), cn->preq.end(), 0);
+      // Exception signalling starts afresh: ER in the next StatusRequest, EA cleared.
+      cn->exception_reset_due = true;
+      cn->exception_pending = false;
+      cn->st->exception_acknowledge = false;
       enter(*cn, CnBootState::kWaitPreOp2);
     }
     reported_state(*cn, ident->nmt_state);
@@ -703,6 +870,10 @@ void ManagingNode::handle_asnd(const FrameHeader& h, const Asnd& asnd) noexcept 
       cn->st->status_error_entries += static_cast<uint32_t>(status->entry_count());
       cn->st->last_error_code = status->entry(status->entry_count() - 1).code;
     }
+    // The entries are read: acknowledge the EN the CN signals (EA follows EN).
+    cn->st->exception_new = status->exception_new;
+    cn->st->exception_acknowledge = status->exception_new;
+    cn->exception_pending = false;
     reported_state(*cn, status->nmt_state);
   } else if (const auto* sdo = std::get_if<Sdo>(&asnd.body)) {
     if (h.dst_node != kNodeMn) return;
@@ -745,12 +916,15 @@ void ManagingNode::update_mn_state() noexcept {
     return;
   }
   if (mn_state_ == NmtState::kPreOperational2) {
+    // OPERATIONAL (and RD in the PReq) only once every mandatory CN has confirmed
+    // READY_TO_OPERATE: NMTEnableReadyToOperate sent is not enough.
     bool ready = !cns_.empty();
     for (const auto& cn : cns_) {
       const CnBootState b = cn->st->boot;
-      if (cn->cfg.mandatory && b != CnBootState::kWaitReadyToOperate &&
-          b != CnBootState::kWaitOperational && b != CnBootState::kOperational)
-        ready = false;
+      const bool confirmed =
+          (b == CnBootState::kWaitReadyToOperate && cn->st->nmt == NmtState::kReadyToOperate) ||
+          b == CnBootState::kWaitOperational || b == CnBootState::kOperational;
+      if (cn->cfg.mandatory && !confirmed) ready = false;
     }
     if (ready) {
       mn_state_ = NmtState::kOperational;

@@ -13,6 +13,7 @@
 #include <cstdint>
 #include <memory>
 #include <span>
+#include <string>
 #include <string_view>
 #include <system_error>
 #include <vector>
@@ -45,6 +46,29 @@ struct DllCounter {
   [[nodiscard]] bool step(bool error, uint32_t threshold) noexcept;
 };
 
+// An object of the CN's configuration (boot step "configure") the CN refused or did not answer.
+struct ObjectAccessFailure {
+  uint16_t index = 0;
+  uint8_t subindex = 0;
+  bool read = false;      // identity read (else a write)
+  std::error_code error;  // an SDO abort (sdo_abort_category, value = abort code) or SdoError
+};
+inline constexpr std::size_t kMaxReportedObjectFailures = 8;
+
+// The identity object that did not match (0x1000/0 device type, 0x1018/1..4).
+struct IdentityMismatch {
+  uint16_t index = 0;
+  uint8_t subindex = 0;
+  uint32_t expected = 0;
+  uint32_t found = 0;
+  bool unreadable = false;  // the read failed: `found` is meaningless
+};
+
+// "0x1C14/0 write: SDO abort 0x06090030: ..." / "0x1018/2 (product code): expected 0x00001928,
+// found 0x00002928" — for status and the log (normal thread; allocates).
+[[nodiscard]] std::string describe(const ObjectAccessFailure& f);
+[[nodiscard]] std::string describe(const IdentityMismatch& m);
+
 struct CnStatus {
   uint8_t node = 0;
   CnBootState boot = CnBootState::kIdentify;
@@ -75,6 +99,20 @@ struct CnStatus {
   std::error_code last_error;
   // Why the MN last reset the CN (kept when it boots again, unlike last_error).
   std::error_code last_reset_reason;
+  // Boot step "configure": objects written (cumulative), and the failures of the last run (the
+  // first kMaxReportedObjectFailures of them; object_failures counts all, cumulative).
+  uint32_t objects_written = 0;
+  uint32_t object_failures = 0;
+  std::array<ObjectAccessFailure, kMaxReportedObjectFailures> last_failures{};
+  std::size_t last_failure_count = 0;
+  // Set when the identity check by SDO failed (kept until the identity matches).
+  bool identity_mismatch = false;
+  IdentityMismatch mismatch{};
+  // Exception signalling: the CN's EN, the EA the MN acknowledges with in the PReq, and
+  // StatusRequests sent because EN changed (its error entries are fetched).
+  bool exception_new = false;
+  bool exception_acknowledge = false;
+  uint32_t exceptions_signalled = 0;
 };
 
 struct MnCounters {
@@ -194,6 +232,8 @@ class ManagingNode {
   void reported_state(Cn& cn, NmtState state) noexcept;
   void start_next_sdo(Cn& cn) noexcept;
   void sdo_done(Cn& cn, std::error_code ec, std::span<const uint8_t> data) noexcept;
+  void start_object_op(Cn& cn) noexcept;  // the op at cn.object_next
+  void object_done(Cn& cn, std::error_code ec, std::span<const uint8_t> data) noexcept;
   void update_mn_state() noexcept;
   [[nodiscard]] int64_t ms(uint32_t v) const noexcept {
     return static_cast<int64_t>(v) * 1'000'000;

@@ -56,6 +56,7 @@ class PowerlinkCn::Objects final : public pl::SdoObjectAccess {
 
   uint32_t read_object(uint16_t index, uint8_t subindex, std::span<uint8_t> out,
                        std::size_t& size) noexcept override {
+    if (CnObjectDictionary::handles(index)) return cn_.comm_.read(index, subindex, out, size);
     uint32_t value = 0;
     uint8_t width = 4;
     if (index == 0x1000) {
@@ -98,6 +99,7 @@ class PowerlinkCn::Objects final : public pl::SdoObjectAccess {
   uint32_t write_object(uint16_t index, uint8_t subindex,
                         std::span<const uint8_t> data) noexcept override {
     if (index == 0x1000 || index == 0x1018) return kAbortReadOnly;
+    if (CnObjectDictionary::handles(index)) return cn_.comm_.write(index, subindex, data);
     Ds1928Module* module = nullptr;
     uint16_t reg = 0;
     if (const uint32_t abort = locate(index, subindex, module, reg)) return abort;
@@ -224,6 +226,8 @@ void PowerlinkCn::reset(pl::NmtCommandId command, int64_t now_ns) noexcept {
     default:
       break;
   }
+  // Every reset restores the communication objects: the MN configures them again.
+  comm_.reset();
   sdo_->reset();
   async_head_ = 0;
   async_count_ = 0;
@@ -404,7 +408,9 @@ void PowerlinkCn::send_pres(int64_t now_ns) noexcept {
     return;
   }
   std::array<uint8_t, pl::kMaxIsoPayload> payload{};
-  std::size_t size = layout_.pres_size;
+  // The size an MN configured (0x1F98/5, 0x1A00), else the modules' image; module bytes beyond
+  // a smaller configured size are left out.
+  std::size_t size = comm_.pres_size(layout_.pres_size);
   for (const HostedModule& m : modules_) {
     if (m.mapping == nullptr) continue;
     (void)pl::write_inputs(std::span<uint8_t>(payload.data(), size), *m.mapping,
@@ -531,8 +537,8 @@ void PowerlinkCn::send_ident_response() noexcept {
   ident.request_count = request_count();
   ident.priority = request_priority();
   ident.mtu = 300;
-  ident.poll_in_size = layout_.pres_size;
-  ident.poll_out_size = layout_.preq_size;
+  ident.poll_in_size = comm_.pres_size(layout_.pres_size);
+  ident.poll_out_size = comm_.preq_size(layout_.preq_size);
   ident.response_time_ns = config_.response_time_ns;
   ident.device_type = config_.device_type;
   ident.vendor_id = config_.vendor_id;

@@ -34,6 +34,7 @@
 #include "powerlink/process_image.hpp"
 #include "powerlink/sdo.hpp"
 #include "powerlink/sdo_mapping.hpp"
+#include "sim/cn_object_dictionary.hpp"
 #include "sim/ds1928_module.hpp"
 
 namespace ds1928::sim {
@@ -199,6 +200,7 @@ class PowerlinkCn {
   std::vector<HostedModule> modules_;
   powerlink::NodeImageLayout layout_;
   powerlink::SdoMapping mapping_;
+  CnObjectDictionary comm_;  // communication objects an MN configures
   std::unique_ptr<Objects> objects_;
   std::unique_ptr<powerlink::SdoServer> sdo_;
   PowerlinkCnStats stats_;

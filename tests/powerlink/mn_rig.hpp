@@ -33,8 +33,10 @@ struct Rig {
   uint64_t cycle = 0;
 
   // `place`: per-axis changes (e.g. PRes/PReq offset overrides) before the CNs are built.
+  // `node_cfg`: changes to each node's configuration (object writes, identity, ...).
   explicit Rig(std::vector<uint8_t> nodes = {1}, uint8_t modules_per_node = 1,
-               const std::function<void(AxisConfig&)>& place = {}) {
+               const std::function<void(AxisConfig&)>& place = {},
+               const std::function<void(PowerlinkNodeConfig&)>& node_cfg = {}) {
     g_clock_ns = 0;
     g_clock_step_ns = 0;
     config.cycle_us = 1000;
@@ -44,6 +46,7 @@ struct Rig {
     for (uint8_t n : nodes) {
       PowerlinkNodeConfig nc;
       nc.node_id = n;
+      if (node_cfg) node_cfg(nc);
       config.bus.nodes.push_back(nc);
       for (uint8_t s = 1; s <= modules_per_node; ++s) {
         AxisConfig a;

@@ -25,6 +25,7 @@ void TestCn::power_cycle() {
 
 uint32_t TestCn::read_object(uint16_t index, uint8_t sub, std::span<uint8_t> out,
                              std::size_t& size) noexcept {
+  ++reads;
   auto it = objects.find({index, sub});
   if (it == objects.end()) return 0x06020000;
   size = std::min(out.size(), it->second.size());
@@ -33,7 +34,10 @@ uint32_t TestCn::read_object(uint16_t index, uint8_t sub, std::span<uint8_t> out
 }
 
 uint32_t TestCn::write_object(uint16_t index, uint8_t sub, std::span<const uint8_t> data) noexcept {
-  if (index < 0x2001 || index > 0x2010) return 0x06020000;
+  writes.emplace_back(index, sub);
+  if (auto it = write_aborts.find({index, sub}); it != write_aborts.end()) return it->second;
+  const bool communication = index >= 0x1000 && index <= 0x1FFF;
+  if (!communication && (index < 0x2001 || index > 0x2010)) return 0x06020000;
   objects[{index, sub}].assign(data.begin(), data.end());
   return 0;
 }
@@ -55,6 +59,7 @@ void TestCn::on_frame(std::span<const uint8_t> bytes, std::deque<std::vector<uin
     if (h.dst_node != node || drop_pres) return;
     if (state == NmtState::kNotActive || state == NmtState::kPreOperational1) return;
     last_preq_ready = preq->ready;
+    last_preq_ea = preq->exception_acknowledge;
     last_preq_payload.assign(preq->payload.begin(), preq->payload.end());
     if (layout.count > 0) (void)read_outputs(preq->payload, layout.modules[0], last_outputs);
     std::vector<uint8_t> payload(std::max<int>(0, layout.pres_size + pres_size_delta), 0);
@@ -66,6 +71,7 @@ void TestCn::on_frame(std::span<const uint8_t> bytes, std::deque<std::vector<uin
     PRes pres;
     pres.nmt_state = state;
     pres.ready = state == NmtState::kOperational;
+    pres.exception_new = exception_new;
     pres.request_count = static_cast<uint8_t>(std::min<std::size_t>(
         sdo_out_.size() + static_cast<std::size_t>(fake_request_count) + (nmt_request ? 1 : 0), 7));
     pres.priority = nmt_request ? 7 : 3;
@@ -88,6 +94,8 @@ void TestCn::on_frame(std::span<const uint8_t> bytes, std::deque<std::vector<uin
         r.nmt_state = state;
         r.vendor_id = vendor_id;
         r.product_code = product_code;
+        r.device_type = device_type;
+        r.serial_no = serial_no;
         r.poll_in_size = layout.pres_size;
         r.poll_out_size = layout.preq_size;
         emit(build_ident_response(buf, ah, r));
@@ -95,10 +103,11 @@ void TestCn::on_frame(std::span<const uint8_t> bytes, std::deque<std::vector<uin
       }
       case RequestedService::kStatusRequest: {
         ++status_requests;
+        if (soa->exception_reset) ++exception_resets;
         if (ignore_status_requests) break;
         StatusResponse r;
         r.nmt_state = state;
-        r.exception_new = !status_errors.empty();
+        r.exception_new = exception_new;
         emit(build_status_response(buf, ah, r, status_errors));
         break;
       }
@@ -126,7 +135,8 @@ void TestCn::on_frame(std::span<const uint8_t> bytes, std::deque<std::vector<uin
       ++nmt_commands;
       switch (static_cast<NmtCommandId>(cmd->command)) {
         case NmtCommandId::kEnableReadyToOperate:
-          if (state == NmtState::kPreOperational2) state = NmtState::kReadyToOperate;
+          if (state == NmtState::kPreOperational2 && !hold_ready_to_operate)
+            state = NmtState::kReadyToOperate;
           break;
         case NmtCommandId::kStartNode:
           if (state == NmtState::kReadyToOperate) state = NmtState::kOperational;

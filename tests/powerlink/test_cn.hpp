@@ -51,10 +51,23 @@ class TestCn : public SdoObjectAccess {
   int nmt_request_invites = 0;
   uint32_t vendor_id = 0x1A;
   uint32_t product_code = 0x1928;
+  uint32_t device_type = 0;
+  uint32_t serial_no = 0;
+  // Exception signalling: EN in PRes and StatusResponse; the EA/ER the MN last sent.
+  bool exception_new = false;
+  bool last_preq_ea = false;
+  int exception_resets = 0;  // StatusRequests with ER set
+  // Stays in PRE_OPERATIONAL_2 on NMTEnableReadyToOperate while set.
+  bool hold_ready_to_operate = false;
+  // Object writes: refused with this abort code (else communication objects 0x1000..0x1FFF and
+  // the module objects are stored).
+  std::map<std::pair<uint16_t, uint8_t>, uint32_t> write_aborts;
+  std::vector<std::pair<uint16_t, uint8_t>> writes;  // in the order received
   // Seen.
   int nmt_commands = 0;
   int ident_requests = 0;
   int status_requests = 0;
+  int reads = 0;  // SDO reads
 
  private:
   SdoServer server_;

@@ -145,6 +145,8 @@ void try_realtime(int priority, int cpu) {
     if (n.vendor_id) cn.vendor_id = *n.vendor_id;
     if (n.product_code) cn.product_code = *n.product_code;
     if (n.device_type) cn.device_type = *n.device_type;
+    if (n.revision_no) cn.revision_no = *n.revision_no;
+    if (n.serial_no) cn.serial_no = *n.serial_no;
   }
   cn.sdo_overrides = config.powerlink.sdo_overrides;
   cn.nettime_offset_us = config.powerlink.nettime_offset_us;

@@ -1,0 +1,215 @@
+#include "sim/cn_object_dictionary.hpp"
+
+#include <algorithm>
+#include <cstring>
+
+namespace ds1928::sim {
+namespace {
+
+constexpr uint32_t kAbortNoObject = 0x06020000;
+constexpr uint32_t kAbortNoSubindex = 0x06090011;
+constexpr uint32_t kAbortReadOnly = 0x06010002;
+constexpr uint32_t kAbortTypeLength = 0x06070010;
+constexpr uint32_t kAbortOutOfRange = 0x06090030;
+constexpr uint32_t kAbortGeneral = 0x08000000;
+// Mapping written while enabled (sub 0 ≠ 0): DS 301 wants it disabled first.
+constexpr uint32_t kAbortDeviceState = 0x08000022;
+
+uint64_t le(std::span<const uint8_t> d) noexcept {
+  uint64_t v = 0;
+  for (std::size_t i = 0; i < d.size() && i < 8; ++i) v |= static_cast<uint64_t>(d[i]) << (8 * i);
+  return v;
+}
+
+// A value of `width` bytes into `out`.
+uint32_t put(std::span<uint8_t> out, std::size_t& size, uint64_t v, std::size_t width) noexcept {
+  if (out.size() < width) return kAbortGeneral;
+  for (std::size_t i = 0; i < width; ++i) out[i] = static_cast<uint8_t>(v >> (8 * i));
+  size = width;
+  return 0;
+}
+
+// Writes `data` of exactly `width` bytes into `field`.
+template <class T>
+uint32_t take(T& field, std::span<const uint8_t> data) noexcept {
+  if (data.size() != sizeof(T)) return kAbortTypeLength;
+  field = static_cast<T>(le(data));
+  return 0;
+}
+
+}  // namespace
+
+uint16_t CnObjectDictionary::Mapping::end_bytes() const noexcept {
+  uint32_t end_bits = 0;
+  for (std::size_t i = 0; i < count; ++i) {
+    const uint64_t e = entries[i];
+    const uint32_t offset = static_cast<uint16_t>(e >> 32);
+    const uint32_t length = static_cast<uint16_t>(e >> 48);
+    end_bits = std::max(end_bits, offset + length);
+  }
+  return static_cast<uint16_t>((end_bits + 7) / 8);
+}
+
+bool CnObjectDictionary::handles(uint16_t index) noexcept {
+  switch (index) {
+    case 0x1006:
+    case 0x1020:
+    case 0x1C14:
+    case 0x1F98:
+    case 0x1400:
+    case 0x1800:
+    case 0x1600:
+    case 0x1A00:
+    case 0x1F22:
+      return true;
+    default:
+      return false;
+  }
+}
+
+uint32_t CnObjectDictionary::read(uint16_t index, uint8_t sub, std::span<uint8_t> out,
+                                  std::size_t& size) const noexcept {
+  switch (index) {
+    case 0x1006:
+      return sub == 0 ? put(out, size, cycle_len_us_, 4) : kAbortNoSubindex;
+    case 0x1020:
+      if (sub == 0) return put(out, size, 2, 1);
+      return sub <= 2 ? put(out, size, conf_date_time_[sub - 1], 4) : kAbortNoSubindex;
+    case 0x1C14:
+      return sub == 0 ? put(out, size, lof_tolerance_ns_, 4) : kAbortNoSubindex;
+    case 0x1F98:
+      switch (sub) {
+        case 0:
+          return put(out, size, 9, 1);
+        case 1:
+          return put(out, size, isochr_tx_max_payload_, 2);
+        case 2:
+          return put(out, size, isochr_rx_max_payload_, 2);
+        case 3:
+          return put(out, size, pres_max_latency_ns_, 4);
+        case 4:
+          return put(out, size, preq_act_payload_, 2);
+        case 5:
+          return put(out, size, pres_act_payload_, 2);
+        case 6:
+          return put(out, size, asnd_max_latency_ns_, 4);
+        case 7:
+          return put(out, size, multipl_cycle_cnt_, 1);
+        case 8:
+          return put(out, size, async_mtu_, 2);
+        case 9:
+          return put(out, size, prescaler_, 2);
+        default:
+          return kAbortNoSubindex;
+      }
+    case 0x1400:
+    case 0x1800: {
+      const PdoComm& c = index == 0x1400 ? rx_comm_ : tx_comm_;
+      if (sub == 0) return put(out, size, 2, 1);
+      if (sub == 1) return put(out, size, c.node_id, 1);
+      if (sub == 2) return put(out, size, c.mapping_version, 1);
+      return kAbortNoSubindex;
+    }
+    case 0x1600:
+    case 0x1A00: {
+      const Mapping& m = index == 0x1600 ? rx_map_ : tx_map_;
+      if (sub == 0) return put(out, size, m.count, 1);
+      if (sub > kMaxMapped) return kAbortNoSubindex;
+      return put(out, size, m.entries[sub - 1], 8);
+    }
+    case 0x1F22:
+      if (sub == 0) return put(out, size, 254, 1);
+      if (out.size() < dcf_size_) return kAbortGeneral;
+      std::memcpy(out.data(), dcf_.data(), dcf_size_);
+      size = dcf_size_;
+      return 0;
+    default:
+      return kAbortNoObject;
+  }
+}
+
+uint32_t CnObjectDictionary::write(uint16_t index, uint8_t sub,
+                                   std::span<const uint8_t> data) noexcept {
+  switch (index) {
+    case 0x1006:
+      return sub == 0 ? take(cycle_len_us_, data) : kAbortNoSubindex;
+    case 0x1020:
+      if (sub == 0) return kAbortReadOnly;
+      return sub <= 2 ? take(conf_date_time_[sub - 1], data) : kAbortNoSubindex;
+    case 0x1C14:
+      return sub == 0 ? take(lof_tolerance_ns_, data) : kAbortNoSubindex;
+    case 0x1F98:
+      switch (sub) {
+        case 0:
+        case 1:
+        case 2:
+        case 3:
+        case 6:
+          return kAbortReadOnly;  // the device's own limits
+        case 4:
+        case 5: {
+          uint16_t v = 0;
+          if (const uint32_t a = take(v, data)) return a;
+          const uint16_t limit = sub == 4 ? isochr_rx_max_payload_ : isochr_tx_max_payload_;
+          if (v > limit) return kAbortOutOfRange;
+          (sub == 4 ? preq_act_payload_ : pres_act_payload_) = v;
+          return 0;
+        }
+        case 7:
+          return take(multipl_cycle_cnt_, data);
+        case 8:
+          return take(async_mtu_, data);
+        case 9:
+          return take(prescaler_, data);
+        default:
+          return kAbortNoSubindex;
+      }
+    case 0x1400:
+    case 0x1800: {
+      PdoComm& c = index == 0x1400 ? rx_comm_ : tx_comm_;
+      if (sub == 0) return kAbortReadOnly;
+      if (sub == 1) return take(c.node_id, data);
+      if (sub == 2) return take(c.mapping_version, data);
+      return kAbortNoSubindex;
+    }
+    case 0x1600:
+    case 0x1A00: {
+      Mapping& m = index == 0x1600 ? rx_map_ : tx_map_;
+      if (sub == 0) {
+        uint8_t count = 0;
+        if (const uint32_t a = take(count, data)) return a;
+        if (count > kMaxMapped) return kAbortOutOfRange;
+        m.count = count;
+        return 0;
+      }
+      if (sub > kMaxMapped) return kAbortNoSubindex;
+      if (m.count != 0) return kAbortDeviceState;
+      uint64_t v = 0;
+      if (const uint32_t a = take(v, data)) return a;
+      m.entries[sub - 1] = v;
+      return 0;
+    }
+    case 0x1F22:
+      if (sub == 0) return kAbortReadOnly;
+      if (data.size() > kMaxStoredDcf) return kAbortOutOfRange;
+      std::memcpy(dcf_.data(), data.data(), data.size());
+      dcf_size_ = data.size();
+      return 0;
+    default:
+      return kAbortNoObject;
+  }
+}
+
+uint16_t CnObjectDictionary::pres_size(uint16_t fallback) const noexcept {
+  if (pres_act_payload_ != 0) return pres_act_payload_;
+  if (tx_map_.count != 0) return std::max(fallback, tx_map_.end_bytes());
+  return fallback;
+}
+
+uint16_t CnObjectDictionary::preq_size(uint16_t fallback) const noexcept {
+  if (preq_act_payload_ != 0) return preq_act_payload_;
+  if (rx_map_.count != 0) return std::max(fallback, rx_map_.end_bytes());
+  return fallback;
+}
+
+}  // namespace ds1928::sim

@@ -1,0 +1,199 @@
+#!/bin/bash
+# A third-party CN configured the standard way, end to end with real frames: ds1928d (the
+# daemon, no axes) in one network namespace boots ds1928-sim without modules (a generic CN) in
+# another, from the MN's concise DCF (mnobd.cdc, 0x1F22/9 = the CN's objects) — the form
+# openCONFIGURATOR writes.
+#
+# Checks:
+#  1. `ds1928d --check-config` accepts the configuration (no axes, CDC file);
+#  2. the CN reaches OPERATIONAL; the MN wrote every object of 0x1F22/9 (none refused) and the
+#     CN's PRes has the size its written mapping (0x1A00) defines, its PReq the written limit
+#     (0x1F98/4);
+#  3. the raw PRes is published (`ds1928ctl pl pres`), PReq bytes set with `pl preq-set` reach
+#     the CN (its PReq payload carries them on the wire);
+#  4. the MN sent the CN nothing but NMT, Ident/StatusRequests and the configuration's SDO
+#     writes (no module register access);
+#  5. Wireshark decodes every frame of both directions with no malformed packet or expert
+#     error/warning.
+# Usage: powerlink_generic_cn_test.sh BUILD_DIR SOURCE_DIR     (root; exit 77 = skipped)
+set -u
+build=${1:?build dir}
+src=${2:?source dir}
+sim=$build/tools/ds1928-sim/ds1928-sim
+daemon=$build/daemon/ds1928d
+ctl=$build/tools/ds1928ctl/ds1928ctl
+
+if [ "$(id -u)" != 0 ]; then
+  echo "SKIP: needs root (network namespaces, veth, AF_PACKET raw sockets); run ctest as root"
+  exit 77
+fi
+for bin in "$sim" "$daemon" "$ctl"; do
+  [ -x "$bin" ] || { echo "FAIL: $bin not built"; exit 1; }
+done
+command -v jq >/dev/null || { echo "FAIL: jq not installed"; exit 1; }
+have_tshark=1
+command -v tshark >/dev/null || { have_tshark=0; echo "NOTE: tshark not installed, frame check skipped"; }
+
+tag=$$
+ns_mn=plg_mn_$tag
+ns_cn=plg_cn_$tag
+if_mn=plg_mn
+if_cn=plg_cn
+tmp=$(mktemp -d /tmp/powerlink_generic.XXXXXX)
+pids=()
+failed=0
+
+cleanup() {
+  for p in "${pids[@]}"; do kill "$p" 2>/dev/null; done
+  for p in "${pids[@]}"; do wait "$p" 2>/dev/null; done
+  ip netns del "$ns_mn" 2>/dev/null
+  ip netns del "$ns_cn" 2>/dev/null
+  rm -f "/dev/shm/ds1928d_plg_$tag" "/dev/shm/ds1928d_plg_$tag.wait"
+  if [ "$failed" = 0 ] && [ -z "${KEEP_TMP:-}" ]; then rm -rf "$tmp"; else echo "logs kept in $tmp"; fi
+}
+trap cleanup EXIT
+trap 'exit 1' INT TERM
+
+fail() { echo "FAIL: $*"; failed=1; for f in "$tmp"/*.log; do echo "---- $f"; tail -n 25 "$f"; done; exit 1; }
+pass() { echo "ok: $*"; }
+ctlj() { ip netns exec "$ns_mn" "$ctl" -s "$tmp/ctl.sock" --json "$@"; }
+node9() { ctlj status 2>/dev/null | jq -c '.bus.nodes[] | select(.node == 9)' 2>/dev/null; }
+
+# ---- The concise DCF --------------------------------------------------------------------------
+# Little-endian fields as printf escapes.
+le() {  # VALUE BYTES
+  local v=$1 n=$2 i out=""
+  for ((i = 0; i < n; i++)); do out+=$(printf '\\x%02x' $(((v >> (8 * i)) & 0xff))); done
+  printf '%s' "$out"
+}
+entry() {  # INDEX SUB SIZE VALUE: one concise DCF entry with a numeric value
+  printf '%s%s%s%s' "$(le "$1" 2)" "$(le "$2" 1)" "$(le "$3" 4)" "$(le "$4" "$3")"
+}
+map() {  # INDEX SUB OFFSET_BITS LENGTH_BITS: a PDO mapping entry (u64)
+  echo $(($1 | ($2 << 16) | ($3 << 32) | ($4 << 48)))
+}
+# Node 9's objects: cycle length, loss-of-frame tolerance, TPDO mapping (disable, 2 entries of
+# 64 + 16 bits = 10 bytes, enable), PReq limit 4 bytes.
+cn_entries=(
+  "$(entry 0x1006 0 4 1000)"
+  "$(entry 0x1C14 0 4 300000)"
+  "$(entry 0x1800 1 1 0)"
+  "$(entry 0x1A00 0 1 0)"
+  "$(entry 0x1A00 1 8 "$(map 0x6000 1 0 64)")"
+  "$(entry 0x1A00 2 8 "$(map 0x6000 2 64 16)")"
+  "$(entry 0x1A00 0 1 2)"
+  "$(entry 0x1F98 4 2 4)"
+)
+{ printf "$(le ${#cn_entries[@]} 4)"; for e in "${cn_entries[@]}"; do printf "$e"; done; } >"$tmp/cn9.cdc"
+cn_size=$(stat -c %s "$tmp/cn9.cdc")
+# The MN's file: its own cycle, node 9's concise DCF (0x1F22/9, a domain), node 9's vendor.
+{
+  printf "$(le 3 4)"
+  printf "$(entry 0x1006 0 4 1000)"
+  printf "$(le 0x1F22 2)$(le 9 1)$(le "$cn_size" 4)"
+  cat "$tmp/cn9.cdc"
+  printf "$(entry 0x1F85 9 4 0x1A)"
+} >"$tmp/mnobd.cdc"
+
+cat >"$tmp/generic.yaml" <<YAML
+# A generic CN (no X20DS1928) configured from openCONFIGURATOR's mnobd.cdc.
+cycle:
+  period_us: 1000
+bus: powerlink
+powerlink:
+  interface: $if_mn
+  cdc: mnobd.cdc
+  nodes:
+    - node_id: 9
+      pres_timeout_us: 300
+  async_timeout_us: 200
+shm:
+  name: /ds1928d_plg_$tag
+socket:
+  path: $tmp/ctl.sock
+  privileged_group: ""
+YAML
+
+"$daemon" --check-config "$tmp/generic.yaml" >"$tmp/check.log" 2>&1 || fail "check-config refused it"
+pass "configuration without axes, from a concise DCF, accepted ($(tail -n1 "$tmp/check.log"))"
+
+ip netns add "$ns_mn" || fail "cannot create network namespace"
+ip netns add "$ns_cn" || fail "cannot create network namespace"
+ip link add "$if_mn" netns "$ns_mn" type veth peer name "$if_cn" netns "$ns_cn" || fail "veth"
+ip -n "$ns_mn" link set "$if_mn" up
+ip -n "$ns_cn" link set "$if_cn" up
+
+wait_for() {  # FILE REGEX SECONDS
+  local i
+  for ((i = 0; i < $3 * 20; i++)); do grep -qE "$2" "$1" 2>/dev/null && return 0; sleep 0.05; done
+  return 1
+}
+if [ $have_tshark = 1 ]; then
+  ip netns exec "$ns_cn" tshark -i "$if_cn" -f "ether proto 0x88ab" -w "$tmp/mn_frames.pcapng" \
+      >"$tmp/tshark.log" 2>&1 &
+  tshark_pid=$!
+  pids+=($!)
+  ip netns exec "$ns_mn" tshark -i "$if_mn" -f "ether proto 0x88ab" -w "$tmp/cn_frames.pcapng" \
+      >"$tmp/tshark_cn.log" 2>&1 &
+  tshark_cn_pid=$!
+  pids+=($!)
+  wait_for "$tmp/tshark.log" "Capturing on" 30 || fail "tshark did not start"
+  wait_for "$tmp/tshark_cn.log" "Capturing on" 30 || fail "tshark (MN end) did not start"
+fi
+
+ip netns exec "$ns_cn" "$sim" powerlink --iface "$if_cn" --node 9 --config "$tmp/generic.yaml" \
+    >"$tmp/sim.log" 2>&1 &
+pids+=($!)
+ip netns exec "$ns_mn" "$daemon" --config "$tmp/generic.yaml" >"$tmp/daemon.log" 2>&1 &
+pids+=($!)
+
+up=0
+for ((i = 0; i < 600; i++)); do
+  [ "$(node9 | jq -r .boot)" = operational ] && { up=1; break; }
+  sleep 0.05
+done
+[ $up = 1 ] || fail "node 9 did not reach OPERATIONAL"
+grep -q "modules 0\|0 module" "$tmp/sim.log" || true
+n=$(node9)
+echo "node 9: $(echo "$n" | jq -c '{boot, preq_size, pres_size, configuration}')"
+[ "$(echo "$n" | jq .configuration.objects_written)" = ${#cn_entries[@]} ] ||
+  fail "not every object of 0x1F22/9 was written"
+[ "$(echo "$n" | jq .configuration.object_failures)" = 0 ] || fail "the CN refused objects"
+[ "$(echo "$n" | jq .pres_size)" = 10 ] || fail "PRes size is not the mapped 10 bytes"
+[ "$(echo "$n" | jq .preq_size)" = 4 ] || fail "PReq size is not the written limit of 4"
+[ "$(echo "$n" | jq .pres_size_mismatches)" = 0 ] || fail "the CN's PRes size differs from the configured"
+pass "node 9 OPERATIONAL, configured from mnobd.cdc: $(echo "$n" | jq .configuration.objects_written) objects written, PRes 10 / PReq 4 bytes"
+
+pres=$(ctlj pl pres 9) || fail "pl pres failed"
+[ "$(echo "$pres" | jq .size)" = 10 ] || fail "raw PRes of node 9 is not 10 bytes: $pres"
+ctlj pl preq-set 9 1 a5c3 >"$tmp/preq.log" 2>&1 || fail "pl preq-set refused: $(cat "$tmp/preq.log")"
+pass "raw PRes published (10 bytes), PReq bytes set"
+sleep 1  # frames with the new PReq bytes on the wire; more cycles of the hold
+n=$(node9)
+echo "node 9 after ~1 s more: resets $(echo "$n" | jq .resets), PRes losses $(echo "$n" | jq .loss_of_pres.events)"
+
+if [ $have_tshark = 1 ]; then
+  sleep 0.2
+  kill -INT "$tshark_pid" "$tshark_cn_pid"
+  wait "$tshark_pid" "$tshark_cn_pid" 2>/dev/null
+  tshark() { command tshark --disable-protocol opensafety "$@"; }
+  # The PReq to node 9 carries the bytes set, 4 bytes payload.
+  preqs=$(tshark -r "$tmp/mn_frames.pcapng" -Y "epl.preq && epl.dest == 9 && epl.preq.size == 4" \
+      -T fields -e epl.preq.pl 2>/dev/null | grep -ci "00:a5:c3\|00a5c3")
+  [ "$preqs" -gt 0 ] || fail "no PReq carried the bytes set with pl preq-set"
+  # Nothing but NMT, Ident/Status and SDO from the MN; the SDO commands are writes only
+  # (command id 0x01 WriteByIndex).
+  sdo_reads=$(tshark -r "$tmp/mn_frames.pcapng" -Y "epl.asnd.sdo.cmd.command.id == 0x02" 2>/dev/null | wc -l)
+  [ "$sdo_reads" = 0 ] || fail "the MN read $sdo_reads objects of a CN with no identity to check"
+  sdo_writes=$(tshark -r "$tmp/mn_frames.pcapng" -Y "epl.asnd.sdo.cmd.command.id == 0x01 && epl.src == 240" 2>/dev/null | wc -l)
+  [ "$sdo_writes" -ge ${#cn_entries[@]} ] || fail "only $sdo_writes SDO writes on the wire"
+  for cap in mn_frames cn_frames; do
+    tshark -r "$tmp/$cap.pcapng" -Y "_ws.malformed || _ws.expert.severity >= 0x00600000" \
+        -T fields -e frame.number -e epl.src -e epl.mtyp -e _ws.expert.message >"$tmp/expert_$cap.txt" 2>/dev/null
+    [ -s "$tmp/expert_$cap.txt" ] && { head "$tmp/expert_$cap.txt"; fail "Wireshark finds malformed $cap"; }
+    undecoded=$(tshark -r "$tmp/$cap.pcapng" -Y "eth.type == 0x88ab && !epl" 2>/dev/null | wc -l)
+    [ "$undecoded" = 0 ] || fail "$undecoded frames of $cap not decoded"
+  done
+  pass "Wireshark decodes both directions cleanly ($sdo_writes SDO writes, no SDO read, PReq with the set bytes)"
+fi
+echo "PASS"

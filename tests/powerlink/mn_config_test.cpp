@@ -1,0 +1,165 @@
+// The MN as a configuration manager for third-party CNs: object writes in the boot step
+// "configure" with per-object abort reports, the identity read back by SDO, the cycle objects,
+// READY_TO_OPERATE before OPERATIONAL/RD, and exception signalling (EN/EA/ER). In-memory CN rig.
+#include <catch2/catch.hpp>
+
+#include "mn_rig.hpp"
+#include "powerlink/powerlink_bus.hpp"
+#include "test_cn.hpp"
+
+using namespace ds1928;
+using namespace ds1928::powerlink;
+using test::Rig;
+using test::TestCn;
+
+namespace {
+
+std::vector<uint8_t> le(uint64_t v, int n) {
+  std::vector<uint8_t> d;
+  for (int i = 0; i < n; ++i) d.push_back(static_cast<uint8_t>(v >> (8 * i)));
+  return d;
+}
+
+bool operational(Rig& rig) {
+  return rig.bus->state() == BusState::Operational;
+}
+
+}  // namespace
+
+TEST_CASE(
+    "The MN goes OPERATIONAL and sets PReq RD only after the mandatory CNs confirm "
+    "READY_TO_OPERATE",
+    "[powerlink][mn][nmt]") {
+  Rig rig({1, 2});
+  rig.cns[1]->hold_ready_to_operate = true;  // node 2 has not confirmed yet
+  REQUIRE(rig.run_until([&] { return rig.st(2).boot == CnBootState::kWaitReadyToOperate; }));
+  for (int i = 0; i < 200; ++i) rig.step();
+  CHECK(rig.cns[1]->state == NmtState::kPreOperational2);
+  CHECK(rig.bus->managing_node().mn_state() == NmtState::kPreOperational2);
+  CHECK_FALSE(rig.cns[0]->last_preq_ready);
+  CHECK_FALSE(rig.cns[1]->last_preq_ready);
+  CHECK(rig.st(1).boot == CnBootState::kWaitReadyToOperate);
+  // Confirmed: now the MN goes on, and both CNs are started.
+  rig.cns[1]->hold_ready_to_operate = false;
+  rig.cns[1]->state = NmtState::kReadyToOperate;
+  REQUIRE(rig.run_until([&] { return operational(rig); }));
+  rig.step();
+  CHECK(rig.bus->managing_node().mn_state() == NmtState::kOperational);
+  CHECK(rig.cns[0]->last_preq_ready);
+  CHECK(rig.cns[1]->state == NmtState::kOperational);
+}
+
+TEST_CASE(
+    "A generic CN gets its configured objects in order; a refused object is reported with "
+    "its abort code and the boot goes on",
+    "[powerlink][mn][configure]") {
+  Rig rig({7}, 0, {}, [](PowerlinkNodeConfig& n) {
+    n.object_writes = {{0x1006, 0, le(1000, 4), true},
+                       {0x1A00, 0, {0}, true},
+                       {0x1A00, 1, le(0x0040'0000'0001'6000ULL, 8), true},
+                       {0x1A00, 0, {1}, true},
+                       {0x1C14, 0, le(50000, 4), false}};
+    n.pres_size = 8;
+  });
+  rig.cns[0]->write_aborts[{0x1C14, 0}] = 0x06090030;  // value range exceeded
+  REQUIRE(rig.run_until([&] { return operational(rig); }));
+  using Key = std::pair<uint16_t, uint8_t>;
+  CHECK(rig.cns[0]->writes ==
+        std::vector<Key>{{0x1006, 0}, {0x1A00, 0}, {0x1A00, 1}, {0x1A00, 0}, {0x1C14, 0}});
+  CHECK(rig.cns[0]->objects[{0x1006, 0}] == le(1000, 4));
+  CHECK(rig.cns[0]->objects[{0x1A00, 0}] == std::vector<uint8_t>{1});
+  const CnStatus& st = rig.st(7);
+  CHECK(st.objects_written == 4);
+  CHECK(st.object_failures == 1);
+  REQUIRE(st.last_failure_count == 1);
+  CHECK(st.last_failures[0].index == 0x1C14);
+  CHECK(st.last_failures[0].subindex == 0);
+  CHECK_FALSE(st.last_failures[0].read);
+  CHECK(st.last_failures[0].error == make_sdo_abort_error(0x06090030));
+  // Nothing else: no module registers, no reads, for a CN without X20DS1928.
+  CHECK(rig.cns[0]->reads == 0);
+  CHECK(st.boot == CnBootState::kOperational);
+}
+
+TEST_CASE("cycle_objects: the MN writes the CN's cycle length and payload limits",
+          "[powerlink][mn][configure]") {
+  Rig rig({3}, 1, {}, [](PowerlinkNodeConfig& n) { n.cycle_objects = true; });
+  REQUIRE(rig.run_until([&] { return operational(rig); }));
+  auto& o = rig.cns[0]->objects;
+  CHECK(o[{0x1006, 0}] == le(1000, 4));
+  CHECK(o[{0x1F98, 4}] == le(rig.st(3).preq_size, 2));
+  CHECK(o[{0x1F98, 5}] == le(rig.st(3).pres_size, 2));
+  CHECK(rig.st(3).pres_size == 16 + 7);
+}
+
+TEST_CASE("The identity is read back by SDO; a mismatch names the object, expected and found",
+          "[powerlink][mn][identity]") {
+  SECTION("matching identity boots") {
+    Rig rig({4}, 0, {}, [](PowerlinkNodeConfig& n) {
+      n.device_type = 0x000F0191;
+      n.serial_no = 0x12345678;
+    });
+    rig.cns[0]->device_type = 0x000F0191;
+    rig.cns[0]->serial_no = 0x12345678;
+    rig.cns[0]->objects[{0x1000, 0}] = le(0x000F0191, 4);
+    rig.cns[0]->objects[{0x1018, 4}] = le(0x12345678, 4);
+    REQUIRE(rig.run_until([&] { return operational(rig); }));
+    CHECK(rig.cns[0]->reads == 2);
+    CHECK_FALSE(rig.st(4).identity_mismatch);
+  }
+  SECTION("a different product code stops the boot") {
+    Rig rig({4}, 0, {}, [](PowerlinkNodeConfig& n) { n.product_code = 0x1928; });
+    rig.cns[0]->objects[{0x1018, 2}] = le(0x2928, 4);
+    REQUIRE(rig.run_until([&] { return rig.st(4).identity_mismatch; }));
+    const CnStatus& st = rig.st(4);
+    CHECK(st.mismatch.index == 0x1018);
+    CHECK(st.mismatch.subindex == 2);
+    CHECK(st.mismatch.expected == 0x1928);
+    CHECK(st.mismatch.found == 0x2928);
+    CHECK_FALSE(st.mismatch.unreadable);
+    CHECK(st.last_reset_reason == make_error_code(MnError::kIdentityCheckFailed));
+    for (int i = 0; i < 500; ++i) rig.step();
+    CHECK(st.boots == 0);
+    CHECK(rig.cns[0]->state != NmtState::kOperational);
+  }
+  SECTION("an identity object the CN does not have is reported as unreadable") {
+    Rig rig({4}, 0, {}, [](PowerlinkNodeConfig& n) { n.revision_no = 0; });
+    rig.cns[0]->objects.erase({0x1018, 3});
+    REQUIRE(rig.run_until([&] { return rig.st(4).identity_mismatch; }));
+    CHECK(rig.st(4).mismatch.unreadable);
+    REQUIRE(rig.st(4).last_failure_count >= 1);
+    CHECK(rig.st(4).last_failures[0].read);
+    CHECK(rig.st(4).last_failures[0].error == make_sdo_abort_error(0x06020000));
+  }
+}
+
+TEST_CASE(
+    "Exception signalling: EN from an OPERATIONAL CN makes the MN fetch its error entries "
+    "and acknowledge with EA",
+    "[powerlink][mn][exception]") {
+  Rig rig({1});
+  REQUIRE(rig.run_until([&] { return operational(rig); }));
+  TestCn& cn = *rig.cns[0];
+  CHECK(cn.exception_resets >= 1);  // ER at the start of the boot
+  const int requests = cn.status_requests;
+  const uint32_t entries = rig.st(1).status_error_entries;
+  for (int i = 0; i < 50; ++i) rig.step();
+  CHECK(cn.status_requests == requests);  // no polling of an OPERATIONAL CN without EN
+  ErrorEntry entry;
+  entry.type = 0x1001;
+  entry.code = 0x8611;
+  cn.status_errors = {entry};
+  cn.exception_new = true;
+  REQUIRE(rig.run_until([&] { return cn.last_preq_ea; }, 50));
+  CHECK(cn.status_requests == requests + 1);
+  CHECK(rig.st(1).status_error_entries == entries + 1);
+  CHECK(rig.st(1).last_error_code == 0x8611);
+  CHECK(rig.st(1).exceptions_signalled == 1);
+  // Acknowledged: no more requests until EN toggles again.
+  for (int i = 0; i < 50; ++i) rig.step();
+  CHECK(cn.status_requests == requests + 1);
+  cn.exception_new = false;
+  REQUIRE(rig.run_until([&] { return !cn.last_preq_ea; }, 50));
+  CHECK(cn.status_requests == requests + 2);
+  CHECK(rig.st(1).boot == CnBootState::kOperational);
+}
