@@ -419,7 +419,11 @@ void check_powerlink(Diagnostics& diag, const DaemonConfig& c, const std::vector
               ") must be less than cycle.period_us (" + std::to_string(c.cycle.period_us) + ")");
     }
   }
-  check_cycle_budget(diag, c, sites);
+  // One error per cause: a PRes timeout longer than the period is reported above already.
+  const bool timeout_too_long = std::any_of(
+      c.powerlink.nodes.begin(), c.powerlink.nodes.end(),
+      [&](const PowerlinkNodeConfig& n) { return n.pres_timeout_us >= c.cycle.period_us; });
+  if (!timeout_too_long) check_cycle_budget(diag, c, sites);
 }
 
 void dump_powerlink(std::ostream& o, const PowerlinkBusConfig& p) {

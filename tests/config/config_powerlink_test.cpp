@@ -181,3 +181,57 @@ TEST_CASE("The MN's mnobd.cdc supplies each node's 0x1F22 objects, identity and 
 }
 
 }  // namespace
+
+TEST_CASE("Timing keys by the standard's names, receive strategy, defaults",
+          "[config][powerlink][timing]") {
+  const ConfigResult d =
+      from("bus: powerlink\npowerlink:\n  interface: eth1\n  nodes:\n    - node_id: 1\n");
+  INFO(d.error_report());
+  REQUIRE(d.errors().empty());
+  const PowerlinkBusConfig& p = d.config().powerlink;
+  CHECK(p.nodes[0].pres_timeout_us == 200);
+  CHECK_FALSE(p.nodes[0].loss_of_pres_threshold);
+  CHECK_FALSE(p.thresholds.loss_of_pres);  // the MN derives it from the period
+  CHECK(p.async_timeout_us == 100);
+  CHECK(p.wait_soc_preq_us == 0);
+  CHECK(p.rx_wait == RxWait::Block);
+  CHECK(p.rx_spin_us == 0);
+
+  const ConfigResult r = from(
+      "bus: powerlink\npowerlink:\n  interface: eth1\n  rx_wait: spin\n  wait_soc_preq_us: 15\n"
+      "  async_slot_timeout_us: 80\n  thresholds: {loss_of_pres: 40}\n  nodes:\n"
+      "    - {node_id: 1, pres_timeout_us: 150, loss_of_pres_threshold: 0}\n");
+  INFO(r.error_report());
+  REQUIRE(r.errors().empty());
+  const PowerlinkBusConfig& q = r.config().powerlink;
+  CHECK(q.rx_wait == RxWait::Spin);
+  CHECK(q.wait_soc_preq_us == 15);
+  CHECK(q.async_timeout_us == 80);
+  CHECK(q.thresholds.loss_of_pres == 40u);
+  CHECK(q.nodes[0].loss_of_pres_threshold == 0u);
+
+  CHECK(one_error("bus: powerlink\npowerlink:\n  interface: eth1\n  rx_wait: poll\n  nodes:\n"
+                  "    - node_id: 1\n")
+            .find("rx_wait") != std::string::npos);
+  CHECK(one_error("bus: powerlink\npowerlink:\n  interface: eth1\n  async_slot_timeout_us: 80\n"
+                  "  async_timeout_us: 80\n  nodes:\n    - node_id: 1\n")
+            .find("not both") != std::string::npos);
+}
+
+TEST_CASE("A cycle that does not fit the period is refused, saying by how much",
+          "[config][powerlink][timing]") {
+  // 200 µs: SoC 6.72 + (6.72 + 200 + 6.72) + SoA 6.72 + 100 + 123.04 = 449.92 µs.
+  const std::string e = one_error(
+      "bus: powerlink\ncycle: {period_us: 500}\npowerlink:\n  interface: eth1\n  nodes:\n"
+      "    - {node_id: 1, pres_timeout_us: 200}\n    - {node_id: 2, pres_timeout_us: 200}\n");
+  CHECK(e.find("does not fit cycle.period_us 500") != std::string::npos);
+  CHECK(e.find("663.4 us, 163.4 us more") != std::string::npos);
+  CHECK(e.find("2 PReq/PRes") != std::string::npos);
+  // Multiplexed: only the nodes of the worst cycle count.
+  const ConfigResult ok = from(
+      "bus: powerlink\ncycle: {period_us: 500}\npowerlink:\n  interface: eth1\n  nodes:\n"
+      "    - {node_id: 1, pres_timeout_us: 200, multiplex: 2}\n"
+      "    - {node_id: 2, pres_timeout_us: 200, multiplex: 2}\n");
+  INFO(ok.error_report());
+  CHECK(ok.errors().empty());
+}

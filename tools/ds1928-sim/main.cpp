@@ -79,6 +79,10 @@ void apply_profile(PowerlinkOptions& o, const std::vector<std::string>& given) {
   if (o.profile == "software-cn") {
     if (!was_given("--rx-mode")) o.rx_mode = "blocking";
     if (!was_given("--rt-priority")) o.rt_priority = 50;
+    // Never asleep on a timer while a PReq may come: the responder waits in the kernel for the
+    // frame, as a user-space stack's receive thread does (a SoC earlier than the learned period
+    // predicts would otherwise find it sleeping).
+    if (!was_given("--guard-us")) o.guard_us = 10'000'000;
     if (o.pres_latency_us < 0) o.pres_latency_us = 30;
     if (o.ready_after_soc_us < 0) o.ready_after_soc_us = 20;
   }
