@@ -199,8 +199,8 @@ TEST_CASE("100 concurrent clients and abrupt disconnects leave the cycle untouch
     const json q0 = stats(d.path);
     REQUIRE(q0.value("ok", false));
     const uint64_t q0_count = q0["cycle"]["count"].get<uint64_t>();
-    Client quiet(d.path);
-    const json q1 = request_until(quiet, {{"cmd", "stats"}}, [&](const json& r) {
+    Client quiet_client(d.path);
+    const json q1 = request_until(quiet_client, {{"cmd", "stats"}}, [&](const json& r) {
       return r.value("ok", false) && r["cycle"]["count"].get<uint64_t>() >= q0_count + 1000;
     });
     REQUIRE(q1.value("ok", false));
