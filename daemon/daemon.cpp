@@ -148,7 +148,18 @@ int Daemon::run() {
   tick_timer_.async_wait([this](const boost::system::error_code& ec) {
     if (!ec) on_tick();
   });
-  io_.run();
+  // Handlers contain their own failures (the control server answers them); this is the net
+  // under everything else posted to the loop: log it and keep serving, the cycle is not ours.
+  for (;;) {
+    try {
+      io_.run();
+      break;
+    } catch (const std::exception& e) {
+      spdlog::error("event loop: uncaught exception: {}; continuing", e.what());
+    } catch (...) {
+      spdlog::error("event loop: uncaught non-standard exception; continuing");
+    }
+  }
   stop();
   return 0;
 }

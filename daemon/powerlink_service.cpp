@@ -25,6 +25,7 @@ void PowerlinkService::status_extra(nlohmann::json& j) const {
                    {"cycle_time_exceeded_fired", st.counters.cycle_time_exceeded.fired},
                    {"unexpected_frames", st.counters.unexpected_frames},
                    {"invalid_frames", st.counters.invalid_frames},
+                   {"short_frames", st.counters.short_frames},
                    {"async_timeouts", st.counters.async_timeouts},
                    {"async_invites_unused", st.counters.async_invites_unused}};
   nlohmann::json nodes = nlohmann::json::array();

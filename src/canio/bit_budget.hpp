@@ -5,8 +5,8 @@
 // subject to bit stuffing), CRC delimiter 1, ACK slot 1, ACK delimiter 1, EOF 7, IFS 3 (13 bits,
 // never stuffed). After five equal bits the transmitter inserts a complementary stuff bit; in the
 // worst case the first stuff bit comes after 5 bits and every further one after 4 (the stuff bit
-// starts the next run), so L stuffable bits carry at most 1 + floor((L - 5) / 4) = floor((L - 1) / 4)
-// stuff bits (Davis, Burns, Bril, Lukkien, "Controller Area Network (CAN) schedulability
+// starts the next run), so L stuffable bits carry at most 1 + floor((L - 5) / 4) = floor((L - 1) /
+// 4) stuff bits (Davis, Burns, Bril, Lukkien, "Controller Area Network (CAN) schedulability
 // analysis: refuted, revisited and revised", Real-Time Systems 35, 2007, eq. 2; CAN 2.0 part A
 // §3.1.1 frame layout, §5 bit stuffing). 8 data bytes: 111 bits nominal, 135 worst case.
 // A 2.0B frame (29-bit id) adds SRR, IDE and 18 identifier bits: 67 + 8n, 54 + 8n stuffable.
@@ -23,7 +23,8 @@ struct FrameBits {
 
 // dlc above 8 is taken as 8 (a classic frame never carries more). Remote frames carry no data
 // bits: pass data_bytes 0.
-[[nodiscard]] constexpr FrameBits frame_bits(uint32_t data_bytes, bool extended_id = false) noexcept {
+[[nodiscard]] constexpr FrameBits frame_bits(uint32_t data_bytes,
+                                             bool extended_id = false) noexcept {
   const uint32_t n = data_bytes > 8 ? 8 : data_bytes;
   const uint32_t stuffable = (extended_id ? 54u : 34u) + 8u * n;
   const uint32_t fixed = 13u;  // CRC delimiter, ACK slot + delimiter, EOF, intermission
@@ -58,10 +59,10 @@ struct CycleBudget {
 
 // Does the cycle fit the period? Numbers only; the caller words the message.
 struct CycleFit {
-  bool fits = false;              // worst case fits the period
-  bool fits_nominal = false;      // nominal fits (worst case may not)
-  int64_t margin_ns = 0;          // period - worst-case time (negative: short by that much)
-  double load_worst_case = 0.0;   // worst-case bus time / period (1.0 = saturated)
+  bool fits = false;             // worst case fits the period
+  bool fits_nominal = false;     // nominal fits (worst case may not)
+  int64_t margin_ns = 0;         // period - worst-case time (negative: short by that much)
+  double load_worst_case = 0.0;  // worst-case bus time / period (1.0 = saturated)
   double load_nominal = 0.0;
   CycleBudget budget;
 };

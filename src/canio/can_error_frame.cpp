@@ -189,9 +189,12 @@ std::size_t describe(const CanErrorEvent& e, char* out, std::size_t size) noexce
     static constexpr struct {
       uint8_t bit;
       const char* text;
-    } kProt[] = {{err_prot::kBit, " bit"},           {err_prot::kForm, " form"},
-                 {err_prot::kStuff, " stuff"},       {err_prot::kBit0, " dominant-bit"},
-                 {err_prot::kBit1, " recessive-bit"}, {err_prot::kOverload, " overload"},
+    } kProt[] = {{err_prot::kBit, " bit"},
+                 {err_prot::kForm, " form"},
+                 {err_prot::kStuff, " stuff"},
+                 {err_prot::kBit0, " dominant-bit"},
+                 {err_prot::kBit1, " recessive-bit"},
+                 {err_prot::kOverload, " overload"},
                  {err_prot::kActive, " active-error"}};
     if ((e.protocol_type & 0x7F) == 0) w.put(" unspecified");
     for (const auto& p : kProt)

@@ -10,19 +10,20 @@
 
 namespace ds1928::canio {
 
-inline constexpr uint32_t kMaxStandardId = 0x7FF;       // CAN 2.0A, 11 bit
+inline constexpr uint32_t kMaxStandardId = 0x7FF;        // CAN 2.0A, 11 bit
 inline constexpr uint32_t kMaxExtendedId = 0x1FFF'FFFF;  // CAN 2.0B, 29 bit
 inline constexpr uint8_t kMaxDlc = 8;
 
 // Which clock produced a frame's rx_time_ns (always expressed on CLOCK_MONOTONIC).
 enum class RxClock : uint8_t {
-  None = 0,             // no reception time (frame built locally, or to be sent)
-  KernelSoftware = 1,   // kernel software RX stamp (SO_TIMESTAMPING / SO_TIMESTAMPNS), moved
-                        // from CLOCK_REALTIME to CLOCK_MONOTONIC
-  KernelHardware = 2,   // controller's hardware stamp (SOF_TIMESTAMPING_RAW_HARDWARE), moved
-                        // likewise; not produced by the current ports, kept for controllers that stamp
-  ReadTime = 3,         // no kernel stamp arrived: CLOCK_MONOTONIC when the frame was read
-  VirtualBus = 4,       // the virtual test bus' clock (real CLOCK_MONOTONIC or a test's fake clock)
+  None = 0,            // no reception time (frame built locally, or to be sent)
+  KernelSoftware = 1,  // kernel software RX stamp (SO_TIMESTAMPING / SO_TIMESTAMPNS), moved
+                       // from CLOCK_REALTIME to CLOCK_MONOTONIC
+  KernelHardware =
+      2,           // controller's hardware stamp (SOF_TIMESTAMPING_RAW_HARDWARE), moved
+                   // likewise; not produced by the current ports, kept for controllers that stamp
+  ReadTime = 3,    // no kernel stamp arrived: CLOCK_MONOTONIC when the frame was read
+  VirtualBus = 4,  // the virtual test bus' clock (real CLOCK_MONOTONIC or a test's fake clock)
 };
 
 [[nodiscard]] constexpr const char* to_string(RxClock c) noexcept {
@@ -47,9 +48,9 @@ struct CanFrame {
   // decode it with decode_error_frame() (can_error_frame.hpp).
   uint32_t id = 0;
   bool extended = false;
-  bool rtr = false;     // remote transmission request: dlc is the requested length, no data
-  bool error = false;   // error frame reported by the controller/driver, never sent on the wire
-  uint8_t dlc = 0;      // 0..8 data bytes
+  bool rtr = false;    // remote transmission request: dlc is the requested length, no data
+  bool error = false;  // error frame reported by the controller/driver, never sent on the wire
+  uint8_t dlc = 0;     // 0..8 data bytes
   std::array<uint8_t, 8> data{};
   int64_t rx_time_ns = 0;  // CLOCK_MONOTONIC reception instant; 0 when rx_clock == None
   RxClock rx_clock = RxClock::None;

@@ -10,8 +10,10 @@
 #pragma once
 
 #include <cstdint>
+#include <span>
 #include <string>
 #include <string_view>
+#include <system_error>
 
 #include "canio/can_port.hpp"
 #include "canio/errors.hpp"
@@ -32,13 +34,23 @@ struct CanLinkInfo {
 // error-active while up.
 [[nodiscard]] Result<CanLinkInfo> query_can_link(std::string_view interface) noexcept;
 
-// The start-up verdict on an interface against the configured bit rate (0: not checked): empty
-// when usable, else the message for the user naming the values and the `ip link` command that
-// fixes it, e.g. "CAN interface 'can0' runs at 250000 bit/s, the configuration says 500000:
-// ip link set can0 down && ip link set can0 type can bitrate 500000 restart-ms 100 && ip link
-// set can0 up". A vcan's missing bit rate is accepted (it has none).
-[[nodiscard]] std::string check_can_link(std::string_view interface, const CanLinkInfo& link,
-                                         uint32_t expected_bitrate);
+// The start-up verdict on an interface against the configured bit rate (0: not checked):
+// no error when usable, else kInterfaceDown / kBitrateMismatch / kNotCanInterface and the message
+// for the user naming the values and the `ip link` command that fixes it, e.g. "CAN interface
+// 'can0' runs at 250000 bit/s, the configuration says 500000: ip link set can0 down && ip link
+// set can0 type can bitrate 500000 restart-ms 100 && ip link set can0 up". A vcan has no bit
+// rate and is accepted at any configured one.
+struct LinkVerdict {
+  std::error_code error;
+  std::string message;
+};
+[[nodiscard]] LinkVerdict check_can_link(std::string_view interface, const CanLinkInfo& link,
+                                         uint32_t expected_bitrate, bool require_up = true);
+
+// Parses one RTM_NEWLINK message (nlmsghdr included) as the kernel answers RTM_GETLINK. Pure:
+// tested with built messages. kNetlink names what was malformed in the returned error's
+// message only as a code; attribute lengths are all checked.
+[[nodiscard]] Result<CanLinkInfo> parse_link_message(std::span<const uint8_t> message) noexcept;
 
 // The message for a query_can_link() failure, e.g. "no CAN interface 'can0' (ip link show can0)".
 [[nodiscard]] std::string describe_link_error(std::string_view interface, std::error_code error);

@@ -83,12 +83,12 @@ struct CanPortCounters {
   uint64_t tx_errors = 0;          // other send errors
   uint64_t rx_frames = 0;          // data/remote frames delivered to the caller
   uint64_t rx_error_frames = 0;    // error frames delivered (and decoded)
-  uint64_t rx_kernel_drops = 0;    // frames the kernel dropped for a full socket queue (SO_RXQ_OVFL)
-  uint64_t rx_unstamped = 0;       // frames without a kernel stamp (stamped with the read time)
-  uint64_t rx_errors = 0;          // receive failures (ENETDOWN ...)
-  uint64_t bus_off_events = 0;     // error frames announcing bus-off
-  uint64_t restarts = 0;           // error frames announcing a controller restart
-  uint64_t protocol_errors = 0;    // protocol violation error frames
+  uint64_t rx_kernel_drops = 0;  // frames the kernel dropped for a full socket queue (SO_RXQ_OVFL)
+  uint64_t rx_unstamped = 0;     // frames without a kernel stamp (stamped with the read time)
+  uint64_t rx_errors = 0;        // receive failures (ENETDOWN ...)
+  uint64_t bus_off_events = 0;   // error frames announcing bus-off
+  uint64_t restarts = 0;         // error frames announcing a controller restart
+  uint64_t protocol_errors = 0;  // protocol violation error frames
   uint64_t controller_errors = 0;  // controller problem error frames
   uint64_t tx_timeouts = 0;        // TX timeout error frames
   uint64_t no_ack = 0;             // "no ACK on transmission" error frames
@@ -97,13 +97,13 @@ struct CanPortCounters {
 // What netlink (or the virtual bus) says about the interface.
 struct CanInterfaceInfo {
   int ifindex = 0;
-  bool up = false;                   // IFF_UP
-  bool running = false;              // IFF_RUNNING (carrier)
+  bool up = false;                     // IFF_UP
+  bool running = false;                // IFF_RUNNING (carrier)
   CanState state = CanState::Unknown;  // IFLA_CAN_STATE (Down when !up)
-  uint32_t bitrate = 0;              // IFLA_CAN_BITTIMING.bitrate, bit/s (0: not configured)
-  uint32_t sample_point = 0;         // tenths of a percent (875 = 87.5 %)
-  uint32_t restart_ms = 0;           // IFLA_CAN_RESTART_MS (0: no automatic restart)
-  bool error_counters_valid = false;  // IFLA_CAN_BERR_COUNTER present
+  uint32_t bitrate = 0;                // IFLA_CAN_BITTIMING.bitrate, bit/s (0: not configured)
+  uint32_t sample_point = 0;           // tenths of a percent (875 = 87.5 %)
+  uint32_t restart_ms = 0;             // IFLA_CAN_RESTART_MS (0: no automatic restart)
+  bool error_counters_valid = false;   // IFLA_CAN_BERR_COUNTER present
   uint16_t tx_error_count = 0;
   uint16_t rx_error_count = 0;
 };

@@ -43,8 +43,7 @@ enum class CanState : uint8_t {
 
 // True when frames can be sent (error-active, warning or passive).
 [[nodiscard]] constexpr bool can_transmit(CanState s) noexcept {
-  return s == CanState::ErrorActive || s == CanState::ErrorWarning ||
-         s == CanState::ErrorPassive;
+  return s == CanState::ErrorActive || s == CanState::ErrorWarning || s == CanState::ErrorPassive;
 }
 
 }  // namespace ds1928::canio

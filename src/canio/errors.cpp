@@ -39,8 +39,6 @@ class CanCategory final : public std::error_category {
         return "rtnetlink query of the CAN interface failed";
       case CanError::kNotOpen:
         return "CAN port not open";
-      case CanError::kVirtualBusFull:
-        return "the virtual CAN bus has no free port";
       case CanError::kVirtualBusMismatch:
         return "a virtual CAN bus of that name exists with another layout";
     }

@@ -17,18 +17,17 @@ enum class CanError : int {
   kUnknownErrorClass,    // error class bits this code does not know
   kInvalidFrame,         // identifier out of range for its format, dlc above 8, or error flag
   // Ports.
-  kNoCanSupport,         // socket(AF_CAN) fails: the kernel has no CAN (EAFNOSUPPORT)
-  kNoSuchInterface,      // no network interface of that name
-  kNotCanInterface,      // the interface exists but is not a CAN device
-  kInterfaceDown,        // the interface is down (ENETDOWN) or its controller stopped
-  kBusOff,               // the controller is bus-off: nothing can be sent until it restarts
-  kBitrateMismatch,      // interface bit rate differs from the configuration
-  kTooManyFilters,       // more identifiers than the port's fixed filter table holds
-  kInterfaceNameInvalid, // empty, or longer than IFNAMSIZ-1
-  kNetlink,              // rtnetlink answer missing or malformed
-  kNotOpen,              // the port is not open
-  kVirtualBusFull,       // the virtual bus has no free port slot
-  kVirtualBusMismatch,   // a shared virtual bus of that name has another layout/version
+  kNoCanSupport,          // socket(AF_CAN) fails: the kernel has no CAN (EAFNOSUPPORT)
+  kNoSuchInterface,       // no network interface of that name
+  kNotCanInterface,       // the interface exists but is not a CAN device
+  kInterfaceDown,         // the interface is down (ENETDOWN) or its controller stopped
+  kBusOff,                // the controller is bus-off: nothing can be sent until it restarts
+  kBitrateMismatch,       // interface bit rate differs from the configuration
+  kTooManyFilters,        // more identifiers than the port's fixed filter table holds
+  kInterfaceNameInvalid,  // empty, or longer than IFNAMSIZ-1
+  kNetlink,               // rtnetlink answer missing or malformed
+  kNotOpen,               // the port is not open
+  kVirtualBusMismatch,    // a shared virtual bus of that name has another layout/version
 };
 
 [[nodiscard]] const std::error_category& can_category() noexcept;

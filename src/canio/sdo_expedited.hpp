@@ -41,17 +41,17 @@ struct SdoMessage {
 
 // What made an SDO frame unusable or a response not the answer to the request.
 enum class SdoFrameError : int {
-  kInvalidNode = 1,       // node id outside 1..127
-  kInvalidSize,           // expedited data size outside 1..4
-  kWrongCobId,            // not 0x600 + node / 0x580 + node of the expected node
-  kWrongLength,           // dlc is not 8
-  kRemoteOrErrorFrame,    // an RTR or error frame on an SDO identifier
-  kUnknownCommand,        // command specifier not defined for this direction
-  kSegmentedNotSupported, // a normal (segmented) transfer: only expedited is supported
-  kCommandMismatch,       // the response's command does not answer the request's
-  kIndexMismatch,         // the response names another index
-  kSubindexMismatch,      // the response names another subindex
-  kSizeMismatch,          // upload response with another data size than requested
+  kInvalidNode = 1,        // node id outside 1..127
+  kInvalidSize,            // expedited data size outside 1..4
+  kWrongCobId,             // not 0x600 + node / 0x580 + node of the expected node
+  kWrongLength,            // dlc is not 8
+  kRemoteOrErrorFrame,     // an RTR or error frame on an SDO identifier
+  kUnknownCommand,         // command specifier not defined for this direction
+  kSegmentedNotSupported,  // a normal (segmented) transfer: only expedited is supported
+  kCommandMismatch,        // the response's command does not answer the request's
+  kIndexMismatch,          // the response names another index
+  kSubindexMismatch,       // the response names another subindex
+  kSizeMismatch,           // upload response with another data size than requested
 };
 
 [[nodiscard]] const std::error_category& sdo_frame_category() noexcept;

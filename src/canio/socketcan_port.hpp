@@ -30,7 +30,7 @@ struct SocketCanOptions {
   uint32_t expected_bitrate = 0;  // checked against IFLA_CAN_BITTIMING at open (0: not checked)
   bool require_up = true;         // an interface that is down is an open() error
   uint32_t error_mask = kDefaultErrorMask;
-  int receive_buffer_bytes = 0;   // SO_RCVBUF (0: kernel default)
+  int receive_buffer_bytes = 0;  // SO_RCVBUF (0: kernel default)
   // Our own frames come back (MSG_CONFIRM) with their transmission stamp. Off: the driver has no
   // use for it yet.
   bool receive_own = false;
@@ -75,7 +75,7 @@ class SocketCanPort final : public CanPort {
 
  private:
   struct Impl;
-  SocketCanPort(SocketCanOptions options, int fd, bool timestamping);
+  SocketCanPort(SocketCanOptions options, int fd);
 
   SocketCanOptions options_;
   int fd_ = -1;

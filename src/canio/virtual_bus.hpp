@@ -8,11 +8,12 @@
 // Medium: one ring of frame slots, written by any port (ticket = fetch_add on the head), read by
 // every port at its own pace (a reader lapped by the writers loses the overwritten frames and
 // counts them as rx_kernel_drops, like SO_RXQ_OVFL). Slots are plain atomics, waiting is a futex
-// on the publish counter, so the ring works the same in process memory (VirtualCanBus::create_local)
-// and in POSIX shared memory between processes (VirtualCanBus::open_shared): ds1928d and
-// `ds1928-sim canio` talk over it without AF_CAN. Shared memory was chosen over a Unix datagram
-// socket per port because a broadcast needs no peer list, send is one slot write with no syscall
-// unless a reader sleeps, and nothing on the send/receive path allocates.
+// on the publish counter, so the ring works the same in process memory
+// (VirtualCanBus::create_local) and in POSIX shared memory between processes
+// (VirtualCanBus::open_shared): ds1928d and `ds1928-sim canio` talk over it without AF_CAN. Shared
+// memory was chosen over a Unix datagram socket per port because a broadcast needs no peer list,
+// send is one slot write with no syscall unless a reader sleeps, and nothing on the send/receive
+// path allocates.
 //
 // Fault injection is per port and thread-safe (atomics; error frames through a small SPSC queue
 // with one injecting thread): random loss with a seeded RNG, "drop the next k frames with id X",
@@ -43,7 +44,7 @@ struct VirtualBusOptions {
 };
 
 struct VirtualPortOptions {
-  std::string name = "vcan";  // for messages and query_interface()
+  std::string name = "vcan";   // for messages and query_interface()
   uint32_t bitrate = 500'000;  // reported by query_interface() (the bus has no timing)
   // After an injected bus-off, the port restarts by itself this long after (bus clock), as the
   // kernel does with `restart-ms`; 0: stays bus-off until restart().
@@ -60,6 +61,8 @@ struct FaultCounters {
   uint64_t delayed = 0;         // frames that went through the delay queue
   uint64_t delay_overflow = 0;  // delay queue full: frame dropped
   uint64_t errors_injected = 0;
+  uint64_t sends_failed = 0;    // by fail_next_sends
+  uint64_t missed_off_bus = 0;  // frames on the bus while this port was bus-off or down
 };
 
 class VirtualCanBus;
@@ -95,13 +98,21 @@ class VirtualCanPort final : public CanPort {
   // Delivers `event` to this port as an error frame (if its class is subscribed) and applies its
   // state change. False when the injection queue (16) is full. One injecting thread at a time.
   bool inject_error(const CanErrorEvent& event) noexcept;
-  // The controller goes bus-off: bus-off error frame, state BusOff, send() answers BusOff; after
-  // restart_ms (if not 0) the port restarts by itself: restarted error frame, error-active.
+  // Every OTHER port on the bus (in any process) takes `event` as if its own controller had
+  // reported it: state change, and the error frame if subscribed. The way a simulator process
+  // makes the daemon's port go bus-off or error-passive. Any thread.
+  bool broadcast_error(const CanErrorEvent& event) noexcept;
+  // The controller goes bus-off at once: state BusOff, send() answers BusOff, a bus-off error
+  // frame for the next receive(); after restart_ms on the bus clock (if not 0) the port restarts
+  // by itself: restarted error frame, error-active. Always true.
   bool inject_bus_off() noexcept;
   // Manual restart of a bus-off controller (`ip link set canX type can restart`).
   void restart() noexcept;
   // Administrative up/down: down → send() InterfaceDown, receive() kInterfaceDown.
   void set_up(bool up) noexcept;
+  // The next `count` send() calls fail with `status` (QueueFull: as ENOBUFS, InterfaceDown: as
+  // ENETDOWN, Failed: as EIO) without reaching the bus.
+  void fail_next_sends(uint32_t count, SendStatus status = SendStatus::QueueFull) noexcept;
 
   [[nodiscard]] FaultCounters fault_counters() const noexcept;
 
@@ -131,7 +142,7 @@ class VirtualCanBus : public std::enable_shared_from_this<VirtualCanBus> {
   VirtualCanBus(const VirtualCanBus&) = delete;
   VirtualCanBus& operator=(const VirtualCanBus&) = delete;
 
-  // A new port on this bus; it sees frames sent from now on. kVirtualBusFull past 64 ports.
+  // A new port on this bus; it sees frames sent from now on (by any other port).
   [[nodiscard]] Result<std::unique_ptr<VirtualCanPort>> open_port(VirtualPortOptions options = {});
 
   [[nodiscard]] int64_t now_ns() const noexcept;

@@ -24,15 +24,12 @@
 
 #include "config/config_canio.hpp"
 #include "config/config_loader.hpp"
-#include "config/config_section.hpp"
+#include "config/config_powerlink.hpp"
+#include "config/config_reader.hpp"
 
 namespace ds1928 {
-namespace {
-
 using namespace config_detail;
-
-// ---------------------------------------------------------------------------------------------
-// Sections
+namespace {
 
 bool valid_name_char(char c) {
   return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == '.';
@@ -101,15 +98,6 @@ void parse_module(Section s, ModuleSettings& m, FunctionModel fm) {
   s.integer("forward_delay_us", m.forward_delay_us, 0, kU16, "µs");
   s.finish();
 }
-
-struct AxisSite {
-  Loc at;
-  Loc name_at;
-  Loc node_at;
-  std::string path;
-  Loc pres_offset_at;
-  Loc preq_offset_at;
-};
 
 void parse_axis(Section s, AxisConfig& a, BusKind bus, size_t index) {
   a.name = "axis" + std::to_string(index);
@@ -181,87 +169,6 @@ void parse_sim_axis(Section s, SimAxisConfig& a, const std::filesystem::path& ba
   s.finish();
 }
 
-struct PowerlinkSites {
-  bool present = false;
-  std::map<uint8_t, Loc> nodes;      // node id → where it is listed
-  std::vector<Loc> pres_timeout_at;  // per nodes[] entry
-};
-
-void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites) {
-  if (s.text("interface", p.interface, 15) && !p.interface.empty() &&
-      !valid_interface_name(p.interface)) {
-    s.error("interface", "'" + p.interface + "' is not a network interface name");
-  }
-  for (auto& item : s.list("nodes")) {
-    Section n(s.diag(), item.node, item.path, item.at);
-    PowerlinkNodeConfig node;
-    if (!n.has("node_id")) {
-      s.diag().error(item.at, n.child("node_id"), "missing required key (CN node id 1..239)");
-    }
-    const bool have_id = n.integer("node_id", node.node_id, 1, 239, "(POWERLINK CN)");
-    n.optional_integer("vendor_id", node.vendor_id, 0, kU32);
-    n.optional_integer("product_code", node.product_code, 0, kU32);
-    n.optional_integer("device_type", node.device_type, 0, kU32);
-    n.integer("pres_timeout_us", node.pres_timeout_us, 1, 100000, "µs");
-    sites.pres_timeout_at.push_back(n.value_at("pres_timeout_us"));
-    n.boolean("mandatory", node.mandatory);
-    n.integer("multiplex", node.multiplex, 0, 255, "(0 = every cycle)");
-    n.optional_integer("preq_size", node.preq_size, 0, 1490);
-    n.optional_integer("pres_size", node.pres_size, 0, 1490);
-    if (have_id) {
-      if (const auto prev = sites.nodes.find(node.node_id); prev != sites.nodes.end()) {
-        n.error("node_id", "node " + std::to_string(node.node_id) + " is listed twice (also at " +
-                               where(prev->second) + ")");
-      } else {
-        sites.nodes.emplace(node.node_id, n.value_at("node_id"));
-      }
-    }
-    n.finish();
-    p.nodes.push_back(node);
-  }
-  Section t = s.section("thresholds");
-  t.integer("loss_of_pres", p.thresholds.loss_of_pres, 0, kU32, "(0 = disabled)");
-  t.integer("cycle_time_exceeded", p.thresholds.cycle_time_exceeded, 0, kU32, "(0 = disabled)");
-  t.integer("late_pres", p.thresholds.late_pres, 0, kU32, "(0 = disabled)");
-  t.finish();
-  Section nmt = s.section("nmt");
-  nmt.integer("pre_op1_timeout_ms", p.nmt.pre_op1_timeout_ms, 1, 600000, "ms");
-  nmt.integer("boot_step_timeout_ms", p.nmt.boot_step_timeout_ms, 1, 600000, "ms");
-  nmt.integer("reset_wait_ms", p.nmt.reset_wait_ms, 0, 600000, "ms");
-  nmt.integer("status_request_every", p.nmt.status_request_every, 1, 10000, "cycles");
-  nmt.finish();
-  s.integer("async_timeout_us", p.async_timeout_us, 1, 100000, "µs");
-  s.integer("sdo_timeout_ms", p.sdo_timeout_ms, 1, 60000, "ms");
-  s.integer("nettime_offset_us", p.nettime_offset_us, std::numeric_limits<int64_t>::min(),
-            std::numeric_limits<int64_t>::max());
-  std::map<uint16_t, Loc> overridden;
-  for (auto& item : s.list("sdo_overrides")) {
-    Section o(s.diag(), item.node, item.path, item.at);
-    uint16_t reg = 0;
-    uint16_t index = 0;
-    uint8_t subindex = 0;
-    for (const char* required : {"register", "index"}) {
-      if (!o.has(required)) {
-        s.diag().error(item.at, o.child(required), "missing required key");
-      }
-    }
-    const bool have_reg = o.integer("register", reg, 0, kU16, "(X20DS1928 register number)");
-    const bool have_index = o.integer("index", index, 1, kU16);
-    o.integer("subindex", subindex, 0, kU8);
-    if (have_reg && have_index) {
-      if (const auto prev = overridden.find(reg); prev != overridden.end()) {
-        o.error("register", "register " + std::to_string(reg) + " is overridden twice (also at " +
-                                where(prev->second) + ")");
-      } else {
-        overridden.emplace(reg, o.value_at("register"));
-        p.sdo_overrides[reg] = {index, subindex};
-      }
-    }
-    o.finish();
-  }
-  s.finish();
-}
-
 void parse_shm(Section s, ShmConfig& c) {
   if (s.text("name", c.name, 255)) {
     const bool ok = c.name.size() >= 2 && c.name[0] == '/' &&
@@ -287,99 +194,12 @@ void parse_socket(Section s, SocketConfig& c) {
   s.integer("max_clients", c.max_clients, 1, 1024);
   s.integer("max_request_bytes", c.max_request_bytes, 256, 1048576, "bytes");
   s.integer("idle_timeout_ms", c.idle_timeout_ms, 0, 86400000, "ms (0 = never)");
+  s.integer("reply_buffer_bytes", c.reply_buffer_bytes, 4096, 67108864, "bytes");
+  s.integer("reply_stall_timeout_ms", c.reply_stall_timeout_ms, 100, 86400000, "ms");
   s.finish();
 }
 
 // ---------------------------------------------------------------------------------------------
-
-// Where the value at `keys` below `node` is written; the deepest existing key when the full path
-// is not in the file. (Recursion instead of a loop: assigning a YAML::Node writes through it.)
-// POWERLINK process image of each CN (docs/powerlink.md §Process image): a module sits at its
-// pres_offset/preq_offset or at its offset in the all-default packed layout (slot order). Two
-// blocks must not share a byte and each must end within 1490 bytes and the node's configured
-// pres_size/preq_size. The MN checks the same at start (make_layout()); here the message can
-// point at the file.
-void check_process_image(Diagnostics& diag, const DaemonConfig& c,
-                         const std::vector<AxisSite>& axes) {
-  struct Block {
-    size_t axis;
-    size_t start[2];  // PRes, PReq
-    size_t size[2];
-  };
-  static constexpr const char* kFrame[2] = {"PRes", "PReq"};
-  static constexpr const char* kKey[2] = {"pres_offset", "preq_offset"};
-  std::map<uint8_t, std::vector<size_t>> by_node;
-  for (size_t i = 0; i < axes.size() && i < c.axes.size(); ++i)
-    by_node[c.axes[i].node].push_back(i);
-  for (auto& [node, members] : by_node) {
-    std::stable_sort(members.begin(), members.end(),
-                     [&](size_t x, size_t y) { return c.axes[x].slot < c.axes[y].slot; });
-    const PowerlinkNodeConfig* nc = nullptr;
-    for (const auto& n : c.powerlink.nodes)
-      if (n.node_id == node) nc = &n;
-    std::vector<Block> blocks;
-    size_t packed[2] = {0, 0};
-    for (size_t i : members) {
-      const AxisConfig& a = c.axes[i];
-      const std::optional<uint16_t> offset[2] = {a.pres_offset, a.preq_offset};
-      Block b{i, {}, {16u + a.module.input_mtu, 2u + a.module.output_mtu}};
-      for (int f = 0; f < 2; ++f) {
-        b.start[f] = offset[f] ? *offset[f] : packed[f];
-        packed[f] += b.size[f];
-      }
-      blocks.push_back(b);
-    }
-    for (size_t k = 0; k < blocks.size(); ++k) {
-      const Block& b = blocks[k];
-      const AxisConfig& a = c.axes[b.axis];
-      const std::optional<uint16_t> offset[2] = {a.pres_offset, a.preq_offset};
-      const std::optional<uint16_t> limit[2] = {nc ? nc->pres_size : std::nullopt,
-                                                nc ? nc->preq_size : std::nullopt};
-      for (int f = 0; f < 2; ++f) {
-        const Loc at = offset[f]
-                           ? (f == 0 ? axes[b.axis].pres_offset_at : axes[b.axis].preq_offset_at)
-                           : axes[b.axis].at;
-        const std::string path = axes[b.axis].path + (offset[f] ? std::string(".") + kKey[f] : "");
-        const std::string what = std::string(kFrame[f]) + " block of node " + std::to_string(node) +
-                                 " slot " + std::to_string(a.slot) + " (bytes " +
-                                 std::to_string(b.start[f]) + ".." +
-                                 std::to_string(b.start[f] + b.size[f] - 1) + ")";
-        const size_t end = b.start[f] + b.size[f];
-        const size_t max = limit[f] ? *limit[f] : 1490;
-        if (end > max) {
-          diag.error(at, path,
-                     what + " ends past the " + kFrame[f] + " payload of " + std::to_string(max) +
-                         " bytes" +
-                         (limit[f] ? std::string(" (powerlink.nodes ") +
-                                         (f == 0 ? "pres_size" : "preq_size") + ")"
-                                   : std::string()));
-        }
-        for (size_t j = 0; j < k; ++j) {
-          const Block& o = blocks[j];
-          if (!(b.start[f] < o.start[f] + o.size[f] && o.start[f] < end)) continue;
-          // Report at the moved block: a default place is not what the user wrote.
-          const bool here =
-              offset[f] || !(f == 0 ? c.axes[o.axis].pres_offset : c.axes[o.axis].preq_offset);
-          const Block& r = here ? b : o;  // reported
-          const Block& x = here ? o : b;  // the one it hits
-          const std::string key = offset[f] || !here ? std::string(".") + kKey[f] : "";
-          const Loc r_at =
-              key.empty() ? axes[r.axis].at
-                          : (f == 0 ? axes[r.axis].pres_offset_at : axes[r.axis].preq_offset_at);
-          auto bytes = [f](const Block& blk) {
-            return "(bytes " + std::to_string(blk.start[f]) + ".." +
-                   std::to_string(blk.start[f] + blk.size[f] - 1) + ")";
-          };
-          diag.error(r_at, axes[r.axis].path + key,
-                     std::string(kFrame[f]) + " block of node " + std::to_string(node) + " slot " +
-                         std::to_string(c.axes[r.axis].slot) + " " + bytes(r) + " overlaps slot " +
-                         std::to_string(c.axes[x.axis].slot) + " " + bytes(x) + " of axes[" +
-                         std::to_string(x.axis) + "] (" + where(axes[x.axis].at) + ")");
-        }
-      }
-    }
-  }
-}
 
 void check_cross_fields(Diagnostics& diag, const DaemonConfig& c, const std::vector<AxisSite>& axes,
                         const PowerlinkSites& pl_sites, Loc spin_at) {
@@ -413,19 +233,7 @@ void check_cross_fields(Diagnostics& diag, const DaemonConfig& c, const std::vec
                    ") must be less than cycle.period_us (" + std::to_string(c.cycle.period_us) +
                    ")");
   }
-  if (c.bus == BusKind::Powerlink) {
-    check_process_image(diag, c, axes);
-    for (size_t i = 0; i < c.powerlink.nodes.size() && i < pl_sites.pres_timeout_at.size(); ++i) {
-      const auto& n = c.powerlink.nodes[i];
-      if (n.pres_timeout_us >= c.cycle.period_us) {
-        diag.error(pl_sites.pres_timeout_at[i],
-                   "powerlink.nodes[" + std::to_string(i) + "].pres_timeout_us",
-                   "pres_timeout_us (" + std::to_string(n.pres_timeout_us) +
-                       ") must be less than cycle.period_us (" + std::to_string(c.cycle.period_us) +
-                       ")");
-      }
-    }
-  }
+  if (c.bus == BusKind::Powerlink) check_powerlink(diag, c, axes, pl_sites);
 }
 
 DaemonConfig parse_document(Diagnostics& diag, const YAML::Node& doc, const std::string& name,
@@ -452,7 +260,7 @@ DaemonConfig parse_document(Diagnostics& diag, const YAML::Node& doc, const std:
   const bool have_powerlink = root.has("powerlink");
   pl_sites.present = have_powerlink;
   const bool have_canio = root.has("canio");
-  parse_powerlink(root.section("powerlink"), c.powerlink, pl_sites);
+  parse_powerlink(root.section("powerlink"), c.powerlink, pl_sites, base_dir);
   parse_canio(root.section("canio"), c.canio);
   if (c.bus == BusKind::Powerlink && !have_powerlink) {
     root.error("bus",
@@ -479,7 +287,9 @@ DaemonConfig parse_document(Diagnostics& diag, const YAML::Node& doc, const std:
     c.axes.push_back(std::move(axis));
   }
   if (c.axes.empty()) {
-    if (c.bus == BusKind::Simulated) {
+    if (c.bus == BusKind::Powerlink) {
+      // Valid: the MN then runs CNs without X20DS1928 only (generic CNs, raw process data).
+    } else if (c.bus == BusKind::Simulated) {
       AxisConfig axis;
       axis.name = "axis0";
       c.axes.push_back(axis);
@@ -582,41 +392,12 @@ ConfigResult load_text(std::string_view text, const std::string& name,
 // ---------------------------------------------------------------------------------------------
 // Dump
 
-std::string quote(std::string_view s) {
-  std::string out = "\"";
-  for (const char ch : s) {
-    const auto c = static_cast<unsigned char>(ch);
-    if (c == '"' || c == '\\') {
-      out += '\\';
-      out += ch;
-    } else if (c < 0x20) {
-      static constexpr char kHex[] = "0123456789abcdef";
-      out += "\\x";
-      out += kHex[c >> 4];
-      out += kHex[c & 0xF];
-    } else {
-      out += ch;
-    }
-  }
-  return out + "\"";
-}
-
 std::string octal(uint32_t mode) {
   std::array<char, 16> buf{};
   const auto [end, ec] = std::to_chars(buf.data(), buf.data() + buf.size(), mode, 8);
   std::string digits(buf.data(), ec == std::errc{} ? end : buf.data());
   while (digits.size() < 3) digits.insert(digits.begin(), '0');
   return "\"0" + digits + "\"";
-}
-
-std::string hex(uint64_t v) {
-  std::array<char, 24> buf{};
-  const auto [end, ec] = std::to_chars(buf.data(), buf.data() + buf.size(), v, 16);
-  return "0x" + std::string(buf.data(), ec == std::errc{} ? end : buf.data());
-}
-
-const char* yes(bool b) {
-  return b ? "true" : "false";
 }
 
 }  // namespace
@@ -720,40 +501,7 @@ std::string dump_config(const DaemonConfig& c) {
       << "      encoder_file: " << quote(a.encoder_file) << "\n"
       << "      inject_error_info: " << hex(a.inject_error_info) << "\n";
   }
-  const auto& p = c.powerlink;
-  o << "powerlink:\n"
-    << "  interface: " << quote(p.interface) << "\n"
-    << "  nodes:" << (p.nodes.empty() ? " []" : "") << "\n";
-  const auto opt = [](const auto& v) { return v ? hex(*v) : std::string(); };
-  const auto opt_dec = [](const auto& v) { return v ? std::to_string(*v) : std::string(); };
-  for (const auto& n : p.nodes) {
-    o << "    - node_id: " << +n.node_id << "\n"
-      << "      vendor_id: " << opt(n.vendor_id) << "\n"
-      << "      product_code: " << opt(n.product_code) << "\n"
-      << "      device_type: " << opt(n.device_type) << "\n"
-      << "      pres_timeout_us: " << n.pres_timeout_us << "\n"
-      << "      mandatory: " << yes(n.mandatory) << "\n"
-      << "      multiplex: " << n.multiplex << "\n"
-      << "      preq_size: " << opt_dec(n.preq_size) << "\n"
-      << "      pres_size: " << opt_dec(n.pres_size) << "\n";
-  }
-  o << "  thresholds:\n"
-    << "    loss_of_pres: " << p.thresholds.loss_of_pres << "\n"
-    << "    cycle_time_exceeded: " << p.thresholds.cycle_time_exceeded << "\n"
-    << "    late_pres: " << p.thresholds.late_pres << "\n"
-    << "  nmt:\n"
-    << "    pre_op1_timeout_ms: " << p.nmt.pre_op1_timeout_ms << "\n"
-    << "    boot_step_timeout_ms: " << p.nmt.boot_step_timeout_ms << "\n"
-    << "    reset_wait_ms: " << p.nmt.reset_wait_ms << "\n"
-    << "    status_request_every: " << p.nmt.status_request_every << "\n"
-    << "  async_timeout_us: " << p.async_timeout_us << "\n"
-    << "  sdo_timeout_ms: " << p.sdo_timeout_ms << "\n"
-    << "  nettime_offset_us: " << p.nettime_offset_us << "\n"
-    << "  sdo_overrides:" << (p.sdo_overrides.empty() ? " []" : "") << "\n";
-  for (const auto& [reg, target] : p.sdo_overrides) {
-    o << "    - {register: " << reg << ", index: " << hex(target.first)
-      << ", subindex: " << hex(target.second) << "}\n";
-  }
+  dump_powerlink(o, c.powerlink);
   dump_canio(o, c.canio);
   o << "axes:\n";
   for (const auto& a : c.axes) {
@@ -796,7 +544,9 @@ std::string dump_config(const DaemonConfig& c) {
     << "  privileged_group: " << quote(k.privileged_group) << "\n"
     << "  max_clients: " << k.max_clients << "\n"
     << "  max_request_bytes: " << k.max_request_bytes << "\n"
-    << "  idle_timeout_ms: " << k.idle_timeout_ms << "\n";
+    << "  idle_timeout_ms: " << k.idle_timeout_ms << "\n"
+    << "  reply_buffer_bytes: " << k.reply_buffer_bytes << "\n"
+    << "  reply_stall_timeout_ms: " << k.reply_stall_timeout_ms << "\n";
   return o.str();
 }
 

@@ -44,12 +44,30 @@ struct SimulatedBusConfig {
   std::vector<SimAxisConfig> axes;  // one per configured axis; missing entries take defaults
 };
 
+// One object the MN writes to a CN by SDO in the boot step "configure" (little endian bytes).
+struct CnObjectWrite {
+  uint16_t index = 0;
+  uint8_t subindex = 0;
+  std::vector<uint8_t> data;
+  bool from_cdc = false;  // from a concise DCF (else from the YAML `sdo_writes`)
+  friend bool operator==(const CnObjectWrite&, const CnObjectWrite&) = default;
+};
+
 // POWERLINK Controlled Node as the MN sees it.
 struct PowerlinkNodeConfig {
   uint8_t node_id = 1;
+  // Identity (docs/powerlink.md §Third-party CNs): checked in the IdentResponse and read back
+  // by SDO (0x1000, 0x1018/1..4) before the node is configured.
   std::optional<uint32_t> vendor_id;
   std::optional<uint32_t> product_code;
   std::optional<uint32_t> device_type;
+  std::optional<uint32_t> revision_no;
+  std::optional<uint32_t> serial_no;
+  std::string cdc;  // concise DCF of this CN (the content of the MN's 0x1F22/node), as given
+  // Written in this order in the boot step "configure": the CN's concise DCF (node `cdc`, else
+  // 0x1F22/node of powerlink.cdc), the cycle objects (cycle_objects), then `sdo_writes`.
+  std::vector<CnObjectWrite> object_writes;
+  bool cycle_objects = false;  // write 0x1006 and 0x1F98/4,5 from the configuration
   uint32_t pres_timeout_us = 100;
   bool mandatory = true;
   uint32_t multiplex = 0;             // 0 = continuous, n = polled every n-th cycle
@@ -71,6 +89,7 @@ struct PowerlinkNmtConfig {
 
 struct PowerlinkBusConfig {
   std::string interface;  // raw-socket interface, e.g. "eth1"
+  std::string cdc;        // the MN's concise DCF (openCONFIGURATOR's mnobd.cdc), as given
   std::vector<PowerlinkNodeConfig> nodes;
   DllThresholds thresholds;
   PowerlinkNmtConfig nmt;
@@ -143,6 +162,10 @@ struct SocketConfig {
   uint32_t max_clients = 64;
   uint32_t max_request_bytes = 4096;
   uint32_t idle_timeout_ms = 60000;
+  // Replies a client has not read yet: past this many bytes no more of its requests are read
+  // (back-pressure), and a client that leaves them unread for reply_stall_timeout_ms is closed.
+  uint32_t reply_buffer_bytes = 262144;
+  uint32_t reply_stall_timeout_ms = 10000;
 };
 
 struct CycleConfig {

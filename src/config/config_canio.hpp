@@ -4,7 +4,7 @@
 #include <ostream>
 
 #include "config/config.hpp"
-#include "config/config_section.hpp"
+#include "config/config_reader.hpp"
 
 namespace ds1928::config_detail {
 

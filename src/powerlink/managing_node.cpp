@@ -584,6 +584,7 @@ std::error_code ManagingNode::on_frame(std::span<const uint8_t> bytes) noexcept 
     ++counters_.invalid_frames;
     return frame.error();
   }
+  if (is_short_frame(bytes.size())) ++counters_.short_frames;
   const FrameHeader& h = frame->header;
   if (const PRes* pres = std::get_if<PRes>(&frame->message)) {
     Cn* cn = find(h.src_node);

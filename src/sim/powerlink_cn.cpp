@@ -294,6 +294,7 @@ void PowerlinkCn::receive(std::span<const uint8_t> frame, int64_t now_ns) noexce
     ++stats_.bad_frames;
     return;
   }
+  if (pl::is_short_frame(frame.size())) ++stats_.short_frames;
   const pl::Frame& f = *parsed;
   const StateHandler& h = handler();
   if (const auto* soc = std::get_if<pl::Soc>(&f.message)) {

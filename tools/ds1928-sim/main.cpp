@@ -228,7 +228,7 @@ int run_powerlink(const PowerlinkOptions& o) {
     std::printf(
         "node %u stats: soc=%llu preq=%llu pres=%llu dropped=%llu delayed=%llu soa=%llu "
         "asnd=%llu nmt=%llu sdo_in=%llu loss_soc=%llu loss_preq=%llu resets=%llu "
-        "bad=%llu state=%s\n",
+        "bad=%llu short=%llu state=%s\n",
         n->node_id(), static_cast<unsigned long long>(s.soc),
         static_cast<unsigned long long>(s.preq), static_cast<unsigned long long>(s.pres_sent),
         static_cast<unsigned long long>(s.pres_dropped),
@@ -239,6 +239,7 @@ int run_powerlink(const PowerlinkOptions& o) {
         static_cast<unsigned long long>(s.loss_of_soc),
         static_cast<unsigned long long>(s.loss_of_preq), static_cast<unsigned long long>(s.resets),
         static_cast<unsigned long long>(s.bad_frames),
+        static_cast<unsigned long long>(s.short_frames),
         std::string(pl::to_string(n->nmt_state())).c_str());
   }
   return 0;

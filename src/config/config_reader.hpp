@@ -1,8 +1,5 @@
-// The YAML reader shared by the configuration's section parsers (config.cpp, config_canio.cpp):
-// diagnostics with file:line:column, and Section, a map of settings that knows which keys it was
-// asked for so every key left over is reported as unknown. Values are parsed by hand (not
-// yaml-cpp's as<T>) for precise messages on hex numbers, quoted numbers and ranges.
-// Internal to the configuration library.
+// Shared pieces of the configuration reader: positions, diagnostics, scalar parsing and the
+// Section reader every config_*.cpp file uses. Internal to src/config.
 #pragma once
 
 #include <yaml-cpp/yaml.h>
@@ -13,12 +10,10 @@
 #include <charconv>
 #include <cmath>
 #include <cstdint>
-#include <cstdlib>
 #include <initializer_list>
 #include <limits>
 #include <map>
 #include <optional>
-#include <sstream>
 #include <string>
 #include <string_view>
 #include <utility>
@@ -465,9 +460,11 @@ class Section {
   std::vector<std::string> known_;
 };
 
-constexpr int64_t kU8 = 0xFF;
-constexpr int64_t kU16 = 0xFFFF;
-constexpr int64_t kU32 = 0xFFFFFFFF;
+// ---------------------------------------------------------------------------------------------
+
+inline constexpr int64_t kU8 = 0xFF;
+inline constexpr int64_t kU16 = 0xFFFF;
+inline constexpr int64_t kU32 = 0xFFFFFFFF;
 
 inline bool valid_interface_name(const std::string& name) {
   // IFNAMSIZ - 1 bytes, no '/', no white space.
@@ -477,7 +474,17 @@ inline bool valid_interface_name(const std::string& name) {
          });
 }
 
-// Where the value at keys[0].keys[1]... is in the document (the deepest map found otherwise).
+struct AxisSite {
+  Loc at;
+  Loc name_at;
+  Loc node_at;
+  std::string path;
+  Loc pres_offset_at;
+  Loc preq_offset_at;
+};
+
+// Where the value at `keys` below `node` is written; the deepest existing key when the full path
+// is not in the file. (Recursion instead of a loop: assigning a YAML::Node writes through it.)
 inline Loc locate(const YAML::Node& node, std::initializer_list<std::string_view> keys,
                   size_t depth = 0) {
   const Loc here = loc_of(node.Mark());
@@ -492,6 +499,35 @@ inline Loc locate(const YAML::Node& node, std::initializer_list<std::string_view
     return locate(it->second, keys, depth + 1);
   }
   return here;
+}
+
+inline std::string quote(std::string_view s) {
+  std::string out = "\"";
+  for (const char ch : s) {
+    const auto c = static_cast<unsigned char>(ch);
+    if (c == '"' || c == '\\') {
+      out += '\\';
+      out += ch;
+    } else if (c < 0x20) {
+      static constexpr char kHex[] = "0123456789abcdef";
+      out += "\\x";
+      out += kHex[c >> 4];
+      out += kHex[c & 0xF];
+    } else {
+      out += ch;
+    }
+  }
+  return out + "\"";
+}
+
+inline std::string hex(uint64_t v) {
+  std::array<char, 24> buf{};
+  const auto [end, ec] = std::to_chars(buf.data(), buf.data() + buf.size(), v, 16);
+  return "0x" + std::string(buf.data(), ec == std::errc{} ? end : buf.data());
+}
+
+inline const char* yes(bool b) {
+  return b ? "true" : "false";
 }
 
 }  // namespace ds1928::config_detail

@@ -1,0 +1,275 @@
+#include "canio/sdo_expedited.hpp"
+
+#include <cstdio>
+#include <string>
+
+namespace ds1928::canio {
+namespace {
+
+// Command specifier bits 7..5 of byte 0.
+constexpr uint8_t kCcsDownload = 1;  // client: initiate download
+constexpr uint8_t kCcsUpload = 2;    // client: initiate upload
+constexpr uint8_t kScsUpload = 2;    // server: initiate upload response
+constexpr uint8_t kScsDownload = 3;  // server: initiate download response
+constexpr uint8_t kCsAbort = 4;      // either side
+constexpr uint8_t kExpedited = 0x02;
+constexpr uint8_t kSizeIndicated = 0x01;
+
+constexpr bool valid_node(uint8_t node) noexcept {
+  return node >= 1 && node <= 127;
+}
+
+uint8_t expedited_specifier(uint8_t cs, uint8_t size) noexcept {
+  return static_cast<uint8_t>((cs << 5) | ((4 - size) << 2) | kExpedited | kSizeIndicated);
+}
+
+CanFrame sdo_frame(uint32_t cob_id, uint8_t specifier, const SdoMessage& m,
+                   uint32_t payload) noexcept {
+  CanFrame f;
+  f.id = cob_id;
+  f.dlc = 8;
+  f.data[0] = specifier;
+  f.data[1] = static_cast<uint8_t>(m.index & 0xFF);
+  f.data[2] = static_cast<uint8_t>(m.index >> 8);
+  f.data[3] = m.subindex;
+  for (int i = 0; i < 4; ++i) f.data[4 + i] = static_cast<uint8_t>(payload >> (8 * i));
+  return f;
+}
+
+uint32_t masked(uint32_t value, uint8_t size) noexcept {
+  return size >= 4 ? value : value & ((1u << (8 * size)) - 1u);
+}
+
+Result<CanFrame> build(uint8_t node, bool from_server, const SdoMessage& m) noexcept {
+  if (!valid_node(node)) return SdoFrameError::kInvalidNode;
+  const uint32_t cob = (from_server ? kSdoResponseBase : kSdoRequestBase) + node;
+  switch (m.command) {
+    case SdoCommand::DownloadRequest:
+    case SdoCommand::UploadResponse: {
+      if ((m.command == SdoCommand::DownloadRequest) == from_server)
+        return SdoFrameError::kCommandMismatch;
+      if (m.size < 1 || m.size > 4) return SdoFrameError::kInvalidSize;
+      const uint8_t cs = m.command == SdoCommand::DownloadRequest ? kCcsDownload : kScsUpload;
+      return sdo_frame(cob, expedited_specifier(cs, m.size), m, masked(m.value, m.size));
+    }
+    case SdoCommand::UploadRequest:
+      if (from_server) return SdoFrameError::kCommandMismatch;
+      return sdo_frame(cob, kCcsUpload << 5, m, 0);
+    case SdoCommand::DownloadResponse:
+      if (!from_server) return SdoFrameError::kCommandMismatch;
+      return sdo_frame(cob, kScsDownload << 5, m, 0);
+    case SdoCommand::Abort:
+      return sdo_frame(cob, kCsAbort << 5, m, m.value);
+  }
+  return SdoFrameError::kUnknownCommand;
+}
+
+class SdoFrameCategory final : public std::error_category {
+ public:
+  const char* name() const noexcept override { return "canopen.sdo"; }
+  std::string message(int ev) const override {
+    switch (static_cast<SdoFrameError>(ev)) {
+      case SdoFrameError::kInvalidNode:
+        return "CANopen node id outside 1..127";
+      case SdoFrameError::kInvalidSize:
+        return "expedited SDO data size outside 1..4 bytes";
+      case SdoFrameError::kWrongCobId:
+        return "SDO frame on another COB-ID than 0x600/0x580 + node";
+      case SdoFrameError::kWrongLength:
+        return "SDO frame with a data length other than 8";
+      case SdoFrameError::kRemoteOrErrorFrame:
+        return "remote or error frame on an SDO identifier";
+      case SdoFrameError::kUnknownCommand:
+        return "SDO command specifier not defined for this direction";
+      case SdoFrameError::kSegmentedNotSupported:
+        return "SDO response starts a segmented transfer; only expedited (1..4 bytes) is supported";
+      case SdoFrameError::kCommandMismatch:
+        return "SDO response does not answer the request (upload vs download)";
+      case SdoFrameError::kIndexMismatch:
+        return "SDO response names another index than the request";
+      case SdoFrameError::kSubindexMismatch:
+        return "SDO response names another subindex than the request";
+      case SdoFrameError::kSizeMismatch:
+        return "SDO upload response carries another data size than the register has";
+    }
+    return "unknown SDO frame error " + std::to_string(ev);
+  }
+};
+
+class SdoAbortCategory final : public std::error_category {
+ public:
+  const char* name() const noexcept override { return "canopen.sdo-abort"; }
+  std::string message(int ev) const override {
+    char buf[160];
+    std::snprintf(buf, sizeof buf, "SDO abort 0x%08X: %s", static_cast<unsigned>(ev),
+                  sdo_abort_text(static_cast<uint32_t>(ev)));
+    return buf;
+  }
+};
+
+}  // namespace
+
+const std::error_category& sdo_frame_category() noexcept {
+  static const SdoFrameCategory category;
+  return category;
+}
+
+const std::error_category& sdo_abort_category() noexcept {
+  static const SdoAbortCategory category;
+  return category;
+}
+
+const char* sdo_abort_text(uint32_t code) noexcept {
+  // CiA 301 §7.2.4.3.17, table "SDO abort codes".
+  switch (code) {
+    case 0x0503'0000:
+      return "toggle bit not alternated";
+    case 0x0504'0000:
+      return "SDO protocol timed out";
+    case 0x0504'0001:
+      return "client/server command specifier not valid or unknown";
+    case 0x0504'0002:
+      return "invalid block size";
+    case 0x0504'0003:
+      return "invalid sequence number";
+    case 0x0504'0004:
+      return "CRC error";
+    case 0x0504'0005:
+      return "out of memory";
+    case 0x0601'0000:
+      return "unsupported access to an object";
+    case 0x0601'0001:
+      return "attempt to read a write only object";
+    case 0x0601'0002:
+      return "attempt to write a read only object";
+    case 0x0602'0000:
+      return "object does not exist in the object dictionary";
+    case 0x0604'0041:
+      return "object cannot be mapped to the PDO";
+    case 0x0604'0042:
+      return "the number and length of the objects to be mapped would exceed PDO length";
+    case 0x0604'0043:
+      return "general parameter incompatibility";
+    case 0x0604'0047:
+      return "general internal incompatibility in the device";
+    case 0x0606'0000:
+      return "access failed due to a hardware error";
+    case 0x0607'0010:
+      return "data type does not match, length of service parameter does not match";
+    case 0x0607'0012:
+      return "data type does not match, length of service parameter too high";
+    case 0x0607'0013:
+      return "data type does not match, length of service parameter too low";
+    case 0x0609'0011:
+      return "sub-index does not exist";
+    case 0x0609'0030:
+      return "invalid value for parameter";
+    case 0x0609'0031:
+      return "value of parameter written too high";
+    case 0x0609'0032:
+      return "value of parameter written too low";
+    case 0x0609'0036:
+      return "maximum value is less than minimum value";
+    case 0x060A'0023:
+      return "resource not available: SDO connection";
+    case 0x0800'0000:
+      return "general error";
+    case 0x0800'0020:
+      return "data cannot be transferred or stored to the application";
+    case 0x0800'0021:
+      return "data cannot be transferred or stored to the application because of local control";
+    case 0x0800'0022:
+      return "data cannot be transferred or stored to the application because of the present "
+             "device state";
+    case 0x0800'0023:
+      return "object dictionary dynamic generation fails or no object dictionary is present";
+    case 0x0800'0024:
+      return "no data available";
+    default:
+      return "unknown abort code";
+  }
+}
+
+Result<CanFrame> build_sdo_request(uint8_t node, const SdoMessage& message) noexcept {
+  return build(node, false, message);
+}
+
+Result<CanFrame> build_sdo_response(uint8_t node, const SdoMessage& message) noexcept {
+  return build(node, true, message);
+}
+
+Result<SdoMessage> parse_sdo(uint8_t node, bool from_server, const CanFrame& f) noexcept {
+  if (!valid_node(node)) return SdoFrameError::kInvalidNode;
+  const uint32_t cob = (from_server ? kSdoResponseBase : kSdoRequestBase) + node;
+  if (f.extended || f.id != cob) return SdoFrameError::kWrongCobId;
+  if (f.rtr || f.error) return SdoFrameError::kRemoteOrErrorFrame;
+  // CiA 301 requires all 8 bytes in every SDO frame; a shorter one is malformed.
+  if (f.dlc != 8) return SdoFrameError::kWrongLength;
+  SdoMessage m;
+  const uint8_t spec = f.data[0];
+  m.index = static_cast<uint16_t>(f.data[1] | (f.data[2] << 8));
+  m.subindex = f.data[3];
+  const uint32_t payload = static_cast<uint32_t>(f.data[4]) | (uint32_t{f.data[5]} << 8) |
+                           (uint32_t{f.data[6]} << 16) | (uint32_t{f.data[7]} << 24);
+  const uint8_t cs = spec >> 5;
+  if (cs == kCsAbort) {
+    m.command = SdoCommand::Abort;
+    m.value = payload;
+    return m;
+  }
+  const bool expedited = (spec & kExpedited) != 0;
+  const bool size_indicated = (spec & kSizeIndicated) != 0;
+  // Expedited with size not indicated: the data size is unspecified, CiA 301 says up to 4 bytes.
+  const uint8_t size =
+      expedited ? (size_indicated ? static_cast<uint8_t>(4 - ((spec >> 2) & 0x3)) : 4) : 0;
+  if (!from_server) {
+    if (cs == kCcsDownload) {
+      if (!expedited) return SdoFrameError::kSegmentedNotSupported;
+      m.command = SdoCommand::DownloadRequest;
+      m.size = size;
+      m.value = masked(payload, size);
+      return m;
+    }
+    if (cs == kCcsUpload) {
+      m.command = SdoCommand::UploadRequest;
+      return m;
+    }
+    return SdoFrameError::kUnknownCommand;
+  }
+  if (cs == kScsDownload) {
+    m.command = SdoCommand::DownloadResponse;
+    return m;
+  }
+  if (cs == kScsUpload) {
+    if (!expedited) return SdoFrameError::kSegmentedNotSupported;
+    m.command = SdoCommand::UploadResponse;
+    m.size = size;
+    m.value = masked(payload, size);
+    return m;
+  }
+  return SdoFrameError::kUnknownCommand;
+}
+
+Result<SdoMessage> match_sdo_response(uint8_t node, const SdoMessage& request,
+                                      const CanFrame& response, uint8_t expected_size) noexcept {
+  auto parsed = parse_sdo(node, true, response);
+  if (!parsed) return parsed.error();
+  const SdoMessage& r = *parsed;
+  // An abort names the object it refers to; one for another object is not this transfer's answer.
+  if (r.index != request.index) return SdoFrameError::kIndexMismatch;
+  if (r.subindex != request.subindex) return SdoFrameError::kSubindexMismatch;
+  if (r.command == SdoCommand::Abort) return make_sdo_abort_error(r.value);
+  switch (request.command) {
+    case SdoCommand::DownloadRequest:
+      if (r.command != SdoCommand::DownloadResponse) return SdoFrameError::kCommandMismatch;
+      return r;
+    case SdoCommand::UploadRequest:
+      if (r.command != SdoCommand::UploadResponse) return SdoFrameError::kCommandMismatch;
+      if (expected_size != 0 && r.size != expected_size) return SdoFrameError::kSizeMismatch;
+      return r;
+    default:
+      return SdoFrameError::kCommandMismatch;  // only requests have responses
+  }
+}
+
+}  // namespace ds1928::canio
