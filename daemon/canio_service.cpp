@@ -112,14 +112,6 @@ class CanioService final : public BusService {
   std::vector<bool> silent_;
 };
 
-[[nodiscard]] std::string bitrate_mismatch(std::string_view iface, uint32_t have, uint32_t want) {
-  return fmt::format(
-      "canio: interface '{}' runs at {} bit/s, the configuration says canio.bitrate {} — every "
-      "node on a CAN bus must use the same bit rate (ip link set {} down; ip link set {} type can "
-      "bitrate {} restart-ms 100; ip link set {} up)",
-      iface, have, want, iface, iface, want, iface);
-}
-
 }  // namespace
 
 std::unique_ptr<BusService> make_canio_service(const DaemonConfig& config, std::string& why_not) {
@@ -162,11 +154,11 @@ std::unique_ptr<BusService> make_canio_service(const DaemonConfig& config, std::
       *port = std::move(opened.port);
     }
   }
-  // The bit rate as the interface reports it (SocketCanPort::open checked it already; the
-  // check here words the same error for every port kind).
-  if (auto info = cycle_port->query_interface();
-      info && info->bitrate != 0 && info->bitrate != config.canio.bitrate) {
-    why_not = bitrate_mismatch(cycle_port->name(), info->bitrate, config.canio.bitrate);
+  // State and bit rate as the interface reports them (SocketCanPort::open checked them already;
+  // this words the same error for every port kind).
+  if (std::string problem = canio::check_interface(*cycle_port, config.canio.bitrate);
+      !problem.empty()) {
+    why_not = "canio: " + problem;
     return nullptr;
   }
   try {

@@ -6,6 +6,7 @@
 #include <chrono>
 
 #include "canio/can_error_frame.hpp"
+#include "canio/can_netlink.hpp"
 #include "canio/sdo_expedited.hpp"
 #include "core/register_catalogue.hpp"
 
@@ -55,6 +56,17 @@ constexpr auto kRetryConfigure = std::chrono::milliseconds(500);
 const std::error_category& canio_bus_category() noexcept {
   static const CanioBusCategory category;
   return category;
+}
+
+std::string check_interface(CanPort& port, uint32_t expected_bitrate) {
+  auto info = port.query_interface();
+  if (!info) return describe_link_error(port.name(), info.error());
+  CanLinkInfo link;
+  link.info = info.value();
+  link.kind = LinkKind::Can;
+  link.kind_name = "can";
+  const LinkVerdict verdict = check_can_link(port.name(), link, expected_bitrate);
+  return verdict.error ? verdict.message : std::string();
 }
 
 CanioBusOptions make_canio_options(const DaemonConfig& config) {
@@ -414,6 +426,18 @@ std::error_code CanioBus::configure_axis(std::size_t axis) {
   return {};
 }
 
+bool CanioBus::configuration_intact(std::size_t axis) {
+  const ModuleSettings& m = options_.axes[axis].module;
+  const std::array<RegisterWrite, 3> checks{{{reg::kEnDatMode, 1, m.endat_mode()},
+                                             {reg::kOutputMtu, 1, m.output_mtu},
+                                             {reg::kInputMtu, 1, m.input_mtu}}};
+  for (const RegisterWrite& c : checks) {
+    uint32_t v = 0;
+    if (sdo_read(axis, c.reg, c.size, v) || v != c.value) return false;
+  }
+  return true;
+}
+
 void CanioBus::worker() noexcept {
   const std::size_t n = options_.axes.size();
   std::vector<std::chrono::steady_clock::time_point> retry_at(n);
@@ -425,6 +449,13 @@ void CanioBus::worker() noexcept {
     for (std::size_t i = 0; i < n && !stop_.load(); ++i) {
       if (!reconfigure_[i].load(std::memory_order_acquire) || now < retry_at[i]) continue;
       busy = true;
+      // Back after silence: a module that kept its configuration (the node was only late or
+      // disconnected) needs three reads; one that was power-cycled is configured anew.
+      if (axis_counters_[i].configurations.load() > 0 && configuration_intact(i)) {
+        reconfigure_[i].store(false, std::memory_order_release);
+        axis_counters_[i].configured.store(true, std::memory_order_release);
+        continue;
+      }
       if (configure_axis(i)) {
         bump(axis_counters_[i].sdo_errors);
         retry_at[i] = now + kRetryConfigure;

@@ -12,8 +12,9 @@
 // Acyclic registers (configuration at start, identification, EnDatAck) go through expedited
 // CANopen SDO on a second port owned by a normal-priority worker thread; the cycle thread never
 // sees them. Writes are verified by read-back. The worker configures each module at start
-// (start-up writes of the register catalogue) and again when its node comes back after being
-// silent; until then the axis publishes nothing.
+// (start-up writes of the register catalogue); when its node comes back after being silent it
+// checks the configuration by read-back and writes it again if the module lost it (power
+// cycle). Until then the axis publishes nothing.
 #pragma once
 
 #include <array>
@@ -98,6 +99,10 @@ struct CanioBusOptions {
   bool assume_configured = false;
 };
 
+// Start-up check of a port's interface (state, bit rate) against the configuration, the same
+// words for SocketCAN and the virtual bus: empty when usable, else the message naming the fix.
+[[nodiscard]] std::string check_interface(CanPort& port, uint32_t expected_bitrate);
+
 // The plan of every configured axis (identifiers resolved).
 [[nodiscard]] CanioBusOptions make_canio_options(const DaemonConfig& config);
 
@@ -168,6 +173,7 @@ class CanioBus final : public BusDriver {
   // SDO worker.
   void worker() noexcept;
   [[nodiscard]] std::error_code configure_axis(std::size_t axis);
+  [[nodiscard]] bool configuration_intact(std::size_t axis);
   [[nodiscard]] std::error_code sdo_read(std::size_t axis, uint16_t reg, uint8_t size,
                                          uint32_t& value);
   [[nodiscard]] std::error_code sdo_write(std::size_t axis, uint16_t reg, uint8_t size,

@@ -6,6 +6,7 @@
 // Faults for tests: random loss of its frames, wrong lengths, foreign identifiers, silence.
 #pragma once
 
+#include <atomic>
 #include <cstdint>
 #include <functional>
 #include <map>
@@ -74,7 +75,7 @@ class CanioNode {
   // Power-cycle: every module back to its bus-controller defaults (EnDat disabled).
   void power_up();
   // No answers at all while true (a node that lost power or its bus connection).
-  void set_silent(bool silent) noexcept { silent_ = silent; }
+  void set_silent(bool silent) noexcept { silent_.store(silent); }
 
   [[nodiscard]] std::size_t module_count() const noexcept { return modules_.size(); }
   [[nodiscard]] Ds1928Module& module(std::size_t i) { return *modules_.at(i); }
@@ -95,7 +96,7 @@ class CanioNode {
   std::vector<std::unique_ptr<Ds1928Module>> modules_;
   CanioNodeCounters counters_;
   std::mt19937_64 rng_;
-  bool silent_ = false;
+  std::atomic<bool> silent_{false};  // set from another thread (tests, the simulator main)
   uint64_t position_objects_ = 0;
 };
 
