@@ -1,7 +1,15 @@
 # ds1928d — the two commands of the README:
 #   make run    build and run the daemon on the simulated node
 #   make run-canio   the daemon on bus canio against `ds1928-sim canio` over the virtual CAN bus
-#   make test   build and run every test
+#   make test   build and run every test (warnings are errors in this build)
+# and for deployment:
+#   make deb            build the Debian packages ds1928d and libds1928-dev (+ lintian)
+#   make test-package   install them into a fresh Debian 12 root and check them there
+# and the deeper checks (docs/testing.md):
+#   make check-asan       the tests under ASan+UBSan (build-asan/)
+#   make check-tsan       the tests under TSan (build-tsan/)
+#   make check-sanitize   both
+#   make fuzz             every libFuzzer target for FUZZ_SECONDS each (clang, build-fuzz/)
 # Each installs the Debian packages it needs when they are missing (as root), or
 # prints the exact apt-get line to run.
 
@@ -12,9 +20,31 @@ JOBS       ?= $(shell nproc)
 
 BUILD_DEPS := cmake make g++ pkg-config libyaml-cpp-dev libspdlog-dev libfmt-dev libboost-dev \
               catch2 nlohmann-json3-dev libcli11-dev libsystemd-dev
-TEST_DEPS  := $(BUILD_DEPS) rt-tests tshark iproute2 python3
+# qemu-system-x86 … can-utils: the real-kernel CAN test (tests/canio/qemu), which also downloads
+# Debian's linux-image package into the build tree with apt-get download.
+TEST_DEPS  := $(BUILD_DEPS) rt-tests tshark iproute2 python3 util-linux passwd \
+              qemu-system-x86 busybox-static cpio kmod xz-utils can-utils
+# dpkg-buildpackage and the Build-Depends of packaging/debian/control.
+DEB_DEPS   := $(BUILD_DEPS) build-essential debhelper devscripts fakeroot lintian help2man
+PKGTEST_DEPS := mmdebstrap util-linux systemd
+# Where make deb builds: a copy of the source tree (the packaging expects debian/ at the top).
+DEB_DIR    ?= build-deb
 
-.PHONY: all build run run-canio test deps-build deps-test format clean bench
+FUZZ_DEPS  := $(BUILD_DEPS) clang libclang-rt-14-dev
+STRESS_DEPS := $(TEST_DEPS) stress-ng
+
+# ccache when installed: the sanitizer and fuzz builds recompile the whole tree.
+CCACHE     := $(shell command -v ccache 2>/dev/null)
+LAUNCHER   := $(if $(CCACHE),-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache)
+FUZZ_SECONDS ?= 60
+FUZZ_TARGETS := powerlink_frame sdo flatstream_receiver endat_reply control_request config_loader
+# The sanitizer runtimes stop at the first report, so a finding fails its test.
+ASAN_ENV   := ASAN_OPTIONS=detect_leaks=1:abort_on_error=1:strict_string_checks=1 \
+              UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
+TSAN_ENV   := TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1 suppressions=$(CURDIR)/tests/tsan.supp"
+
+.PHONY: all build run run-canio test deps-build deps-test deps-deb deb test-package deps-fuzz deps-stress \
+        format clean bench check-asan check-tsan check-sanitize fuzz stress
 
 all: build
 
@@ -40,8 +70,35 @@ deps-build:
 deps-test:
 	$(call ensure_packages,$(TEST_DEPS))
 
+deps-deb:
+	$(call ensure_packages,$(DEB_DEPS))
+
+# The packages are built from a copy of the working tree with packaging/debian as debian/, so the
+# tree itself stays as it is; the .debs, .buildinfo and .changes land in $(DEB_DIR)/.
+deb: deps-deb
+	rm -rf $(DEB_DIR)/src $(DEB_DIR)/*.deb $(DEB_DIR)/*.changes $(DEB_DIR)/*.buildinfo
+	mkdir -p $(DEB_DIR)/src
+	tar -C . --exclude-vcs --exclude='./build*' --exclude='./obj-*' -cf - . | tar -C $(DEB_DIR)/src -xf -
+	cp -r packaging/debian $(DEB_DIR)/src/debian
+	# ccache's compiler wrappers when installed: a rebuild of the same tree is fast.
+	cd $(DEB_DIR)/src && PATH="$$(test -d /usr/lib/ccache && echo /usr/lib/ccache:)$$PATH" \
+	  dpkg-buildpackage -us -uc -b -j$(JOBS)
+	lintian --fail-on error,warning --info --display-info $(DEB_DIR)/*.changes
+
+# Installs the packages into a fresh Debian 12 root (mmdebstrap; the base root is cached in
+# $(DEB_DIR)/) and checks files, users, groups, units and configuration (tests/package/).
+test-package: deb
+	$(call ensure_packages,$(PKGTEST_DEPS))
+	tests/package/install_test.sh $(DEB_DIR)
+
+deps-fuzz:
+	$(call ensure_packages,$(FUZZ_DEPS))
+
+deps-stress:
+	$(call ensure_packages,$(STRESS_DEPS))
+
 $(BUILD)/CMakeCache.txt:
-	cmake -S . -B $(BUILD) -DCMAKE_BUILD_TYPE=$(BUILD_TYPE)
+	cmake -S . -B $(BUILD) -DCMAKE_BUILD_TYPE=$(BUILD_TYPE) $(LAUNCHER)
 
 build: deps-build $(BUILD)/CMakeCache.txt
 	cmake --build $(BUILD) -j $(JOBS)
@@ -57,8 +114,42 @@ run-canio: build
 	  sim=$$!; trap 'kill $$sim 2>/dev/null; wait $$sim 2>/dev/null' EXIT INT TERM; \
 	  ./$(BUILD)/daemon/ds1928d --config $(CANIO_CONFIG)
 
-test: deps-test build
+# The developer/CI build keeps zero warnings: DS1928_WERROR=ON here only (Release and package
+# builds leave it off, so a newer compiler's new warning does not break them).
+test: deps-test
+	cmake -S . -B $(BUILD) -DCMAKE_BUILD_TYPE=$(BUILD_TYPE) -DDS1928_WERROR=ON $(LAUNCHER)
+	cmake --build $(BUILD) -j $(JOBS)
 	cd $(BUILD) && ctest --output-on-failure --timeout 900 -j 2
+
+# Sanitizer builds: their own build directories, the same ctest suite (unit and integration).
+check-asan: deps-test
+	cmake -S . -B build-asan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DDS1928_SANITIZE=address,undefined $(LAUNCHER)
+	cmake --build build-asan -j $(JOBS)
+	cd build-asan && $(ASAN_ENV) ctest --output-on-failure --timeout 900 -j 2
+
+check-tsan: deps-test
+	cmake -S . -B build-tsan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DDS1928_SANITIZE=thread $(LAUNCHER)
+	cmake --build build-tsan -j $(JOBS)
+	cd build-tsan && $(TSAN_ENV) ctest --output-on-failure --timeout 900 -j 2
+
+check-sanitize: check-asan check-tsan
+
+# libFuzzer: each target FUZZ_SECONDS, starting from the committed seeds (fuzz/corpus/<name>);
+# new inputs go to build-fuzz/corpus/<name>, crashers to build-fuzz/crash-<name>-*.
+fuzz: deps-fuzz
+	CC=clang CXX=clang++ cmake -S . -B build-fuzz -DCMAKE_BUILD_TYPE=RelWithDebInfo -DDS1928_FUZZ=ON $(LAUNCHER)
+	cmake --build build-fuzz -j $(JOBS) --target $(addprefix fuzz_,$(FUZZ_TARGETS))
+	@set -e; for t in $(FUZZ_TARGETS); do \
+	  mkdir -p build-fuzz/corpus/$$t; \
+	  echo "== fuzz_$$t ($(FUZZ_SECONDS) s)"; \
+	  ./build-fuzz/fuzz/fuzz_$$t -max_total_time=$(FUZZ_SECONDS) -print_final_stats=1 \
+	    -artifact_prefix=build-fuzz/crash-$$t- build-fuzz/corpus/$$t fuzz/corpus/$$t; \
+	done
+
+# The test suite RUNS times in a row under `stress-ng --cpu 2` (tests/stress-repeat.sh).
+RUNS ?= 20
+stress: deps-stress build
+	tests/stress-repeat.sh $(BUILD) $(RUNS)
 
 bench: deps-test build
 	./bench/run-all.sh $(BUILD)
@@ -67,4 +158,4 @@ format:
 	find daemon include src tools tests bench -name '*.[ch]pp' -o -name '*.[ch]' | xargs clang-format -i
 
 clean:
-	rm -rf $(BUILD)
+	rm -rf $(BUILD) $(DEB_DIR) build-asan build-tsan build-fuzz

@@ -7,6 +7,8 @@
 #include <cstdio>
 
 #include "config/config_loader.hpp"
+#include "control/socket_path.hpp"
+#include "endat_service.hpp"
 
 namespace ds1928 {
 
@@ -73,11 +75,16 @@ std::error_code Daemon::start() {
   }
 
   // Control socket: the configured path, or the per-user fallback when its directory cannot be
-  // made (a daemon started by hand without root).
+  // made or written (a daemon started by hand without root). Something planted at the path or a
+  // directory others control is refused outright: moving elsewhere would hide it.
   SocketConfig socket = config_.socket;
   server_ = std::make_unique<control::Server>(io_, socket);
   register_commands();
   if (auto ec = server_->start()) {
+    if (!control::directory_unusable(ec)) {
+      spdlog::error("control socket {}: {}", config_.socket.path, ec.message());
+      return ec;
+    }
     const std::string fallback = fallback_socket_path(config_.socket.path);
     spdlog::warn("control socket {}: {}; using {}", config_.socket.path, ec.message(), fallback);
     socket.path = fallback;
@@ -325,6 +332,12 @@ void Daemon::register_commands() {
     if (axis >= config_.axes.size()) {
       reply.error(control::ErrorCode::BadArgument,
                   fmt::format("axis: {} does not exist (0..{})", axis, config_.axes.size() - 1));
+      return;
+    }
+    // Clearing a module error hides it from every other client: a reader may not.
+    if (!peer_is_privileged(req.peer(), config_.socket.privileged_group)) {
+      reply.error("permission_denied", "'ack-errors' clears module errors: needs uid 0 or group '" +
+                                           config_.socket.privileged_group + "'");
       return;
     }
     if (bus().state() != BusState::Operational) {

@@ -138,11 +138,14 @@ void EnDatService::register_commands(control::Server& server) {
                        });
                      });
 
-  server.add_command("endat-ack", [run](const control::Request& req, control::Reply reply) {
-    run(req, reply, JobKind::Single, {Request::acknowledge()}, [](const JobResult&) {
-      return json{{"command", "ack"}};
-    });
-  });
+  // Acknowledging clears the encoder's error and warning bits for every client: privileged.
+  server.add_command(
+      "endat-ack", [run, privileged](const control::Request& req, control::Reply reply) {
+        if (!privileged(req, reply)) return;
+        run(req, reply, JobKind::Single, {Request::acknowledge()}, [](const JobResult&) {
+          return json{{"command", "ack"}};
+        });
+      });
 
   server.add_command("endat-read-param", [run](const control::Request& req, control::Reply reply) {
     const auto mrs = static_cast<uint8_t>(number_arg(req, "mrs", 0, 0xFF));

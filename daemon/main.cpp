@@ -1,5 +1,6 @@
 // ds1928d: real-time master of X20DS1928 EnDat encoder modules.
 #include <spdlog/spdlog.h>
+#include <sys/un.h>
 
 #include <CLI/CLI.hpp>
 #include <cstdio>
@@ -12,6 +13,29 @@
 
 namespace {
 constexpr std::size_t kThreadStackBytes = 1024 * 1024;
+
+// The same rules as the configuration's shm.name and socket.path.
+CLI::Validator shm_name_check() {
+  return {[](const std::string& v) -> std::string {
+            if (v.size() >= 2 && v.size() <= 255 && v.front() == '/' &&
+                v.find('/', 1) == std::string::npos && v != "/." && v != "/..")
+              return {};
+            return "'" + v +
+                   "' is not a shared-memory name: '/' followed by 1..254 characters "
+                   "without '/'";
+          },
+          "NAME"};
+}
+CLI::Validator socket_path_check() {
+  return {[](const std::string& v) -> std::string {
+            if (!v.empty() && v.front() == '/' && v.back() != '/' &&
+                v.size() < sizeof(sockaddr_un::sun_path))
+              return {};
+            return "'" + v + "' is not an absolute file path shorter than " +
+                   std::to_string(sizeof(sockaddr_un::sun_path)) + " bytes";
+          },
+          "PATH"};
+}
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -24,6 +48,14 @@ int main(int argc, char** argv) {
                  "validate FILE without touching the bus; exit 0 when valid, 2 otherwise");
   app.add_flag("--print-config", print_config,
                "with --check-config: print the effective configuration (all defaults filled in)");
+  std::string shm_name;
+  std::string socket_path;
+  app.add_option("--shm-name", shm_name,
+                 "publish under this shared memory name instead of shm.name (e.g. /ds1928d-line2)")
+      ->check(shm_name_check());
+  app.add_option("--socket", socket_path,
+                 "listen on this control socket instead of socket.path (an absolute path)")
+      ->check(socket_path_check());
   app.set_version_flag("--version", "ds1928d " PROJECT_VERSION);
   try {
     app.parse(argc, argv);
@@ -38,14 +70,18 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "%s: %zu error(s)\n", path.c_str(), loaded.errors().size());
     return 2;
   }
+  auto config = std::move(loaded).config();
+  // The template unit ds1928d@NAME.service gives each instance its own shared memory and socket
+  // from the instance name, so that NAME.yaml need not repeat them.
+  if (!shm_name.empty()) config.shm.name = shm_name;
+  if (!socket_path.empty()) config.socket.path = socket_path;
   if (!check_path.empty()) {
-    const auto& c = loaded.config();
-    if (print_config) std::cout << ds1928::dump_config(c);
+    if (print_config) std::cout << ds1928::dump_config(config);
     std::printf("%s: ok (bus %s, %zu axis(es), cycle %u µs)\n", path.c_str(),
-                std::string(ds1928::to_string(c.bus)).c_str(), c.axes.size(), c.cycle.period_us);
+                std::string(ds1928::to_string(config.bus)).c_str(), config.axes.size(),
+                config.cycle.period_us);
     return 0;
   }
-  auto config = std::move(loaded).config();
   // mlockall locks every thread's whole stack in RAM: 1 MiB each (the cycle thread pre-faults
   // 256 KiB of it) instead of glibc's default of RLIMIT_STACK, usually 8 MiB. Before the first
   // thread (the logger's) starts.

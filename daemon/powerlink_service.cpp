@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 
 #include "powerlink/raw_link.hpp"
+#include "powerlink/rx_wait.hpp"
 #include "powerlink_commands.hpp"
 
 namespace ds1928 {
@@ -43,7 +44,8 @@ void PowerlinkService::status_extra(nlohmann::json& j) const {
                      {"loss_of_pres",
                       {{"events", n.loss_of_pres.events},
                        {"counter", n.loss_of_pres.value},
-                       {"fired", n.loss_of_pres.fired}}},
+                       {"fired", n.loss_of_pres.fired},
+                       {"threshold", n.loss_of_pres_threshold}}},
                      {"late_pres", {{"events", n.late_pres.events}, {"fired", n.late_pres.fired}}},
                      {"stale_pres_dropped", n.stale_pres_dropped},
                      {"pres_size_mismatches", n.pres_size_mismatches},
@@ -111,6 +113,7 @@ std::unique_ptr<BusService> make_powerlink_service(const DaemonConfig& config,
   auto link = std::make_unique<powerlink::RawLink>();
   powerlink::RawLinkOptions options;
   options.interface = config.powerlink.interface;
+  powerlink::apply_rx_wait(config.powerlink.rx_wait, config.powerlink.rx_spin_us, options);
   if (auto ec = link->open(options)) {
     why_not = fmt::format(
         "powerlink: cannot open raw socket on '{}': {}{}", config.powerlink.interface, ec.message(),

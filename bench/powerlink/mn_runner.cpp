@@ -22,8 +22,10 @@
 
 #include "config/config_loader.hpp"
 #include "core/axis_sample.hpp"
+#include "powerlink/cycle_budget.hpp"
 #include "powerlink/powerlink_bus.hpp"
 #include "powerlink/raw_link.hpp"
+#include "powerlink/rx_wait.hpp"
 
 namespace pl = ds1928::powerlink;
 
@@ -131,7 +133,7 @@ struct Options {
   std::string config_file;
   int nodes = 1;
   uint32_t period_us = 0;        // 0: from the config (1000 without one)
-  uint32_t pres_timeout_us = 0;  // 0: from the config (100 without one)
+  uint32_t pres_timeout_us = 0;  // 0: from the config (200 without one)
   int64_t loss_threshold = -1;   // -1: from the config
   double duration_s = 0;         // measured run after all CNs are operational (0: until signal)
   double warmup_s = 1.0;
@@ -139,7 +141,11 @@ struct Options {
   int rt_priority = 80;
   int cpu = -1;
   bool check_positions = true;
-  std::string rx_mode = "ring";
+  std::string rx_mode;  // legacy: ring (= spin) | busy-poll | blocking (recv + ppoll, no ring)
+  std::string rx_wait;  // block | spin | busy_poll; default: the configuration's (block)
+  int64_t rx_spin_us = -1;
+  int64_t wait_soc_preq_us = -1;
+  int64_t async_timeout_us = -1;
 };
 
 void try_realtime(int priority, int cpu) {
@@ -204,7 +210,12 @@ int main(int argc, char** argv) {
   app.add_option("--boot-timeout", o.boot_timeout_s, "give up when not all operational by then");
   app.add_option("--rt-priority", o.rt_priority, "SCHED_FIFO priority (0: normal)");
   app.add_option("--cpu", o.cpu, "pin to this CPU");
-  app.add_option("--rx-mode", o.rx_mode, "ring | busy-poll | blocking");
+  app.add_option("--rx-mode", o.rx_mode, "raw link mode: ring (spin) | busy-poll | blocking");
+  app.add_option("--rx-wait", o.rx_wait, "powerlink.rx_wait: block | spin | busy_poll")
+      ->check(CLI::IsMember({"block", "spin", "busy_poll"}));
+  app.add_option("--rx-spin-us", o.rx_spin_us, "powerlink.rx_spin_us (block: ring polled first)");
+  app.add_option("--wait-soc-preq-us", o.wait_soc_preq_us, "WaitSoCPReq (0x1F8A/1)");
+  app.add_option("--async-timeout-us", o.async_timeout_us, "AsyncSlotTimeout (0x1F8A/2)");
   app.add_flag("!--no-check-positions", o.check_positions, "do not check positions");
   CLI11_PARSE(app, argc, argv);
   std::signal(SIGINT, on_stop);
@@ -229,13 +240,39 @@ int main(int argc, char** argv) {
   if (o.loss_threshold >= 0)
     config.powerlink.thresholds.loss_of_pres = static_cast<uint32_t>(o.loss_threshold);
   config.powerlink.interface = o.iface;
+  if (o.rx_wait == "block") config.powerlink.rx_wait = ds1928::RxWait::Block;
+  if (o.rx_wait == "spin") config.powerlink.rx_wait = ds1928::RxWait::Spin;
+  if (o.rx_wait == "busy_poll") config.powerlink.rx_wait = ds1928::RxWait::BusyPoll;
+  if (o.rx_spin_us >= 0) config.powerlink.rx_spin_us = static_cast<uint32_t>(o.rx_spin_us);
+  if (o.wait_soc_preq_us >= 0)
+    config.powerlink.wait_soc_preq_us = static_cast<uint32_t>(o.wait_soc_preq_us);
+  if (o.async_timeout_us >= 0)
+    config.powerlink.async_timeout_us = static_cast<uint32_t>(o.async_timeout_us);
 
   pl::RawLink raw;
   pl::RawLinkOptions lo;
   lo.interface = o.iface;
-  lo.rx_mode = o.rx_mode == "busy-poll"  ? pl::RxMode::BusyPoll
-               : o.rx_mode == "blocking" ? pl::RxMode::Blocking
-                                         : pl::RxMode::Ring;
+  pl::apply_rx_wait(config.powerlink.rx_wait, config.powerlink.rx_spin_us, lo);
+  if (!o.rx_mode.empty()) {
+    lo.ring_spin_ns = -1;
+    lo.rx_mode = o.rx_mode == "busy-poll"  ? pl::RxMode::BusyPoll
+                 : o.rx_mode == "blocking" ? pl::RxMode::Blocking
+                                           : pl::RxMode::Ring;
+  }
+  {
+    std::vector<pl::BudgetNode> budget_nodes;
+    for (const auto& n : config.powerlink.nodes)
+      budget_nodes.push_back({n.node_id, 9, 23, n.pres_timeout_us, n.multiplex});
+    const pl::CycleBudget b = pl::cycle_budget(budget_nodes, config.powerlink.wait_soc_preq_us,
+                                               config.powerlink.async_timeout_us);
+    std::printf(
+        "CONFIG period_us=%u rx_wait=%s rx_spin_us=%u ring_spin_ns=%lld rx_mode=%s "
+        "wait_soc_preq_us=%u async_slot_timeout_us=%u budget_us=%.1f\n",
+        config.cycle.period_us, pl::to_string(config.powerlink.rx_wait),
+        config.powerlink.rx_spin_us, static_cast<long long>(lo.ring_spin_ns),
+        pl::to_string(lo.rx_mode), config.powerlink.wait_soc_preq_us,
+        config.powerlink.async_timeout_us, b.total_us());
+  }
   if (auto ec = raw.open(lo)) {
     std::fprintf(stderr, "open %s: %s\n", o.iface.c_str(), ec.message().c_str());
     return 2;
@@ -489,8 +526,7 @@ int main(int argc, char** argv) {
       all_op ? 1 : 0, boots, resets, events, fired, measuring ? events - events_at_start : 0,
       measuring ? fired - fired_at_start : 0, static_cast<unsigned long long>(overruns),
       mc.cycle_time_exceeded.events, mc.invalid_frames, mc.short_frames, mc.unexpected_frames,
-      mc.async_timeouts,
-      mc.async_invites_unused, stale, static_cast<unsigned long long>(fresh),
+      mc.async_timeouts, mc.async_invites_unused, stale, static_cast<unsigned long long>(fresh),
       static_cast<unsigned long long>(moving), static_cast<unsigned long long>(wrong),
       static_cast<unsigned long long>(bad_stamp));
   std::printf(

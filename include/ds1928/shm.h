@@ -286,13 +286,19 @@ static inline int ds1928_shm_reader_open(struct ds1928_shm_reader* r, const char
   r->wait = NULL;
   r->size = 0;
   r->generation = 0;
-  int fd = shm_open(name, O_RDONLY | O_CLOEXEC, 0);
+  /* O_NONBLOCK: a FIFO planted under the name must not block the reader (glibc adds
+   * O_NOFOLLOW: a symbolic link fails with ELOOP). */
+  int fd = shm_open(name, O_RDONLY | O_NONBLOCK | O_CLOEXEC, 0);
   if (fd < 0) return -errno;
   struct stat st;
   if (fstat(fd, &st) != 0) {
     int e = -errno;
     close(fd);
     return e;
+  }
+  if (!S_ISREG(st.st_mode)) {
+    close(fd);
+    return -EINVAL;
   }
   if ((size_t)st.st_size < sizeof(struct ds1928_shm_header)) {
     close(fd);

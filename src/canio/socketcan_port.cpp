@@ -13,8 +13,6 @@
 #include <cerrno>
 #include <cstring>
 
-#include "canio/unique_fd.hpp"
-
 namespace ds1928::canio {
 namespace {
 
@@ -150,17 +148,15 @@ SocketCanOpen SocketCanPort::open(const SocketCanOptions& options) {
   addr.can_family = AF_CAN;
   addr.can_ifindex = link->info.ifindex;
   if (bind(fd.get(), reinterpret_cast<sockaddr*>(&addr), sizeof addr) != 0) return fail("bind");
-  result.port.reset(new SocketCanPort(options, fd.release()));
+  result.port.reset(new SocketCanPort(options, std::move(fd)));
   result.port->impl_->set_state(link->info.state);
   return result;
 }
 
-SocketCanPort::SocketCanPort(SocketCanOptions options, int fd)
-    : options_(std::move(options)), fd_(fd), impl_(std::make_unique<Impl>()) {}
+SocketCanPort::SocketCanPort(SocketCanOptions options, UniqueFd fd)
+    : options_(std::move(options)), fd_(std::move(fd)), impl_(std::make_unique<Impl>()) {}
 
-SocketCanPort::~SocketCanPort() {
-  if (fd_ >= 0) ::close(fd_);
-}
+SocketCanPort::~SocketCanPort() = default;
 
 SendResult SocketCanPort::send(const CanFrame& frame) noexcept {
   Impl& p = *impl_;
@@ -173,7 +169,7 @@ SendResult SocketCanPort::send(const CanFrame& frame) noexcept {
   if (frame.rtr) cf.can_id |= CAN_RTR_FLAG;
   cf.len = frame.dlc;
   if (!frame.rtr) std::memcpy(cf.data, frame.data.data(), frame.dlc);
-  const ssize_t n = ::send(fd_, &cf, sizeof cf, MSG_DONTWAIT);
+  const ssize_t n = ::send(fd_.get(), &cf, sizeof cf, MSG_DONTWAIT);
   if (n == static_cast<ssize_t>(sizeof cf)) {
     bump(p.tx_frames);
     return {};
@@ -207,7 +203,7 @@ ReceiveResult SocketCanPort::receive(std::span<CanFrame> out, int64_t deadline_n
   for (;;) {
     const unsigned want = static_cast<unsigned>(out.size() < kBatch ? out.size() : kBatch);
     p.arm();
-    const int n = recvmmsg(fd_, p.msgs.data(), want, MSG_DONTWAIT, nullptr);
+    const int n = recvmmsg(fd_.get(), p.msgs.data(), want, MSG_DONTWAIT, nullptr);
     if (n > 0) {
       // One REALTIME→MONOTONIC offset per batch: the frames arrived within microseconds.
       const int64_t mono = clock_ns(CLOCK_MONOTONIC);
@@ -292,7 +288,7 @@ ReceiveResult SocketCanPort::receive(std::span<CanFrame> out, int64_t deadline_n
     const int64_t wait = deadline_ns - now;
     const timespec ts{static_cast<time_t>(wait / 1'000'000'000),
                       static_cast<long>(wait % 1'000'000'000)};
-    pollfd pfd{fd_, POLLIN, 0};
+    pollfd pfd{fd_.get(), POLLIN, 0};
     const int r = ppoll(&pfd, 1, &ts, nullptr);
     if (r < 0 && errno != EINTR) {
       bump(p.rx_errors);
@@ -346,7 +342,7 @@ std::error_code SocketCanPort::set_filters(std::span<const CanIdFilter> ids) noe
     table[i].can_mask = (f.extended ? CAN_EFF_MASK : CAN_SFF_MASK) | CAN_EFF_FLAG | CAN_RTR_FLAG;
   }
   // An empty table (length 0) makes the socket receive no data frames at all.
-  if (setsockopt(fd_, SOL_CAN_RAW, CAN_RAW_FILTER, ids.empty() ? nullptr : table.data(),
+  if (setsockopt(fd_.get(), SOL_CAN_RAW, CAN_RAW_FILTER, ids.empty() ? nullptr : table.data(),
                  static_cast<socklen_t>(ids.size() * sizeof(can_filter))) != 0)
     return errno_code(errno);
   return {};
@@ -354,7 +350,7 @@ std::error_code SocketCanPort::set_filters(std::span<const CanIdFilter> ids) noe
 
 std::error_code SocketCanPort::set_error_mask(uint32_t classes) noexcept {
   const can_err_mask_t mask = classes & err_class::kAll;
-  if (setsockopt(fd_, SOL_CAN_RAW, CAN_RAW_ERR_FILTER, &mask, sizeof mask) != 0)
+  if (setsockopt(fd_.get(), SOL_CAN_RAW, CAN_RAW_ERR_FILTER, &mask, sizeof mask) != 0)
     return errno_code(errno);
   return {};
 }
@@ -370,20 +366,21 @@ Result<SocketCanSettings> SocketCanPort::read_settings() const noexcept {
   SocketCanSettings s;
   can_err_mask_t mask = 0;
   socklen_t len = sizeof mask;
-  if (getsockopt(fd_, SOL_CAN_RAW, CAN_RAW_ERR_FILTER, &mask, &len) != 0) return errno_code(errno);
+  if (getsockopt(fd_.get(), SOL_CAN_RAW, CAN_RAW_ERR_FILTER, &mask, &len) != 0)
+    return errno_code(errno);
   s.error_mask = mask;
   std::array<can_filter, kMaxFilters> table{};
   len = sizeof table;
-  if (getsockopt(fd_, SOL_CAN_RAW, CAN_RAW_FILTER, table.data(), &len) != 0)
+  if (getsockopt(fd_.get(), SOL_CAN_RAW, CAN_RAW_FILTER, table.data(), &len) != 0)
     return errno_code(errno);
   s.filter_count = len / sizeof(can_filter);
   int flags = 0;
   len = sizeof flags;
-  if (getsockopt(fd_, SOL_SOCKET, SO_TIMESTAMPING, &flags, &len) == 0)
+  if (getsockopt(fd_.get(), SOL_SOCKET, SO_TIMESTAMPING, &flags, &len) == 0)
     s.timestamping = (flags & SOF_TIMESTAMPING_RX_SOFTWARE) != 0;
   int ovfl = 0;
   len = sizeof ovfl;
-  if (getsockopt(fd_, SOL_SOCKET, SO_RXQ_OVFL, &ovfl, &len) == 0) s.rxq_overflow = ovfl != 0;
+  if (getsockopt(fd_.get(), SOL_SOCKET, SO_RXQ_OVFL, &ovfl, &len) == 0) s.rxq_overflow = ovfl != 0;
   return s;
 }
 

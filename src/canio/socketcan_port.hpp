@@ -22,6 +22,7 @@
 #include "canio/can_error_frame.hpp"
 #include "canio/can_netlink.hpp"
 #include "canio/can_port.hpp"
+#include "canio/unique_fd.hpp"
 
 namespace ds1928::canio {
 
@@ -71,14 +72,14 @@ class SocketCanPort final : public CanPort {
   [[nodiscard]] std::string_view name() const noexcept override { return options_.interface; }
 
   [[nodiscard]] Result<SocketCanSettings> read_settings() const noexcept;
-  [[nodiscard]] int fd() const noexcept { return fd_; }
+  [[nodiscard]] int fd() const noexcept { return fd_.get(); }
 
  private:
   struct Impl;
-  SocketCanPort(SocketCanOptions options, int fd);
+  SocketCanPort(SocketCanOptions options, UniqueFd fd);
 
   SocketCanOptions options_;
-  int fd_ = -1;
+  UniqueFd fd_;
   std::unique_ptr<Impl> impl_;  // receive buffers and counters, allocated once at open
 };
 

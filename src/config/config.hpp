@@ -68,16 +68,41 @@ struct PowerlinkNodeConfig {
   // 0x1F22/node of powerlink.cdc), the cycle objects (cycle_objects), then `sdo_writes`.
   std::vector<CnObjectWrite> object_writes;
   bool cycle_objects = false;  // write 0x1006 and 0x1F98/4,5 from the configuration
-  uint32_t pres_timeout_us = 100;
+  // PResTimeout (0x1F92/node): how long the MN waits for the PRes after the PReq. Long enough for
+  // a CN that answers from software on a busy PC (docs/realtime.md); a lost PRes costs it once.
+  uint32_t pres_timeout_us = 200;
+  // DLL_MNCNLossPResThreshold (0x1C09/node); unset: powerlink.thresholds.loss_of_pres.
+  std::optional<uint32_t> loss_of_pres_threshold;
   bool mandatory = true;
   uint32_t multiplex = 0;             // 0 = continuous, n = polled every n-th cycle
   std::optional<uint16_t> preq_size;  // default: from IdentResponse PollOutSize / module list
   std::optional<uint16_t> pres_size;  // default: from IdentResponse PollInSize / module list
 };
+// DLL threshold counters (+8 per cycle with the error, −1 per cycle without; 0 = disabled).
 struct DllThresholds {
-  uint32_t loss_of_pres = 15;
-  uint32_t cycle_time_exceeded = 15;
+  // DLL_MNCNLossPResThreshold (0x1C09) of every CN without its own; unset: ride through
+  // kLossOfPresRideThroughUs of silence, at least 5 lost PRes in a row, reset at the next loss
+  // (default_loss_of_pres_threshold()).
+  std::optional<uint32_t> loss_of_pres;
+  uint32_t cycle_time_exceeded = 15;  // DLL_MNCycTimeExceed_REC (0x1C02/3)
   uint32_t late_pres = 15;
+};
+// A CN whose host stalls this long (PRes lost in a row) is not reset with the default threshold;
+// measured stalls of a busy 2-core VM: 7–13 ms (docs/realtime.md).
+inline constexpr uint32_t kLossOfPresRideThroughUs = 20'000;
+[[nodiscard]] constexpr uint32_t default_loss_of_pres_threshold(uint32_t period_us) noexcept {
+  // Fires at the first loss past the ride-through: 8 × (tolerated losses in a row + 1).
+  const uint32_t cycles =
+      period_us == 0 ? 5 : (kLossOfPresRideThroughUs + period_us - 1) / period_us;
+  return 8 * ((cycles < 5 ? 5 : cycles) + 1);
+}
+
+// How the cycle thread waits for a PRes or an awaited ASnd (docs/realtime.md).
+enum class RxWait : uint8_t {
+  Block,     // RX ring, polled for rx_spin_us, then a blocking ppoll(): the CPU is free meanwhile
+  Spin,      // RX ring polled until the frame or the deadline: no syscall, but nothing of lower
+             // priority runs on the cycle thread's CPU until then
+  BusyPoll,  // recv(MSG_DONTWAIT) in a loop until the deadline (no ring)
 };
 // The MN's NMT timing while booting CNs (docs/powerlink.md, boot sequence).
 struct PowerlinkNmtConfig {
@@ -93,7 +118,13 @@ struct PowerlinkBusConfig {
   std::vector<PowerlinkNodeConfig> nodes;
   DllThresholds thresholds;
   PowerlinkNmtConfig nmt;
-  uint32_t async_timeout_us = 50;  // wait for the invited ASnd
+  // AsyncSlotTimeout (0x1F8A/2): wait for the invited ASnd after the SoA.
+  uint32_t async_timeout_us = 100;
+  // WaitSoCPReq (0x1F8A/1): pause between the SoC and the first PReq, for CNs that need time to
+  // take the SoC (a software CN) before they can answer a PReq.
+  uint32_t wait_soc_preq_us = 0;
+  RxWait rx_wait = RxWait::Block;
+  uint32_t rx_spin_us = 0;  // Block: poll the ring this long before blocking
   uint32_t sdo_timeout_ms = 500;
   // PosTime relation: PosTime = low 32 bits of (SoC RelativeTime µs + offset).
   int64_t nettime_offset_us = 0;

@@ -2,6 +2,7 @@
 #include "config/config_powerlink.hpp"
 
 #include <algorithm>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
@@ -10,6 +11,7 @@
 #include <tuple>
 
 #include "powerlink/concise_dcf.hpp"
+#include "powerlink/cycle_budget.hpp"
 
 namespace ds1928::config_detail {
 namespace {
@@ -285,6 +287,7 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
     n.boolean("cycle_objects", node.cycle_objects);
     n.integer("pres_timeout_us", node.pres_timeout_us, 1, 100000, "µs");
     sites.pres_timeout_at.push_back(n.value_at("pres_timeout_us"));
+    n.optional_integer("loss_of_pres_threshold", node.loss_of_pres_threshold, 0, kU32);
     n.boolean("mandatory", node.mandatory);
     n.integer("multiplex", node.multiplex, 0, 255, "(0 = every cycle)");
     n.optional_integer("preq_size", node.preq_size, 0, 1490);
@@ -318,7 +321,7 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
     p.nodes.push_back(node);
   }
   Section t = s.section("thresholds");
-  t.integer("loss_of_pres", p.thresholds.loss_of_pres, 0, kU32, "(0 = disabled)");
+  t.optional_integer("loss_of_pres", p.thresholds.loss_of_pres, 0, kU32);
   t.integer("cycle_time_exceeded", p.thresholds.cycle_time_exceeded, 0, kU32, "(0 = disabled)");
   t.integer("late_pres", p.thresholds.late_pres, 0, kU32, "(0 = disabled)");
   t.finish();
@@ -328,7 +331,17 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
   nmt.integer("reset_wait_ms", p.nmt.reset_wait_ms, 0, 600000, "ms");
   nmt.integer("status_request_every", p.nmt.status_request_every, 1, 10000, "cycles");
   nmt.finish();
+  // AsyncSlotTimeout by its standard name; async_timeout_us is the older spelling.
+  if (s.has("async_slot_timeout_us") && s.has("async_timeout_us"))
+    s.error("async_timeout_us", "give either async_slot_timeout_us or async_timeout_us, not both");
+  s.integer("async_slot_timeout_us", p.async_timeout_us, 1, 100000, "µs");
   s.integer("async_timeout_us", p.async_timeout_us, 1, 100000, "µs");
+  s.integer("wait_soc_preq_us", p.wait_soc_preq_us, 0, 100000, "µs");
+  s.choice("rx_wait", p.rx_wait,
+           {{"block", RxWait::Block}, {"spin", RxWait::Spin}, {"busy_poll", RxWait::BusyPoll}});
+  s.integer("rx_spin_us", p.rx_spin_us, 0, 100000, "µs");
+  sites.async_timeout_at = s.has("async_timeout_us") ? s.value_at("async_timeout_us")
+                                                     : s.value_at("async_slot_timeout_us");
   s.integer("sdo_timeout_ms", p.sdo_timeout_ms, 1, 60000, "ms");
   s.integer("nettime_offset_us", p.nettime_offset_us, std::numeric_limits<int64_t>::min(),
             std::numeric_limits<int64_t>::max());
@@ -360,6 +373,40 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
   s.finish();
 }
 
+// The worst cycle on the wire must fit the period (docs/powerlink.md §Cycle timing).
+static void check_cycle_budget(Diagnostics& diag, const DaemonConfig& c,
+                               const PowerlinkSites& sites) {
+  std::vector<powerlink::BudgetNode> nodes;
+  for (const PowerlinkNodeConfig& n : c.powerlink.nodes) {
+    powerlink::BudgetNode b;
+    b.node_id = n.node_id;
+    b.pres_timeout_us = n.pres_timeout_us;
+    b.multiplex = n.multiplex;
+    std::size_t preq = 0, pres = 0;
+    for (const AxisConfig& a : c.axes) {
+      if (a.node != n.node_id) continue;
+      preq += 2u + a.module.output_mtu;
+      pres += 16u + a.module.input_mtu;
+    }
+    b.preq_payload = n.preq_size.value_or(static_cast<uint16_t>(std::min<std::size_t>(preq, 1490)));
+    b.pres_payload = n.pres_size.value_or(static_cast<uint16_t>(std::min<std::size_t>(pres, 1490)));
+    nodes.push_back(b);
+  }
+  const powerlink::CycleBudget b =
+      powerlink::cycle_budget(nodes, c.powerlink.wait_soc_preq_us, c.powerlink.async_timeout_us);
+  const double period = c.cycle.period_us;
+  if (b.total_us() <= period) return;
+  char text[512];
+  std::snprintf(text, sizeof text,
+                "the POWERLINK cycle does not fit cycle.period_us %u: its worst case on the wire "
+                "takes %.1f us, %.1f us more (SoC %.1f, WaitSoCPReq %.1f, %zu PReq/PRes with their "
+                "PRes timeouts %.1f, SoA + async slot timeout + longest ASnd %.1f); lengthen the "
+                "period or shorten pres_timeout_us / async_slot_timeout_us",
+                c.cycle.period_us, b.total_us(), b.total_us() - period, b.soc_us,
+                b.wait_soc_preq_us, b.polled_in_worst_cycle, b.isochronous_us, b.async_us);
+  diag.error(sites.async_timeout_at, "powerlink", text);
+}
+
 void check_powerlink(Diagnostics& diag, const DaemonConfig& c, const std::vector<AxisSite>& axes,
                      const PowerlinkSites& sites) {
   check_process_image(diag, c, axes);
@@ -372,6 +419,7 @@ void check_powerlink(Diagnostics& diag, const DaemonConfig& c, const std::vector
               ") must be less than cycle.period_us (" + std::to_string(c.cycle.period_us) + ")");
     }
   }
+  check_cycle_budget(diag, c, sites);
 }
 
 void dump_powerlink(std::ostream& o, const PowerlinkBusConfig& p) {
@@ -392,6 +440,7 @@ void dump_powerlink(std::ostream& o, const PowerlinkBusConfig& p) {
       << "      cycle_objects: " << yes(n.cycle_objects) << "\n"
       << "      pres_timeout_us: " << n.pres_timeout_us << "\n"
       << "      mandatory: " << yes(n.mandatory) << "\n"
+      << "      loss_of_pres_threshold: " << opt_dec(n.loss_of_pres_threshold) << "\n"
       << "      multiplex: " << n.multiplex << "\n"
       << "      preq_size: " << opt_dec(n.preq_size) << "\n"
       << "      pres_size: " << opt_dec(n.pres_size) << "\n";
@@ -413,7 +462,7 @@ void dump_powerlink(std::ostream& o, const PowerlinkBusConfig& p) {
     }
   }
   o << "  thresholds:\n"
-    << "    loss_of_pres: " << p.thresholds.loss_of_pres << "\n"
+    << "    loss_of_pres: " << opt_dec(p.thresholds.loss_of_pres) << "\n"
     << "    cycle_time_exceeded: " << p.thresholds.cycle_time_exceeded << "\n"
     << "    late_pres: " << p.thresholds.late_pres << "\n"
     << "  nmt:\n"
@@ -421,7 +470,14 @@ void dump_powerlink(std::ostream& o, const PowerlinkBusConfig& p) {
     << "    boot_step_timeout_ms: " << p.nmt.boot_step_timeout_ms << "\n"
     << "    reset_wait_ms: " << p.nmt.reset_wait_ms << "\n"
     << "    status_request_every: " << p.nmt.status_request_every << "\n"
-    << "  async_timeout_us: " << p.async_timeout_us << "\n"
+    << "  async_slot_timeout_us: " << p.async_timeout_us << "\n"
+    << "  wait_soc_preq_us: " << p.wait_soc_preq_us << "\n"
+    << "  rx_wait: "
+    << (p.rx_wait == RxWait::Block  ? "block"
+        : p.rx_wait == RxWait::Spin ? "spin"
+                                    : "busy_poll")
+    << "\n"
+    << "  rx_spin_us: " << p.rx_spin_us << "\n"
     << "  sdo_timeout_ms: " << p.sdo_timeout_ms << "\n"
     << "  nettime_offset_us: " << p.nettime_offset_us << "\n"
     << "  sdo_overrides:" << (p.sdo_overrides.empty() ? " []" : "") << "\n";

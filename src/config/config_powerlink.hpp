@@ -18,6 +18,7 @@ struct PowerlinkSites {
   bool present = false;
   std::map<uint8_t, Loc> nodes;      // node id → where it is listed
   std::vector<Loc> pres_timeout_at;  // per nodes[] entry
+  Loc async_timeout_at;              // where the budget check points when the cycle is too long
 };
 
 // `base_dir`: where relative file names (cdc) are resolved.

@@ -12,6 +12,8 @@
 #include <set>
 
 #include "control/asio.hpp"
+#include "control/request_parser.hpp"
+#include "control/socket_path.hpp"
 
 namespace ds1928::control {
 
@@ -353,35 +355,17 @@ void Session::handle_line(std::string_view line) {
          false);
     return;
   }
-  json body;
-  try {
-    body = json::parse(line);
-  } catch (const json::exception& e) {
-    // parse_error, and out_of_range for numbers beyond a double (a 400-digit "id").
-    std::string what = e.what();
-    if (const auto p = what.find("] "); p != std::string::npos) what.erase(0, p + 2);
-    send(error_reply(to_string(ErrorCode::BadJson), bounded(std::move(what))), false);
-    return;
-  }
-  if (!body.is_object()) {
-    send(error_reply(to_string(ErrorCode::BadJson),
-                     std::string("request must be a JSON object, got ") + body.type_name()),
-         false);
-    return;
-  }
-  json id;
-  if (const auto it = body.find("id"); it != body.end()) id = *it;
+  ParsedRequest parsed = parse_request(line);
+  if (parsed.error) parsed.message = bounded(std::move(parsed.message));
+  const json& id = parsed.id;
   auto fail = [&](ErrorCode code, std::string message) {
     json reply = error_reply(to_string(code), std::move(message));
     if (!id.is_null()) reply["id"] = id;
     send(std::move(reply), false);
   };
-  const auto cmd = body.find("cmd");
-  if (cmd == body.end()) return fail(ErrorCode::BadArgument, "argument 'cmd' (string) is required");
-  if (!cmd->is_string())
-    return fail(ErrorCode::BadArgument,
-                std::string("argument 'cmd': expected string, got ") + cmd->type_name());
-  const std::string name = cmd->get<std::string>();
+  if (parsed.error) return fail(*parsed.error, std::move(parsed.message));
+  const std::string& name = parsed.command;
+  const json& body = parsed.body;
   const auto handler = server_.commands.find(name);
   if (handler == server_.commands.end()) {
     std::string known;
@@ -600,19 +584,9 @@ std::error_code Server::start() {
       return std::make_error_code(std::errc::invalid_argument);
     gid = found->gr_gid;
   }
-  std::error_code fs_ec;
-  const auto dir = std::filesystem::path(path).parent_path();
-  if (!dir.empty()) std::filesystem::create_directories(dir, fs_ec);
+  if (auto e = prepare_socket_path(path)) return e;
 
   boost::system::error_code ec;
-  struct stat st {};
-  if (lstat(path.c_str(), &st) == 0) {
-    if (!S_ISSOCK(st.st_mode)) return std::make_error_code(std::errc::file_exists);
-    local::socket probe(impl.io);
-    probe.connect(local::endpoint(path), ec);
-    if (!ec) return std::make_error_code(std::errc::address_in_use);
-    ::unlink(path.c_str());  // stale: nobody listens
-  }
   impl.acceptor.open(local(), ec);
   if (!ec) impl.acceptor.bind(local::endpoint(path), ec);
   if (ec) {
@@ -620,7 +594,11 @@ std::error_code Server::start() {
     impl.acceptor.close(ignored);
     return {ec.value(), std::system_category()};
   }
-  if (gid != static_cast<gid_t>(-1) && ::chown(path.c_str(), static_cast<uid_t>(-1), gid) != 0) {
+  // The socket takes the daemon's group; chown only to change it (the packaged unit's syscall
+  // filter refuses chown, and its group already is the readers' group).
+  struct stat st {};
+  if (gid != static_cast<gid_t>(-1) && (lstat(path.c_str(), &st) != 0 || st.st_gid != gid) &&
+      ::chown(path.c_str(), static_cast<uid_t>(-1), gid) != 0) {
     const std::error_code e{errno, std::system_category()};
     stop();
     return e;

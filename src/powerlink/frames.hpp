@@ -8,8 +8,10 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <ranges>
 #include <span>
 #include <string_view>
+#include <type_traits>
 #include <variant>
 
 #include "powerlink/errors.hpp"
@@ -335,6 +337,23 @@ struct Frame {
 [[nodiscard]] Result<PRes> parse_pres(std::span<const uint8_t> frame) noexcept;
 [[nodiscard]] Result<SoA> parse_soa(std::span<const uint8_t> frame) noexcept;
 [[nodiscard]] Result<Asnd> parse_asnd(std::span<const uint8_t> frame) noexcept;
+
+// The results view the frame's bytes, so a frame that dies at the end of the call (a temporary
+// container) would leave them dangling: such calls do not compile. Spans and lvalues pass.
+template <class R>
+concept DanglingFrame = !std::is_lvalue_reference_v<R> && !std::ranges::borrowed_range<R>;
+template <class R>
+requires DanglingFrame<R> Result<Frame> parse_frame(R&&)
+= delete;
+template <class R>
+requires DanglingFrame<R> Result<PRes> parse_pres(R&&)
+= delete;
+template <class R>
+requires DanglingFrame<R> Result<PReq> parse_preq(R&&)
+= delete;
+template <class R>
+requires DanglingFrame<R> Result<Asnd> parse_asnd(R&&)
+= delete;
 
 // Ordered little-endian helpers shared by the codec and process-image code.
 [[nodiscard]] constexpr uint16_t load_le16(const uint8_t* p) noexcept {

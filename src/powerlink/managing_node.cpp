@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cstring>
+#include <numeric>
 #include <string>
 
 #include "core/register_catalogue.hpp"
@@ -52,11 +53,12 @@ struct ManagingNode::Cn {
   NodeImageLayout layout;
   std::array<uint8_t, kMaxIsoPayload> preq{};
   std::array<uint8_t, kMaxIsoPayload> pres{};
-  bool polled = false;       // PReq sent this cycle
-  bool pres_seen = false;    // its PRes arrived this cycle
-  bool pres_usable = false;  // ... with a payload the layout fits in
-  bool timed_out = false;    // the driver gave up waiting for it this cycle
-  bool late = false;         // a PRes came after its timeout
+  bool polled = false;          // PReq sent this cycle
+  uint32_t loss_threshold = 0;  // DLL_MNCNLossPResThreshold (0x1C09) in effect
+  bool pres_seen = false;       // its PRes arrived this cycle
+  bool pres_usable = false;     // ... with a payload the layout fits in
+  bool timed_out = false;       // the driver gave up waiting for it this cycle
+  bool late = false;            // a PRes came after its timeout
   int64_t state_since_ns = 0;
   uint64_t last_status_request = 0;
   uint8_t rs = 0;  // CN's pending async requests (RS) and their priority (PR)
@@ -123,9 +125,15 @@ ManagingNode::ManagingNode(const MnConfig& config)
       throw std::system_error(make_error_code(MnError::kNodeNotConfigured), "node id");
     auto cn = std::make_unique<Cn>();
     cn->cfg = nc;
+    cn->loss_threshold =
+        nc.loss_of_pres_threshold.value_or(config_.bus.thresholds.loss_of_pres.value_or(
+            default_loss_of_pres_threshold(config_.cycle_us)));
+    if (nc.multiplex > 1)
+      mux_cycle_len_ = std::min<uint64_t>(std::lcm(mux_cycle_len_, uint64_t{nc.multiplex}), 4096);
     status_view_.emplace_back();
     cn->st = &status_view_.back();
     cn->st->node = nc.node_id;
+    cn->st->loss_of_pres_threshold = cn->loss_threshold;
     std::vector<ModuleSpec> specs;
     for (const AxisConfig& a : config_.axes) {
       if (a.node != nc.node_id) continue;
@@ -211,12 +219,17 @@ uint64_t ManagingNode::net_time_us() const noexcept {
 void ManagingNode::enter(Cn& cn, CnBootState state) noexcept {
   cn.st->boot = state;
   cn.state_since_ns = now_ns_;
-  (this->*kHandlers[static_cast<int>(state)].enter)(cn);
+  // Bind the row before the call: GCC 12 instrumentation (-fsanitize=undefined) mis-reads a
+  // pointer-to-member taken straight out of the array expression (false -Wuninitialized, bogus
+  // index).
+  const Handler& h = kHandlers[static_cast<int>(state)];
+  (this->*h.enter)(cn);
 }
 
 void ManagingNode::reported_state(Cn& cn, NmtState s) noexcept {
   cn.st->nmt = s;
-  (this->*kHandlers[static_cast<int>(cn.st->boot)].state)(cn, s);
+  const Handler& h = kHandlers[static_cast<int>(cn.st->boot)];  // bound first: see enter()
+  (this->*h.state)(cn, s);
 }
 
 void ManagingNode::reset_node(Cn& cn, std::error_code reason) noexcept {
@@ -421,6 +434,10 @@ void ManagingNode::begin_cycle(int64_t now_ns) noexcept {
   awaiting_asnd_ = false;
   mn_asnd_from_ = nullptr;
   iso_count_ = 0;
+  // SoC MC: toggled when the last cycle of a multiplexed cycle has ended (EPSG DS 301), so a CN
+  // can tell where the multiplexed cycle starts.
+  if (mux_cycle_len_ > 1 && counters_.cycles > 0 && counters_.cycles % mux_cycle_len_ == 0)
+    mc_flag_ = !mc_flag_;
   for (auto& cn : cns_) {
     cn->polled = cn->pres_seen = cn->pres_usable = cn->timed_out = cn->late = false;
     if (!full_cycle() || !cn->st->in_isochronous) continue;
@@ -454,6 +471,7 @@ std::span<const uint8_t> ManagingNode::isochronous_nodes() const noexcept {
 
 Result<std::size_t> ManagingNode::build_soc(std::span<uint8_t> out) const noexcept {
   Soc soc;
+  soc.multiplexed_cycle_completed = mc_flag_;
   soc.net_time = net_time_;
   soc.relative_time_us = relative_time_us_;
   return powerlink::build_soc(out, soc_header(config_.mac), soc);
@@ -738,9 +756,12 @@ void ManagingNode::end_cycle(bool cycle_time_exceeded) noexcept {
   (void)counters_.cycle_time_exceeded.step(cycle_time_exceeded, th.cycle_time_exceeded);
   for (auto& p : cns_) {
     Cn& cn = *p;
-    if (cn.polled) {
-      const bool lost = !cn.pres_seen;
-      if (cn.st->loss_of_pres.step(lost, th.loss_of_pres)) {
+    // Every cycle counts (EPSG DS 301): −1 in each cycle without the error, also in those that
+    // did not poll a multiplexed CN, or sparse losses of a CN polled every n-th cycle would add
+    // up to a reset.
+    if (cn.st->in_isochronous || cn.polled) {
+      const bool lost = cn.polled && !cn.pres_seen;
+      if (cn.st->loss_of_pres.step(lost, cn.loss_threshold)) {
         reset_node(cn, make_error_code(MnError::kLossOfPresThreshold));
       }
       (void)cn.st->late_pres.step(cn.late, th.late_pres);

@@ -57,6 +57,7 @@ struct CnStatus {
   uint16_t preq_size = 0;  // payload sizes in use
   uint16_t pres_size = 0;
   DllCounter loss_of_pres;
+  uint32_t loss_of_pres_threshold = 0;  // in effect (0x1C09; 0 = disabled)
   DllCounter late_pres;
   uint32_t pres_received = 0;
   // PRes received before this cycle's PReq to the CN: the late answer to an earlier PReq
@@ -227,6 +228,8 @@ class ManagingNode {
   int64_t start_ns_ = -1;
   int64_t mn_state_since_ns_ = 0;
   uint64_t relative_time_us_ = 0;
+  uint64_t mux_cycle_len_ = 1;  // cycles of one multiplexed cycle (lcm of the nodes' factors)
+  bool mc_flag_ = false;        // SoC MC, toggled at each multiplexed cycle's end
   int64_t soc_time_ns_ = 0;
   NetTime net_time_{};
   MnCounters counters_;

@@ -186,8 +186,13 @@ ExchangeResult PowerlinkBus::exchange(std::span<AxisIo> axes, int64_t cycle_star
   if (mn_.full_cycle()) {
     // RelativeTime and the NetTimeRef describe the instant the SoC leaves, which is the cycle
     // thread's wake-up latency (tens of µs, ms in a stall) after the nominal cycle start.
-    mn_.stamp_soc(clock_(), wall_clock());
+    const int64_t soc_ns = clock_();
+    mn_.stamp_soc(soc_ns, wall_clock());
     send(mn_.build_soc(tx_));
+    // WaitSoCPReq: the CNs get this long to take the SoC before the first PReq; frames that come
+    // meanwhile (late ASnds) are served, and the wait is the link's (blocking by default).
+    if (config_.bus.wait_soc_preq_us > 0 && !mn_.isochronous_nodes().empty())
+      drain(soc_ns + static_cast<int64_t>(config_.bus.wait_soc_preq_us) * 1000);
   }
   for (uint8_t node : mn_.isochronous_nodes()) {
     const CnStatus* st = mn_.node(node);

@@ -322,14 +322,43 @@ Received RawLink::receive_ring(std::span<uint8_t> buffer, int64_t deadline_ns) n
   // line that the kernel writes when it fills the slot.
   auto* hdr = reinterpret_cast<tpacket2_hdr*>(ring_ + static_cast<std::size_t>(ring_head_) *
                                                           ring_frame_size_);
-  uint32_t spins = 0;
-  while ((__atomic_load_n(&hdr->tp_status, __ATOMIC_ACQUIRE) & TP_STATUS_USER) == 0) {
-    // Reading the clock every poll would dominate the loop; every 16th is fine-grained enough.
-    if ((++spins & 15u) == 0 && monotonic_now_ns() >= deadline_ns) {
-      if (__atomic_load_n(&hdr->tp_status, __ATOMIC_ACQUIRE) & TP_STATUS_USER) break;
-      return Received{};
+  auto ready = [hdr] {
+    return (__atomic_load_n(&hdr->tp_status, __ATOMIC_ACQUIRE) & TP_STATUS_USER) != 0;
+  };
+  if (!ready()) {
+    const int64_t spin_ns = options_.ring_spin_ns;
+    int64_t spin_until = deadline_ns;
+    if (spin_ns >= 0)
+      spin_until = spin_ns == 0 ? 0 : std::min(deadline_ns, monotonic_now_ns() + spin_ns);
+    uint32_t spins = 0;
+    while (!ready()) {
+      // Reading the clock every poll would dominate the loop; every 16th is fine-grained enough.
+      if (spin_until != 0 && ((++spins & 15u) != 0 || monotonic_now_ns() < spin_until)) {
+        cpu_relax();
+        continue;
+      }
+      // Spin budget spent: the rest of the wait sleeps in the kernel, which wakes this thread
+      // when the frame lands (poll on a ring socket reports the head slot's status).
+      const int64_t now = monotonic_now_ns();
+      if (now >= deadline_ns) {
+        if (ready()) break;
+        return Received{};
+      }
+      spin_until = 0;
+      pollfd pfd{fd_, POLLIN, 0};
+      const timespec timeout = to_timespec(deadline_ns - now);
+      const int r = ppoll(&pfd, 1, &timeout, nullptr);
+      if (r < 0 && errno != EINTR) return Received{0, 0, errno_code(errno)};
+      if (r > 0 && (pfd.revents & POLLERR) != 0 && !ready()) {
+        int err = 0;
+        socklen_t len = sizeof err;
+        getsockopt(fd_, SOL_SOCKET, SO_ERROR, &err, &len);
+        if (err != 0) {
+          if (is_link_loss(err)) set_up(false);
+          return Received{0, 0, errno_code(err)};
+        }
+      }
     }
-    cpu_relax();
   }
   // The kernel stamped the frame when it arrived (CLOCK_REALTIME); moved to CLOCK_MONOTONIC it
   // is the arrival instant even when this thread was late to look.

@@ -2,10 +2,14 @@
 // POWERLINK EtherType, with the POWERLINK multicast memberships and PACKET_QDISC_BYPASS.
 // Only moves bytes; the protocol lives in the MN / CN cores.
 //
-// Receive strategies (see docs/powerlink-testing.md for the measurements that chose the default):
-//  - Ring:     TPACKET_V2 RX ring, polled on the frame's status word (no syscall per poll).
+// Receive strategies (docs/realtime.md §POWERLINK receive strategy has the measurements):
+//  - Ring:     TPACKET_V2 RX ring, its frame's status word polled for at most `ring_spin_ns`,
+//              then ppoll() until the deadline (the kernel wakes the thread when a frame lands).
+//              ring_spin_ns < 0 spins to the deadline: no syscall, but a SCHED_FIFO thread that
+//              spins keeps every lower-priority thread of its CPU — a software CN's responder,
+//              ksoftirqd — from running until it gives up.
 //  - BusyPoll: recv(MSG_DONTWAIT) in a loop until the deadline.
-//  - Blocking: ppoll() until the deadline, then recv — the scheduler wakes us (slow, cheap on CPU).
+//  - Blocking: ppoll() until the deadline, then recv (no ring).
 #pragma once
 
 #include <array>
@@ -55,6 +59,8 @@ struct RawLinkOptions {
   bool promiscuous = false;
   bool qdisc_bypass = true;
   uint32_t ring_frames = 256;  // RX ring slots (each 2048 bytes), power of two
+  // Ring: how long receive() polls the ring before it blocks in ppoll(); < 0 = to the deadline.
+  int64_t ring_spin_ns = -1;
   // The interface flags (IFF_UP / IFF_RUNNING) are re-read at most this often, from send().
   int64_t carrier_check_interval_ns = 10'000'000;
 };

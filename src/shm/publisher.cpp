@@ -40,9 +40,32 @@ bool name_held_by_live_daemon(const std::string& name) {
   return alive;
 }
 
+// What already holds `name`. Only a regular file of our own may be replaced (a leftover of a
+// dead daemon of ours: its readers keep their mapping); a symbolic link, a FIFO or another
+// user's file is left alone, so that nobody can make the daemon write through a planted link or
+// hand its readers an object someone else controls. glibc's shm_open adds O_NOFOLLOW (a link
+// gives ELOOP); O_NONBLOCK keeps a planted FIFO from blocking the open.
+std::error_code check_existing(const std::string& name) {
+  const int fd = shm_open(name.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC, 0);
+  if (fd < 0) {
+    if (errno == ENOENT) return {};
+    if (errno == ELOOP) return ShmError::kNotRegularFile;
+    return last_error();
+  }
+  struct stat st {};
+  const int rc = fstat(fd, &st);
+  const auto ec = last_error();
+  ::close(fd);
+  if (rc != 0) return ec;
+  if (!S_ISREG(st.st_mode)) return ShmError::kNotRegularFile;
+  if (st.st_uid != geteuid()) return ShmError::kForeignOwner;
+  return {};
+}
+
 std::error_code create_object(const std::string& name, uint32_t mode, int gid, std::size_t size,
                               int& fd_out, void*& map_out) {
-  shm_unlink(name.c_str());  // a leftover of a dead daemon: its readers keep their mapping
+  if (auto ec = check_existing(name)) return ec;
+  shm_unlink(name.c_str());  // a leftover of a dead daemon of ours
   const int fd = shm_open(name.c_str(), O_RDWR | O_CREAT | O_EXCL | O_CLOEXEC, 0600);
   if (fd < 0) return last_error();
   auto fail = [&] {
@@ -53,7 +76,13 @@ std::error_code create_object(const std::string& name, uint32_t mode, int gid, s
   };
   // Mode and group explicitly: shm_open's mode is filtered by the umask.
   if (ftruncate(fd, static_cast<off_t>(size)) != 0) return fail();
-  if (gid >= 0 && fchown(fd, static_cast<uid_t>(-1), static_cast<gid_t>(gid)) != 0) return fail();
+  // The file takes the daemon's group; chown only to change it (the packaged unit's syscall
+  // filter refuses chown, and its group already is the readers' group).
+  struct stat st {};
+  if (fstat(fd, &st) != 0) return fail();
+  if (gid >= 0 && st.st_gid != static_cast<gid_t>(gid) &&
+      fchown(fd, static_cast<uid_t>(-1), static_cast<gid_t>(gid)) != 0)
+    return fail();
   if (fchmod(fd, static_cast<mode_t>(mode & 07777)) != 0) return fail();
   void* p = mmap(nullptr, size, PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0);
   if (p == MAP_FAILED) return fail();
@@ -140,6 +169,8 @@ std::error_code Publisher::open(const ShmConfig& config, uint32_t axis_count,
       return ShmError::kUnknownGroup;
     gid = static_cast<int>(found->gr_gid);
   }
+  // Ownership and type first: the liveness probe maps whatever holds the name.
+  if (auto ec = check_existing(config.name)) return ec;
   if (name_held_by_live_daemon(config.name)) return ShmError::kNameInUse;
 
   const std::string wait_name = config.name + DS1928_SHM_WAIT_SUFFIX;

@@ -20,6 +20,12 @@ class ShmCategory final : public std::error_category {
         return "shared memory group does not exist";
       case ShmError::kNameInUse:
         return "another running daemon publishes under this name";
+      case ShmError::kNotRegularFile:
+        return "a symbolic link or non-regular file holds the name in /dev/shm; refusing to "
+               "follow or replace it (remove it if it is not meant to be there)";
+      case ShmError::kForeignOwner:
+        return "a file of another user holds the name in /dev/shm; refusing to adopt or remove "
+               "it (remove it if it is not meant to be there)";
     }
     return "unknown shared memory error";
   }

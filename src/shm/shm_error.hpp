@@ -12,6 +12,8 @@ enum class ShmError {
   kTooManyAxes,      // more axes than the layout allows
   kUnknownGroup,     // ShmConfig.group names no group
   kNameInUse,        // another live daemon publishes under this name
+  kNotRegularFile,   // a symbolic link, FIFO or other non-regular file holds the name
+  kForeignOwner,     // a file of another user holds the name
 };
 
 [[nodiscard]] const std::error_category& shm_category() noexcept;

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cerrno>
 #include <climits>
+#include <cmath>
 #include <cstring>
 
 #include "sim/sim_error.hpp"
@@ -382,6 +383,19 @@ void PowerlinkCn::preq_answer(const pl::PReq& preq, int64_t now_ns) noexcept {
   send_pres(now_ns);
 }
 
+int64_t PowerlinkCn::software_response_delay(int64_t now_ns) noexcept {
+  const PowerlinkCnResponse& r = config_.response;
+  int64_t delay = 0;
+  if (r.pres_latency_median_ns > 0) {
+    const double d = static_cast<double>(r.pres_latency_median_ns) *
+                     std::exp(r.pres_latency_sigma * normal_(rng_));
+    delay = std::min(static_cast<int64_t>(d), r.pres_latency_max_ns);
+  }
+  if (r.ready_after_soc_ns > 0 && last_soc_ns_ != 0)
+    delay = std::max(delay, last_soc_ns_ + r.ready_after_soc_ns - now_ns);
+  return delay;
+}
+
 void PowerlinkCn::send_pres(int64_t now_ns) noexcept {
   tick_modules(now_ns);
   const PowerlinkCnFaults& faults = config_.faults;
@@ -409,11 +423,14 @@ void PowerlinkCn::send_pres(int64_t now_ns) noexcept {
   pres.payload = std::span<const uint8_t>(payload.data(), size);
   auto len = pl::build_pres(tx_, pl::pres_header(config_.mac, config_.node_id), pres);
   if (!len) return;
-  if (faults.delay_pres > 0.0 && faults.delay_pres_ns > 0 && uniform_(rng_) < faults.delay_pres) {
+  int64_t due = now_ns + software_response_delay(now_ns);
+  if (faults.delay_pres > 0.0 && faults.delay_pres_ns > 0 && uniform_(rng_) < faults.delay_pres)
+    due += faults.delay_pres_ns;
+  if (due > now_ns) {
     ++stats_.pres_delayed;
     std::memcpy(pres_frame_.data(), tx_.data(), *len);
     pres_pending_len_ = *len;
-    pres_due_ns_ = now_ns + faults.delay_pres_ns;
+    pres_due_ns_ = due;
     pres_pending_ = true;
     return;
   }

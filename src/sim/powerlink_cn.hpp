@@ -56,6 +56,18 @@ struct PowerlinkCnFaults {
   uint64_t seed = 1;
 };
 
+// A CN whose PRes comes from software (a user-space stack on a PC): each PRes leaves after a
+// log-normal delay — median `pres_latency_median_ns`, shape `pres_latency_sigma` (0.6 gives
+// p99 ≈ 4 × median, p99.99 ≈ 9 × median: a long tail), capped at `pres_latency_max_ns` — and
+// not before `ready_after_soc_ns` after the cycle's SoC (the stack is still busy with the SoC's
+// work). All zero: the PRes leaves at once, as from the bus controller's hardware.
+struct PowerlinkCnResponse {
+  int64_t pres_latency_median_ns = 0;
+  double pres_latency_sigma = 0.6;
+  int64_t pres_latency_max_ns = 2'000'000;
+  int64_t ready_after_soc_ns = 0;
+};
+
 struct PowerlinkCnConfig {
   uint8_t node_id = 1;
   powerlink::MacAddress mac{0x02, 0x00, 0x00, 0x00, 0x19, 0x28};
@@ -75,6 +87,7 @@ struct PowerlinkCnConfig {
   uint32_t loss_of_preq_threshold = 15;  // DLL threshold counter (+8 per event, −1 per cycle)
   int64_t power_off_ns = 300'000'000;    // how long a power cycle keeps the node silent
   PowerlinkCnFaults faults;
+  PowerlinkCnResponse response;
 };
 
 struct PowerlinkCnStats {
@@ -82,7 +95,7 @@ struct PowerlinkCnStats {
   uint64_t preq = 0;
   uint64_t pres_sent = 0;
   uint64_t pres_dropped = 0;
-  uint64_t pres_delayed = 0;
+  uint64_t pres_delayed = 0;  // by the delay fault or the software response model
   uint64_t soa = 0;
   uint64_t asnd_sent = 0;
   uint64_t nmt_commands = 0;
@@ -177,6 +190,9 @@ class PowerlinkCn {
   void emit(std::span<const uint8_t> frame) noexcept;
 
   PowerlinkCnConfig config_;
+  // Delay of this PRes from the software response model (0 without one).
+  [[nodiscard]] int64_t software_response_delay(int64_t now_ns) noexcept;
+
   FrameSink send_;
   StateListener listener_;
   powerlink::NmtState state_ = powerlink::NmtState::kOff;
@@ -189,6 +205,7 @@ class PowerlinkCn {
   bool nmt_request_pending_ = false;
   std::mt19937_64 rng_;
   std::uniform_real_distribution<double> uniform_{0.0, 1.0};
+  std::normal_distribution<double> normal_{0.0, 1.0};
 
   // Cycle timing.
   int64_t last_soc_ns_ = 0;

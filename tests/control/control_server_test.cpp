@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "control_test_util.hpp"
+#include "support/wait.hpp"
 
 using namespace ds1928;
 using namespace ds1928::control;
@@ -276,28 +277,24 @@ TEST_CASE(
   REQUIRE_FALSE(t.start());
 
   auto take = [&]() -> std::optional<Reply> {
-    for (int i = 0; i < 400; ++i) {
-      {
-        std::lock_guard lock(mutex);
-        if (!parked.empty()) {
-          Reply r = parked.back();
-          parked.pop_back();
-          return r;
-        }
-      }
-      std::this_thread::sleep_for(std::chrono::milliseconds(5));
-    }
-    return std::nullopt;
+    if (!ds1928::test::wait_until([&] {
+          std::lock_guard lock(mutex);
+          return !parked.empty();
+        }))
+      return std::nullopt;
+    std::lock_guard lock(mutex);
+    Reply r = parked.back();
+    parked.pop_back();
+    return r;
   };
 
-  // Completed from another thread 50 ms later; requests behind it wait their turn.
+  // Completed later from another thread; the request behind it waits its turn.
   LineClient c(t.server().path());
   c.send_raw(json{{"cmd", "slow"}, {"id", 1}}.dump() + "\n" +
              json{{"cmd", "drop"}, {"id", 2}}.dump() + "\n");
   auto reply = take();
   REQUIRE(reply);
   std::thread later([r = *reply] {
-    std::this_thread::sleep_for(std::chrono::milliseconds(50));
     r.ok({{"value", 5}});
     r.error("late", "second completion is ignored");
   });
@@ -321,13 +318,10 @@ TEST_CASE(
   REQUIRE(reply);
   CHECK_FALSE(reply->cancelled());
   d.reset();
-  for (int i = 0; i < 400 && !reply->cancelled(); ++i)
-    std::this_thread::sleep_for(std::chrono::milliseconds(5));
-  CHECK(reply->cancelled());
+  CHECK(ds1928::test::wait_until([&] { return reply->cancelled(); }));
   reply->ok({{"value", 1}});  // harmless
   CHECK(t.wait_clients(1));
-  for (int i = 0; i < 400 && cancel_callbacks == 0; ++i)
-    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  CHECK(ds1928::test::wait_until([&] { return cancel_callbacks != 0; }));
   CHECK(cancel_callbacks == 1);
   CHECK(c.request({{"cmd", "drop"}})["ok"] == false);  // c is unaffected
 }
@@ -362,4 +356,112 @@ TEST_CASE("the server replaces a stale socket file and refuses a live one") {
   REQUIRE_FALSE(t.start());
   LineClient d(path);
   CHECK(d.request({{"cmd", "echo"}})["ok"] == true);
+}
+
+TEST_CASE("whatever a handler throws is answered, and the server goes on") {
+  ServerThread t(config_for("throw"));
+  add_test_commands(t.server());
+  t.server().add_command("std",
+                         [](const Request&, Reply) { throw std::runtime_error("disk on fire"); });
+  t.server().add_command("json", [](const Request& req, Reply reply) {
+    reply.ok({{"n", req.body().at("n").get<int>()}});  // type_error on a string, out_of_range
+  });
+  t.server().add_command("odd", [](const Request&, Reply) { throw 42; });
+  REQUIRE_FALSE(t.start());
+  LineClient c(t.server().path());
+  const json s = c.request({{"cmd", "std"}, {"id", 1}});
+  CHECK(error_code_of(s) == "internal");
+  CHECK_THAT(error_message_of(s), Catch::Contains("disk on fire"));
+  CHECK(s["id"] == 1);
+  const json j = c.request({{"cmd", "json"}, {"n", "seven"}});
+  CHECK(error_code_of(j) == "bad_argument");
+  CHECK_THAT(error_message_of(j), Catch::Contains("type must be number"));
+  CHECK(error_code_of(c.request({{"cmd", "json"}})) == "bad_argument");
+  CHECK(error_code_of(c.request({{"cmd", "odd"}})) == "internal");
+  CHECK(c.request({{"cmd", "echo"}})["ok"] == true);
+}
+
+TEST_CASE("JSON beyond what the parser or the server holds is bad_json, not a crash") {
+  SocketConfig cfg = config_for("numbers");
+  cfg.max_request_bytes = 1024;
+  ServerThread t(cfg);
+  add_test_commands(t.server());
+  REQUIRE_FALSE(t.start());
+  LineClient c(t.server().path());
+  // 400 digits: the parser throws out_of_range (not parse_error) for a number beyond a double.
+  c.send_raw("{\"cmd\":\"echo\",\"id\":1" + std::string(400, '0') + "}\n");
+  const json big = c.reply();
+  CHECK(error_code_of(big) == "bad_json");
+  CHECK_THAT(error_message_of(big), Catch::Contains("number overflow"));
+  c.send_raw("{\"cmd\":\"echo\",\"id\":" + std::string(65, '[') + std::string(65, ']') + "}\n");
+  CHECK_THAT(error_message_of(c.reply()), Catch::Contains("nested deeper than 64"));
+  // 64 levels are fine, and echoed.
+  json id = json::array();
+  for (int i = 1; i < 63; ++i) id = json::array({id});  // 63 levels in the request object
+  const json deep = c.request({{"cmd", "echo"}, {"id", id}});
+  CHECK(deep["ok"] == true);
+  CHECK(deep["id"] == id);
+  // Brackets and escaped quotes inside strings do not nest.
+  const json text = c.request({{"cmd", "echo"}, {"text", std::string(100, '[') + "\"\\"}});
+  CHECK(text["ok"] == true);
+}
+
+namespace {
+// Bytes the kernel holds for one direction of a Unix stream socket, at most: the sender's
+// buffer (the default one, the server does not change it) counted twice for skb overhead.
+std::size_t kernel_socket_bytes() {
+  std::size_t wmem = 212992;
+  if (FILE* f = std::fopen("/proc/sys/net/core/wmem_default", "r")) {
+    if (std::fscanf(f, "%zu", &wmem) != 1) wmem = 212992;
+    std::fclose(f);
+  }
+  return 2 * wmem;
+}
+}  // namespace
+
+TEST_CASE("a client that does not read its replies stops being read, then is closed") {
+  SocketConfig cfg = config_for("noread");
+  cfg.reply_buffer_bytes = 4096;
+  cfg.reply_stall_timeout_ms = 200;
+  ServerThread t(cfg);
+  std::atomic<int> calls{0};
+  constexpr std::size_t kReply = 65536;
+  t.server().add_command("big", [&](const Request&, Reply reply) {
+    ++calls;
+    reply.ok({{"data", std::string(kReply, 'd')}});
+  });
+  REQUIRE_FALSE(t.start());
+  LineClient c(t.server().path(), 10000);
+  std::string requests;
+  for (int i = 0; i < 200; ++i) requests += "{\"cmd\":\"big\"}\n";  // 3 kB: one write
+  REQUIRE(c.send_raw(requests));
+  // Never read: the server stops handling requests once the kernel's buffer and its own
+  // 4 kB are full, and closes the connection after 200 ms of that.
+  REQUIRE(t.wait_clients(0, 10000));
+  const std::size_t bound = 2 + (kernel_socket_bytes() + cfg.reply_buffer_bytes) / kReply;
+  INFO("handled " << calls.load() << " of 200 requests; bound " << bound);
+  CHECK(calls.load() <= static_cast<int>(bound));
+  CHECK(calls.load() < 200);
+}
+
+TEST_CASE("a client that reads slowly gets every reply, in order") {
+  SocketConfig cfg = config_for("slowread");
+  cfg.reply_buffer_bytes = 4096;
+  cfg.reply_stall_timeout_ms = 10000;
+  ServerThread t(cfg);
+  t.server().add_command("big", [](const Request&, Reply reply) {
+    reply.ok({{"data", std::string(65536, 'd')}});
+  });
+  REQUIRE_FALSE(t.start());
+  LineClient c(t.server().path(), 10000);
+  std::string requests;
+  for (int i = 1; i <= 100; ++i) requests += "{\"cmd\":\"big\",\"id\":" + std::to_string(i) + "}\n";
+  REQUIRE(c.send_raw(requests));
+  for (int i = 1; i <= 100; ++i) {
+    const json r = c.reply();
+    REQUIRE(r.is_object());
+    CHECK(r["id"] == i);
+    CHECK(r["data"].get<std::string>().size() == 65536);
+  }
+  CHECK(t.clients() == 1);
 }

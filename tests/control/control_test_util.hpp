@@ -17,6 +17,7 @@
 
 #include "control/asio.hpp"
 #include "control/control_server.hpp"
+#include "support/wait.hpp"
 
 namespace ds1928::control::test {
 
@@ -60,12 +61,8 @@ class ServerThread {
     return run([this] { return server_.client_count(); });
   }
   // Waits until the client count reaches `n` (connections are closed asynchronously).
-  bool wait_clients(std::size_t n, int timeout_ms = 2000) {
-    for (int i = 0; i < timeout_ms / 5; ++i) {
-      if (clients() == n) return true;
-      std::this_thread::sleep_for(std::chrono::milliseconds(5));
-    }
-    return clients() == n;
+  bool wait_clients(std::size_t n) {
+    return ds1928::test::wait_until([&] { return clients() == n; });
   }
 
  private:

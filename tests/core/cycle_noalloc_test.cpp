@@ -16,6 +16,7 @@
 #include "core/cycle_engine.hpp"
 #include "core/spsc_queue.hpp"
 #include "support/alloc_counter.hpp"
+#include "support/wait.hpp"
 
 using namespace ds1928;
 namespace t = ds1928::test;
@@ -37,17 +38,26 @@ TEST_CASE("counter sees operator new, malloc from libc and mutex locks", "[alloc
   m.lock();
   m.unlock();
   const auto c = scope.stop();
-  CHECK(c.new_calls == 1);
-  CHECK(c.delete_calls == 1);
-  CHECK(c.malloc_calls == 1);
-  CHECK(c.free_calls == 1);
-  CHECK(c.mutex_locks == 1);
+  if (t::counts_new_separately()) {
+    CHECK(c.new_calls == 1);
+    CHECK(c.delete_calls == 1);
+    CHECK(c.malloc_calls == 1);
+    CHECK(c.free_calls == 1);
+  } else {
+    WARN("sanitizer build: operator new is counted as malloc");
+    CHECK(c.allocations() == 2);
+    CHECK(c.deallocations() == 2);
+  }
+  if (t::counts_mutexes())
+    CHECK(c.mutex_locks == 1);
+  else
+    WARN("TSan build: mutex locks are not counted (TSan intercepts them); check skipped");
   CHECK(c.first_size == sizeof(int));
   CHECK_FALSE(t::counting());
   // Stopped: nothing more is counted.
   g_sink = malloc(16);
   free(g_sink);
-  CHECK(t::current_counts().malloc_calls == 1);
+  CHECK(t::current_counts().allocations() == c.allocations());
 }
 
 TEST_CASE("counter ignores other threads", "[alloc_counter]") {
@@ -137,7 +147,7 @@ t::HeapCounts run_and_count(RepresentativeTask& task, uint32_t period_us,
   uint64_t popped = 0;
   uint32_t sent = 0;
   bool reset_sent = false;
-  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(120);
   while (!task.done_.load(std::memory_order_acquire) && std::chrono::steady_clock::now() < until) {
     while (task.samples_.try_pop()) ++popped;
     if (task.commands_.try_push(sent)) ++sent;
@@ -146,7 +156,11 @@ t::HeapCounts run_and_count(RepresentativeTask& task, uint32_t period_us,
       engine->request_stats_reset();  // applied on the cycle thread inside the counted window
       reset_sent = true;
     }
-    std::this_thread::sleep_for(std::chrono::microseconds(500));
+    // Next round after 5 more cycles: the consumer keeps pace with the cycle, not the clock.
+    const uint64_t next = engine->cycle_count() + 5;
+    (void)t::wait_until([&] {
+      return task.done_.load(std::memory_order_acquire) || engine->cycle_count() >= next;
+    });
   }
   engine->stop();
   final_stats = engine->stats_snapshot();
@@ -170,6 +184,7 @@ TEST_CASE("cycle thread: zero allocations and no mutex over 100 000 steady cycle
   CHECK(c.allocations() == 0);
   CHECK(c.deallocations() == 0);
   CHECK(c.mutex_locks == 0);
+  if (!t::counts_mutexes()) WARN("TSan build: mutex locks are not counted; that check is void");
   CHECK(task->executed_ >= 102'000);
 }
 

@@ -131,6 +131,7 @@ TEST_CASE("privileged commands need the privileged group", "[endat_e2e]") {
       c.request({{"cmd", "endat-write-param"}, {"mrs", 0xA9}, {"param", 1}, {"value", 1}});
   CHECK(error_code_of(w) == "permission_denied");
   CHECK(error_code_of(c.request({{"cmd", "endat-reset"}})) == "permission_denied");
+  CHECK(error_code_of(c.request({{"cmd", "endat-ack"}})) == "permission_denied");
   CHECK(error_code_of(c.request({{"cmd", "endat-write-block"},
                                  {"mrs", 0xB1},
                                  {"block", 0},
@@ -190,21 +191,23 @@ TEST_CASE("echo mismatch, truncated reply and timeout are reported, and the next
 
 TEST_CASE("a client that disconnects: its queued command is dropped, its reply discarded",
           "[endat_e2e]") {
-  Rig rig({.peer = Peer::Scripted, .command_timeout_ms = 3000});
-  // A: in flight, answered 800 cycles late (well within the timeout, and long after both
-  // clients left even if this thread stalls on a loaded machine). B: queued behind it.
-  rig.scripted().inject(ScriptedModule::Fault::Late, 1, 800);
+  Rig rig({.peer = Peer::Scripted, .command_timeout_ms = 10000});
+  // A: in flight, answered 2000 cycles late (well within the timeout; the steps below wait
+  // for events and take a few cycles). B: queued behind it.
+  rig.scripted().inject(ScriptedModule::Fault::Late, 1, 2000);
   {
     LineClient a(rig.socket_path(), kClientTimeoutMs);
     LineClient b(rig.socket_path(), kClientTimeoutMs);
     a.send_raw(json{{"cmd", "endat-read-param"}, {"mrs", 0xA9}, {"param", 40}}.dump() + "\n");
-    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    REQUIRE(ds1928::test::wait_until([&] { return rig.scripted().received_with_param(40) == 1; }));
     b.send_raw(
         json{{"cmd", "endat-write-param"}, {"mrs", 0xA9}, {"param", 41}, {"value", 7}}.dump() +
         "\n");
-    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    REQUIRE(ds1928::test::wait_until([&] {
+      return rig.run([&] { return rig.service().status_json(0)["commands"]["queued"] == 1; });
+    }));
     b.close();
-    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    REQUIRE(ds1928::test::wait_until([&] { return rig.counters().jobs_cancelled == 1; }));
     a.close();
   }
   LineClient c(rig.socket_path(), kClientTimeoutMs);
@@ -223,7 +226,7 @@ TEST_CASE("under a lossy bus every result is the right value or an explicit erro
   const uint32_t seed = static_cast<uint32_t>(std::random_device{}());
   INFO("seed " << seed);
   Rig rig({.peer = Peer::Lossy, .command_timeout_ms = 1000, .seed = seed});
-  REQUIRE(rig.wait_identified(10000));
+  REQUIRE(rig.wait_identified());
   const uint64_t published_before = publish_count(rig.shm_name());
   const uint64_t cycles_before = rig.cycles();
 

@@ -26,6 +26,7 @@
 #include "register_client.hpp"
 #include "shm/publisher.hpp"
 #include "sim/simulated_bus.hpp"
+#include "support/wait.hpp"
 
 namespace ds1928::endat_test {
 
@@ -277,12 +278,9 @@ class Rig {
     return run([this] { return service_->counters(0); });
   }
   // Waits for the identification (it runs at start).
-  bool wait_identified(int timeout_ms = 5000) {
-    for (int i = 0; i < timeout_ms / 10; ++i) {
-      if (run([this] { return service_->identification(0).has_value(); })) return true;
-      std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    }
-    return false;
+  bool wait_identified() {
+    return ds1928::test::wait_until(
+        [this] { return run([this] { return service_->identification(0).has_value(); }); });
   }
 
  private:

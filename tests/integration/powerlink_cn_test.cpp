@@ -144,7 +144,8 @@ TEST_CASE(
   boot_to_pre_op2(h, 7);
   std::vector<uint8_t> preq_payload(h.cn.layout().preq_size, 0);
   h.preq(7, preq_payload, false);
-  auto pres = pl::parse_pres(h.pop());
+  auto frame = h.pop();  // the parsed PRes views these bytes
+  auto pres = pl::parse_pres(frame);
   REQUIRE(pres.has_value());
   CHECK(pres->nmt_state == NmtState::kPreOperational2);
   CHECK_FALSE(pres->ready);
@@ -161,7 +162,8 @@ TEST_CASE(
   CHECK(h.cn.nmt_state() == NmtState::kOperational);
 
   h.preq(7, preq_payload, true);
-  pres = pl::parse_pres(h.pop());
+  frame = h.pop();
+  pres = pl::parse_pres(frame);
   REQUIRE(pres.has_value());
   CHECK(pres->ready);
   CHECK(pres->nmt_state == NmtState::kOperational);
@@ -193,7 +195,8 @@ TEST_CASE("CN modules take NetTime from the SoC RelativeTime") {
   }
   h.soc();
   h.preq(3, preq_payload, false);
-  auto pres = pl::parse_pres(h.pop());
+  const auto frame = h.pop();  // the parsed PRes views these bytes
+  auto pres = pl::parse_pres(frame);
   REQUIRE(pres.has_value());
   ds1928::ModuleInputs in;
   REQUIRE(pl::read_inputs(pres->payload, *h.cn.layout().find(1), in));
@@ -287,7 +290,8 @@ TEST_CASE("CN loss of SoC falls back to PRE_OPERATIONAL_1 and logs it in the Sta
   CHECK(h.cn.nmt_state() == NmtState::kPreOperational1);
   CHECK(h.cn.stats().loss_of_soc == 1);
   h.soa(pl::RequestedService::kStatusRequest, 2);
-  auto asnd = pl::parse_asnd(h.pop());
+  const auto frame = h.pop();  // the parsed ASnd views these bytes
+  auto asnd = pl::parse_asnd(frame);
   REQUIRE(asnd.has_value());
   const auto* status = std::get_if<pl::StatusResponse>(&asnd->body);
   REQUIRE(status != nullptr);
@@ -357,13 +361,15 @@ TEST_CASE("CN fault injection: dropped, delayed and wrongly sized PRes") {
   h.now += 1'000;
   h.cn.tick(h.now);
   REQUIRE(h.out.size() == 1);
-  CHECK(pl::parse_pres(h.pop()).has_value());
+  const auto late = h.pop();
+  CHECK(pl::parse_pres(late).has_value());
 
   faults = {};
   faults.pres_size_delta = 4;
   h.cn.set_faults(faults);
   h.preq(6, preq_payload, false);
-  auto pres = pl::parse_pres(h.pop());
+  const auto frame = h.pop();  // the parsed PRes views these bytes
+  auto pres = pl::parse_pres(frame);
   REQUIRE(pres.has_value());
   CHECK(pres->payload.size() == h.cn.layout().pres_size + 4u);
 }

@@ -16,6 +16,8 @@
 #include <cstring>
 #include <string>
 
+#include "support/wait.hpp"
+
 namespace pl = ds1928::powerlink;
 
 namespace {
@@ -38,8 +40,7 @@ bool enter_test_namespace() {
 
 // Waits until the kernel reports carrier on both ends (link watch runs asynchronously).
 void wait_link_up(const pl::RawLink& link) {
-  for (int i = 0; i < 300 && !link.link_up(); ++i) usleep(10'000);
-  REQUIRE(link.link_up());
+  REQUIRE(ds1928::test::wait_until([&] { return link.link_up(); }));
 }
 
 pl::RawLink open_link(const char* name, pl::RxMode mode) {
@@ -131,13 +132,10 @@ TEST_CASE("RawLink reports carrier loss and an interface that vanished") {
   const auto frame = short_powerlink_frame(a.mac());
   // Peer down: rl_a stays administratively up but loses its carrier.
   REQUIRE(std::system("ip link set rl_b down") == 0);
-  bool down = false;
-  for (int i = 0; i < 300 && !down; ++i) {
+  CHECK(ds1928::test::wait_until([&] {
     (void)a.send(frame);  // the carrier check runs from send()
-    down = !a.link_up();
-    usleep(10'000);
-  }
-  CHECK(down);
+    return !a.link_up();
+  }));
   CHECK(a.stats().link_losses == 1);
   REQUIRE(std::system("ip link set rl_b up") == 0);
   wait_link_up(a);  // link_up() itself notices the carrier coming back
@@ -145,10 +143,10 @@ TEST_CASE("RawLink reports carrier loss and an interface that vanished") {
   // The interface disappears: sends fail with an errno naming it, the link is down.
   REQUIRE(std::system("ip link del rl_a") == 0);
   std::error_code ec;
-  for (int i = 0; i < 100 && !ec; ++i) {
+  (void)ds1928::test::wait_until([&] {
     ec = a.send(frame);
-    usleep(1'000);
-  }
+    return static_cast<bool>(ec);
+  });
   INFO("send after delete: " << ec.message());
   CHECK((ec == std::errc::no_such_device_or_address || ec == std::errc::network_down ||
          ec == std::errc::no_such_device));

@@ -39,6 +39,8 @@ struct Rig {
     g_clock_step_ns = 0;
     config.cycle_us = 1000;
     config.mac = link.mac();
+    // The standard's threshold (two losses in a row): tests count losses against it.
+    config.bus.thresholds.loss_of_pres = 15;
     for (uint8_t n : nodes) {
       PowerlinkNodeConfig nc;
       nc.node_id = n;

@@ -153,8 +153,11 @@ std::error_code MemoryLink::send(std::span<const uint8_t> frame) noexcept {
   return {};
 }
 
-Received MemoryLink::receive(std::span<uint8_t> buffer, int64_t) noexcept {
-  if (rx.empty()) return {};
+Received MemoryLink::receive(std::span<uint8_t> buffer, int64_t deadline_ns) noexcept {
+  if (rx.empty()) {
+    if (on_idle_wait) on_idle_wait(deadline_ns);
+    return {};
+  }
   auto f = std::move(rx.front());
   rx.pop_front();
   std::copy(f.begin(), f.end(), buffer.begin());

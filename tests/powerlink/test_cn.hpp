@@ -72,6 +72,8 @@ class MemoryLink : public Link {
   bool up = true;
   std::function<void(std::span<const uint8_t>)>
       on_send;  // every frame the MN sent, after the CNs' answers were queued
+  // receive() found nothing queued: the deadline a real link would have waited until.
+  std::function<void(int64_t deadline_ns)> on_idle_wait;
   std::error_code send(std::span<const uint8_t> frame) noexcept override;
   Received receive(std::span<uint8_t> buffer, int64_t deadline_ns) noexcept override;
   bool link_up() const noexcept override { return up; }

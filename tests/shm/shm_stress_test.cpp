@@ -8,6 +8,7 @@
 
 #include "ds1928/shm.hpp"
 #include "shm_test_util.hpp"
+#include "support/wait.hpp"
 
 using namespace ds1928;
 using namespace ds1928::shm;
@@ -22,7 +23,8 @@ TEST_CASE("10^7 reads from another process while the writer runs at >= 10 kHz: 0
   REQUIRE(writer.running());
   ShmReader reader;
   REQUIRE_FALSE(reader.open(name));
-  while (ds1928_shm_publish_count(&reader.header()) == 0) usleep(100);
+  REQUIRE(
+      ds1928::test::wait_until([&] { return ds1928_shm_publish_count(&reader.header()) != 0; }));
 
   const uint64_t count0 = ds1928_shm_publish_count(&reader.header());
   const int64_t t0 = now_ns();
@@ -75,7 +77,8 @@ TEST_CASE("the check value exposes copies taken without the seqlock protocol") {
   REQUIRE(writer.running());
   ShmReader reader;
   REQUIRE_FALSE(reader.open(name));
-  while (ds1928_shm_publish_count(&reader.header()) == 0) usleep(100);
+  REQUIRE(
+      ds1928::test::wait_until([&] { return ds1928_shm_publish_count(&reader.header()) != 0; }));
   const ds1928_shm_axis* rec = ds1928_shm_axis_record(&reader.header(), 0);
 
   uint64_t raw_torn = 0;

@@ -25,6 +25,21 @@ int ds1928_real_pthread_mutex_trylock(pthread_mutex_t* m) noexcept;
 __asm__(".symver ds1928_real_pthread_mutex_lock,__pthread_mutex_lock@GLIBC_2.2.5");
 __asm__(".symver ds1928_real_pthread_mutex_trylock,__pthread_mutex_trylock@GLIBC_2.2.5");
 
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+#define DS1928_SANITIZER_ALLOCATOR 1
+#endif
+#if defined(__SANITIZE_THREAD__)
+#define DS1928_SANITIZER_MUTEXES 1
+#endif
+
+#ifdef DS1928_SANITIZER_ALLOCATOR
+// The sanitizer's allocator owns malloc and operator new: replacing them collides with it. Its
+// own hooks see every allocation and free of the process instead.
+extern "C" int __sanitizer_install_malloc_and_free_hooks(void (*malloc_hook)(const volatile void*,
+                                                                             std::size_t),
+                                                         void (*free_hook)(const volatile void*));
+#endif
+
 namespace ds1928::test {
 namespace {
 
@@ -44,6 +59,7 @@ inline void note_free(uint64_t HeapCounts::*field, const void* p) noexcept {
   if (p != nullptr && t_state.on) ++(t_state.counts.*field);
 }
 
+#ifndef DS1928_SANITIZER_ALLOCATOR
 void* new_impl(std::size_t size, std::size_t alignment, bool nothrow) {
   note_alloc(&HeapCounts::new_calls, size);
   if (size == 0) size = 1;
@@ -63,8 +79,34 @@ void delete_impl(void* p) noexcept {
   note_free(&HeapCounts::delete_calls, p);
   __libc_free(p);
 }
+#else
+// operator new and malloc reach the same hook: both count as malloc_calls (free_calls).
+void sanitizer_malloc_hook(const volatile void*, std::size_t size) {
+  note_alloc(&HeapCounts::malloc_calls, size);
+}
+void sanitizer_free_hook(const volatile void* p) {
+  note_free(&HeapCounts::free_calls, const_cast<const void*>(p));
+}
+[[maybe_unused]] const int g_hooks_installed =
+    __sanitizer_install_malloc_and_free_hooks(sanitizer_malloc_hook, sanitizer_free_hook);
+#endif
 
 }  // namespace
+
+bool counts_new_separately() noexcept {
+#ifdef DS1928_SANITIZER_ALLOCATOR
+  return false;
+#else
+  return true;
+#endif
+}
+bool counts_mutexes() noexcept {
+#ifdef DS1928_SANITIZER_MUTEXES
+  return false;
+#else
+  return true;
+#endif
+}
 
 void begin_counting() noexcept {
   t_state.counts = HeapCounts{};
@@ -83,11 +125,13 @@ bool counting() noexcept {
 
 }  // namespace ds1928::test
 
-using ds1928::test::delete_impl;
 using ds1928::test::HeapCounts;
-using ds1928::test::new_impl;
 using ds1928::test::note_alloc;
 using ds1928::test::note_free;
+
+#ifndef DS1928_SANITIZER_ALLOCATOR
+using ds1928::test::delete_impl;
+using ds1928::test::new_impl;
 
 // ---- operator new / delete ----
 void* operator new(std::size_t n) {
@@ -220,6 +264,11 @@ void* pvalloc(std::size_t size) noexcept {
   return __libc_pvalloc(size);
 }
 
+}  // extern "C"
+#endif  // DS1928_SANITIZER_ALLOCATOR
+
+#ifndef DS1928_SANITIZER_MUTEXES
+extern "C" {
 // ---- mutexes ----
 int pthread_mutex_lock(pthread_mutex_t* m) noexcept {
   if (ds1928::test::t_state.on) ++ds1928::test::t_state.counts.mutex_locks;
@@ -231,3 +280,4 @@ int pthread_mutex_trylock(pthread_mutex_t* m) noexcept {
 }
 
 }  // extern "C"
+#endif  // DS1928_SANITIZER_MUTEXES

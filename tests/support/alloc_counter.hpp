@@ -8,6 +8,11 @@
 // for the calling thread, count the call. Calls from other threads are never counted, so a test
 // can switch counting on inside the cycle thread while its main thread does what it likes.
 //
+// Under ASan and TSan the sanitizer's allocator cannot be replaced: its malloc/free hooks count
+// instead, and operator new is counted as malloc (counts_new_separately() is false). TSan
+// intercepts pthread_mutex_lock itself, so mutex locks are not counted there (counts_mutexes()
+// is false): tests then skip that one check and say so.
+//
 // Counting only sees calls that reach these symbols: glibc-internal locks (lll_lock) and
 // direct futex system calls are not mutex locks in this sense.
 #pragma once
@@ -36,6 +41,9 @@ HeapCounts end_counting() noexcept;
 // What has been counted on the calling thread so far; counting stays as it is.
 [[nodiscard]] HeapCounts current_counts() noexcept;
 [[nodiscard]] bool counting() noexcept;
+// What this build can tell apart (see above).
+[[nodiscard]] bool counts_new_separately() noexcept;
+[[nodiscard]] bool counts_mutexes() noexcept;
 
 // begin_counting() for the lifetime of a scope, then end_counting() (its result in counts()).
 class ScopedCounting {

@@ -1,5 +1,6 @@
 // ds1928-sim: standalone simulated node, the test peer of ds1928d.
-//   ds1928-sim powerlink --iface IF --node N [--modules K] [--drop-pres P] [--delay-pres-us U]
+//   ds1928-sim powerlink --iface IF --node N [--modules K] [--profile hardware|software-cn]
+//                        [--drop-pres P] [--delay-pres-us U]
 //                        [--power-cycle-after S] [--config FILE] ...
 // runs POWERLINK Controlled Node(s) with simulated X20DS1928 modules on a raw socket and prints
 // every NMT state change. SIGUSR1 power-cycles the node(s); SIGUSR2 makes them ask the MN for
@@ -13,6 +14,7 @@
 #include <time.h>
 
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <atomic>
 #include <csignal>
 #include <cstdio>
@@ -62,7 +64,33 @@ struct PowerlinkOptions {
   uint32_t guard_us = 80;
   double duration_s = 0.0;
   bool quiet = false;
+  // Software response path (--profile software-cn and the --pres-latency-* options).
+  std::string profile = "hardware";
+  double pres_latency_us = -1;  // -1: from the profile
+  double pres_latency_sigma = -1;
+  double pres_latency_max_us = -1;
+  double ready_after_soc_us = -1;
 };
+
+// "software-cn": a CN whose PRes comes from a user-space stack, as on a PC: its responder blocks
+// in the kernel until the PReq arrives (blocking receive), runs at SCHED_FIFO 50 — below an MN at
+// the usual 80 — on the CPU given by --cpu, answers after a log-normal delay with a long tail and
+// not before it finished the SoC's work. Options given explicitly win over the profile.
+void apply_profile(PowerlinkOptions& o, const std::vector<std::string>& given) {
+  auto was_given = [&](const char* name) {
+    return std::find(given.begin(), given.end(), name) != given.end();
+  };
+  if (o.profile == "software-cn") {
+    if (!was_given("--rx-mode")) o.rx_mode = "blocking";
+    if (!was_given("--rt-priority")) o.rt_priority = 50;
+    if (o.pres_latency_us < 0) o.pres_latency_us = 30;
+    if (o.ready_after_soc_us < 0) o.ready_after_soc_us = 20;
+  }
+  if (o.pres_latency_us < 0) o.pres_latency_us = 0;
+  if (o.pres_latency_sigma < 0) o.pres_latency_sigma = 0.6;
+  if (o.pres_latency_max_us < 0) o.pres_latency_max_us = 2000;
+  if (o.ready_after_soc_us < 0) o.ready_after_soc_us = 0;
+}
 
 [[nodiscard]] int64_t now_ns() {
   timespec ts{};
@@ -161,6 +189,10 @@ int run_powerlink(const PowerlinkOptions& o) {
     cn.faults.delay_pres = o.delay_pres_us > 0 ? o.delay_pres_prob : 0.0;
     cn.faults.pres_size_delta = o.wrong_pres_size;
     cn.faults.seed = o.seed + static_cast<uint64_t>(k);
+    cn.response.pres_latency_median_ns = static_cast<int64_t>(o.pres_latency_us * 1000);
+    cn.response.pres_latency_sigma = o.pres_latency_sigma;
+    cn.response.pres_latency_max_ns = static_cast<int64_t>(o.pres_latency_max_us * 1000);
+    cn.response.ready_after_soc_ns = static_cast<int64_t>(o.ready_after_soc_us * 1000);
     auto node = std::make_unique<sim::PowerlinkCn>(
         cn, [&link](std::span<const uint8_t> frame) { (void)link.send(frame); });
     if (!o.quiet) {
@@ -174,10 +206,12 @@ int run_powerlink(const PowerlinkOptions& o) {
     }
     std::printf(
         "node %u: %zu module(s), PRes payload %u bytes, PReq payload %u bytes, MAC "
-        "%02x:%02x:%02x:%02x:%02x:%02x on %s (%s)\n",
+        "%02x:%02x:%02x:%02x:%02x:%02x on %s (%s, profile %s, PRes latency median %.0f us "
+        "sigma %.2f, ready %.0f us after SoC)\n",
         node_id, node->module_count(), node->layout().pres_size, node->layout().preq_size,
         cn.mac[0], cn.mac[1], cn.mac[2], cn.mac[3], cn.mac[4], cn.mac[5], o.iface.c_str(),
-        pl::to_string(link.rx_mode()));
+        pl::to_string(link.rx_mode()), o.profile.c_str(), o.pres_latency_us, o.pres_latency_sigma,
+        o.ready_after_soc_us);
     node_ptrs.push_back(node.get());
     nodes.push_back(std::move(node));
   }
@@ -281,6 +315,17 @@ int main(int argc, char** argv) {
   plk->add_option("--guard-us", o.guard_us, "start polling this long before the next SoC");
   plk->add_option("--duration", o.duration_s, "stop after S seconds (0: until SIGTERM)");
   plk->add_flag("--quiet", o.quiet, "do not print NMT state changes");
+  plk->add_option("--profile", o.profile,
+                  "hardware (PRes at once, polling) | software-cn (blocking responder at FIFO 50, "
+                  "PRes latency with a long tail, readiness delay after SoC)")
+      ->check(CLI::IsMember({"hardware", "software-cn"}));
+  plk->add_option("--pres-latency-us", o.pres_latency_us,
+                  "median PRes latency, log-normal (software-cn: 30)");
+  plk->add_option("--pres-latency-sigma", o.pres_latency_sigma,
+                  "log-normal shape of the PRes latency (0.6: p99 = 4 x median)");
+  plk->add_option("--pres-latency-max-us", o.pres_latency_max_us, "cap of the PRes latency");
+  plk->add_option("--ready-after-soc-us", o.ready_after_soc_us,
+                  "no PRes earlier than this after the SoC (software-cn: 20)");
 
   CanioOptions co;
   CLI::App* can = app.add_subcommand(
@@ -327,7 +372,14 @@ int main(int argc, char** argv) {
   std::signal(SIGUSR1, on_usr1);
   std::signal(SIGUSR2, on_usr2);
   setvbuf(stdout, nullptr, _IOLBF, 0);
-  if (plk->parsed()) return run_powerlink(o);
+  if (plk->parsed()) {
+    std::vector<std::string> given;
+    for (const CLI::Option* opt : plk->get_options())
+      if (opt->count() > 0 && !opt->get_lnames().empty())
+        given.push_back("--" + opt->get_lnames()[0]);
+    apply_profile(o, given);
+    return run_powerlink(o);
+  }
   if (can->parsed()) return run_canio(co, g_stop);
   return 1;
 }

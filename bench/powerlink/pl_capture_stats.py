@@ -1,0 +1,72 @@
+#!/usr/bin/env python3
+"""Cycle timing seen on the wire, from captures at both ends of the MN–CN veth pair.
+
+  pl_capture_stats.py PERIOD_US CN_END.pcapng MN_END.pcapng
+
+CN_END: capture on the CN's interface (the MN's SoC/PReq/SoA as the CN receives them);
+MN_END: capture on the MN's interface (the CN's PRes as the MN receives them). With
+PACKET_QDISC_BYPASS a sender's own frames do not show on its interface, hence two captures;
+both carry the same clock (one machine).
+Prints one line: SoC period deviation, SoC→PReq (first PReq of the cycle) and PReq→PRes
+(per polled CN) as p50/p99/max in µs, and the count of PRes later than 1 ms.
+"""
+import subprocess
+import sys
+
+
+def frames(path):
+    out = subprocess.run(
+        ["tshark", "-n", "-r", path, "-T", "fields", "-e", "frame.time_epoch", "-e", "epl.mtyp",
+         "-e", "epl.src", "-e", "epl.dest", "-Y", "epl"],
+        capture_output=True, text=True, check=True).stdout
+    rows = []
+    for line in out.splitlines():
+        parts = line.split("\t")
+        if len(parts) < 4 or not parts[1]:
+            continue
+        rows.append((float(parts[0]), int(parts[1], 0), int(parts[2] or 0), int(parts[3] or 0)))
+    return rows
+
+
+def quant(values):
+    if not values:
+        return "-/-/-"
+    v = sorted(values)
+    def q(p):
+        return v[min(len(v) - 1, int(p * len(v)))]
+    return "%.0f/%.0f/%.0f" % (q(0.5), q(0.99), v[-1])
+
+
+def main():
+    period_us = float(sys.argv[1])
+    cn_end = frames(sys.argv[2])
+    mn_end = frames(sys.argv[3])
+    soc = [t for t, m, s, d in cn_end if m == 1]
+    jitter = [abs((b - a) * 1e6 - period_us) for a, b in zip(soc, soc[1:])]
+    # SoC→first PReq of the same cycle.
+    soc_preq = []
+    last_soc = None
+    for t, m, s, d in cn_end:
+        if m == 1:
+            last_soc = t
+        elif m == 3 and last_soc is not None:
+            soc_preq.append((t - last_soc) * 1e6)
+            last_soc = None
+    # PReq (as the CN got it) → PRes of that CN (as the MN got it), before the next PReq to it.
+    events = sorted([(t, "preq", d) for t, m, s, d in cn_end if m == 3] +
+                    [(t, "pres", s) for t, m, s, d in mn_end if m == 4])
+    pending = {}
+    latency = []
+    for t, kind, node in events:
+        if kind == "preq":
+            pending[node] = t
+        elif node in pending:
+            latency.append((t - pending.pop(node)) * 1e6)
+    late = sum(1 for x in latency if x > 1000)
+    print("WIRE soc_jitter_us=%s soc_to_preq_us=%s preq_to_pres_us=%s cycles=%d pres=%d "
+          "pres_over_1ms=%d" % (quant(jitter), quant(soc_preq), quant(latency), len(soc),
+                                len(latency), late))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,70 @@
+// Does a POWERLINK cycle fit its period? The worst case on the wire at 100 Mbit/s (seed 001):
+// SoC, WaitSoCPReq, then per polled CN its PReq, PResTimeout and PRes, then SoA and the
+// asynchronous slot (AsyncSlotTimeout plus the longest ASnd). Multiplexed CNs count in the
+// cycles that poll them (slot = node % multiplex); the worst cycle is what must fit.
+// Header-only and pure: the configuration check and the benchmarks use it.
+#pragma once
+
+#include <algorithm>
+#include <cstddef>
+#include <cstdint>
+#include <numeric>
+#include <span>
+
+namespace ds1928::powerlink {
+
+// A frame of `length` bytes (without FCS) on the wire: padded to 60, + FCS 4, preamble 8 and
+// inter-frame gap 12 bytes, at 12.5 bytes/µs (a 60-byte frame: 6.72 µs, seed 001).
+[[nodiscard]] constexpr double wire_time_us(std::size_t length) noexcept {
+  return static_cast<double>(std::max<std::size_t>(length, 60) + 24) * 0.08;
+}
+
+struct BudgetNode {
+  uint8_t node_id = 1;
+  uint16_t preq_payload = 0;
+  uint16_t pres_payload = 0;
+  uint32_t pres_timeout_us = 0;
+  uint32_t multiplex = 0;  // 0/1 = every cycle
+};
+
+struct CycleBudget {
+  double soc_us = 0;
+  double wait_soc_preq_us = 0;
+  double isochronous_us = 0;  // PReq + PResTimeout + PRes of the CNs of the worst cycle
+  std::size_t polled_in_worst_cycle = 0;
+  double async_us = 0;  // SoA + AsyncSlotTimeout + longest ASnd (1514 bytes)
+  [[nodiscard]] double total_us() const noexcept {
+    return soc_us + wait_soc_preq_us + isochronous_us + async_us;
+  }
+};
+
+[[nodiscard]] inline CycleBudget cycle_budget(std::span<const BudgetNode> nodes,
+                                              uint32_t wait_soc_preq_us,
+                                              uint32_t async_slot_timeout_us) noexcept {
+  CycleBudget b;
+  b.soc_us = wire_time_us(36);
+  b.wait_soc_preq_us = wait_soc_preq_us;
+  b.async_us = wire_time_us(23) + async_slot_timeout_us + wire_time_us(1514);
+  // Cycles repeat with the least common multiple of the multiplex factors (bounded: a factor
+  // set whose multiple is huge is checked over its first 4096 cycles).
+  uint64_t period = 1;
+  for (const BudgetNode& n : nodes)
+    if (n.multiplex > 1) period = std::min<uint64_t>(std::lcm(period, uint64_t{n.multiplex}), 4096);
+  for (uint64_t cycle = 0; cycle < period; ++cycle) {
+    double iso = 0;
+    std::size_t polled = 0;
+    for (const BudgetNode& n : nodes) {
+      if (n.multiplex > 1 && cycle % n.multiplex != n.node_id % n.multiplex) continue;
+      iso += wire_time_us(24u + n.preq_payload) + n.pres_timeout_us +
+             wire_time_us(24u + n.pres_payload);
+      ++polled;
+    }
+    if (iso > b.isochronous_us) {
+      b.isochronous_us = iso;
+      b.polled_in_worst_cycle = polled;
+    }
+  }
+  return b;
+}
+
+}  // namespace ds1928::powerlink

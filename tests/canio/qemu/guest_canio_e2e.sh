@@ -1,0 +1,212 @@
+#!/bin/bash
+# Guest script for run-guest.sh: ds1928d on can0 against ds1928-sim canio on can1, over the
+# kernel's real CAN stack (two SJA1000 controllers on QEMU's emulated bus). Checks:
+#  1. the daemon starts on SocketCAN: bus canio operational, transport socketcan, the interface's
+#     bit rate and restart-ms as set with ip link;
+#  2. the module was configured at start over SDO (status: configured, SDO transfers, the log);
+#  3. positions in shared memory: fresh samples valid, moving, stamped with the kernel's receive
+#     time (time source rx_timestamp, stamp <= publication, monotonic) — check_positions.py;
+#  4. the daemon's receive filters on can0 are exactly its identifiers (/proc/net/can/rcvlist_fil)
+#     and its error-frame subscription is in effect (rcvlist_err);
+#  5. a frame of wrong length on an input identifier is counted as such, and positions go on;
+#  6. `ds1928ctl endat ident` and `endat read-param` are answered (EnDat over Flatstream on CAN);
+#  7. the same checks fail when the daemon has a wrong identifier: with object 2 on an identifier
+#     nobody sends, no sample is ever fresh (check_positions.py fails; --expect-no-fresh holds).
+# Nothing about timing is asserted: the guest's CPU is emulated.
+#
+# Usage: guest_canio_e2e.sh BUILD_DIR SOURCE_DIR [--config FILE]
+#   --config runs checks 1-6 with FILE instead of canio_guest.yaml (e.g. a wrong identifier, to see
+#   the test fail); the simulator always uses canio_guest.yaml.
+set -u
+build=${1:?build dir}
+src=${2:?source dir}
+shift 2
+here=$src/tests/canio/qemu
+sim_config=$here/canio_guest.yaml
+daemon_config=$sim_config
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --config) daemon_config=$(realpath "${2:?file}"); shift 2 ;;
+    *) echo "usage: guest_canio_e2e.sh BUILD_DIR SOURCE_DIR [--config FILE]"; exit 2 ;;
+  esac
+done
+. "$here/guest_lib.sh"
+daemon=$build/daemon/ds1928d
+sim=$build/tools/ds1928-sim/ds1928-sim
+ctl=$build/tools/ds1928ctl/ds1928ctl
+for bin in "$daemon" "$sim" "$ctl"; do
+  [ -x "$bin" ] || { echo "FAIL: $bin not built"; exit 1; }
+done
+
+tmp=$(mktemp -d /tmp/canio_e2e.XXXXXX)
+tag=$$
+pids=()
+failed=0
+cleanup() {
+  local p
+  for p in "${pids[@]}"; do kill "$p" 2> /dev/null; done
+  for p in "${pids[@]}"; do wait "$p" 2> /dev/null; done
+  for f in "$tmp"/*.log; do
+    [ "$failed" = 0 ] && break
+    echo "---- $f (tail)"
+    tail -n 25 "$f"
+  done
+  # The work directory outlives the guest: the logs stay there for the host to show.
+  [ -n "${CANIO_WORK:-}" ] && cp "$tmp"/*.log "$tmp"/*.txt "$CANIO_WORK/" 2> /dev/null
+  rm -rf "$tmp"
+}
+trap cleanup EXIT
+fail() {
+  echo "FAIL: $*"
+  failed=1
+  exit 1
+}
+pass() { echo "ok: $*"; }
+uptime_ns() {
+  local up
+  read -r up _ < /proc/uptime
+  echo $((${up/./} * 10000000))
+}
+
+# ---- the simulated node on can1 -----------------------------------------------------------------
+"$sim" canio --iface can1 --config "$sim_config" > "$tmp/sim.log" 2>&1 &
+sim_pid=$!
+pids+=($sim_pid)
+# Ready once its receive filters are in the kernel's list for can1.
+until_true 60 file_has /proc/net/can/rcvlist_fil "^ +can1 " ||
+  fail "ds1928-sim canio registered no receive filter on can1 within 60 s"
+kill -0 $sim_pid 2> /dev/null || fail "ds1928-sim exited"
+pass "ds1928-sim canio on can1: $(head -n1 "$tmp/sim.log")"
+
+# start_daemon NAME CONFIG: ds1928d on its own shm and socket; sets shm, sock, daemon_pid, t_start.
+start_daemon() {
+  local name=$1 config=$2
+  shm=/ds1928d_cq_${name}_$tag
+  sock=$tmp/$name.sock
+  cp "$config" "$tmp/$name.yaml"
+  printf 'shm:\n  name: %s\nsocket:\n  path: %s\n' "$shm" "$sock" >> "$tmp/$name.yaml"
+  "$daemon" --check-config "$tmp/$name.yaml" > "$tmp/$name-check.log" 2>&1 ||
+    fail "ds1928d rejects $config: $(tail -n 5 "$tmp/$name-check.log")"
+  t_start=$(uptime_ns)
+  "$daemon" -c "$tmp/$name.yaml" > "$tmp/$name.log" 2>&1 &
+  daemon_pid=$!
+  pids+=($daemon_pid)
+}
+# status NAME: the daemon's status as shell variables (status_vars.py, one coprocess for the whole
+# test), the JSON in NAME-status.txt.
+coproc STATUS_VARS { exec python3 "$here/status_vars.py" --serve; }
+pids+=($STATUS_VARS_PID)
+status() {
+  local line vars=""
+  "$ctl" --json --timeout 20000 -s "$sock" status > "$tmp/$1-status.txt" 2>> "$tmp/ctl.log" || return 1
+  echo "$tmp/$1-status.txt 0" >&"${STATUS_VARS[1]}"
+  while read -r -t 60 line <&"${STATUS_VARS[0]}"; do
+    [ "$line" = "#end" ] && break
+    vars+="$line"$'\n'
+  done
+  [ "$line" = "#end" ] || fail "status_vars.py does not answer"
+  eval "$vars"
+}
+operational() { status "$1" && [ "$bus_state" = operational ]; }
+stop_daemon() {
+  kill -TERM "$daemon_pid" 2> /dev/null
+  wait "$daemon_pid" 2> /dev/null
+}
+# positions FILE COUNT: COUNT publications of axis 0 (bounded).
+positions() {
+  timeout 90 "$ctl" --json --timeout 60000 --shm "$shm" position --axis 0 --follow --count "$2" \
+    > "$1" 2>> "$tmp/ctl.log"
+}
+
+# ---- 1. the daemon on can0 ----------------------------------------------------------------------
+start_daemon good "$daemon_config"
+until_true 60 operational good || {
+  kill -0 "$daemon_pid" 2> /dev/null || fail "ds1928d exited: $(tail -n 5 "$tmp/good.log")"
+  fail "ds1928d not operational within 60 s (bus state '${bus_state:-?}')"
+}
+[ "$bus_kind" = canio ] && [ "$transport" = socketcan ] && [ "$interface" = can0 ] ||
+  fail "status says bus $bus_kind over $transport on $interface, expected canio over socketcan on can0"
+[ "$bitrate" = "$CANIO_BITRATE" ] && [ "$restart_ms" = "$CANIO_RESTART_MS" ] ||
+  fail "status says bitrate $bitrate restart-ms $restart_ms, ip link set $CANIO_BITRATE / $CANIO_RESTART_MS"
+pass "ds1928d: bus canio operational over socketcan on can0, $bitrate bit/s, restart-ms $restart_ms, controller $can_state"
+
+# ---- 2. the module configured at start ----------------------------------------------------------
+[ "$configured" = 1 ] || fail "node $node not configured (last error: $last_error)"
+[ "${n_sdo_transfers:-0}" -gt 0 ] || fail "node configured without any SDO transfer"
+[ "${n_sdo_errors:-0}" = 0 ] || fail "$n_sdo_errors SDO errors (last error: $last_error)"
+pass "module configured at start by SDO: ${n_sdo_transfers} transfers, ${n_configurations:-?} configuration(s); log: $(grep -m1 -iE "configured|read back" "$tmp/good.log" | sed 's/^.*\] *//')"
+
+# ---- 3. positions with receive-time stamps ------------------------------------------------------
+positions "$tmp/positions.txt" 300 || fail "ds1928ctl position --follow failed: $(tail -n 3 "$tmp/ctl.log")"
+python3 "$here/check_positions.py" --min-fresh 100 --since-ns "$((t_start - 20000000))" \
+  < "$tmp/positions.txt" > "$tmp/check.txt"
+rc=$?
+cat "$tmp/check.txt"
+[ $rc = 0 ] || fail "positions in shared memory"
+
+# ---- 4. the daemon's filters and error subscription on can0 -------------------------------------
+# Nothing else has a socket on can0: every can0 entry is the daemon's.
+status good || fail "status"
+sdo_rx=$((0x580 + node))
+ids=()
+mapfile -t fil < /proc/net/can/rcvlist_fil
+for line in "${fil[@]}"; do
+  [[ $line =~ ^\ +can0\ +([0-9a-f]+)\ +([0-9a-f]+)\  ]] || continue
+  id=$((16#${BASH_REMATCH[1]}))
+  mask=${BASH_REMATCH[2]}
+  [[ $mask == *7ff ]] || fail "can0 filter for id $(printf 0x%X $id) has mask $mask, not an exact 11-bit match"
+  ids+=("$id")
+done
+want=("$in_id0" "$in_id1" "$sdo_rx")
+for w in "${want[@]}"; do
+  [[ " ${ids[*]} " == *" $w "* ]] || fail "no can0 filter for id $(printf 0x%X "$w"): $(printf '%s\n' "${fil[@]}")"
+done
+for id in "${ids[@]}"; do
+  [[ " ${want[*]} " == *" $id "* ]] || fail "can0 filter for id $(printf 0x%X "$id"), which the daemon does not use"
+done
+printf '  %s\n' "${fil[@]}" | grep -E "can0|device" | head -n 8
+pass "can0 receive filters are exactly the daemon's identifiers: $(printf '0x%X ' "${want[@]}")(inputs, SDO response)"
+file_has /proc/net/can/rcvlist_err "^ +can0 +[0-9a-f]+ +[0-9a-f]*[1-9a-f][0-9a-f]* " ||
+  fail "no error-frame subscription on can0: $(cat /proc/net/can/rcvlist_err)"
+pass "error-frame subscription on can0: $(grep -E '^ +can0 ' /proc/net/can/rcvlist_err | tr -s ' ' | head -n 2 | tr '\n' ';')"
+
+# ---- 5. a frame of wrong length on an input identifier ------------------------------------------
+wrong_before=${n_wrong_length:-0}
+samples_before=${n_samples:-0}
+cansend can1 "$(printf %03X "$in_id0")#0102" || fail "cansend on can1"
+wrong_seen() { status good && [ "${n_wrong_length:-0}" -gt "$wrong_before" ]; }
+until_true 30 wrong_seen || fail "a 2-byte frame on $(printf 0x%X "$in_id0") was not counted as wrong length (wrong_length ${n_wrong_length:-?})"
+more_samples() { status good && [ "${n_samples:-0}" -gt "$samples_before" ]; }
+until_true 30 more_samples || fail "no complete samples after the wrong-length frame"
+pass "wrong-length frame counted (wrong_length $wrong_before -> $n_wrong_length), samples go on ($n_samples); unexpected ids ${c_unexpected_ids:-?}, error frames ${c_error_frames:-?}"
+
+# ---- 6. EnDat over Flatstream on CAN ------------------------------------------------------------
+"$ctl" --timeout 60000 -s "$sock" endat ident > "$tmp/ident.txt" 2>&1 ||
+  fail "ds1928ctl endat ident: $(cat "$tmp/ident.txt")"
+[ -s "$tmp/ident.txt" ] || fail "ds1928ctl endat ident printed nothing"
+pass "endat ident: $(tr -s ' \n' ' ' < "$tmp/ident.txt" | cut -c1-160)"
+"$ctl" --timeout 60000 -s "$sock" endat read-param 0xA1 13 > "$tmp/param.txt" 2>&1 ||
+  fail "ds1928ctl endat read-param 0xA1 13: $(cat "$tmp/param.txt")"
+pass "endat read-param 0xA1 13: $(tr -s ' \n' ' ' < "$tmp/param.txt" | cut -c1-160)"
+stop_daemon
+
+# ---- 7. a wrong identifier makes these checks fail ----------------------------------------------
+# Object 2 on 0x3F1, which the simulator never sends: only half samples arrive.
+awk '
+  /^ *identifiers:/ { print "  identifiers: explicit"; print "  axes:";
+                      print "    - input_ids: [" in0 ", 0x3F1]"; print "      output_id: " out; next }
+  { print }' in0="$in_id0" out="$out_id" "$daemon_config" > "$tmp/wrong_id.yaml"
+start_daemon wrong "$tmp/wrong_id.yaml"
+configured_wrong() { status wrong && [ "$configured" = 1 ] && [ "${n_half_samples:-0}" -gt 0 ]; }
+until_true 60 configured_wrong || fail "daemon with a wrong identifier: not configured / no half samples (state '${bus_state:-?}', $(tail -n 3 "$tmp/wrong.log"))"
+positions "$tmp/positions_wrong.txt" 100 || fail "ds1928ctl position --follow (wrong identifier)"
+if python3 "$here/check_positions.py" --min-fresh 1 < "$tmp/positions_wrong.txt" > "$tmp/check_wrong.txt"; then
+  cat "$tmp/check_wrong.txt"
+  fail "the position check passed with object 2 on a wrong identifier"
+fi
+python3 "$here/check_positions.py" --expect-no-fresh < "$tmp/positions_wrong.txt" ||
+  fail "fresh positions with a wrong identifier"
+status wrong
+pass "wrong identifier 0x3F1: the position check fails ($(grep -m1 FAIL "$tmp/check_wrong.txt" | cut -c7-)); status: samples ${n_samples:-?}, half samples ${n_half_samples:-?}, silent $silent"
+stop_daemon
+exit 0

@@ -1,0 +1,152 @@
+#!/bin/bash
+# The Debian packages in a fresh Debian 12 root: install, then check what an administrator gets.
+#
+#   1. a minimal bookworm root made by mmdebstrap from Debian's mirror, with systemd and the
+#      packages' dependencies (resolved by apt from the .deb's Depends), cached as a tarball in
+#      DEB_DIR keyed by that package list — reruns only unpack it;
+#   2. dpkg installs ds1928d and libds1928-dev there; the maintainer scripts run (systemd-sysusers
+#      creates the user and groups; systemd is not running in the root, so nothing is started);
+#   3. files: programs, units, sysusers/tmpfiles/udev entries, man pages, header and example,
+#      the configuration as a conffile;
+#   4. the system user ds1928d (group ds1928, no login) and the groups ds1928, ds1928-admin;
+#   5. the units: systemd-analyze verify; the exposure score of ds1928d.service ≤ 2.0;
+#   6. the configuration passes ds1928d --check-config;
+#   7. the installed daemon starts in the root as ds1928d with the unit's capabilities (READY=1),
+#      runs real-time, and a member of ds1928 gets its status and positions.
+# Everything runs in a private mount namespace; the root is removed at the end.
+#
+# Usage: install_test.sh DEB_DIR        (root; needs mmdebstrap, network to the Debian mirror
+#                                        only on the first run)
+set -u
+debs=$(cd "${1:?directory with the .deb files}" && pwd)
+here=$(cd "$(dirname "$0")" && pwd)
+deploy=$here/../deploy
+
+if [ "$(id -u)" != 0 ]; then
+  echo "SKIP: needs root (chroot, mounts)"
+  exit 77
+fi
+if [ -z "${INSTALL_TEST_NS:-}" ]; then
+  export INSTALL_TEST_NS=1
+  exec unshare --mount --propagation private -- "$0" "$@"
+fi
+
+start=$(date +%s)
+daemon_deb=$(ls "$debs"/ds1928d_*.deb 2>/dev/null | head -1)
+dev_deb=$(ls "$debs"/libds1928-dev_*.deb 2>/dev/null | head -1)
+[ -n "$daemon_deb" ] && [ -n "$dev_deb" ] || { echo "FAIL: no ds1928d/libds1928-dev .deb in $debs"; exit 1; }
+
+# --- 1. the base root -------------------------------------------------------------------------
+# Depends of both packages, without versions and alternatives beyond the first.
+deps=$( { dpkg-deb -f "$daemon_deb" Depends; dpkg-deb -f "$dev_deb" Depends; } |
+        tr ',' '\n' | sed -e 's/|.*//' -e 's/(.*)//' -e 's/ //g' | grep -v '^$' | sort -u | tr '\n' ',')
+include="systemd,util-linux,passwd,python3-minimal,${deps%,}"
+key=$(printf '%s' "bookworm $include" | sha256sum | cut -c1-12)
+cache=$debs/pkgtest-bookworm-$key.tar
+if [ -f "$cache" ]; then
+  echo "base root: cached $cache"
+else
+  echo "base root: mmdebstrap bookworm (minbase + $include)"
+  rm -f "$debs"/pkgtest-bookworm-*.tar
+  mmdebstrap --variant=minbase --include="$include" bookworm "$cache.part" \
+    || { echo "FAIL: mmdebstrap"; exit 1; }
+  mv "$cache.part" "$cache"
+fi
+root=$(mktemp -d /var/tmp/ds1928d-pkgtest.XXXXXX)
+cleanup() {
+  [ -n "${pid:-}" ] && kill -TERM "$pid" 2>/dev/null && timeout 20 tail --pid="$pid" -f /dev/null
+  for m in "$root/dev/shm" "$root/dev" "$root/proc" "$root/run"; do
+    mountpoint -q "$m" && umount -l "$m"
+  done
+  rm -rf "$root"
+}
+trap cleanup EXIT
+tar -C "$root" -xf "$cache"
+mount -t proc proc "$root/proc"
+mount --rbind /dev "$root/dev"
+mount -t tmpfs -o mode=1777 tmpfs "$root/dev/shm"   # its own /dev/shm: no clash with the host
+mount -t tmpfs -o mode=0755 tmpfs "$root/run"
+unpacked=$(( $(date +%s) - start ))
+
+fail=0
+check() {  # check DESCRIPTION COMMAND...
+  if "${@:2}"; then echo "ok:   $1"; else echo "FAIL: $1"; fail=1; fi
+}
+in_root() { chroot "$root" "$@"; }
+
+# --- 2. install ---------------------------------------------------------------------------------
+cp "$daemon_deb" "$dev_deb" "$root/tmp/"
+if ! in_root env DEBIAN_FRONTEND=noninteractive dpkg -i "/tmp/${daemon_deb##*/}" "/tmp/${dev_deb##*/}"; then
+  echo "FAIL: dpkg -i"; exit 1
+fi
+check "both packages installed" \
+  test "$(in_root dpkg-query -W -f='${db:Status-Status} ' ds1928d libds1928-dev)" = "installed installed "
+
+# --- 3. files -----------------------------------------------------------------------------------
+for f in /usr/bin/ds1928d /usr/bin/ds1928ctl /usr/bin/ds1928-sim \
+         /lib/systemd/system/ds1928d.service /lib/systemd/system/ds1928d@.service \
+         /usr/lib/sysusers.d/ds1928d.conf /usr/lib/tmpfiles.d/ds1928d.conf \
+         /lib/udev/rules.d/60-ds1928d.rules \
+         /usr/share/man/man8/ds1928d.8.gz /usr/share/man/man1/ds1928ctl.1.gz \
+         /usr/share/man/man1/ds1928-sim.1.gz /etc/ds1928d/ds1928d.yaml \
+         /usr/share/doc/ds1928d/copyright /usr/share/doc/ds1928d/README.md.gz \
+         /usr/include/ds1928/shm.h /usr/include/ds1928/shm.hpp \
+         /usr/share/doc/libds1928-dev/examples/shm_reader.c; do
+  check "file $f" test -s "$root$f"
+done
+check "/etc/ds1928d/ds1928d.yaml is a conffile" \
+  grep -q '/etc/ds1928d/ds1928d.yaml' <<<"$(in_root dpkg-query -W -f='${Conffiles}' ds1928d)"
+check "man ds1928d(8) has the option --shm-name" \
+  sh -c "zcat '$root/usr/share/man/man8/ds1928d.8.gz' | grep -q 'shm\\\\-name'"
+
+# --- 4. user and groups -------------------------------------------------------------------------
+pw=$(in_root getent passwd ds1928d)
+echo "  passwd: $pw"
+check "group ds1928 exists" in_root getent group ds1928
+check "group ds1928-admin exists" in_root getent group ds1928-admin
+check "user ds1928d exists, a system user" test -n "$pw" -a "$(cut -d: -f3 <<<"$pw")" -lt 1000
+check "user ds1928d's group is ds1928" \
+  test "$(cut -d: -f4 <<<"$pw")" = "$(in_root getent group ds1928 | cut -d: -f3)"
+check "user ds1928d cannot log in" test "$(cut -d: -f7 <<<"$pw")" = /usr/sbin/nologin
+
+# --- 5. units -----------------------------------------------------------------------------------
+for u in ds1928d.service ds1928d@bus1.service; do
+  out=$(in_root systemd-analyze verify --man=no "$u" 2>&1)
+  [ -n "$out" ] && sed 's/^/  | /' <<<"$out"
+  check "systemd-analyze verify $u: clean" test -z "$out"
+done
+score=$(in_root systemd-analyze security --offline=true /lib/systemd/system/ds1928d.service 2>&1 |
+        sed -n 's/.*Overall exposure level for .*: \([0-9.]*\).*/\1/p')
+echo "  exposure level of the installed ds1928d.service: $score"
+check "exposure level ≤ 2.0" awk -v s="${score:-99}" 'BEGIN {exit !(s <= 2.0)}'
+
+# --- 6. configuration ---------------------------------------------------------------------------
+out=$(in_root ds1928d --check-config /etc/ds1928d/ds1928d.yaml 2>&1)
+echo "  $out"
+check "the packaged configuration is valid" grep -q ': ok (bus simulated' <<<"$out"
+
+# --- 7. the daemon starts as the service would start it ----------------------------------------
+# RuntimeDirectory=ds1928d: /run/ds1928d owned by the service user.
+install -d -m 0755 -o "$(cut -d: -f3 <<<"$pw")" -g "$(cut -d: -f4 <<<"$pw")" "$root/run/ds1928d"
+in_root useradd --no-create-home --shell /usr/sbin/nologin --groups ds1928 reader
+caps=-all,+net_raw,+sys_nice,+ipc_lock
+pid=$(NOTIFY_START_ROOT=$root python3 "$deploy/notify_start.py" "$root/run/ds1928d" 60 \
+        "$root/tmp/daemon.log" -- chroot "$root" setpriv --reuid=ds1928d --regid=ds1928 \
+        --init-groups --inh-caps=$caps --ambient-caps=$caps --bounding-set=$caps \
+        --no-new-privs -- /usr/bin/ds1928d --config /etc/ds1928d/ds1928d.yaml)
+check "the installed daemon starts as ds1928d (READY=1)" test -n "$pid"
+if [ -n "$pid" ]; then
+  sed 's/^/  | /' "$root/tmp/daemon.log"
+  status=$(in_root setpriv --reuid=reader --regid=reader --init-groups -- ds1928ctl --json status)
+  check "a member of ds1928 gets the status, real-time" grep -q '"realtime":true' <<<"$status"
+  position=$(in_root setpriv --reuid=reader --regid=reader --init-groups -- \
+               ds1928ctl --json position --axis 0)
+  check "a member of ds1928 reads the shared memory" grep -q '"cycle":' <<<"$position"
+  check "the shared memory belongs to ds1928d:ds1928" \
+    test "$(stat -c '%u:%g %a' "$root/dev/shm/ds1928d" 2>/dev/null)" = "$(cut -d: -f3 <<<"$pw"):$(cut -d: -f4 <<<"$pw") 640"
+fi
+
+elapsed=$(( $(date +%s) - start ))
+echo "time: ${elapsed} s in all (root ready after ${unpacked} s)"
+[ "$fail" = 0 ] && echo "PASS: the packages install into a fresh Debian 12 root and the daemon starts there"
+exit "$fail"
