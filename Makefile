@@ -1,5 +1,6 @@
 # ds1928d — the two commands of the README:
 #   make run    build and run the daemon on the simulated node
+#   make run-canio   the daemon on bus canio against `ds1928-sim canio` over the virtual CAN bus
 #   make test   build and run every test
 # Each installs the Debian packages it needs when they are missing (as root), or
 # prints the exact apt-get line to run.
@@ -16,7 +17,7 @@ BUILD_DEPS := cmake make g++ pkg-config libyaml-cpp-dev libspdlog-dev libfmt-dev
 TEST_DEPS  := $(BUILD_DEPS) rt-tests tshark iproute2 python3 \
               qemu-system-x86 busybox-static cpio kmod xz-utils can-utils
 
-.PHONY: all build run test deps-build deps-test format clean bench
+.PHONY: all build run run-canio test deps-build deps-test format clean bench
 
 all: build
 
@@ -50,6 +51,14 @@ build: deps-build $(BUILD)/CMakeCache.txt
 
 run: build
 	./$(BUILD)/daemon/ds1928d --config $(CONFIG)
+
+# The simulated CAN-I/O node runs in the background on the virtual bus of config/canio-sim.yaml
+# and stops with the daemon (Ctrl-C).
+CANIO_CONFIG ?= config/canio-sim.yaml
+run-canio: build
+	./$(BUILD)/tools/ds1928-sim/ds1928-sim canio --virtual ds1928-sim --config $(CANIO_CONFIG) & \
+	  sim=$$!; trap 'kill $$sim 2>/dev/null; wait $$sim 2>/dev/null' EXIT INT TERM; \
+	  ./$(BUILD)/daemon/ds1928d --config $(CANIO_CONFIG)
 
 test: deps-test build
 	cd $(BUILD) && ctest --output-on-failure --timeout 900 -j 2

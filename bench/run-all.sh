@@ -20,6 +20,7 @@ if [ "$quick" = 1 ]; then
   run "$build/bench/endat/endat_bench"
   run "$here/powerlink/run_rx_latency.sh" "$build" 5000
   run "$here/powerlink/run_cycle_bench.sh" "$build" --quick --nodes 1
+  run "$build/bench/canio/canio_bench" --quick
 else
   run env BUILD_DIR="$build" "$here/cycle/run.sh" --cycles 20000 --rounds 3
   run "$build/bench/shm/shm_bench"
@@ -27,5 +28,6 @@ else
   run "$build/bench/endat/endat_bench"
   run "$here/powerlink/run_rx_latency.sh" "$build" 20000
   run "$here/powerlink/run_cycle_bench.sh" "$build" --nodes "1 4 16"
+  run "$build/bench/canio/canio_bench"
 fi
 exit $status

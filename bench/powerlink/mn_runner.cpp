@@ -480,14 +480,16 @@ int main(int argc, char** argv) {
       "RESULT period_us=%u nodes=%zu cycles=%llu measured_cycles=%llu all_operational=%d "
       "boots=%u resets=%u loss_of_pres_events=%u loss_threshold_fired=%u "
       "measured_loss_events=%u measured_threshold_fired=%u overruns=%llu "
-      "cycle_time_exceeded=%u invalid_frames=%u unexpected_frames=%u async_timeouts=%u "
+      "cycle_time_exceeded=%u invalid_frames=%u short_frames=%u unexpected_frames=%u "
+      "async_timeouts=%u "
       "async_invites_unused=%u stale_pres_dropped=%u "
       "fresh=%llu moving=%llu wrong_positions=%llu bad_stamps=%llu\n",
       config.cycle.period_us, config.powerlink.nodes.size(),
       static_cast<unsigned long long>(cycles), static_cast<unsigned long long>(measured_cycles),
       all_op ? 1 : 0, boots, resets, events, fired, measuring ? events - events_at_start : 0,
       measuring ? fired - fired_at_start : 0, static_cast<unsigned long long>(overruns),
-      mc.cycle_time_exceeded.events, mc.invalid_frames, mc.unexpected_frames, mc.async_timeouts,
+      mc.cycle_time_exceeded.events, mc.invalid_frames, mc.short_frames, mc.unexpected_frames,
+      mc.async_timeouts,
       mc.async_invites_unused, stale, static_cast<unsigned long long>(fresh),
       static_cast<unsigned long long>(moving), static_cast<unsigned long long>(wrong),
       static_cast<unsigned long long>(bad_stamp));

@@ -129,10 +129,8 @@ SocketCanOpen SocketCanPort::open(const SocketCanOptions& options) {
   const int on = 1;
   // Kernel RX stamps in the same recvmmsg as the frame; SO_TIMESTAMPNS where the richer option
   // is refused.
-  bool timestamping = true;
   const int ts_flags = SOF_TIMESTAMPING_RX_SOFTWARE | SOF_TIMESTAMPING_SOFTWARE;
   if (setsockopt(fd.get(), SOL_SOCKET, SO_TIMESTAMPING, &ts_flags, sizeof ts_flags) != 0) {
-    timestamping = false;
     if (setsockopt(fd.get(), SOL_SOCKET, SO_TIMESTAMPNS, &on, sizeof on) != 0)
       return fail("setsockopt(SO_TIMESTAMPNS)");
   }
@@ -152,15 +150,13 @@ SocketCanOpen SocketCanPort::open(const SocketCanOptions& options) {
   addr.can_family = AF_CAN;
   addr.can_ifindex = link->info.ifindex;
   if (bind(fd.get(), reinterpret_cast<sockaddr*>(&addr), sizeof addr) != 0) return fail("bind");
-  result.port.reset(new SocketCanPort(options, fd.release(), timestamping));
+  result.port.reset(new SocketCanPort(options, fd.release()));
   result.port->impl_->set_state(link->info.state);
   return result;
 }
 
-SocketCanPort::SocketCanPort(SocketCanOptions options, int fd, bool timestamping)
-    : options_(std::move(options)), fd_(fd), impl_(std::make_unique<Impl>()) {
-  (void)timestamping;  // read back with getsockopt when asked (read_settings)
-}
+SocketCanPort::SocketCanPort(SocketCanOptions options, int fd)
+    : options_(std::move(options)), fd_(fd), impl_(std::make_unique<Impl>()) {}
 
 SocketCanPort::~SocketCanPort() {
   if (fd_ >= 0) ::close(fd_);

@@ -75,7 +75,7 @@ class SocketCanPort final : public CanPort {
 
  private:
   struct Impl;
-  SocketCanPort(SocketCanOptions options, int fd, bool timestamping);
+  SocketCanPort(SocketCanOptions options, int fd);
 
   SocketCanOptions options_;
   int fd_ = -1;

@@ -98,8 +98,13 @@ class VirtualCanPort final : public CanPort {
   // Delivers `event` to this port as an error frame (if its class is subscribed) and applies its
   // state change. False when the injection queue (16) is full. One injecting thread at a time.
   bool inject_error(const CanErrorEvent& event) noexcept;
-  // The controller goes bus-off: bus-off error frame, state BusOff, send() answers BusOff; after
-  // restart_ms (if not 0) the port restarts by itself: restarted error frame, error-active.
+  // Every OTHER port on the bus (in any process) takes `event` as if its own controller had
+  // reported it: state change, and the error frame if subscribed. The way a simulator process
+  // makes the daemon's port go bus-off or error-passive. Any thread.
+  bool broadcast_error(const CanErrorEvent& event) noexcept;
+  // The controller goes bus-off at once: state BusOff, send() answers BusOff, a bus-off error
+  // frame for the next receive(); after restart_ms on the bus clock (if not 0) the port restarts
+  // by itself: restarted error frame, error-active. Always true.
   bool inject_bus_off() noexcept;
   // Manual restart of a bus-off controller (`ip link set canX type can restart`).
   void restart() noexcept;

@@ -22,453 +22,14 @@
 #include <sstream>
 #include <utility>
 
+#include "config/config_canio.hpp"
 #include "config/config_loader.hpp"
+#include "config/config_powerlink.hpp"
+#include "config/config_reader.hpp"
 
 namespace ds1928 {
+using namespace config_detail;
 namespace {
-
-struct Loc {
-  int line = 0;
-  int column = 0;
-};
-
-Loc loc_of(const YAML::Mark& m) {
-  if (m.is_null() || m.line < 0) return {};
-  return {m.line + 1, m.column + 1};
-}
-
-std::string where(Loc l) {
-  return "line " + std::to_string(l.line);
-}
-
-class Diagnostics {
- public:
-  explicit Diagnostics(std::string file) : file_(std::move(file)) {}
-
-  void error(Loc at, std::string key, std::string message) {
-    errors_.push_back(ConfigError{file_, at.line, at.column, std::move(key), std::move(message)});
-  }
-  [[nodiscard]] bool empty() const noexcept { return errors_.empty(); }
-  [[nodiscard]] std::vector<ConfigError> take() {
-    std::stable_sort(errors_.begin(), errors_.end(), [](const auto& a, const auto& b) {
-      return std::pair(a.line, a.column) < std::pair(b.line, b.column);
-    });
-    return std::move(errors_);
-  }
-
- private:
-  std::string file_;
-  std::vector<ConfigError> errors_;
-};
-
-// ---------------------------------------------------------------------------------------------
-// Scalar parsing
-
-std::string describe(const YAML::Node& n) {
-  switch (n.Type()) {
-    case YAML::NodeType::Map:
-      return "a map";
-    case YAML::NodeType::Sequence:
-      return "a list";
-    case YAML::NodeType::Null:
-    case YAML::NodeType::Undefined:
-      return "an empty value";
-    case YAML::NodeType::Scalar:
-      break;
-  }
-  return n.Tag() == "?" ? "'" + n.Scalar() + "'" : "the string \"" + n.Scalar() + "\"";
-}
-
-bool is_plain(const YAML::Node& n) {
-  return n.IsScalar() && n.Tag() == "?";
-}
-
-struct IntParse {
-  enum class Status { Ok, Syntax, LeadingZero, Overflow } status = Status::Syntax;
-  int64_t value = 0;
-};
-
-// Decimal or 0x hex, optional sign. A leading zero is refused because YAML 1.1 would read it
-// as octal and a reader of the file cannot tell which was meant.
-IntParse parse_integer(std::string_view s) {
-  IntParse r;
-  bool negative = false;
-  if (!s.empty() && (s.front() == '+' || s.front() == '-')) {
-    negative = s.front() == '-';
-    s.remove_prefix(1);
-  }
-  int base = 10;
-  if (s.size() > 2 && s[0] == '0' && (s[1] == 'x' || s[1] == 'X')) {
-    base = 16;
-    s.remove_prefix(2);
-  } else if (s.size() > 1 && s[0] == '0') {
-    r.status = std::all_of(s.begin(), s.end(), [](char c) { return c >= '0' && c <= '9'; })
-                   ? IntParse::Status::LeadingZero
-                   : IntParse::Status::Syntax;
-    return r;
-  }
-  if (s.empty()) return r;
-  uint64_t magnitude = 0;
-  const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), magnitude, base);
-  if (end != s.data() + s.size()) return r;
-  constexpr uint64_t kMaxPositive = static_cast<uint64_t>(std::numeric_limits<int64_t>::max());
-  if (ec == std::errc::result_out_of_range || magnitude > kMaxPositive + (negative ? 1 : 0)) {
-    r.status = IntParse::Status::Overflow;
-    return r;
-  }
-  if (ec != std::errc{}) return r;
-  r.status = IntParse::Status::Ok;
-  r.value = negative ? static_cast<int64_t>(0 - magnitude) : static_cast<int64_t>(magnitude);
-  return r;
-}
-
-std::optional<double> parse_real(std::string_view s) {
-  if (!s.empty() && s.front() == '+') s.remove_prefix(1);
-  double v = 0;
-  const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
-  if (ec != std::errc{} || end != s.data() + s.size() || !std::isfinite(v)) return std::nullopt;
-  return v;
-}
-
-std::optional<bool> parse_bool(std::string s) {
-  std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return std::tolower(c); });
-  if (s == "true" || s == "yes" || s == "on") return true;
-  if (s == "false" || s == "no" || s == "off") return false;
-  return std::nullopt;
-}
-
-std::string range_text(int64_t lo, int64_t hi) {
-  return std::to_string(lo) + ".." + std::to_string(hi);
-}
-
-std::string real_text(double v) {
-  std::array<char, 64> buf{};
-  const auto [end, ec] = std::to_chars(buf.data(), buf.data() + buf.size(), v);
-  return ec == std::errc{} ? std::string(buf.data(), end) : std::string("?");
-}
-
-size_t edit_distance(std::string_view a, std::string_view b) {
-  std::vector<size_t> row(b.size() + 1);
-  for (size_t j = 0; j <= b.size(); ++j) row[j] = j;
-  for (size_t i = 1; i <= a.size(); ++i) {
-    size_t diagonal = row[0];
-    row[0] = i;
-    for (size_t j = 1; j <= b.size(); ++j) {
-      const size_t up = row[j];
-      const bool same = std::tolower(static_cast<unsigned char>(a[i - 1])) ==
-                        std::tolower(static_cast<unsigned char>(b[j - 1]));
-      row[j] = std::min({row[j] + 1, row[j - 1] + 1, diagonal + (same ? 0 : 1)});
-      diagonal = up;
-    }
-  }
-  return row[b.size()];
-}
-
-// The closest candidate when it is plausibly a typo of `word`.
-std::optional<std::string> closest(std::string_view word, const std::vector<std::string>& options) {
-  std::optional<std::string> best;
-  size_t best_distance = std::numeric_limits<size_t>::max();
-  for (const auto& o : options) {
-    const size_t d = edit_distance(word, o);
-    if (d < best_distance) {
-      best_distance = d;
-      best = o;
-    }
-  }
-  const size_t limit = std::max<size_t>(2, std::min(word.size(), best ? best->size() : 0) / 3);
-  if (best && best_distance <= limit) return best;
-  // An abbreviation of a longer key ("rt_prio" for "rt_priority").
-  if (word.size() >= 3) {
-    for (const auto& o : options) {
-      if (o.size() > word.size() && o.compare(0, word.size(), word) == 0) return o;
-    }
-  }
-  return std::nullopt;
-}
-
-std::string join(const std::vector<std::string>& items) {
-  std::string out;
-  for (const auto& i : items) out += (out.empty() ? "" : ", ") + i;
-  return out;
-}
-
-// ---------------------------------------------------------------------------------------------
-// One YAML map of settings. Every accessor registers its key as known; finish() reports the rest.
-
-class Section {
- public:
-  Section(Diagnostics& diag, const YAML::Node& node, std::string path, Loc at)
-      : diag_(&diag), path_(std::move(path)), at_(at) {
-    if (!node.IsDefined() || node.IsNull()) return;
-    if (!node.IsMap()) {
-      diag_->error(at_, path_, "expected a map of settings, got " + describe(node));
-      return;
-    }
-    for (auto it = node.begin(); it != node.end(); ++it) {
-      const Loc key_at = loc_of(it->first.Mark());
-      if (!it->first.IsScalar()) {
-        diag_->error(key_at, path_, "a key must be a plain name, got " + describe(it->first));
-        continue;
-      }
-      const std::string key = it->first.Scalar();
-      if (const auto found = entries_.find(key); found != entries_.end()) {
-        diag_->error(key_at, child(key),
-                     "duplicate key (first given at " + where(found->second.key_at) + ")");
-        continue;
-      }
-      entries_.emplace(key, Entry{key_at, it->second});
-    }
-  }
-  Section(const Section&) = delete;
-  Section& operator=(const Section&) = delete;
-
-  [[nodiscard]] std::string child(std::string_view key) const {
-    return path_.empty() ? std::string(key) : path_ + "." + std::string(key);
-  }
-  [[nodiscard]] const std::string& path() const noexcept { return path_; }
-  [[nodiscard]] Loc at() const noexcept { return at_; }
-  [[nodiscard]] Diagnostics& diag() const noexcept { return *diag_; }
-
-  // Registers `key` as known; the value node when the key is present.
-  const YAML::Node* find(std::string_view key) {
-    known_.emplace_back(key);
-    const auto it = entries_.find(std::string(key));
-    return it == entries_.end() ? nullptr : &it->second.value;
-  }
-  [[nodiscard]] bool has(std::string_view key) const {
-    return entries_.count(std::string(key)) != 0;
-  }
-
-  // Where the value of `key` is (the key itself for an empty value, the map when absent).
-  [[nodiscard]] Loc value_at(std::string_view key) const {
-    const auto it = entries_.find(std::string(key));
-    if (it == entries_.end()) return at_;
-    const YAML::Node& v = it->second.value;
-    if (!v.IsDefined() || v.IsNull()) return it->second.key_at;
-    const Loc l = loc_of(v.Mark());
-    return l.line == 0 ? it->second.key_at : l;
-  }
-
-  void error(std::string_view key, std::string message) {
-    diag_->error(value_at(key), child(key), std::move(message));
-  }
-
-  // A nested map; an absent key gives an empty section (all defaults).
-  [[nodiscard]] Section section(std::string_view key) {
-    const YAML::Node* v = find(key);
-    return Section(*diag_, v ? *v : YAML::Node(YAML::NodeType::Undefined), child(key),
-                   value_at(key));
-  }
-
-  template <class T>
-  bool integer(std::string_view key, T& out, int64_t lo, int64_t hi, std::string_view note = {}) {
-    int64_t v = 0;
-    if (!integer_value(key, v, lo, hi, note)) return false;
-    out = static_cast<T>(v);
-    return true;
-  }
-
-  template <class T>
-  bool optional_integer(std::string_view key, std::optional<T>& out, int64_t lo, int64_t hi) {
-    const YAML::Node* v = find(key);
-    if (!v || v->IsNull()) return false;
-    T value{};
-    if (!integer(key, value, lo, hi)) return false;
-    out = value;
-    return true;
-  }
-
-  bool real(std::string_view key, double& out, double lo, double hi) {
-    const YAML::Node* v = find(key);
-    if (!v) return false;
-    const std::string expected = "a number in " + real_text(lo) + ".." + real_text(hi);
-    if (!is_plain(*v)) {
-      error(key, "expected " + expected + ", got " + describe(*v));
-      return false;
-    }
-    const auto parsed = parse_real(v->Scalar());
-    if (!parsed) {
-      error(key, "expected " + expected + ", got " + describe(*v));
-      return false;
-    }
-    if (*parsed < lo || *parsed > hi) {
-      error(key, v->Scalar() + " is out of range " + real_text(lo) + ".." + real_text(hi));
-      return false;
-    }
-    out = *parsed;
-    return true;
-  }
-
-  bool boolean(std::string_view key, bool& out) {
-    const YAML::Node* v = find(key);
-    if (!v) return false;
-    const auto parsed = is_plain(*v) ? parse_bool(v->Scalar()) : std::nullopt;
-    if (!parsed) {
-      error(key, "expected true or false, got " + describe(*v));
-      return false;
-    }
-    out = *parsed;
-    return true;
-  }
-
-  // A string; an empty value gives "". `max_length` counts bytes.
-  bool text(std::string_view key, std::string& out, size_t max_length = 4096) {
-    const YAML::Node* v = find(key);
-    if (!v) return false;
-    if (v->IsNull()) {
-      out.clear();
-      return true;
-    }
-    if (!v->IsScalar()) {
-      error(key, "expected a string, got " + describe(*v));
-      return false;
-    }
-    if (v->Scalar().size() > max_length) {
-      error(key, "is " + std::to_string(v->Scalar().size()) + " characters long; at most " +
-                     std::to_string(max_length) + " are allowed");
-      return false;
-    }
-    out = v->Scalar();
-    return true;
-  }
-
-  // One of a fixed set of words.
-  template <class E>
-  bool choice(std::string_view key, E& out,
-              std::initializer_list<std::pair<std::string_view, E>> options) {
-    const YAML::Node* v = find(key);
-    if (!v) return false;
-    std::vector<std::string> names;
-    for (const auto& [name, value] : options) {
-      if (v->IsScalar() && v->Scalar() == name) {
-        out = value;
-        return true;
-      }
-      names.emplace_back(name);
-    }
-    std::string message = describe(*v) + " is not allowed; expected one of: " + join(names);
-    if (v->IsScalar()) {
-      if (const auto hint = closest(v->Scalar(), names))
-        message += " (did you mean '" + *hint + "'?)";
-    }
-    error(key, std::move(message));
-    return false;
-  }
-
-  // A file mode, always read as octal like chmod does: "0640", 0640, 640 or 0o640.
-  bool mode(std::string_view key, uint32_t& out) {
-    const YAML::Node* v = find(key);
-    if (!v) return false;
-    std::string_view s = v->IsScalar() ? std::string_view(v->Scalar()) : std::string_view{};
-    if (s.size() > 2 && s[0] == '0' && (s[1] == 'o' || s[1] == 'O')) s.remove_prefix(2);
-    uint32_t value = 0;
-    const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), value, 8);
-    if (s.empty() || ec != std::errc{} || end != s.data() + s.size()) {
-      error(key, "expected an octal file mode such as \"0640\", got " + describe(*v));
-      return false;
-    }
-    if (value > 0777) {
-      error(key, v->Scalar() + " is out of range 0000..0777 (permission bits only)");
-      return false;
-    }
-    out = value;
-    return true;
-  }
-
-  // The items of a list with their paths; an absent or empty key gives none.
-  struct Item {
-    YAML::Node node;
-    std::string path;
-    Loc at;
-  };
-  std::vector<Item> list(std::string_view key) {
-    std::vector<Item> items;
-    const YAML::Node* v = find(key);
-    if (!v || v->IsNull()) return items;
-    if (!v->IsSequence()) {
-      error(key, "expected a list, got " + describe(*v));
-      return items;
-    }
-    size_t i = 0;
-    for (const auto& n : *v) {
-      Loc l = loc_of(n.Mark());
-      if (l.line == 0 || n.IsNull()) l = value_at(key);
-      items.push_back({n, child(key) + "[" + std::to_string(i++) + "]", l});
-    }
-    return items;
-  }
-
-  void finish() {
-    for (const auto& [key, entry] : entries_) {
-      if (std::find(known_.begin(), known_.end(), key) != known_.end()) continue;
-      std::string message = "unknown key '" + key + "'";
-      if (const auto hint = closest(key, known_)) {
-        message += " (did you mean '" + *hint + "'?)";
-      } else {
-        message += "; allowed keys here: " + join(known_);
-      }
-      diag_->error(entry.key_at, child(key), std::move(message));
-    }
-  }
-
- private:
-  struct Entry {
-    Loc key_at;
-    YAML::Node value;
-  };
-
-  bool integer_value(std::string_view key, int64_t& out, int64_t lo, int64_t hi,
-                     std::string_view note) {
-    const YAML::Node* v = find(key);
-    if (!v) return false;
-    const std::string suffix = note.empty() ? std::string() : " " + std::string(note);
-    const std::string expected = "an integer in " + range_text(lo, hi) + suffix;
-    const std::string expected_syntax =
-        "an integer (decimal or 0x hex) in " + range_text(lo, hi) + suffix;
-    if (!is_plain(*v)) {
-      std::string message = "expected " + expected + ", got " + describe(*v);
-      if (v->IsScalar() && parse_integer(v->Scalar()).status == IntParse::Status::Ok) {
-        message += " (write the number without quotes)";
-      }
-      error(key, std::move(message));
-      return false;
-    }
-    const IntParse parsed = parse_integer(v->Scalar());
-    switch (parsed.status) {
-      case IntParse::Status::Ok:
-        break;
-      case IntParse::Status::LeadingZero:
-        error(key, "'" + v->Scalar() +
-                       "' has a leading zero; write a decimal number without it, or 0x hex");
-        return false;
-      case IntParse::Status::Overflow:
-        error(key, v->Scalar() + " is out of range " + range_text(lo, hi) + suffix);
-        return false;
-      case IntParse::Status::Syntax:
-        error(key, "expected " + expected_syntax + ", got " + describe(*v));
-        return false;
-    }
-    if (parsed.value < lo || parsed.value > hi) {
-      error(key, v->Scalar() + " is out of range " + range_text(lo, hi) + suffix);
-      return false;
-    }
-    out = parsed.value;
-    return true;
-  }
-
-  Diagnostics* diag_;
-  std::string path_;
-  Loc at_;
-  std::map<std::string, Entry> entries_;
-  std::vector<std::string> known_;
-};
-
-// ---------------------------------------------------------------------------------------------
-// Sections
-
-constexpr int64_t kU8 = 0xFF;
-constexpr int64_t kU16 = 0xFFFF;
-constexpr int64_t kU32 = 0xFFFFFFFF;
 
 bool valid_name_char(char c) {
   return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == '.';
@@ -537,15 +98,6 @@ void parse_module(Section s, ModuleSettings& m, FunctionModel fm) {
   s.integer("forward_delay_us", m.forward_delay_us, 0, kU16, "µs");
   s.finish();
 }
-
-struct AxisSite {
-  Loc at;
-  Loc name_at;
-  Loc node_at;
-  std::string path;
-  Loc pres_offset_at;
-  Loc preq_offset_at;
-};
 
 void parse_axis(Section s, AxisConfig& a, BusKind bus, size_t index) {
   a.name = "axis" + std::to_string(index);
@@ -617,113 +169,6 @@ void parse_sim_axis(Section s, SimAxisConfig& a, const std::filesystem::path& ba
   s.finish();
 }
 
-bool valid_interface_name(const std::string& name) {
-  // IFNAMSIZ - 1 bytes, no '/', no white space.
-  return !name.empty() && name.size() <= 15 && name != "." && name != ".." &&
-         std::none_of(name.begin(), name.end(), [](char c) {
-           return c == '/' || c == ':' || std::isspace(static_cast<unsigned char>(c));
-         });
-}
-
-struct PowerlinkSites {
-  bool present = false;
-  std::map<uint8_t, Loc> nodes;      // node id → where it is listed
-  std::vector<Loc> pres_timeout_at;  // per nodes[] entry
-};
-
-void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites) {
-  if (s.text("interface", p.interface, 15) && !p.interface.empty() &&
-      !valid_interface_name(p.interface)) {
-    s.error("interface", "'" + p.interface + "' is not a network interface name");
-  }
-  for (auto& item : s.list("nodes")) {
-    Section n(s.diag(), item.node, item.path, item.at);
-    PowerlinkNodeConfig node;
-    if (!n.has("node_id")) {
-      s.diag().error(item.at, n.child("node_id"), "missing required key (CN node id 1..239)");
-    }
-    const bool have_id = n.integer("node_id", node.node_id, 1, 239, "(POWERLINK CN)");
-    n.optional_integer("vendor_id", node.vendor_id, 0, kU32);
-    n.optional_integer("product_code", node.product_code, 0, kU32);
-    n.optional_integer("device_type", node.device_type, 0, kU32);
-    n.integer("pres_timeout_us", node.pres_timeout_us, 1, 100000, "µs");
-    sites.pres_timeout_at.push_back(n.value_at("pres_timeout_us"));
-    n.boolean("mandatory", node.mandatory);
-    n.integer("multiplex", node.multiplex, 0, 255, "(0 = every cycle)");
-    n.optional_integer("preq_size", node.preq_size, 0, 1490);
-    n.optional_integer("pres_size", node.pres_size, 0, 1490);
-    if (have_id) {
-      if (const auto prev = sites.nodes.find(node.node_id); prev != sites.nodes.end()) {
-        n.error("node_id", "node " + std::to_string(node.node_id) + " is listed twice (also at " +
-                               where(prev->second) + ")");
-      } else {
-        sites.nodes.emplace(node.node_id, n.value_at("node_id"));
-      }
-    }
-    n.finish();
-    p.nodes.push_back(node);
-  }
-  Section t = s.section("thresholds");
-  t.integer("loss_of_pres", p.thresholds.loss_of_pres, 0, kU32, "(0 = disabled)");
-  t.integer("cycle_time_exceeded", p.thresholds.cycle_time_exceeded, 0, kU32, "(0 = disabled)");
-  t.integer("late_pres", p.thresholds.late_pres, 0, kU32, "(0 = disabled)");
-  t.finish();
-  Section nmt = s.section("nmt");
-  nmt.integer("pre_op1_timeout_ms", p.nmt.pre_op1_timeout_ms, 1, 600000, "ms");
-  nmt.integer("boot_step_timeout_ms", p.nmt.boot_step_timeout_ms, 1, 600000, "ms");
-  nmt.integer("reset_wait_ms", p.nmt.reset_wait_ms, 0, 600000, "ms");
-  nmt.integer("status_request_every", p.nmt.status_request_every, 1, 10000, "cycles");
-  nmt.finish();
-  s.integer("async_timeout_us", p.async_timeout_us, 1, 100000, "µs");
-  s.integer("sdo_timeout_ms", p.sdo_timeout_ms, 1, 60000, "ms");
-  s.integer("nettime_offset_us", p.nettime_offset_us, std::numeric_limits<int64_t>::min(),
-            std::numeric_limits<int64_t>::max());
-  std::map<uint16_t, Loc> overridden;
-  for (auto& item : s.list("sdo_overrides")) {
-    Section o(s.diag(), item.node, item.path, item.at);
-    uint16_t reg = 0;
-    uint16_t index = 0;
-    uint8_t subindex = 0;
-    for (const char* required : {"register", "index"}) {
-      if (!o.has(required)) {
-        s.diag().error(item.at, o.child(required), "missing required key");
-      }
-    }
-    const bool have_reg = o.integer("register", reg, 0, kU16, "(X20DS1928 register number)");
-    const bool have_index = o.integer("index", index, 1, kU16);
-    o.integer("subindex", subindex, 0, kU8);
-    if (have_reg && have_index) {
-      if (const auto prev = overridden.find(reg); prev != overridden.end()) {
-        o.error("register", "register " + std::to_string(reg) + " is overridden twice (also at " +
-                                where(prev->second) + ")");
-      } else {
-        overridden.emplace(reg, o.value_at("register"));
-        p.sdo_overrides[reg] = {index, subindex};
-      }
-    }
-    o.finish();
-  }
-  s.finish();
-}
-
-void parse_canio(Section s, CanioBusConfig& c) {
-  if (s.text("interface", c.interface, 15) && !valid_interface_name(c.interface)) {
-    s.error("interface", "'" + c.interface + "' is not a network interface name");
-  }
-  if (s.integer("bitrate", c.bitrate, 0, kU32, "bit/s")) {
-    constexpr std::array<uint32_t, 9> kRates{10000,  20000,  50000,  100000, 125000,
-                                             250000, 500000, 800000, 1000000};
-    if (std::find(kRates.begin(), kRates.end(), c.bitrate) == kRates.end()) {
-      s.error("bitrate", std::to_string(c.bitrate) +
-                             " is not a CAN bit rate; expected one of 10000, 20000, 50000, 100000, "
-                             "125000, 250000, 500000, 800000, 1000000");
-    }
-  }
-  s.integer("response_timeout_us", c.response_timeout_us, 1, 100000, "µs");
-  s.choice("byte_order", c.little_endian, {{"little", true}, {"big", false}});
-  s.finish();
-}
-
 void parse_shm(Section s, ShmConfig& c) {
   if (s.text("name", c.name, 255)) {
     const bool ok = c.name.size() >= 2 && c.name[0] == '/' &&
@@ -749,117 +194,15 @@ void parse_socket(Section s, SocketConfig& c) {
   s.integer("max_clients", c.max_clients, 1, 1024);
   s.integer("max_request_bytes", c.max_request_bytes, 256, 1048576, "bytes");
   s.integer("idle_timeout_ms", c.idle_timeout_ms, 0, 86400000, "ms (0 = never)");
+  s.integer("reply_buffer_bytes", c.reply_buffer_bytes, 4096, 67108864, "bytes");
+  s.integer("reply_stall_timeout_ms", c.reply_stall_timeout_ms, 100, 86400000, "ms");
   s.finish();
 }
 
 // ---------------------------------------------------------------------------------------------
 
-// Where the value at `keys` below `node` is written; the deepest existing key when the full path
-// is not in the file. (Recursion instead of a loop: assigning a YAML::Node writes through it.)
-Loc locate(const YAML::Node& node, std::initializer_list<std::string_view> keys, size_t depth = 0) {
-  const Loc here = loc_of(node.Mark());
-  if (depth == keys.size() || !node.IsMap()) return here;
-  const std::string_view key = *(keys.begin() + depth);
-  for (auto it = node.begin(); it != node.end(); ++it) {
-    if (!it->first.IsScalar() || it->first.Scalar() != key) continue;
-    if (it->second.IsNull() || depth + 1 == keys.size()) {
-      const Loc v = loc_of(it->second.Mark());
-      return it->second.IsNull() || v.line == 0 ? loc_of(it->first.Mark()) : v;
-    }
-    return locate(it->second, keys, depth + 1);
-  }
-  return here;
-}
-
-// POWERLINK process image of each CN (docs/powerlink.md §Process image): a module sits at its
-// pres_offset/preq_offset or at its offset in the all-default packed layout (slot order). Two
-// blocks must not share a byte and each must end within 1490 bytes and the node's configured
-// pres_size/preq_size. The MN checks the same at start (make_layout()); here the message can
-// point at the file.
-void check_process_image(Diagnostics& diag, const DaemonConfig& c,
-                         const std::vector<AxisSite>& axes) {
-  struct Block {
-    size_t axis;
-    size_t start[2];  // PRes, PReq
-    size_t size[2];
-  };
-  static constexpr const char* kFrame[2] = {"PRes", "PReq"};
-  static constexpr const char* kKey[2] = {"pres_offset", "preq_offset"};
-  std::map<uint8_t, std::vector<size_t>> by_node;
-  for (size_t i = 0; i < axes.size() && i < c.axes.size(); ++i)
-    by_node[c.axes[i].node].push_back(i);
-  for (auto& [node, members] : by_node) {
-    std::stable_sort(members.begin(), members.end(),
-                     [&](size_t x, size_t y) { return c.axes[x].slot < c.axes[y].slot; });
-    const PowerlinkNodeConfig* nc = nullptr;
-    for (const auto& n : c.powerlink.nodes)
-      if (n.node_id == node) nc = &n;
-    std::vector<Block> blocks;
-    size_t packed[2] = {0, 0};
-    for (size_t i : members) {
-      const AxisConfig& a = c.axes[i];
-      const std::optional<uint16_t> offset[2] = {a.pres_offset, a.preq_offset};
-      Block b{i, {}, {16u + a.module.input_mtu, 2u + a.module.output_mtu}};
-      for (int f = 0; f < 2; ++f) {
-        b.start[f] = offset[f] ? *offset[f] : packed[f];
-        packed[f] += b.size[f];
-      }
-      blocks.push_back(b);
-    }
-    for (size_t k = 0; k < blocks.size(); ++k) {
-      const Block& b = blocks[k];
-      const AxisConfig& a = c.axes[b.axis];
-      const std::optional<uint16_t> offset[2] = {a.pres_offset, a.preq_offset};
-      const std::optional<uint16_t> limit[2] = {nc ? nc->pres_size : std::nullopt,
-                                                nc ? nc->preq_size : std::nullopt};
-      for (int f = 0; f < 2; ++f) {
-        const Loc at = offset[f]
-                           ? (f == 0 ? axes[b.axis].pres_offset_at : axes[b.axis].preq_offset_at)
-                           : axes[b.axis].at;
-        const std::string path = axes[b.axis].path + (offset[f] ? std::string(".") + kKey[f] : "");
-        const std::string what = std::string(kFrame[f]) + " block of node " + std::to_string(node) +
-                                 " slot " + std::to_string(a.slot) + " (bytes " +
-                                 std::to_string(b.start[f]) + ".." +
-                                 std::to_string(b.start[f] + b.size[f] - 1) + ")";
-        const size_t end = b.start[f] + b.size[f];
-        const size_t max = limit[f] ? *limit[f] : 1490;
-        if (end > max) {
-          diag.error(at, path,
-                     what + " ends past the " + kFrame[f] + " payload of " + std::to_string(max) +
-                         " bytes" +
-                         (limit[f] ? std::string(" (powerlink.nodes ") +
-                                         (f == 0 ? "pres_size" : "preq_size") + ")"
-                                   : std::string()));
-        }
-        for (size_t j = 0; j < k; ++j) {
-          const Block& o = blocks[j];
-          if (!(b.start[f] < o.start[f] + o.size[f] && o.start[f] < end)) continue;
-          // Report at the moved block: a default place is not what the user wrote.
-          const bool here =
-              offset[f] || !(f == 0 ? c.axes[o.axis].pres_offset : c.axes[o.axis].preq_offset);
-          const Block& r = here ? b : o;  // reported
-          const Block& x = here ? o : b;  // the one it hits
-          const std::string key = offset[f] || !here ? std::string(".") + kKey[f] : "";
-          const Loc r_at =
-              key.empty() ? axes[r.axis].at
-                          : (f == 0 ? axes[r.axis].pres_offset_at : axes[r.axis].preq_offset_at);
-          auto bytes = [f](const Block& blk) {
-            return "(bytes " + std::to_string(blk.start[f]) + ".." +
-                   std::to_string(blk.start[f] + blk.size[f] - 1) + ")";
-          };
-          diag.error(r_at, axes[r.axis].path + key,
-                     std::string(kFrame[f]) + " block of node " + std::to_string(node) + " slot " +
-                         std::to_string(c.axes[r.axis].slot) + " " + bytes(r) + " overlaps slot " +
-                         std::to_string(c.axes[x.axis].slot) + " " + bytes(x) + " of axes[" +
-                         std::to_string(x.axis) + "] (" + where(axes[x.axis].at) + ")");
-        }
-      }
-    }
-  }
-}
-
 void check_cross_fields(Diagnostics& diag, const DaemonConfig& c, const std::vector<AxisSite>& axes,
-                        const PowerlinkSites& pl_sites, Loc spin_at, Loc canio_timeout_at) {
+                        const PowerlinkSites& pl_sites, Loc spin_at) {
   std::map<std::string, size_t> names;
   std::map<std::pair<uint8_t, uint8_t>, size_t> places;
   for (size_t i = 0; i < axes.size() && i < c.axes.size(); ++i) {
@@ -890,25 +233,7 @@ void check_cross_fields(Diagnostics& diag, const DaemonConfig& c, const std::vec
                    ") must be less than cycle.period_us (" + std::to_string(c.cycle.period_us) +
                    ")");
   }
-  if (c.bus == BusKind::Powerlink) {
-    check_process_image(diag, c, axes);
-    for (size_t i = 0; i < c.powerlink.nodes.size() && i < pl_sites.pres_timeout_at.size(); ++i) {
-      const auto& n = c.powerlink.nodes[i];
-      if (n.pres_timeout_us >= c.cycle.period_us) {
-        diag.error(pl_sites.pres_timeout_at[i],
-                   "powerlink.nodes[" + std::to_string(i) + "].pres_timeout_us",
-                   "pres_timeout_us (" + std::to_string(n.pres_timeout_us) +
-                       ") must be less than cycle.period_us (" + std::to_string(c.cycle.period_us) +
-                       ")");
-      }
-    }
-  }
-  if (c.bus == BusKind::Canio && c.canio.response_timeout_us >= c.cycle.period_us) {
-    diag.error(canio_timeout_at, "canio.response_timeout_us",
-               "response_timeout_us (" + std::to_string(c.canio.response_timeout_us) +
-                   ") must be less than cycle.period_us (" + std::to_string(c.cycle.period_us) +
-                   ")");
-  }
+  if (c.bus == BusKind::Powerlink) check_powerlink(diag, c, axes, pl_sites);
 }
 
 DaemonConfig parse_document(Diagnostics& diag, const YAML::Node& doc, const std::string& name,
@@ -935,7 +260,7 @@ DaemonConfig parse_document(Diagnostics& diag, const YAML::Node& doc, const std:
   const bool have_powerlink = root.has("powerlink");
   pl_sites.present = have_powerlink;
   const bool have_canio = root.has("canio");
-  parse_powerlink(root.section("powerlink"), c.powerlink, pl_sites);
+  parse_powerlink(root.section("powerlink"), c.powerlink, pl_sites, base_dir);
   parse_canio(root.section("canio"), c.canio);
   if (c.bus == BusKind::Powerlink && !have_powerlink) {
     root.error("bus",
@@ -962,7 +287,9 @@ DaemonConfig parse_document(Diagnostics& diag, const YAML::Node& doc, const std:
     c.axes.push_back(std::move(axis));
   }
   if (c.axes.empty()) {
-    if (c.bus == BusKind::Simulated) {
+    if (c.bus == BusKind::Powerlink) {
+      // Valid: the MN then runs CNs without X20DS1928 only (generic CNs, raw process data).
+    } else if (c.bus == BusKind::Simulated) {
       AxisConfig axis;
       axis.name = "axis0";
       c.axes.push_back(axis);
@@ -997,8 +324,8 @@ DaemonConfig parse_document(Diagnostics& diag, const YAML::Node& doc, const std:
   parse_socket(root.section("socket"), c.socket);
   root.finish();
 
-  check_cross_fields(diag, c, axis_sites, pl_sites, locate(doc, {"cycle", "spin_us"}),
-                     locate(doc, {"canio", "response_timeout_us"}));
+  check_cross_fields(diag, c, axis_sites, pl_sites, locate(doc, {"cycle", "spin_us"}));
+  if (c.bus == BusKind::Canio) check_canio(diag, c, doc);
   return c;
 }
 
@@ -1065,41 +392,12 @@ ConfigResult load_text(std::string_view text, const std::string& name,
 // ---------------------------------------------------------------------------------------------
 // Dump
 
-std::string quote(std::string_view s) {
-  std::string out = "\"";
-  for (const char ch : s) {
-    const auto c = static_cast<unsigned char>(ch);
-    if (c == '"' || c == '\\') {
-      out += '\\';
-      out += ch;
-    } else if (c < 0x20) {
-      static constexpr char kHex[] = "0123456789abcdef";
-      out += "\\x";
-      out += kHex[c >> 4];
-      out += kHex[c & 0xF];
-    } else {
-      out += ch;
-    }
-  }
-  return out + "\"";
-}
-
 std::string octal(uint32_t mode) {
   std::array<char, 16> buf{};
   const auto [end, ec] = std::to_chars(buf.data(), buf.data() + buf.size(), mode, 8);
   std::string digits(buf.data(), ec == std::errc{} ? end : buf.data());
   while (digits.size() < 3) digits.insert(digits.begin(), '0');
   return "\"0" + digits + "\"";
-}
-
-std::string hex(uint64_t v) {
-  std::array<char, 24> buf{};
-  const auto [end, ec] = std::to_chars(buf.data(), buf.data() + buf.size(), v, 16);
-  return "0x" + std::string(buf.data(), ec == std::errc{} ? end : buf.data());
-}
-
-const char* yes(bool b) {
-  return b ? "true" : "false";
 }
 
 }  // namespace
@@ -1203,45 +501,8 @@ std::string dump_config(const DaemonConfig& c) {
       << "      encoder_file: " << quote(a.encoder_file) << "\n"
       << "      inject_error_info: " << hex(a.inject_error_info) << "\n";
   }
-  const auto& p = c.powerlink;
-  o << "powerlink:\n"
-    << "  interface: " << quote(p.interface) << "\n"
-    << "  nodes:" << (p.nodes.empty() ? " []" : "") << "\n";
-  const auto opt = [](const auto& v) { return v ? hex(*v) : std::string(); };
-  const auto opt_dec = [](const auto& v) { return v ? std::to_string(*v) : std::string(); };
-  for (const auto& n : p.nodes) {
-    o << "    - node_id: " << +n.node_id << "\n"
-      << "      vendor_id: " << opt(n.vendor_id) << "\n"
-      << "      product_code: " << opt(n.product_code) << "\n"
-      << "      device_type: " << opt(n.device_type) << "\n"
-      << "      pres_timeout_us: " << n.pres_timeout_us << "\n"
-      << "      mandatory: " << yes(n.mandatory) << "\n"
-      << "      multiplex: " << n.multiplex << "\n"
-      << "      preq_size: " << opt_dec(n.preq_size) << "\n"
-      << "      pres_size: " << opt_dec(n.pres_size) << "\n";
-  }
-  o << "  thresholds:\n"
-    << "    loss_of_pres: " << p.thresholds.loss_of_pres << "\n"
-    << "    cycle_time_exceeded: " << p.thresholds.cycle_time_exceeded << "\n"
-    << "    late_pres: " << p.thresholds.late_pres << "\n"
-    << "  nmt:\n"
-    << "    pre_op1_timeout_ms: " << p.nmt.pre_op1_timeout_ms << "\n"
-    << "    boot_step_timeout_ms: " << p.nmt.boot_step_timeout_ms << "\n"
-    << "    reset_wait_ms: " << p.nmt.reset_wait_ms << "\n"
-    << "    status_request_every: " << p.nmt.status_request_every << "\n"
-    << "  async_timeout_us: " << p.async_timeout_us << "\n"
-    << "  sdo_timeout_ms: " << p.sdo_timeout_ms << "\n"
-    << "  nettime_offset_us: " << p.nettime_offset_us << "\n"
-    << "  sdo_overrides:" << (p.sdo_overrides.empty() ? " []" : "") << "\n";
-  for (const auto& [reg, target] : p.sdo_overrides) {
-    o << "    - {register: " << reg << ", index: " << hex(target.first)
-      << ", subindex: " << hex(target.second) << "}\n";
-  }
-  o << "canio:\n"
-    << "  interface: " << quote(c.canio.interface) << "\n"
-    << "  bitrate: " << c.canio.bitrate << "\n"
-    << "  response_timeout_us: " << c.canio.response_timeout_us << "\n"
-    << "  byte_order: " << (c.canio.little_endian ? "little" : "big") << "\n";
+  dump_powerlink(o, c.powerlink);
+  dump_canio(o, c.canio);
   o << "axes:\n";
   for (const auto& a : c.axes) {
     const auto& m = a.module;
@@ -1283,7 +544,9 @@ std::string dump_config(const DaemonConfig& c) {
     << "  privileged_group: " << quote(k.privileged_group) << "\n"
     << "  max_clients: " << k.max_clients << "\n"
     << "  max_request_bytes: " << k.max_request_bytes << "\n"
-    << "  idle_timeout_ms: " << k.idle_timeout_ms << "\n";
+    << "  idle_timeout_ms: " << k.idle_timeout_ms << "\n"
+    << "  reply_buffer_bytes: " << k.reply_buffer_bytes << "\n"
+    << "  reply_stall_timeout_ms: " << k.reply_stall_timeout_ms << "\n";
   return o.str();
 }
 

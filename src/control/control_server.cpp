@@ -1,6 +1,7 @@
 #include "control/control_server.hpp"
 
 #include <grp.h>
+#include <spdlog/spdlog.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
 
@@ -32,6 +33,7 @@ std::string_view to_string(ErrorCode code) noexcept {
       return "too_many_clients";
     case ErrorCode::IdleTimeout:
       return "idle_timeout";
+
     case ErrorCode::Internal:
       return "internal";
   }
@@ -39,6 +41,45 @@ std::string_view to_string(ErrorCode code) noexcept {
 }
 
 namespace {
+
+// Deeper than any request of docs/socket-protocol.md needs; bounds the recursion of copying and
+// dumping an echoed "id" whatever the client sends.
+constexpr unsigned kMaxJsonDepth = 64;
+// Messages quote what the client sent: a bounded prefix of it.
+constexpr std::size_t kMaxQuoted = 160;
+
+std::string bounded(std::string text, std::size_t max = kMaxQuoted) {
+  if (text.size() <= max) return text;
+  const std::size_t total = text.size();
+  text.resize(max);
+  return text + "... (" + std::to_string(total) + " bytes)";
+}
+
+// The byte offset where `line` nests deeper than `max` arrays/objects, if it does. Brackets in
+// strings do not count; the JSON parser reports every other malformation.
+std::optional<std::size_t> too_deep(std::string_view line, unsigned max) {
+  unsigned depth = 0;
+  bool in_string = false;
+  bool escaped = false;
+  for (std::size_t i = 0; i < line.size(); ++i) {
+    const char c = line[i];
+    if (in_string) {
+      if (escaped)
+        escaped = false;
+      else if (c == '\\')
+        escaped = true;
+      else if (c == '"')
+        in_string = false;
+    } else if (c == '"') {
+      in_string = true;
+    } else if (c == '[' || c == '{') {
+      if (++depth > max) return i;
+    } else if ((c == ']' || c == '}') && depth > 0) {
+      --depth;
+    }
+  }
+  return std::nullopt;
+}
 
 json error_reply(std::string_view code, std::string message) {
   return json{{"ok", false}, {"error", {{"code", code}, {"message", std::move(message)}}}};
@@ -153,15 +194,22 @@ class Session : public std::enable_shared_from_this<Session> {
   void send(json reply, bool close_after);
   void write_next();
   void arm_idle_timer();
+  // Back-pressure: no request is read or handled while this many reply bytes wait for the
+  // client; the stall timer closes the connection when they keep waiting.
+  [[nodiscard]] bool output_full() const noexcept;
+  void on_output_drained();
 
   std::shared_ptr<Server::Impl> impl_;
   Server::Impl& server_;
   local::socket socket_;
   asio::steady_timer idle_timer_;
+  asio::steady_timer stall_timer_;
   PeerCredentials peer_;
   std::string inbuf_;
   std::array<char, 4096> chunk_{};
   std::deque<std::pair<std::string, bool>> outq_;  // line, close after it
+  std::size_t out_bytes_ = 0;                      // in outq_
+  bool stall_armed_ = false;
   std::weak_ptr<detail::ReplyState> pending_state_;
   uint64_t pending_ = 0;  // serial of the request awaiting its reply, 0: none
   uint64_t serial_ = 0;
@@ -174,16 +222,22 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
   asio::io_context& io;
   SocketConfig config;
   local::acceptor acceptor;
+  asio::steady_timer accept_retry;
+  bool accept_failing = false;  // logged once per run of failures
   std::map<std::string, Handler, std::less<>> commands;
   std::set<std::shared_ptr<Session>> sessions;
   bool listening = false;
 
   Impl(asio::io_context& io_, SocketConfig config_)
-      : io(io_), config(std::move(config_)), acceptor(io_) {}
+      : io(io_), config(std::move(config_)), acceptor(io_), accept_retry(io_) {}
 
   void accept();
   void reject(local::socket socket);
 };
+
+bool Session::output_full() const noexcept {
+  return out_bytes_ >= server_.config.reply_buffer_bytes;
+}
 
 detail::ReplyState::~ReplyState() {
   if (done.load()) return;
@@ -210,7 +264,8 @@ Session::Session(std::shared_ptr<Server::Impl> server, local::socket socket)
     : impl_(std::move(server)),
       server_(*impl_),
       socket_(std::move(socket)),
-      idle_timer_(server_.io) {
+      idle_timer_(server_.io),
+      stall_timer_(server_.io) {
   ucred cred{};
   socklen_t len = sizeof(cred);
   if (getsockopt(socket_.native_handle(), SOL_SOCKET, SO_PEERCRED, &cred, &len) == 0) {
@@ -239,7 +294,7 @@ void Session::arm_idle_timer() {
 }
 
 void Session::read_more() {
-  if (reading_ || closed_ || closing_) return;
+  if (reading_ || closed_ || closing_ || output_full()) return;
   // Back-pressure: while a request is pending, buffer at most one more request's worth.
   if (pending_ && inbuf_.size() > server_.config.max_request_bytes) return;
   reading_ = true;
@@ -263,7 +318,7 @@ void Session::on_read(const boost::system::error_code& ec, std::size_t n) {
 
 void Session::process_buffer() {
   const std::size_t limit = server_.config.max_request_bytes;
-  while (!pending_ && !closing_ && !closed_) {
+  while (!pending_ && !closing_ && !closed_ && !output_full()) {
     const auto nl = inbuf_.find('\n');
     if (nl == std::string::npos) {
       if (inbuf_.size() > limit) {
@@ -291,13 +346,21 @@ void Session::process_buffer() {
 }
 
 void Session::handle_line(std::string_view line) {
+  if (const auto at = too_deep(line, kMaxJsonDepth)) {
+    send(error_reply(to_string(ErrorCode::BadJson),
+                     "nested deeper than " + std::to_string(kMaxJsonDepth) +
+                         " arrays/objects (at byte " + std::to_string(*at) + ")"),
+         false);
+    return;
+  }
   json body;
   try {
     body = json::parse(line);
-  } catch (const json::parse_error& e) {
+  } catch (const json::exception& e) {
+    // parse_error, and out_of_range for numbers beyond a double (a 400-digit "id").
     std::string what = e.what();
     if (const auto p = what.find("] "); p != std::string::npos) what.erase(0, p + 2);
-    send(error_reply(to_string(ErrorCode::BadJson), what), false);
+    send(error_reply(to_string(ErrorCode::BadJson), bounded(std::move(what))), false);
     return;
   }
   if (!body.is_object()) {
@@ -323,7 +386,8 @@ void Session::handle_line(std::string_view line) {
   if (handler == server_.commands.end()) {
     std::string known;
     for (const auto& [n, h] : server_.commands) known += (known.empty() ? "" : ", ") + n;
-    return fail(ErrorCode::UnknownCommand, "unknown command '" + name + "' (known: " + known + ")");
+    return fail(ErrorCode::UnknownCommand,
+                "unknown command '" + bounded(name, 64) + "' (known: " + known + ")");
   }
 
   auto state = std::make_shared<detail::ReplyState>();
@@ -335,12 +399,21 @@ void Session::handle_line(std::string_view line) {
   pending_state_ = state;
   idle_timer_.cancel();
   Reply reply(std::move(state));
+  // Nothing a handler throws reaches the io_context: the client gets the error, the daemon
+  // goes on.
   try {
     handler->second(Request(name, body, peer_), reply);
   } catch (const ArgumentError& e) {
-    reply.error(ErrorCode::BadArgument, e.what());
+    reply.error(ErrorCode::BadArgument, bounded(e.what(), 2 * kMaxQuoted));
+  } catch (const json::exception& e) {
+    // A handler reading the request body beyond the typed accessors.
+    reply.error(ErrorCode::BadArgument, "'" + name + "': " + bounded(e.what(), 2 * kMaxQuoted));
   } catch (const std::exception& e) {
-    reply.error(ErrorCode::Internal, e.what());
+    spdlog::warn("control command '{}' failed: {}", name, e.what());
+    reply.error(ErrorCode::Internal, "'" + name + "' failed: " + bounded(e.what()));
+  } catch (...) {
+    spdlog::warn("control command '{}' failed with a non-standard exception", name);
+    reply.error(ErrorCode::Internal, "'" + name + "' failed");
   }
 }
 
@@ -359,6 +432,20 @@ void Session::send(json reply, bool close_after) {
   if (close_after) closing_ = true;
   outq_.emplace_back(reply.dump(-1, ' ', false, json::error_handler_t::replace) + "\n",
                      close_after);
+  out_bytes_ += outq_.back().first.size();
+  if (output_full() && !stall_armed_) {
+    // The client does not read its replies: it gets reply_stall_timeout_ms to start again.
+    stall_armed_ = true;
+    stall_timer_.expires_after(std::chrono::milliseconds(server_.config.reply_stall_timeout_ms));
+    stall_timer_.async_wait([self = weak_from_this()](const boost::system::error_code& ec) {
+      auto s = self.lock();
+      if (ec || !s || s->closed_ || !s->stall_armed_) return;
+      spdlog::warn(
+          "control client pid {} uid {}: {} bytes of replies unread for {} ms; connection closed",
+          s->peer_.pid, s->peer_.uid, s->out_bytes_, s->server_.config.reply_stall_timeout_ms);
+      s->close();
+    });
+  }
   if (outq_.size() == 1) write_next();
 }
 
@@ -367,14 +454,25 @@ void Session::write_next() {
   asio::async_write(socket_, asio::buffer(outq_.front().first),
                     [self = shared_from_this()](const boost::system::error_code& ec, std::size_t) {
                       if (self->closed_) return;
+                      const bool was_full = self->output_full();
                       const bool close_after = self->outq_.front().second;
+                      self->out_bytes_ -= self->outq_.front().first.size();
                       self->outq_.pop_front();
                       if (ec || close_after) {
                         self->close();
                         return;
                       }
                       self->write_next();
+                      if (was_full && !self->output_full()) self->on_output_drained();
                     });
+}
+
+void Session::on_output_drained() {
+  stall_armed_ = false;
+  stall_timer_.cancel();
+  if (!pending_) arm_idle_timer();
+  process_buffer();
+  read_more();
 }
 
 void Session::close() {
@@ -382,6 +480,7 @@ void Session::close() {
   closed_ = true;
   boost::system::error_code ignored;
   idle_timer_.cancel();
+  stall_timer_.cancel();
   socket_.shutdown(local::socket::shutdown_both, ignored);
   socket_.close(ignored);
   if (auto state = pending_state_.lock()) {
@@ -391,6 +490,8 @@ void Session::close() {
   }
   pending_ = 0;
   pending_state_.reset();
+  outq_.clear();
+  out_bytes_ = 0;
   server_.sessions.erase(shared_from_this());
 }
 
@@ -434,14 +535,25 @@ void Server::Impl::accept() {
   acceptor.async_accept(
       [self = shared_from_this()](const boost::system::error_code& ec, local::socket socket) {
         if (!self->listening) return;
-        if (!ec) {
-          if (self->sessions.size() >= self->config.max_clients) {
-            self->reject(std::move(socket));
-          } else {
-            auto s = std::make_shared<Session>(self, std::move(socket));
-            self->sessions.insert(s);
-            s->start();
-          }
+        if (ec) {
+          // Out of file descriptors (EMFILE/ENFILE) or memory: the pending connection stays in
+          // the backlog, so accepting again at once would spin. Retry shortly instead.
+          if (!std::exchange(self->accept_failing, true))
+            spdlog::warn("control socket: accept failed: {}; retrying every 100 ms", ec.message());
+          self->accept_retry.expires_after(std::chrono::milliseconds(100));
+          self->accept_retry.async_wait([self](const boost::system::error_code& e) {
+            if (!e && self->listening) self->accept();
+          });
+          return;
+        }
+        if (std::exchange(self->accept_failing, false))
+          spdlog::info("control socket: accepting connections again");
+        if (self->sessions.size() >= self->config.max_clients) {
+          self->reject(std::move(socket));
+        } else {
+          auto s = std::make_shared<Session>(self, std::move(socket));
+          self->sessions.insert(s);
+          s->start();
         }
         self->accept();
       });
@@ -532,6 +644,7 @@ void Server::stop() {
   auto& impl = *impl_;
   const bool was_open = impl.acceptor.is_open();
   impl.listening = false;
+  impl.accept_retry.cancel();
   boost::system::error_code ignored;
   impl.acceptor.close(ignored);
   auto sessions = impl.sessions;  // close() erases

@@ -11,7 +11,7 @@ class FrameCategory final : public std::error_category {
   std::string message(int ev) const override {
     switch (static_cast<FrameError>(ev)) {
       case FrameError::kFrameTooShort:
-        return "frame too short";
+        return "frame shorter than the 17-byte POWERLINK header";
       case FrameError::kFrameTooLong:
         return "frame longer than 1514 bytes";
       case FrameError::kNotPowerlink:
@@ -38,6 +38,20 @@ class FrameCategory final : public std::error_category {
         return "frame is of another message type";
       case FrameError::kBufferTooSmall:
         return "buffer too small for the frame";
+      case FrameError::kSocTruncated:
+        return "SoC truncated: its fields need 36 bytes";
+      case FrameError::kPollTruncated:
+        return "PReq/PRes truncated: its header needs 24 bytes";
+      case FrameError::kSoaTruncated:
+        return "SoA truncated: its fields need 23 bytes";
+      case FrameError::kAsndTruncated:
+        return "ASnd truncated: ServiceID missing, or NMTCommand/NMTRequest shorter than 20 bytes";
+      case FrameError::kIdentResponseTruncated:
+        return "IdentResponse truncated: it needs 176 bytes";
+      case FrameError::kStatusResponseTruncated:
+        return "StatusResponse truncated: it needs 32 bytes up to its static error field";
+      case FrameError::kSdoTruncated:
+        return "SDO truncated: sequence layer missing or command layer header incomplete";
     }
     return "unknown frame error";
   }

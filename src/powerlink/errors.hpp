@@ -13,7 +13,7 @@ namespace ds1928::powerlink {
 
 // What was wrong with a frame (parse) or a request to build one.
 enum class FrameError : int {
-  kFrameTooShort = 1,           // fewer than 60 bytes, or shorter than its message needs
+  kFrameTooShort = 1,           // shorter than the 17-byte POWERLINK header (or the Ethernet one)
   kFrameTooLong,                // more than 1514 bytes
   kNotPowerlink,                // EtherType is not 0x88AB
   kUnknownMessageType,          // MessageType not SoC/PReq/PRes/SoA/ASnd
@@ -27,6 +27,15 @@ enum class FrameError : int {
   kSdoInconsistentCommand,      // e.g. an abort without its 4-byte code, initiate without size
   kWrongMessageType,            // a parse_xxx() call got a frame of another type
   kBufferTooSmall,              // build: output span cannot hold the frame
+  // The frame ends inside the fixed fields of its message. Frames shorter than Ethernet's 60
+  // bytes are otherwise accepted: software senders on veth/TAP links do not pad.
+  kSocTruncated,             // SoC shorter than 36 bytes
+  kPollTruncated,            // PReq/PRes shorter than 24 bytes (header up to the payload size)
+  kSoaTruncated,             // SoA shorter than 23 bytes
+  kAsndTruncated,            // ASnd without its ServiceID, or NMTCommand/NMTRequest < 20 bytes
+  kIdentResponseTruncated,   // IdentResponse shorter than 176 bytes
+  kStatusResponseTruncated,  // StatusResponse shorter than 32 bytes (up to the static error field)
+  kSdoTruncated,             // SDO without its sequence layer, or a partial command header
 };
 
 // SDO transfer outcome not expressed by an abort code from the peer.

@@ -62,6 +62,7 @@ uint8_t* begin_frame(std::span<uint8_t> out, std::size_t content, const FrameHea
 }
 
 Result<Soc> decode_soc(std::span<const uint8_t> f, const FrameHeader& h) noexcept {
+  if (f.size() < kSocSize) return FrameError::kSocTruncated;
   if (h.src_node != kNodeMn) return FrameError::kInvalidSourceNode;
   if (h.dst_node != kNodeBroadcast) return FrameError::kInvalidDestinationNode;
   Soc s;
@@ -74,6 +75,7 @@ Result<Soc> decode_soc(std::span<const uint8_t> f, const FrameHeader& h) noexcep
 }
 
 Result<std::span<const uint8_t>> decode_poll_payload(std::span<const uint8_t> f) noexcept {
+  if (f.size() < kPollPayloadOffset) return FrameError::kPollTruncated;
   const std::size_t size = load_le16(&f[22]);
   if (size > kMaxIsoPayload) return FrameError::kPayloadTooLarge;
   if (kPollPayloadOffset + size > f.size()) return FrameError::kPayloadSizeExceedsFrame;
@@ -97,6 +99,7 @@ Result<PReq> decode_preq(std::span<const uint8_t> f, const FrameHeader& h) noexc
 Result<PRes> decode_pres(std::span<const uint8_t> f, const FrameHeader& h) noexcept {
   if (!is_cn(h.src_node) && h.src_node != kNodeMn) return FrameError::kInvalidSourceNode;
   if (h.dst_node != kNodeBroadcast) return FrameError::kInvalidDestinationNode;
+  if (f.size() < kPollPayloadOffset) return FrameError::kPollTruncated;
   if (!is_valid_nmt_state(f[17])) return FrameError::kInvalidNmtState;
   auto payload = decode_poll_payload(f);
   if (!payload) return payload.error();
@@ -115,6 +118,7 @@ Result<PRes> decode_pres(std::span<const uint8_t> f, const FrameHeader& h) noexc
 Result<SoA> decode_soa(std::span<const uint8_t> f, const FrameHeader& h) noexcept {
   if (h.src_node != kNodeMn) return FrameError::kInvalidSourceNode;
   if (h.dst_node != kNodeBroadcast) return FrameError::kInvalidDestinationNode;
+  if (f.size() < kSoaSize) return FrameError::kSoaTruncated;
   if (!is_valid_nmt_state(f[17])) return FrameError::kInvalidNmtState;
   if (!is_valid_requested_service(f[20])) return FrameError::kUnknownServiceId;
   SoA s;
@@ -131,7 +135,7 @@ Result<SoA> decode_soa(std::span<const uint8_t> f, const FrameHeader& h) noexcep
 }
 
 Result<IdentResponse> decode_ident(std::span<const uint8_t> f) noexcept {
-  if (f.size() < kIdentResponseSize) return FrameError::kFrameTooShort;
+  if (f.size() < kIdentResponseSize) return FrameError::kIdentResponseTruncated;
   if (!is_valid_nmt_state(f[20])) return FrameError::kInvalidNmtState;
   IdentResponse r;
   r.exception_new = (f[18] & kFlagEn) != 0;
@@ -163,7 +167,8 @@ Result<IdentResponse> decode_ident(std::span<const uint8_t> f) noexcept {
 }
 
 Result<StatusResponse> decode_status(std::span<const uint8_t> f) noexcept {
-  // Lenient on the length: a 60-byte frame holds the header and the terminating entry.
+  // Lenient on the length beyond the static error field: the error list ends at the frame end.
+  if (f.size() < kStatusEntryOffset) return FrameError::kStatusResponseTruncated;
   if (!is_valid_nmt_state(f[20])) return FrameError::kInvalidNmtState;
   StatusResponse r;
   r.exception_new = (f[18] & kFlagEn) != 0;
@@ -181,11 +186,20 @@ Result<StatusResponse> decode_status(std::span<const uint8_t> f) noexcept {
 }
 
 Result<Sdo> decode_sdo(std::span<const uint8_t> f) noexcept {
+  if (f.size() < kSdoCmdOffset) return FrameError::kSdoTruncated;
   Sdo s;
   s.sequence.recv_seq = f[18] >> 2;
   s.sequence.recv_con = static_cast<SdoRecvCon>(f[18] & 0x03);
   s.sequence.send_seq = f[19] >> 2;
   s.sequence.send_con = static_cast<SdoSendCon>(f[19] & 0x03);
+  if (f.size() < kSdoPayloadOffset) {
+    // An unpadded sequence-layer-only frame ends at 22 bytes; what there is of a command header
+    // must then be the zeros of a Nil command.
+    const auto partial = f.subspan(kSdoCmdOffset);
+    if (std::any_of(partial.begin(), partial.end(), [](uint8_t b) { return b != 0; }))
+      return FrameError::kSdoTruncated;
+    return s;
+  }
   const uint8_t flags = f[24];
   const uint8_t command_id = f[25];
   const std::size_t segment_size = load_le16(&f[26]);
@@ -214,6 +228,7 @@ Result<Asnd> decode_asnd(std::span<const uint8_t> f, const FrameHeader& h) noexc
   if (h.src_node == kNodeInvalid || h.src_node == kNodeBroadcast)
     return FrameError::kInvalidSourceNode;
   if (h.dst_node == kNodeInvalid) return FrameError::kInvalidDestinationNode;
+  if (f.size() < kAsndDataOffset) return FrameError::kAsndTruncated;
   const uint8_t service = f[17];
   Asnd a;
   a.service = static_cast<AsndService>(service);
@@ -231,10 +246,12 @@ Result<Asnd> decode_asnd(std::span<const uint8_t> f, const FrameHeader& h) noexc
       return a;
     }
     case AsndService::kNmtRequest:
+      if (f.size() < 20) return FrameError::kAsndTruncated;
       a.body = NmtRequest{f[18], f[19], f.subspan(20)};
       return a;
     case AsndService::kNmtCommand:
       if (h.src_node != kNodeMn) return FrameError::kInvalidSourceNode;
+      if (f.size() < 20) return FrameError::kAsndTruncated;
       a.body = NmtCommand{f[18], f.subspan(20)};
       return a;
     case AsndService::kSdo: {
@@ -530,7 +547,7 @@ FrameHeader asnd_header(const MacAddress& src_mac, uint8_t src_node, uint8_t dst
 // ---- Parse --------------------------------------------------------------------------------------
 
 Result<FrameHeader> parse_header(std::span<const uint8_t> f) noexcept {
-  if (f.size() < kMinFrameSize) return FrameError::kFrameTooShort;
+  if (f.size() < kHeaderSize) return FrameError::kFrameTooShort;
   if (f.size() > kMaxFrameSize) return FrameError::kFrameTooLong;
   if (((f[12] << 8) | f[13]) != kEtherType) return FrameError::kNotPowerlink;
   const uint8_t type = f[kTypeOffset] & 0x7F;

@@ -17,7 +17,12 @@
 namespace ds1928::powerlink {
 
 inline constexpr uint16_t kEtherType = 0x88AB;
-inline constexpr std::size_t kMinFrameSize = 60;    // before the FCS
+// Builders pad to Ethernet's minimum (60 bytes before the FCS). Parsers accept shorter frames
+// whose message is complete: software senders on veth/TAP links send them unpadded.
+inline constexpr std::size_t kMinFrameSize = 60;
+inline constexpr std::size_t kHeaderSize = 17;  // Ethernet header + type, destination, source
+inline constexpr std::size_t kSocSize = 36;
+inline constexpr std::size_t kSoaSize = 23;
 inline constexpr std::size_t kMaxFrameSize = 1514;  // before the FCS
 inline constexpr std::size_t kMaxIsoPayload = 1490;
 inline constexpr std::size_t kPollPayloadOffset = 24;  // PReq/PRes payload
@@ -312,10 +317,15 @@ struct Frame {
 
 // ---- Parse ------------------------------------------------------------------------------------
 // parse_frame() validates the Ethernet/POWERLINK header, the size limits and the message's own
-// consistency (node ids, payload sizes, NMT state, service ids, SDO sizes). The spans in the
-// result point into `frame`.
+// consistency (node ids, payload sizes, NMT state, service ids, SDO sizes). A frame shorter than
+// 60 bytes is accepted when its message's fields are all there (is_short_frame() lets callers
+// count them); one that ends inside them gets the message's kXxxTruncated error. The spans in
+// the result point into `frame`.
 
 [[nodiscard]] Result<FrameHeader> parse_header(std::span<const uint8_t> frame) noexcept;
+[[nodiscard]] constexpr bool is_short_frame(std::size_t length) noexcept {
+  return length < kMinFrameSize;
+}
 [[nodiscard]] Result<Frame> parse_frame(std::span<const uint8_t> frame) noexcept;
 
 // Typed shortcuts: kWrongMessageType (or kUnknownServiceId for ASnd services) when the frame is

@@ -4,6 +4,8 @@
 #include <cstring>
 #include <string>
 
+#include "core/register_catalogue.hpp"
+
 namespace ds1928::powerlink {
 
 std::string_view to_string(CnBootState s) noexcept {
@@ -129,25 +131,8 @@ ManagingNode::ManagingNode(const MnConfig& config)
       if (a.node != nc.node_id) continue;
       specs.push_back(
           {a.slot, a.module.input_mtu, a.module.output_mtu, a.pres_offset, a.preq_offset});
-      const ModuleSettings& m = a.module;
-      auto add = [&](uint16_t reg, uint32_t value) {
-        cn->boot_ops.push_back(
-            {0, nc.node_id, a.slot, reg, register_size(reg).value_or(1), true, value});
-      };
-      add(reg::kSinCosEnable, 1);
-      add(reg::kSinCosRefSource, 1);
-      add(reg::kEnDatMode, m.endat_mode());
-      add(reg::kSystemCyclePrescaler, m.prescaler);
-      add(reg::kSlframeGenId, m.slframe_gen_id);
-      add(reg::kErrorEnable, m.error_enable);
-      add(reg::kSinCosVssMin, m.vss_min_mv);
-      add(reg::kSinCosVssMax, m.vss_max_mv);
-      add(reg::kSinCosQuitTime, m.quit_time_us);
-      add(reg::kOutputMtu, m.output_mtu);
-      add(reg::kInputMtu, m.input_mtu);
-      add(reg::kFlatstreamMode, m.flatstream_mode);
-      add(reg::kForward, m.forward);
-      add(reg::kForwardDelay, m.forward_delay_us);
+      for (const RegisterWrite& w : startup_writes(a.module))
+        cn->boot_ops.push_back({0, nc.node_id, a.slot, w.reg, w.size, true, w.value});
     }
     LayoutIssue issue;
     auto layout = make_layout(specs, &issue);
@@ -599,6 +584,7 @@ std::error_code ManagingNode::on_frame(std::span<const uint8_t> bytes) noexcept 
     ++counters_.invalid_frames;
     return frame.error();
   }
+  if (is_short_frame(bytes.size())) ++counters_.short_frames;
   const FrameHeader& h = frame->header;
   if (const PRes* pres = std::get_if<PRes>(&frame->message)) {
     Cn* cn = find(h.src_node);

@@ -81,6 +81,7 @@ struct MnCounters {
   DllCounter cycle_time_exceeded;
   uint32_t unexpected_frames = 0;  // frames that fit no expected slot
   uint32_t invalid_frames = 0;     // rejected by the codec
+  uint32_t short_frames = 0;       // accepted although shorter than 60 bytes (unpadded sender)
   // IdentRequest/StatusRequest whose mandatory answer did not come within async_timeout.
   uint32_t async_timeouts = 0;
   // UnspecifiedInvite/NMTRequestInvite the CN let pass: it may legitimately have nothing to send

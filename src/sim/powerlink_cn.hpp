@@ -92,7 +92,8 @@ struct PowerlinkCnStats {
   uint64_t power_cycles = 0;
   uint64_t nmt_requests_sent = 0;
   uint64_t resets = 0;
-  uint64_t bad_frames = 0;  // rejected by the codec
+  uint64_t bad_frames = 0;    // rejected by the codec
+  uint64_t short_frames = 0;  // accepted although shorter than 60 bytes (unpadded sender)
 };
 
 class PowerlinkCn {

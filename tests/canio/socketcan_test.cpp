@@ -7,6 +7,7 @@
 // restart-ms 100) and brought up, as root. A vcan named after the pid is created for the
 // single-interface tests and removed at exit. Needs root for ip link.
 #define CATCH_CONFIG_RUNNER
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <catch2/catch.hpp>
@@ -169,6 +170,53 @@ TEST_CASE("frames cross the bus from one controller to the other", "[socketcan][
     CHECK(buf[0].rx_clock == RxClock::KernelSoftware);
     CHECK(buf[0].rx_time_ns >= before);
   }
+}
+
+TEST_CASE("two processes exchange frames over the two controllers", "[socketcan][pair]") {
+  if (g_env.can_a.empty()) {
+    WARN("no pair of CAN controllers: skipped");
+    return;
+  }
+  auto master = open_port(g_env.can_a, g_env.can_bitrate);
+  const CanIdFilter answers[] = {{0x181, false}, {0x701, false}};
+  REQUIRE_FALSE(master->set_filters(answers));
+  const pid_t child = fork();
+  REQUIRE(child >= 0);
+  if (child == 0) {
+    // The node on the other controller: answers every SYNC (0x080) with 0x181, byte 0 + 1.
+    SocketCanOptions o;
+    o.interface = g_env.can_b;
+    auto opened = SocketCanPort::open(o);
+    if (!opened.port) _exit(2);
+    const CanIdFilter sync[] = {{0x080, false}};
+    if (opened.port->set_filters(sync)) _exit(3);
+    if (!opened.port->send(frame(0x701, 0)).sent()) _exit(4);  // ready
+    std::array<CanFrame, 8> buf;
+    for (int answered = 0; answered < 50;) {
+      auto r = opened.port->receive(buf, now_ns() + kWait);
+      if (r.error || r.count == 0) _exit(5);
+      for (std::size_t i = 0; i < r.count; ++i, ++answered)
+        if (!opened.port->send(frame(0x181, static_cast<uint8_t>(buf[i].data[0] + 1))).sent())
+          _exit(6);
+    }
+    _exit(0);
+  }
+  std::array<CanFrame, 8> buf;
+  auto ready = master->receive(buf, now_ns() + kWait);
+  REQUIRE(ready.count == 1);
+  CHECK(buf[0].id == 0x701);
+  int answered = 0;
+  for (int i = 0; i < 50; ++i) {
+    REQUIRE(master->send(frame(0x080, static_cast<uint8_t>(i))).sent());
+    auto r = master->receive(buf, now_ns() + kWait);
+    REQUIRE(r.count == 1);
+    answered += buf[0].id == 0x181 && buf[0].data[0] == static_cast<uint8_t>(i + 1);
+  }
+  CHECK(answered == 50);
+  int status = 0;
+  REQUIRE(waitpid(child, &status, 0) == child);
+  CHECK(WIFEXITED(status));
+  CHECK(WEXITSTATUS(status) == 0);
 }
 
 TEST_CASE("interface state, bit rate and restart-ms from netlink; mismatch is refused",

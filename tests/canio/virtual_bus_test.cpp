@@ -184,6 +184,58 @@ TEST_CASE("bus-off: sends refused, restarted after restart-ms, error-active agai
   CHECK(c.tx_bus_off == 1);
 }
 
+TEST_CASE("a port that only sends through bus-off and restart reports both, in order",
+          "[canio][vbus]") {
+  FakeClock clock;
+  auto bus = VirtualCanBus::create_local(clock.options());
+  auto p = port(bus);  // restart-ms 100
+  REQUIRE_FALSE(p->set_error_mask(kDefaultErrorMask));
+  REQUIRE(p->inject_bus_off());
+  CHECK(p->send(data_frame(1, 1)).status == SendStatus::BusOff);
+  clock.advance_ms(150);
+  CHECK(p->send(data_frame(1, 2)).sent());  // restarted by the send path
+  auto got = drain(*p);
+  REQUIRE(got.size() == 2);
+  CHECK(decode_error_frame(got[0])->bus_off);
+  CHECK(decode_error_frame(got[1])->restarted);
+  CHECK(p->state() == CanState::ErrorActive);  // the late bus-off frame does not undo the restart
+}
+
+TEST_CASE("an error broadcast by one port reaches every other port's controller", "[canio][vbus]") {
+  FakeClock clock;
+  auto bus = VirtualCanBus::create_local(clock.options());
+  auto sim = port(bus), daemon = port(bus), quiet = port(bus);
+  REQUIRE_FALSE(daemon->set_error_mask(kDefaultErrorMask));
+  CanErrorEvent off;
+  off.bus_off = true;
+  REQUIRE(sim->broadcast_error(off));
+  auto got = drain(*daemon);
+  REQUIRE(got.size() == 1);
+  CHECK(decode_error_frame(got[0])->bus_off);
+  CHECK(daemon->state() == CanState::BusOff);
+  CHECK(daemon->send(data_frame(0x201, 1)).status == SendStatus::BusOff);
+  CHECK(drain(*quiet).empty());  // not subscribed: no frame, but the state changed all the same
+  CHECK(quiet->state() == CanState::BusOff);
+  CHECK(sim->state() == CanState::ErrorActive);  // not its own
+  clock.advance_ms(100);
+  got = drain(*daemon);
+  REQUIRE(got.size() == 1);
+  CHECK(decode_error_frame(got[0])->restarted);
+  CHECK(daemon->state() == CanState::ErrorActive);
+  // A frame with no room in the caller's span waits for the next call.
+  CanErrorEvent passive;
+  passive.controller = true;
+  passive.controller_status = err_ctrl::kRxPassive;
+  REQUIRE(sim->send(data_frame(0x181, 1)).sent());
+  REQUIRE(sim->broadcast_error(passive));
+  std::array<CanFrame, 1> one;
+  REQUIRE(daemon->receive(one, 0).count == 1);
+  CHECK(one[0].id == 0x181);
+  REQUIRE(daemon->receive(one, 0).count == 1);
+  CHECK(one[0].error);
+  CHECK(daemon->state() == CanState::ErrorPassive);
+}
+
 TEST_CASE("bus-off without restart-ms waits for restart()", "[canio][vbus]") {
   FakeClock clock;
   auto bus = VirtualCanBus::create_local(clock.options());

@@ -147,7 +147,8 @@ TEST_CASE("Parsing rejects short, long and inconsistent frames with a reason",
           "[powerlink][codec]") {
   const auto samples = ds1928::powerlink::test::build_samples();
   const auto& soc = samples.at(0).bytes;
-  CHECK(parse_frame(std::span(soc).first(59)).error() == FrameError::kFrameTooShort);
+  CHECK(parse_frame(std::span(soc).first(16)).error() == FrameError::kFrameTooShort);
+  CHECK(parse_frame(std::span(soc).first(35)).error() == FrameError::kSocTruncated);
   std::vector<uint8_t> big(1515, 0);
   std::copy(soc.begin(), soc.end(), big.begin());
   CHECK(parse_frame(big).error() == FrameError::kFrameTooLong);
@@ -176,7 +177,7 @@ TEST_CASE("Parsing rejects short, long and inconsistent frames with a reason",
   CHECK(parse_frame(bad).error() == FrameError::kInvalidDestinationNode);
 
   auto ident = samples.at(6).bytes;
-  CHECK(parse_frame(std::span(ident).first(175)).error() == FrameError::kFrameTooShort);
+  CHECK(parse_frame(std::span(ident).first(175)).error() == FrameError::kIdentResponseTruncated);
   bad = ident;
   bad[17] = 0x42;
   CHECK(parse_frame(bad).error() == FrameError::kUnknownServiceId);
@@ -210,6 +211,128 @@ TEST_CASE("Parsing rejects short, long and inconsistent frames with a reason",
   preq.payload = huge;
   CHECK(build_preq(buf, preq_header(kMnMac, kCnMac, 1), preq).error() ==
         FrameError::kPayloadTooLarge);
+}
+
+TEST_CASE("54-byte frames (unpadded software senders) are accepted when complete",
+          "[powerlink][codec]") {
+  // What a sender on a veth/TAP link puts on the wire without padding: 14-byte Ethernet header +
+  // 40 bytes of POWERLINK. The SoC from an MN with NetTime 1 s + 500 ns, RelativeTime 4000 µs,
+  // MC set.
+  std::vector<uint8_t> soc = {0x01, 0x11, 0x1E, 0x00, 0x00, 0x01, 0x02, 0x00, 0x00, 0x00, 0x00,
+                              0xF0, 0x88, 0xAB, 0x01, 0xFF, 0xF0, 0x00, 0x80, 0x00, 0x01, 0x00,
+                              0x00, 0x00, 0xF4, 0x01, 0x00, 0x00, 0xA0, 0x0F, 0x00, 0x00, 0x00,
+                              0x00, 0x00, 0x00};
+  soc.resize(54, 0);
+  auto s = parse_soc(soc);
+  REQUIRE(s);
+  CHECK(s->multiplexed_cycle_completed);
+  CHECK(s->net_time == NetTime{1, 500});
+  CHECK(s->relative_time_us == 4000);
+  CHECK(is_short_frame(soc.size()));
+
+  // SoA: StatusRequest to node 7, MN PRE_OPERATIONAL_2.
+  std::vector<uint8_t> soa = {0x01, 0x11, 0x1E, 0x00, 0x00, 0x03, 0x02, 0x00, 0x00, 0x00, 0x00, 0xF0,
+                              0x88, 0xAB, 0x05, 0xFF, 0xF0, 0x5D, 0x00, 0x00, 0x02, 0x07, 0x20};
+  soa.resize(54, 0);
+  auto a = parse_soa(soa);
+  REQUIRE(a);
+  CHECK(a->mn_nmt_state == NmtState::kPreOperational2);
+  CHECK(a->service == RequestedService::kStatusRequest);
+  CHECK(a->target == 7);
+  CHECK(a->epl_version == 0x20);
+
+  // Every sample whose message fits 54 bytes parses to the same message cut to 54 bytes as with
+  // its padding (PReq/PRes with ≤ 30 payload bytes, NMTCommand, SDO sequence-only, StatusResponse).
+  std::array<uint8_t, kMaxFrameSize> buf{};
+  std::array<uint8_t, 6> payload{1, 2, 3, 4, 5, 6};
+  PReq preq;
+  preq.ready = true;
+  preq.payload = payload;
+  PRes pres;
+  pres.nmt_state = NmtState::kOperational;
+  pres.payload = payload;
+  NmtCommand cmd;
+  cmd.command = static_cast<uint8_t>(NmtCommandId::kStartNode);
+  Sdo seq;
+  seq.sequence.recv_con = SdoRecvCon::kInit;
+  seq.sequence.send_con = SdoSendCon::kInit;
+  StatusResponse st;
+  st.nmt_state = NmtState::kPreOperational2;
+  std::vector<std::vector<uint8_t>> frames;
+  auto keep = [&](Result<std::size_t> len) {
+    REQUIRE(len);
+    frames.emplace_back(buf.begin(), buf.begin() + *len);
+  };
+  keep(build_preq(buf, preq_header(kMnMac, kCnMac, 3), preq));
+  keep(build_pres(buf, pres_header(kCnMac, 3), pres));
+  keep(build_nmt_command(buf, asnd_header(kMnMac, kNodeMn, 3), cmd));
+  keep(build_sdo(buf, asnd_header(kCnMac, 3, kNodeMn), seq));
+  keep(build_status_response(buf, asnd_header(kCnMac, 3, kNodeMn), st, {}));
+  for (const auto& full : frames) {
+    const std::vector<uint8_t> cut(full.begin(), full.begin() + 54);
+    auto want = parse_frame(full);
+    auto got = parse_frame(cut);
+    REQUIRE(want);
+    REQUIRE(got);
+    CHECK(got->header.type == want->header.type);
+    CHECK(got->message.index() == want->message.index());
+  }
+  auto p = parse_pres(std::span(frames[1]).first(54));
+  REQUIRE(p);
+  CHECK(std::equal(p->payload.begin(), p->payload.end(), payload.begin(), payload.end()));
+  auto q = parse_preq(std::span(frames[0]).first(30));  // exactly header + payload
+  REQUIRE(q);
+  CHECK(q->payload.size() == 6);
+  CHECK(q->ready);
+  // An unpadded sequence-layer-only SDO frame ends after its 4 sequence bytes.
+  auto sq = parse_asnd(std::span(frames[3]).first(22));
+  REQUIRE(sq);
+  CHECK_FALSE(std::get<Sdo>(sq->body).has_command);
+  CHECK(std::get<Sdo>(sq->body).sequence.send_con == SdoSendCon::kInit);
+}
+
+TEST_CASE("Frames that end inside their message are refused with the message's error",
+          "[powerlink][codec]") {
+  const auto samples = ds1928::powerlink::test::build_samples();
+  auto cut = [](const std::vector<uint8_t>& f, std::size_t n) {
+    return parse_frame(std::span(f).first(n));
+  };
+  const auto& soc = samples.at(0).bytes;
+  CHECK(cut(soc, 36));
+  CHECK(cut(soc, 35).error() == FrameError::kSocTruncated);
+  const auto& preq = samples.at(1).bytes;
+  CHECK(cut(preq, 23).error() == FrameError::kPollTruncated);
+  CHECK(cut(preq, 24 + load_le16(&preq[22]) - 1).error() == FrameError::kPayloadSizeExceedsFrame);
+  CHECK(cut(preq, 24 + load_le16(&preq[22])));
+  const auto& pres = samples.at(2).bytes;
+  CHECK(cut(pres, 23).error() == FrameError::kPollTruncated);
+  CHECK(cut(pres, 54).error() == FrameError::kPayloadSizeExceedsFrame);  // 46-byte payload
+  const auto& soa = samples.at(3).bytes;
+  CHECK(cut(soa, 23));
+  CHECK(cut(soa, 22).error() == FrameError::kSoaTruncated);
+  const auto& ident = samples.at(6).bytes;
+  CHECK(cut(ident, 17).error() == FrameError::kAsndTruncated);
+  CHECK(cut(ident, 54).error() == FrameError::kIdentResponseTruncated);
+  for (const auto& sample : samples) {
+    auto full = parse_frame(sample.bytes);
+    REQUIRE(full);
+    const auto* asnd = std::get_if<Asnd>(&full->message);
+    if (asnd == nullptr) continue;
+    if (asnd->service == AsndService::kStatusResponse) {
+      CHECK(cut(sample.bytes, 31).error() == FrameError::kStatusResponseTruncated);
+    } else if (asnd->service == AsndService::kNmtCommand) {
+      CHECK(cut(sample.bytes, 19).error() == FrameError::kAsndTruncated);
+    } else if (asnd->service == AsndService::kSdo) {
+      CHECK(cut(sample.bytes, 21).error() == FrameError::kSdoTruncated);
+      if (std::get<Sdo>(asnd->body).has_command)
+        CHECK(cut(sample.bytes, 29).error() == FrameError::kSdoTruncated);
+    }
+  }
+  // Every truncation error names its message.
+  for (auto e : {FrameError::kSocTruncated, FrameError::kPollTruncated, FrameError::kSoaTruncated,
+                 FrameError::kAsndTruncated, FrameError::kIdentResponseTruncated,
+                 FrameError::kStatusResponseTruncated, FrameError::kSdoTruncated})
+    CHECK(make_error_code(e).message().find("truncated") != std::string::npos);
 }
 
 TEST_CASE("StatusResponse error entries survive build and parse", "[powerlink][codec]") {

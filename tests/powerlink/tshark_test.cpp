@@ -57,3 +57,33 @@ TEST_CASE("Wireshark decodes every frame type the codec builds", "[powerlink][co
   INFO(expert);
   CHECK(expert.find("Malformed") == std::string::npos);
 }
+
+TEST_CASE("Wireshark decodes unpadded 54-byte frames the codec accepts",
+          "[powerlink][codec][tshark]") {
+  if (access("/usr/bin/tshark", X_OK) != 0) {
+    WARN("tshark not installed: Wireshark decoding check skipped");
+    return;
+  }
+  const auto samples = ds1928::powerlink::test::build_samples();
+  // SoC, SoA StatusRequest, SoA IdentRequest, NMTCommand, SDO sequence init cut to 54 bytes, as
+  // a software sender on a veth/TAP link sends them.
+  std::vector<std::vector<uint8_t>> frames;
+  for (std::size_t i : {0, 3, 4, 8, 10}) {
+    auto f = samples.at(i).bytes;
+    f.resize(54);
+    REQUIRE(ds1928::powerlink::parse_frame(f));
+    frames.push_back(f);
+  }
+  const std::string path = std::string(DS1928_TEST_TMPDIR) + "/powerlink_short.pcap";
+  write_pcap(path, frames);
+  const std::string verbose = run_command("tshark -n -r " + path + " -V 2>&1");
+  INFO(verbose);
+  CHECK(verbose.find("Malformed") == std::string::npos);
+  CHECK(verbose.find("Expert Info (Error") == std::string::npos);
+  CHECK(verbose.find("Expert Info (Warning") == std::string::npos);
+  const std::string lines =
+      run_command("tshark -n -r " + path + " -T fields -e epl.mtyp 2>/dev/null");
+  INFO(lines);
+  CHECK(count(lines, "\n") == frames.size());
+  CHECK(lines.find("\n\n") == std::string::npos);
+}

@@ -14,6 +14,10 @@
 namespace ds1928::ctl {
 namespace {
 
+// The largest reply the daemon sends is a few hundred kB (axes of a full bus); more without a
+// newline is not a ds1928d reply.
+constexpr std::size_t kMaxReplyBytes = 16 * 1024 * 1024;
+
 class Fd {
  public:
   explicit Fd(int fd) : fd_(fd) {}
@@ -85,6 +89,9 @@ Outcome send_request(const Context& ctx, const nlohmann::json& request) {
     }
     if (n == 0) return {kUnavailable, nullptr, "the daemon closed the connection without a reply"};
     buffer.append(chunk, static_cast<std::size_t>(n));
+    if (buffer.size() > kMaxReplyBytes && buffer.find('\n') == std::string::npos)
+      return {kBadReply, nullptr,
+              "reply longer than " + std::to_string(kMaxReplyBytes) + " bytes without a newline"};
   }
 
   out.reply = nlohmann::json::parse(buffer, nullptr, false);
@@ -92,10 +99,16 @@ Outcome send_request(const Context& ctx, const nlohmann::json& request) {
       !out.reply["ok"].is_boolean())
     return {kBadReply, nullptr, "invalid reply from the daemon: " + buffer};
   if (out.reply["ok"] == true) return out;
-  const auto& err = out.reply.value("error", nlohmann::json::object());
+  // value() throws on a non-object or a non-string member: look before taking.
+  const auto text = [](const nlohmann::json& j, const char* key, const char* fallback) {
+    const auto it = j.is_object() ? j.find(key) : j.end();
+    return it != j.end() && it->is_string() ? it->get<std::string>() : std::string(fallback);
+  };
+  const auto err = out.reply.find("error");
+  const nlohmann::json none = nlohmann::json::object();
+  const nlohmann::json& e = err != out.reply.end() ? *err : none;
   out.exit = kDaemonError;
-  out.problem =
-      err.value("code", std::string("error")) + ": " + err.value("message", std::string());
+  out.problem = text(e, "code", "error") + ": " + text(e, "message", "");
   return out;
 }
 
@@ -114,8 +127,10 @@ int request_and_print(const Context& ctx, const nlohmann::json& request,
   } else {
     try {
       print_human(o.reply);
-    } catch (const nlohmann::json::exception& e) {
-      std::cerr << "ds1928ctl: unexpected reply (" << e.what() << "): " << o.reply.dump() << "\n";
+    } catch (const std::exception& e) {
+      std::cerr << "ds1928ctl: unexpected reply (" << e.what()
+                << "): " << o.reply.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace)
+                << "\n";
       return kBadReply;
     }
   }

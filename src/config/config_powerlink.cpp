@@ -1,0 +1,434 @@
+// The `powerlink` section: nodes, thresholds, NMT timing, SDO overrides (docs/powerlink.md).
+#include "config/config_powerlink.hpp"
+
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <span>
+#include <string>
+#include <tuple>
+
+#include "powerlink/concise_dcf.hpp"
+
+namespace ds1928::config_detail {
+namespace {
+
+// POWERLINK process image of each CN (docs/powerlink.md §Process image): a module sits at its
+// pres_offset/preq_offset or at its offset in the all-default packed layout (slot order). Two
+// blocks must not share a byte and each must end within 1490 bytes and the node's configured
+// pres_size/preq_size. The MN checks the same at start (make_layout()); here the message can
+// point at the file.
+void check_process_image(Diagnostics& diag, const DaemonConfig& c,
+                         const std::vector<AxisSite>& axes) {
+  struct Block {
+    size_t axis;
+    size_t start[2];  // PRes, PReq
+    size_t size[2];
+  };
+  static constexpr const char* kFrame[2] = {"PRes", "PReq"};
+  static constexpr const char* kKey[2] = {"pres_offset", "preq_offset"};
+  std::map<uint8_t, std::vector<size_t>> by_node;
+  for (size_t i = 0; i < axes.size() && i < c.axes.size(); ++i)
+    by_node[c.axes[i].node].push_back(i);
+  for (auto& [node, members] : by_node) {
+    std::stable_sort(members.begin(), members.end(),
+                     [&](size_t x, size_t y) { return c.axes[x].slot < c.axes[y].slot; });
+    const PowerlinkNodeConfig* nc = nullptr;
+    for (const auto& n : c.powerlink.nodes)
+      if (n.node_id == node) nc = &n;
+    std::vector<Block> blocks;
+    size_t packed[2] = {0, 0};
+    for (size_t i : members) {
+      const AxisConfig& a = c.axes[i];
+      const std::optional<uint16_t> offset[2] = {a.pres_offset, a.preq_offset};
+      Block b{i, {}, {16u + a.module.input_mtu, 2u + a.module.output_mtu}};
+      for (int f = 0; f < 2; ++f) {
+        b.start[f] = offset[f] ? *offset[f] : packed[f];
+        packed[f] += b.size[f];
+      }
+      blocks.push_back(b);
+    }
+    for (size_t k = 0; k < blocks.size(); ++k) {
+      const Block& b = blocks[k];
+      const AxisConfig& a = c.axes[b.axis];
+      const std::optional<uint16_t> offset[2] = {a.pres_offset, a.preq_offset};
+      const std::optional<uint16_t> limit[2] = {nc ? nc->pres_size : std::nullopt,
+                                                nc ? nc->preq_size : std::nullopt};
+      for (int f = 0; f < 2; ++f) {
+        const Loc at = offset[f]
+                           ? (f == 0 ? axes[b.axis].pres_offset_at : axes[b.axis].preq_offset_at)
+                           : axes[b.axis].at;
+        const std::string path = axes[b.axis].path + (offset[f] ? std::string(".") + kKey[f] : "");
+        const std::string what = std::string(kFrame[f]) + " block of node " + std::to_string(node) +
+                                 " slot " + std::to_string(a.slot) + " (bytes " +
+                                 std::to_string(b.start[f]) + ".." +
+                                 std::to_string(b.start[f] + b.size[f] - 1) + ")";
+        const size_t end = b.start[f] + b.size[f];
+        const size_t max = limit[f] ? *limit[f] : 1490;
+        if (end > max) {
+          diag.error(at, path,
+                     what + " ends past the " + kFrame[f] + " payload of " + std::to_string(max) +
+                         " bytes" +
+                         (limit[f] ? std::string(" (powerlink.nodes ") +
+                                         (f == 0 ? "pres_size" : "preq_size") + ")"
+                                   : std::string()));
+        }
+        for (size_t j = 0; j < k; ++j) {
+          const Block& o = blocks[j];
+          if (!(b.start[f] < o.start[f] + o.size[f] && o.start[f] < end)) continue;
+          // Report at the moved block: a default place is not what the user wrote.
+          const bool here =
+              offset[f] || !(f == 0 ? c.axes[o.axis].pres_offset : c.axes[o.axis].preq_offset);
+          const Block& r = here ? b : o;  // reported
+          const Block& x = here ? o : b;  // the one it hits
+          const std::string key = offset[f] || !here ? std::string(".") + kKey[f] : "";
+          const Loc r_at =
+              key.empty() ? axes[r.axis].at
+                          : (f == 0 ? axes[r.axis].pres_offset_at : axes[r.axis].preq_offset_at);
+          auto bytes = [f](const Block& blk) {
+            return "(bytes " + std::to_string(blk.start[f]) + ".." +
+                   std::to_string(blk.start[f] + blk.size[f] - 1) + ")";
+          };
+          diag.error(r_at, axes[r.axis].path + key,
+                     std::string(kFrame[f]) + " block of node " + std::to_string(node) + " slot " +
+                         std::to_string(c.axes[r.axis].slot) + " " + bytes(r) + " overlaps slot " +
+                         std::to_string(c.axes[x.axis].slot) + " " + bytes(x) + " of axes[" +
+                         std::to_string(x.axis) + "] (" + where(axes[x.axis].at) + ")");
+        }
+      }
+    }
+  }
+}
+
+// A concise DCF file, read and decoded; on failure an error at `key` and nullopt.
+std::optional<std::vector<powerlink::CdcEntry>> load_cdc(Section& s, std::string_view key,
+                                                         std::string& path,
+                                                         const std::filesystem::path& base_dir) {
+  std::filesystem::path file(path);
+  if (file.is_relative()) file = base_dir / file;
+  file = file.lexically_normal();
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(file, ec)) {
+    s.error(key, "no such file: " + file.string());
+    return std::nullopt;
+  }
+  std::ifstream in(file, std::ios::binary);
+  std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)),
+                             std::istreambuf_iterator<char>());
+  if (!in.good() && !in.eof()) {
+    s.error(key, "cannot read " + file.string());
+    return std::nullopt;
+  }
+  path = file.string();
+  auto decoded = powerlink::decode_cdc(bytes);
+  if (!decoded.ok()) {
+    s.error(key, file.string() + " is not a valid concise DCF: " + decoded.error->message +
+                     " (byte " + std::to_string(decoded.error->offset) + ")");
+    return std::nullopt;
+  }
+  return std::move(decoded.entries);
+}
+
+// Hex bytes of a domain value: "01 02 0a", "01020A" or "0x01,0x02".
+std::optional<std::vector<uint8_t>> parse_hex_bytes(std::string_view text) {
+  std::vector<uint8_t> out;
+  std::string digits;
+  for (std::size_t i = 0; i < text.size(); ++i) {
+    const char c = text[i];
+    if (c == ' ' || c == ',' || c == ':' || c == '\t') {
+      if (digits.size() % 2 != 0) return std::nullopt;
+      continue;
+    }
+    if (c == '0' && i + 1 < text.size() && (text[i + 1] == 'x' || text[i + 1] == 'X') &&
+        digits.size() % 2 == 0) {
+      ++i;
+      continue;
+    }
+    if (!std::isxdigit(static_cast<unsigned char>(c))) return std::nullopt;
+    digits += c;
+  }
+  if (digits.size() % 2 != 0) return std::nullopt;
+  for (std::size_t i = 0; i < digits.size(); i += 2)
+    out.push_back(static_cast<uint8_t>(std::stoul(digits.substr(i, 2), nullptr, 16)));
+  return out;
+}
+
+// One `sdo_writes` item: index, subindex and exactly one typed value.
+void parse_sdo_write(Section o, std::vector<CnObjectWrite>& out) {
+  CnObjectWrite w;
+  if (!o.has("index")) o.diag().error(o.at(), o.child("index"), "missing required key");
+  const bool have_index = o.integer("index", w.index, 1, kU16);
+  o.integer("subindex", w.subindex, 0, kU8);
+  struct Type {
+    const char* key;
+    std::size_t size;
+    int64_t lo, hi;
+  };
+  static constexpr Type kTypes[] = {
+      {"u8", 1, 0, 0xFF},
+      {"u16", 2, 0, 0xFFFF},
+      {"u32", 4, 0, 0xFFFFFFFF},
+      {"u64", 8, 0, std::numeric_limits<int64_t>::max()},
+      {"i8", 1, -128, 127},
+      {"i16", 2, -32768, 32767},
+      {"i32", 4, std::numeric_limits<int32_t>::min(), std::numeric_limits<int32_t>::max()},
+      {"i64", 8, std::numeric_limits<int64_t>::min(), std::numeric_limits<int64_t>::max()},
+  };
+  std::vector<std::string> given;
+  for (const Type& t : kTypes) {
+    if (!o.has(t.key)) {
+      (void)o.find(t.key);  // known key
+      continue;
+    }
+    given.emplace_back(t.key);
+    int64_t v = 0;
+    if (o.integer(t.key, v, t.lo, t.hi)) {
+      w.data.clear();
+      for (std::size_t i = 0; i < t.size; ++i)
+        w.data.push_back(static_cast<uint8_t>(static_cast<uint64_t>(v) >> (8 * i)));
+    }
+  }
+  if (o.has("domain")) {
+    given.emplace_back("domain");
+    std::string text;
+    if (o.text("domain", text, 4096)) {
+      const auto bytes = parse_hex_bytes(text);
+      if (!bytes || bytes->empty()) {
+        o.error("domain", "'" + text + "' is not a list of hex bytes such as \"01 02 0a\"");
+      } else {
+        w.data = *bytes;
+      }
+    }
+  } else {
+    (void)o.find("domain");
+  }
+  if (given.empty()) {
+    o.diag().error(o.at(), o.path(),
+                   "missing the value: give exactly one of u8, u16, u32, u64, i8, i16, i32, i64, "
+                   "domain");
+  } else if (given.size() > 1) {
+    o.diag().error(o.at(), o.path(), "more than one value given (" + join(given) + "); give one");
+  }
+  o.finish();
+  if (have_index && given.size() == 1 && !w.data.empty()) out.push_back(std::move(w));
+}
+
+// The node's objects and identity from the MN's concise DCF (0x1F22/node, 0x1F84..0x1F88/node,
+// 0x1F8B/node, 0x1F8D/node); what the YAML gives wins.
+void apply_mn_cdc(Section& n, PowerlinkNodeConfig& node, std::span<const powerlink::CdcEntry> mn,
+                  bool node_has_own_cdc) {
+  using powerlink::find_cdc_entry;
+  const uint8_t id = node.node_id;
+  if (!node_has_own_cdc) {
+    if (const auto* dcf = find_cdc_entry(mn, powerlink::kObjConciseDcfList, id)) {
+      auto decoded = powerlink::decode_cdc(dcf->data);
+      if (!decoded.ok()) {
+        n.error("node_id",
+                "powerlink.cdc: object 0x1F22/" + std::to_string(id) +
+                    " (this node's concise DCF) is not valid: " + decoded.error->message);
+      } else {
+        for (auto& e : decoded.entries)
+          node.object_writes.push_back({e.index, e.subindex, std::move(e.data), true});
+      }
+    }
+  }
+  auto value = [&](uint16_t index) -> std::optional<uint32_t> {
+    const auto* e = find_cdc_entry(mn, index, id);
+    const auto v = e ? e->as_unsigned() : std::nullopt;
+    if (!v || *v == 0) return std::nullopt;  // 0: "do not check" in the MN's lists
+    return static_cast<uint32_t>(*v);
+  };
+  if (!node.device_type) node.device_type = value(0x1F84);
+  if (!node.vendor_id) node.vendor_id = value(0x1F85);
+  if (!node.product_code) node.product_code = value(0x1F86);
+  if (!node.revision_no) node.revision_no = value(0x1F87);
+  if (!node.serial_no) node.serial_no = value(0x1F88);
+  if (!node.preq_size)
+    if (const auto v = value(0x1F8B)) node.preq_size = static_cast<uint16_t>(std::min(*v, 1490u));
+  if (!node.pres_size)
+    if (const auto v = value(0x1F8D)) node.pres_size = static_cast<uint16_t>(std::min(*v, 1490u));
+}
+
+}  // namespace
+
+void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
+                     const std::filesystem::path& base_dir) {
+  if (s.text("interface", p.interface, 15) && !p.interface.empty() &&
+      !valid_interface_name(p.interface)) {
+    s.error("interface", "'" + p.interface + "' is not a network interface name");
+  }
+  std::vector<powerlink::CdcEntry> mn_cdc;
+  if (s.text("cdc", p.cdc) && !p.cdc.empty()) {
+    if (auto entries = load_cdc(s, "cdc", p.cdc, base_dir)) mn_cdc = std::move(*entries);
+  }
+  for (auto& item : s.list("nodes")) {
+    Section n(s.diag(), item.node, item.path, item.at);
+    PowerlinkNodeConfig node;
+    if (!n.has("node_id")) {
+      s.diag().error(item.at, n.child("node_id"), "missing required key (CN node id 1..239)");
+    }
+    const bool have_id = n.integer("node_id", node.node_id, 1, 239, "(POWERLINK CN)");
+    n.optional_integer("vendor_id", node.vendor_id, 0, kU32);
+    n.optional_integer("product_code", node.product_code, 0, kU32);
+    n.optional_integer("device_type", node.device_type, 0, kU32);
+    n.optional_integer("revision_no", node.revision_no, 0, kU32);
+    n.optional_integer("serial_no", node.serial_no, 0, kU32);
+    bool own_cdc = false;
+    if (n.text("cdc", node.cdc) && !node.cdc.empty()) {
+      own_cdc = true;
+      if (auto entries = load_cdc(n, "cdc", node.cdc, base_dir)) {
+        for (auto& e : *entries)
+          node.object_writes.push_back({e.index, e.subindex, std::move(e.data), true});
+      }
+    }
+    n.boolean("cycle_objects", node.cycle_objects);
+    n.integer("pres_timeout_us", node.pres_timeout_us, 1, 100000, "µs");
+    sites.pres_timeout_at.push_back(n.value_at("pres_timeout_us"));
+    n.boolean("mandatory", node.mandatory);
+    n.integer("multiplex", node.multiplex, 0, 255, "(0 = every cycle)");
+    n.optional_integer("preq_size", node.preq_size, 0, 1490);
+    n.optional_integer("pres_size", node.pres_size, 0, 1490);
+    for (auto& w : n.list("sdo_writes"))
+      parse_sdo_write(Section(n.diag(), w.node, w.path, w.at), node.object_writes);
+    if (have_id && !mn_cdc.empty()) apply_mn_cdc(n, node, mn_cdc, own_cdc);
+    // Sizes the written objects define (0x1F98/4,5 or the PDO mappings), unless given.
+    std::vector<powerlink::CdcEntry> written;
+    for (const auto& w : node.object_writes) written.push_back({w.index, w.subindex, w.data});
+    const auto sizes = powerlink::image_sizes_from_objects(written);
+    for (auto [size, from, key] : {std::tuple{&node.preq_size, sizes.preq_size, "preq_size"},
+                                   std::tuple{&node.pres_size, sizes.pres_size, "pres_size"}}) {
+      if (*size || !from) continue;
+      if (*from > 1490) {
+        n.error("node_id", std::string("the objects written to this node give a ") + key + " of " +
+                               std::to_string(*from) + " bytes; at most 1490 are allowed");
+      } else {
+        *size = from;
+      }
+    }
+    if (have_id) {
+      if (const auto prev = sites.nodes.find(node.node_id); prev != sites.nodes.end()) {
+        n.error("node_id", "node " + std::to_string(node.node_id) + " is listed twice (also at " +
+                               where(prev->second) + ")");
+      } else {
+        sites.nodes.emplace(node.node_id, n.value_at("node_id"));
+      }
+    }
+    n.finish();
+    p.nodes.push_back(node);
+  }
+  Section t = s.section("thresholds");
+  t.integer("loss_of_pres", p.thresholds.loss_of_pres, 0, kU32, "(0 = disabled)");
+  t.integer("cycle_time_exceeded", p.thresholds.cycle_time_exceeded, 0, kU32, "(0 = disabled)");
+  t.integer("late_pres", p.thresholds.late_pres, 0, kU32, "(0 = disabled)");
+  t.finish();
+  Section nmt = s.section("nmt");
+  nmt.integer("pre_op1_timeout_ms", p.nmt.pre_op1_timeout_ms, 1, 600000, "ms");
+  nmt.integer("boot_step_timeout_ms", p.nmt.boot_step_timeout_ms, 1, 600000, "ms");
+  nmt.integer("reset_wait_ms", p.nmt.reset_wait_ms, 0, 600000, "ms");
+  nmt.integer("status_request_every", p.nmt.status_request_every, 1, 10000, "cycles");
+  nmt.finish();
+  s.integer("async_timeout_us", p.async_timeout_us, 1, 100000, "µs");
+  s.integer("sdo_timeout_ms", p.sdo_timeout_ms, 1, 60000, "ms");
+  s.integer("nettime_offset_us", p.nettime_offset_us, std::numeric_limits<int64_t>::min(),
+            std::numeric_limits<int64_t>::max());
+  std::map<uint16_t, Loc> overridden;
+  for (auto& item : s.list("sdo_overrides")) {
+    Section o(s.diag(), item.node, item.path, item.at);
+    uint16_t reg = 0;
+    uint16_t index = 0;
+    uint8_t subindex = 0;
+    for (const char* required : {"register", "index"}) {
+      if (!o.has(required)) {
+        s.diag().error(item.at, o.child(required), "missing required key");
+      }
+    }
+    const bool have_reg = o.integer("register", reg, 0, kU16, "(X20DS1928 register number)");
+    const bool have_index = o.integer("index", index, 1, kU16);
+    o.integer("subindex", subindex, 0, kU8);
+    if (have_reg && have_index) {
+      if (const auto prev = overridden.find(reg); prev != overridden.end()) {
+        o.error("register", "register " + std::to_string(reg) + " is overridden twice (also at " +
+                                where(prev->second) + ")");
+      } else {
+        overridden.emplace(reg, o.value_at("register"));
+        p.sdo_overrides[reg] = {index, subindex};
+      }
+    }
+    o.finish();
+  }
+  s.finish();
+}
+
+void check_powerlink(Diagnostics& diag, const DaemonConfig& c, const std::vector<AxisSite>& axes,
+                     const PowerlinkSites& sites) {
+  check_process_image(diag, c, axes);
+  for (size_t i = 0; i < c.powerlink.nodes.size() && i < sites.pres_timeout_at.size(); ++i) {
+    const auto& n = c.powerlink.nodes[i];
+    if (n.pres_timeout_us >= c.cycle.period_us) {
+      diag.error(
+          sites.pres_timeout_at[i], "powerlink.nodes[" + std::to_string(i) + "].pres_timeout_us",
+          "pres_timeout_us (" + std::to_string(n.pres_timeout_us) +
+              ") must be less than cycle.period_us (" + std::to_string(c.cycle.period_us) + ")");
+    }
+  }
+}
+
+void dump_powerlink(std::ostream& o, const PowerlinkBusConfig& p) {
+  o << "powerlink:\n"
+    << "  interface: " << quote(p.interface) << "\n"
+    << "  cdc: " << quote(p.cdc) << "\n"
+    << "  nodes:" << (p.nodes.empty() ? " []" : "") << "\n";
+  const auto opt = [](const auto& v) { return v ? hex(*v) : std::string(); };
+  const auto opt_dec = [](const auto& v) { return v ? std::to_string(*v) : std::string(); };
+  for (const auto& n : p.nodes) {
+    o << "    - node_id: " << +n.node_id << "\n"
+      << "      vendor_id: " << opt(n.vendor_id) << "\n"
+      << "      product_code: " << opt(n.product_code) << "\n"
+      << "      device_type: " << opt(n.device_type) << "\n"
+      << "      revision_no: " << opt(n.revision_no) << "\n"
+      << "      serial_no: " << opt(n.serial_no) << "\n"
+      << "      cdc: " << quote(n.cdc) << "\n"
+      << "      cycle_objects: " << yes(n.cycle_objects) << "\n"
+      << "      pres_timeout_us: " << n.pres_timeout_us << "\n"
+      << "      mandatory: " << yes(n.mandatory) << "\n"
+      << "      multiplex: " << n.multiplex << "\n"
+      << "      preq_size: " << opt_dec(n.preq_size) << "\n"
+      << "      pres_size: " << opt_dec(n.pres_size) << "\n";
+    // The YAML writes as items; the concise DCF's objects (loaded again from `cdc` when this is
+    // read back) as comments, so the dump shows everything the MN writes.
+    std::size_t own = 0;
+    for (const auto& w : n.object_writes) own += w.from_cdc ? 0 : 1;
+    o << "      sdo_writes:" << (own == 0 ? " []" : "") << "\n";
+    for (const auto& w : n.object_writes) {
+      std::string bytes;
+      for (const uint8_t b : w.data) {
+        static constexpr char kHex[] = "0123456789abcdef";
+        if (!bytes.empty()) bytes += ' ';
+        bytes += kHex[b >> 4];
+        bytes += kHex[b & 0xF];
+      }
+      o << (w.from_cdc ? "      # concise DCF: " : "        - ") << "{index: " << hex(w.index)
+        << ", subindex: " << +w.subindex << ", domain: \"" << bytes << "\"}\n";
+    }
+  }
+  o << "  thresholds:\n"
+    << "    loss_of_pres: " << p.thresholds.loss_of_pres << "\n"
+    << "    cycle_time_exceeded: " << p.thresholds.cycle_time_exceeded << "\n"
+    << "    late_pres: " << p.thresholds.late_pres << "\n"
+    << "  nmt:\n"
+    << "    pre_op1_timeout_ms: " << p.nmt.pre_op1_timeout_ms << "\n"
+    << "    boot_step_timeout_ms: " << p.nmt.boot_step_timeout_ms << "\n"
+    << "    reset_wait_ms: " << p.nmt.reset_wait_ms << "\n"
+    << "    status_request_every: " << p.nmt.status_request_every << "\n"
+    << "  async_timeout_us: " << p.async_timeout_us << "\n"
+    << "  sdo_timeout_ms: " << p.sdo_timeout_ms << "\n"
+    << "  nettime_offset_us: " << p.nettime_offset_us << "\n"
+    << "  sdo_overrides:" << (p.sdo_overrides.empty() ? " []" : "") << "\n";
+  for (const auto& [reg, target] : p.sdo_overrides) {
+    o << "    - {register: " << reg << ", index: " << hex(target.first)
+      << ", subindex: " << hex(target.second) << "}\n";
+  }
+}
+
+}  // namespace ds1928::config_detail

@@ -1,0 +1,92 @@
+// Concise DCF (CDC): the binary object list a POWERLINK/CANopen configuration tool writes
+// (EPSG DS 301 / CiA 302; openCONFIGURATOR's mnobd.cdc). Little endian throughout:
+//   u32 number of entries, then per entry: u16 index | u8 subindex | u32 data size | data.
+// The MN's own file holds its objects, among them 0x1F22/<node>: a domain that is itself a
+// concise DCF, the objects the MN writes to that CN when it configures it.
+// Pure codec: bytes in, entries out (and back); no I/O.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
+
+namespace ds1928::powerlink {
+
+inline constexpr uint16_t kObjConciseDcfList = 0x1F22;  // per-node concise DCF (domain)
+inline constexpr std::size_t kCdcEntryHeaderSize = 7;   // index, subindex, size
+
+struct CdcEntry {
+  uint16_t index = 0;
+  uint8_t subindex = 0;
+  std::vector<uint8_t> data;
+  friend bool operator==(const CdcEntry&, const CdcEntry&) = default;
+
+  // The value as an unsigned little-endian number; nullopt when empty or longer than 8 bytes.
+  [[nodiscard]] std::optional<uint64_t> as_unsigned() const noexcept;
+};
+
+// Why a byte string is not a concise DCF, and where.
+struct CdcError {
+  std::size_t offset = 0;  // byte offset in the file where the problem is
+  std::size_t entry = 0;   // 0-based entry being read (or the count for a count problem)
+  std::string message;     // "entry 3 (0x1600/1) announces 8 data bytes, only 5 remain", ...
+};
+
+struct CdcDecodeResult {
+  std::vector<CdcEntry> entries;
+  std::optional<CdcError> error;  // set: `entries` holds those read before the problem
+  [[nodiscard]] bool ok() const noexcept { return !error.has_value(); }
+};
+
+// Decodes a whole file. A count of 0, a count larger than the bytes could hold, a truncated
+// entry header or data, and bytes after the last entry are errors.
+[[nodiscard]] CdcDecodeResult decode_cdc(std::span<const uint8_t> bytes);
+
+// The inverse (tests, tools); entries as given.
+[[nodiscard]] std::vector<uint8_t> encode_cdc(std::span<const CdcEntry> entries);
+
+// The entry index/subindex of `entries`, or nullptr.
+[[nodiscard]] const CdcEntry* find_cdc_entry(std::span<const CdcEntry> entries, uint16_t index,
+                                             uint8_t subindex) noexcept;
+
+// "0x1600/1" (for messages).
+[[nodiscard]] std::string object_name(uint16_t index, uint8_t subindex);
+
+}  // namespace ds1928::powerlink
+
+namespace ds1928::powerlink {
+
+// PDO mapping (0x1600.. RPDO = the CN's PReq payload, 0x1A00.. TPDO = its PRes payload):
+// sub 0 = number of entries; each entry u64 = length bits 63..48 | offset bits 47..32 |
+// reserved 31..24 | subindex 23..16 | index 15..0, offset and length in bits.
+inline constexpr uint16_t kObjRxPdoMapping = 0x1600;
+inline constexpr uint16_t kObjTxPdoMapping = 0x1A00;
+inline constexpr uint16_t kObjCycleTiming = 0x1F98;  // /4 PReqActPayloadLimit, /5 PRes...
+struct PdoMapEntry {
+  uint16_t index = 0;
+  uint8_t subindex = 0;
+  uint16_t offset_bits = 0;
+  uint16_t length_bits = 0;
+  [[nodiscard]] static PdoMapEntry from_u64(uint64_t v) noexcept {
+    return {static_cast<uint16_t>(v), static_cast<uint8_t>(v >> 16), static_cast<uint16_t>(v >> 32),
+            static_cast<uint16_t>(v >> 48)};
+  }
+  [[nodiscard]] uint64_t to_u64() const noexcept {
+    return static_cast<uint64_t>(index) | static_cast<uint64_t>(subindex) << 16 |
+           static_cast<uint64_t>(offset_bits) << 32 | static_cast<uint64_t>(length_bits) << 48;
+  }
+};
+
+// What an object list written to a CN says about its process image: the payload sizes from
+// 0x1F98/4 and /5 when written, else from the end of the last mapped object of the first
+// 0x1600 / 0x1A00 (entries 1..sub 0); nullopt when the list says nothing about it.
+struct ImageSizes {
+  std::optional<uint16_t> preq_size;
+  std::optional<uint16_t> pres_size;
+};
+[[nodiscard]] ImageSizes image_sizes_from_objects(std::span<const CdcEntry> objects) noexcept;
+
+}  // namespace ds1928::powerlink

@@ -1,0 +1,183 @@
+// The powerlink section's third-party CN keys: no axes at all, typed SDO writes, concise DCF
+// files (the node's own and the MN's mnobd.cdc with 0x1F22/node), identity and sizes from them.
+#include <stdlib.h>
+#include <unistd.h>
+
+#include <catch2/catch.hpp>
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include "config/config_loader.hpp"
+#include "powerlink/concise_dcf.hpp"
+
+namespace {
+
+using namespace ds1928;
+using powerlink::CdcEntry;
+
+ConfigResult from(std::string_view text, const std::string& name = "test.yaml") {
+  return load_config_from_string(text, name);
+}
+
+std::string one_error(std::string_view text, const std::string& name = "test.yaml") {
+  const ConfigResult r = from(text, name);
+  INFO(r.error_report());
+  REQUIRE(r.errors().size() == 1);
+  return r.errors().front().to_string();
+}
+
+// A private directory for CDC files, removed at the end.
+struct TempDir {
+  std::filesystem::path path;
+  TempDir() {
+    std::string t = (std::filesystem::temp_directory_path() / "ds1928-cfgpl-XXXXXX").string();
+    REQUIRE(::mkdtemp(t.data()) != nullptr);
+    path = t;
+  }
+  ~TempDir() {
+    std::error_code ec;
+    std::filesystem::remove_all(path, ec);
+  }
+  std::string write(const std::string& name, const std::vector<uint8_t>& bytes) const {
+    std::ofstream(path / name, std::ios::binary)
+        .write(reinterpret_cast<const char*>(bytes.data()),
+               static_cast<std::streamsize>(bytes.size()));
+    return (path / name).string();
+  }
+};
+
+std::vector<uint8_t> le(uint64_t v, int n) {
+  std::vector<uint8_t> d;
+  for (int i = 0; i < n; ++i) d.push_back(static_cast<uint8_t>(v >> (8 * i)));
+  return d;
+}
+
+const std::string kHead = "bus: powerlink\npowerlink:\n  interface: veth0\n  nodes:\n";
+
+TEST_CASE("A POWERLINK configuration without axes is valid", "[config][powerlink]") {
+  const ConfigResult r = from(kHead + "    - {node_id: 5, preq_size: 4, pres_size: 8}\n");
+  INFO(r.error_report());
+  REQUIRE(r.ok());
+  CHECK(r.config().axes.empty());
+  CHECK(r.config().powerlink.nodes[0].pres_size == uint16_t{8});
+  const ConfigResult again = from(dump_config(r.config()));
+  INFO(again.error_report());
+  REQUIRE(again.ok());
+  CHECK(dump_config(again.config()) == dump_config(r.config()));
+}
+
+TEST_CASE("sdo_writes take one typed value each, little endian", "[config][powerlink]") {
+  const ConfigResult r = from(kHead +
+                              "    - node_id: 1\n"
+                              "      sdo_writes:\n"
+                              "        - {index: 0x1006, u32: 1000}\n"
+                              "        - {index: 0x1F98, subindex: 5, u16: 0x24}\n"
+                              "        - {index: 0x2000, subindex: 1, i16: -2}\n"
+                              "        - {index: 0x2001, subindex: 2, domain: \"01 0a FF\"}\n"
+                              "        - {index: 0x2002, u64: 0x0010000000016200}\n");
+  INFO(r.error_report());
+  REQUIRE(r.ok());
+  const auto& w = r.config().powerlink.nodes[0].object_writes;
+  REQUIRE(w.size() == 5);
+  CHECK(w[0] == CnObjectWrite{0x1006, 0, le(1000, 4), false});
+  CHECK(w[1] == CnObjectWrite{0x1F98, 5, {0x24, 0}, false});
+  CHECK(w[2].data == std::vector<uint8_t>{0xFE, 0xFF});
+  CHECK(w[3].data == std::vector<uint8_t>{0x01, 0x0A, 0xFF});
+  CHECK(w[4].data == le(0x0010000000016200ULL, 8));
+  // 0x1F98/5 written: that is the PRes payload size.
+  CHECK(r.config().powerlink.nodes[0].pres_size == uint16_t{0x24});
+  const ConfigResult again = from(dump_config(r.config()));
+  INFO(again.error_report());
+  REQUIRE(again.ok());
+  CHECK(again.config().powerlink.nodes[0].object_writes.size() == 5);
+  CHECK(dump_config(again.config()) == dump_config(r.config()));
+
+  const std::string at = kHead + "    - node_id: 1\n      sdo_writes:\n        - ";
+  CHECK_THAT(one_error(at + "{index: 0x1006}\n"),
+             Catch::Contains("powerlink.nodes[0].sdo_writes[0]: missing the value: give exactly "
+                             "one of u8, u16, u32, u64, i8, i16, i32, i64, domain"));
+  CHECK_THAT(one_error(at + "{index: 0x1006, u8: 1, u16: 2}\n"),
+             Catch::Contains("more than one value given (u8, u16)"));
+  CHECK_THAT(one_error(at + "{index: 0x1006, u8: 256}\n"),
+             Catch::Contains("sdo_writes[0].u8: 256 is out of range 0..255"));
+  CHECK_THAT(one_error(at + "{index: 0x1006, domain: \"0g\"}\n"),
+             Catch::Contains("sdo_writes[0].domain: '0g' is not a list of hex bytes"));
+  CHECK_THAT(one_error(at + "{u8: 1}\n"), Catch::Contains("sdo_writes[0].index: missing"));
+  CHECK_THAT(one_error(at + "{index: 0x1006, u32: 1, typo: 2}\n"),
+             Catch::Contains("unknown key 'typo'"));
+}
+
+TEST_CASE("A node's concise DCF becomes its writes; its mapping gives the payload sizes",
+          "[config][powerlink][cdc]") {
+  TempDir dir;
+  const std::vector<CdcEntry> node_cdc = {
+      {0x1006, 0, le(1000, 4)},
+      {0x1A00, 0, {1}},
+      {0x1A00, 1, le(powerlink::PdoMapEntry{0x6000, 1, 0, 80}.to_u64(), 8)},
+      {0x1600, 0, {1}},
+      {0x1600, 1, le(powerlink::PdoMapEntry{0x6200, 1, 0, 16}.to_u64(), 8)},
+  };
+  const std::string file = dir.write("cn5.cdc", powerlink::encode_cdc(node_cdc));
+  const std::string cfg = (dir.path / "ds1928d.yaml").string();
+  const ConfigResult r = from(kHead +
+                                  "    - node_id: 5\n      cdc: cn5.cdc\n      preq_size: 4\n"
+                                  "      sdo_writes: [{index: 0x2000, u8: 7}]\n",
+                              cfg);
+  INFO(r.error_report());
+  REQUIRE(r.ok());
+  const PowerlinkNodeConfig& n = r.config().powerlink.nodes[0];
+  CHECK(n.cdc == file);
+  REQUIRE(n.object_writes.size() == 6);
+  CHECK(n.object_writes[0] == CnObjectWrite{0x1006, 0, le(1000, 4), true});
+  CHECK(n.object_writes[5] == CnObjectWrite{0x2000, 0, {7}, false});
+  CHECK(n.pres_size == uint16_t{10});  // 80 bits mapped
+  CHECK(n.preq_size == uint16_t{4});   // the YAML wins over the mapping's 2
+  const std::string dumped = dump_config(r.config());
+  CHECK_THAT(dumped, Catch::Contains("# concise DCF: {index: 0x1a00, subindex: 1"));
+  const ConfigResult again = from(dumped, cfg);
+  INFO(again.error_report());
+  REQUIRE(again.ok());
+  CHECK(dump_config(again.config()) == dumped);
+
+  // Broken files: named, with the codec's reason.
+  dir.write("short.cdc", {2, 0, 0, 0, 0x06, 0x10, 0, 4, 0, 0, 0, 0xE8, 3, 0, 0, 0x06});
+  CHECK_THAT(one_error(kHead + "    - {node_id: 5, cdc: short.cdc}\n", cfg),
+             Catch::Contains("powerlink.nodes[0].cdc: " + (dir.path / "short.cdc").string() +
+                             " is not a valid concise DCF: entry 1 of 2 is truncated"));
+  CHECK_THAT(one_error(kHead + "    - {node_id: 5, cdc: none.cdc}\n", cfg),
+             Catch::Contains("powerlink.nodes[0].cdc: no such file: "));
+}
+
+TEST_CASE("The MN's mnobd.cdc supplies each node's 0x1F22 objects, identity and sizes",
+          "[config][powerlink][cdc]") {
+  TempDir dir;
+  const std::vector<CdcEntry> cn3 = {{0x1006, 0, le(2000, 4)}, {0x1F98, 4, le(12, 2)}};
+  const std::vector<CdcEntry> mn = {
+      {0x1006, 0, le(2000, 4)},                 // the MN's own cycle: not for the CN
+      {0x1F22, 3, powerlink::encode_cdc(cn3)},  // node 3's objects
+      {0x1F84, 3, le(0x000F0191, 4)},           // device type
+      {0x1F85, 3, le(0x0000001A, 4)},           // vendor
+      {0x1F86, 3, le(0, 4)},                    // 0 = not checked
+      {0x1F8D, 3, le(24, 2)},                   // PRes payload limit
+      {0x1F22, 4, {1, 0, 0, 0, 0x06, 0x10}},    // node 4's domain is truncated
+  };
+  dir.write("mnobd.cdc", powerlink::encode_cdc(mn));
+  const std::string cfg = (dir.path / "ds1928d.yaml").string();
+  const ConfigResult r = from(kHead + "    - {node_id: 3}\n  cdc: mnobd.cdc\n", cfg);
+  INFO(r.error_report());
+  REQUIRE(r.ok());
+  const PowerlinkNodeConfig& n = r.config().powerlink.nodes[0];
+  REQUIRE(n.object_writes.size() == 2);
+  CHECK(n.object_writes[1] == CnObjectWrite{0x1F98, 4, le(12, 2), true});
+  CHECK(n.device_type == uint32_t{0x000F0191});
+  CHECK(n.vendor_id == uint32_t{0x1A});
+  CHECK_FALSE(n.product_code.has_value());
+  CHECK(n.pres_size == uint16_t{24});
+  CHECK(n.preq_size == uint16_t{12});
+  CHECK_THAT(one_error(kHead + "    - {node_id: 4}\n  cdc: mnobd.cdc\n", cfg),
+             Catch::Contains("powerlink.nodes[0].node_id: powerlink.cdc: object 0x1F22/4 (this "
+                             "node's concise DCF) is not valid: entry 0 of 1 is truncated"));
+}
+
+}  // namespace
