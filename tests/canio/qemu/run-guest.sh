@@ -208,7 +208,7 @@ boot_guest() {
   t0=$EPOCHREALTIME
   timeout -k 5 "$qemu_timeout" qemu-system-x86_64 \
     -nodefaults -no-user-config -display none -serial stdio -no-reboot \
-    "${bios[@]}" ${CANIO_QEMU_EXTRA:-} -machine pc -cpu max -m 768 -smp 1 \
+    "${bios[@]}" ${CANIO_QEMU_EXTRA:-} -machine pc -cpu max -m 768 -smp "${CANIO_QEMU_SMP:-1}" \
     -kernel "$kernel" -initrd "$initrd" \
     -append "console=ttyS0 quiet panic=-1 mitigations=off no_timer_check ${CANIO_QEMU_APPEND:-} ds1928.work=$work ds1928.timeout=$cmd_timeout" \
     -virtfs local,path=/,mount_tag=host,security_model=none,readonly=on,multidevs=remap \
