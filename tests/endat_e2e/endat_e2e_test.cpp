@@ -372,11 +372,8 @@ TEST_CASE("an axis queues 16 EnDat commands behind the one in flight; one more i
     waiting.push_back(std::make_unique<LineClient>(rig.socket_path(), kClientTimeoutMs));
     REQUIRE(waiting.back()->send_raw(
         json{{"cmd", "endat-read-param"}, {"mrs", 0xA9}, {"param", i}}.dump() + "\n"));
-    // Bounded wait for the service to take it (the socket is read asynchronously).
-    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(20);
-    while (state() != State{true, i} && std::chrono::steady_clock::now() < until)
-      std::this_thread::sleep_for(std::chrono::milliseconds(1));
-    REQUIRE(state() == State{true, i});
+    // The socket is read asynchronously: wait until the service has taken it.
+    REQUIRE(ds1928::test::wait_until([&] { return state() == State{true, i}; }));
   }
   LineClient extra(rig.socket_path(), kClientTimeoutMs);
   const json r = extra.request({{"cmd", "endat-read-param"}, {"mrs", 0xA9}, {"param", 99}});
