@@ -1,5 +1,6 @@
 # ds1928d — the two commands of the README:
 #   make run    build and run the daemon on the simulated node
+#   make run-canio   the daemon on bus canio against `ds1928-sim canio` over the virtual CAN bus
 #   make test   build and run every test (warnings are errors in this build)
 # and for deployment:
 #   make deb            build the Debian packages ds1928d and libds1928-dev (+ lintian)
@@ -42,7 +43,7 @@ ASAN_ENV   := ASAN_OPTIONS=detect_leaks=1:abort_on_error=1:strict_string_checks=
               UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
 TSAN_ENV   := TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1 suppressions=$(CURDIR)/tests/tsan.supp"
 
-.PHONY: all build run test deps-build deps-test deps-deb deb test-package deps-fuzz deps-stress \
+.PHONY: all build run run-canio test deps-build deps-test deps-deb deb test-package deps-fuzz deps-stress \
         format clean bench check-asan check-tsan check-sanitize fuzz stress
 
 all: build
@@ -104,6 +105,14 @@ build: deps-build $(BUILD)/CMakeCache.txt
 
 run: build
 	./$(BUILD)/daemon/ds1928d --config $(CONFIG)
+
+# The simulated CAN-I/O node runs in the background on the virtual bus of config/canio-sim.yaml
+# and stops with the daemon (Ctrl-C).
+CANIO_CONFIG ?= config/canio-sim.yaml
+run-canio: build
+	./$(BUILD)/tools/ds1928-sim/ds1928-sim canio --virtual ds1928-sim --config $(CANIO_CONFIG) & \
+	  sim=$$!; trap 'kill $$sim 2>/dev/null; wait $$sim 2>/dev/null' EXIT INT TERM; \
+	  ./$(BUILD)/daemon/ds1928d --config $(CANIO_CONFIG)
 
 # The developer/CI build keeps zero warnings: DS1928_WERROR=ON here only (Release and package
 # builds leave it off, so a newer compiler's new warning does not break them).

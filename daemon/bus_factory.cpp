@@ -1,126 +1,33 @@
-// Which bus driver a configuration asks for, and its status for the control socket.
-#include <spdlog/spdlog.h>
+// The bus kinds the daemon knows, how each is created, and the parts of BusService every kind
+// shares. Adding a bus kind = one factory and one row in kKinds.
+#include <fmt/format.h>
 
+#include <array>
+
+#include "bus_service.hpp"
 #include "daemon.hpp"
-#include "powerlink/powerlink_bus.hpp"
-#include "powerlink/raw_link.hpp"
-#include "powerlink/rx_wait.hpp"
-#include "sim/simulated_bus.hpp"
 
 namespace ds1928 {
-
-std::unique_ptr<BusDriver> make_bus(const DaemonConfig& config, std::string& why_not) {
-  switch (config.bus) {
-    case BusKind::Simulated:
-      return std::make_unique<sim::SimulatedBus>(config);
-    case BusKind::Powerlink: {
-      auto link = std::make_unique<powerlink::RawLink>();
-      powerlink::RawLinkOptions options;
-      options.interface = config.powerlink.interface;
-      powerlink::apply_rx_wait(config.powerlink.rx_wait, config.powerlink.rx_spin_us, options);
-      if (auto ec = link->open(options)) {
-        why_not = fmt::format(
-            "powerlink: cannot open raw socket on '{}': {}{}", config.powerlink.interface,
-            ec.message(),
-            ec == std::errc::operation_not_permitted ? " (needs root or CAP_NET_RAW)" : "");
-        return nullptr;
-      }
-      powerlink::MnConfig mn;
-      mn.bus = config.powerlink;
-      mn.axes = config.axes;
-      mn.cycle_us = config.cycle.period_us;
-      mn.mac = link->mac();
-      try {
-        return std::make_unique<powerlink::PowerlinkBus>(mn, std::move(link));
-      } catch (const std::exception& e) {
-        why_not = fmt::format("powerlink: {}", e.what());
-        return nullptr;
-      }
-    }
-    case BusKind::Canio:
-      why_not =
-          "canio: the CAN-I/O bus driver is not part of this build yet (use bus: simulated or "
-          "powerlink)";
-      return nullptr;
-  }
-  why_not = "unknown bus";
-  return nullptr;
-}
-
 namespace {
 
-// Boot step "configure" of a CN: objects written, the failures of the last run (index/subindex,
-// abort code), and an identity mismatch.
-nlohmann::json configuration_json(const powerlink::CnStatus& n) {
-  nlohmann::json failures = nlohmann::json::array();
-  for (std::size_t i = 0; i < n.last_failure_count; ++i)
-    failures.push_back(powerlink::describe(n.last_failures[i]));
-  return {{"objects_written", n.objects_written},
-          {"object_failures", n.object_failures},
-          {"last_failures", std::move(failures)},
-          {"identity_mismatch",
-           n.identity_mismatch ? nlohmann::json(powerlink::describe(n.mismatch)) : nullptr}};
-}
+using Factory = std::unique_ptr<BusService> (*)(const DaemonConfig&, std::string&);
+
+constexpr std::array<std::string_view, 2> kPowerlinkCommands{"pl-pres", "pl-preq-set"};
+
+struct Kind {
+  BusKind kind;
+  Factory make;
+};
+constexpr std::array<Kind, 3> kKinds{{{BusKind::Simulated, &make_simulated_service},
+                                      {BusKind::Powerlink, &make_powerlink_service},
+                                      {BusKind::Canio, &make_canio_service}}};
+
+constexpr std::array<BusCommandSet, 1> kCommandSets{
+    {{BusKind::Powerlink, "powerlink", kPowerlinkCommands}}};
 
 }  // namespace
 
-nlohmann::json bus_status_json(const BusDriver& bus) {
-  nlohmann::json j{{"kind", std::string(bus.name())},
-                   {"state", std::string(to_string(bus.state()))}};
-  const auto* pl = dynamic_cast<const powerlink::PowerlinkBus*>(&bus);
-  if (pl == nullptr) return j;
-  const auto st = pl->status();
-  j["mn_state"] = std::string(powerlink::to_string(st.mn_state));
-  j["link_up"] = st.link_up;
-  j["counters"] = {{"cycles", st.counters.cycles},
-                   {"cycle_time_exceeded", st.counters.cycle_time_exceeded.events},
-                   {"cycle_time_exceeded_fired", st.counters.cycle_time_exceeded.fired},
-                   {"unexpected_frames", st.counters.unexpected_frames},
-                   {"invalid_frames", st.counters.invalid_frames},
-                   {"short_frames", st.counters.short_frames},
-                   {"async_timeouts", st.counters.async_timeouts},
-                   {"async_invites_unused", st.counters.async_invites_unused}};
-  nlohmann::json nodes = nlohmann::json::array();
-  for (std::size_t i = 0; i < st.node_count; ++i) {
-    const auto& n = st.nodes[i];
-    nodes.push_back({{"node", n.node},
-                     {"boot", std::string(powerlink::to_string(n.boot))},
-                     {"nmt", std::string(powerlink::to_string(n.nmt))},
-                     {"in_isochronous", n.in_isochronous},
-                     {"vendor_id", n.vendor_id},
-                     {"product_code", n.product_code},
-                     {"preq_size", n.preq_size},
-                     {"pres_size", n.pres_size},
-                     {"pres_received", n.pres_received},
-                     {"loss_of_pres",
-                      {{"events", n.loss_of_pres.events},
-                       {"counter", n.loss_of_pres.value},
-                       {"fired", n.loss_of_pres.fired},
-                       {"threshold", n.loss_of_pres_threshold}}},
-                     {"late_pres", {{"events", n.late_pres.events}, {"fired", n.late_pres.fired}}},
-                     {"stale_pres_dropped", n.stale_pres_dropped},
-                     {"pres_size_mismatches", n.pres_size_mismatches},
-                     {"last_pres_size", n.last_pres_size},
-                     {"status_error_entries", n.status_error_entries},
-                     {"boots", n.boots},
-                     {"resets", n.resets},
-                     {"sdo_errors", n.sdo_errors},
-                     {"nmt_requests", n.nmt_requests},
-                     {"nmt_requests_refused", n.nmt_requests_refused},
-                     {"last_error", n.last_error ? n.last_error.message() : std::string()},
-                     {"last_reset_reason",
-                      n.last_reset_reason ? n.last_reset_reason.message() : std::string()}});
-    nodes.back()["configuration"] = configuration_json(n);
-    nodes.back()["exception"] = {{"new", n.exception_new},
-                                 {"acknowledged", n.exception_acknowledge},
-                                 {"signalled", n.exceptions_signalled}};
-  }
-  j["nodes"] = std::move(nodes);
-  return j;
-}
-
-bool BusWatch::Said::due(uint32_t value, std::chrono::steady_clock::time_point now,
-                         uint32_t& more) {
+bool SaidCounter::due(uint64_t value, std::chrono::steady_clock::time_point now, uint64_t& more) {
   if (value <= said || now - at < kRepeat) return false;
   more = value - said;
   said = value;
@@ -128,75 +35,59 @@ bool BusWatch::Said::due(uint32_t value, std::chrono::steady_clock::time_point n
   return true;
 }
 
-std::vector<BusEvent> BusWatch::poll(const BusDriver& bus,
-                                     std::chrono::steady_clock::time_point now) {
+nlohmann::json BusService::status_json() const {
+  nlohmann::json j{{"kind", std::string(driver().name())},
+                   {"state", std::string(to_string(driver().state()))}};
+  status_extra(j);
+  return j;
+}
+
+void BusService::status_extra(nlohmann::json&) const {}
+
+void BusService::register_commands(control::Server&, const SocketConfig&) {}
+
+void BusService::watch(std::vector<BusEvent>&, bool, std::chrono::steady_clock::time_point) {}
+
+std::span<const BusCommandSet> bus_commands() noexcept {
+  return kCommandSets;
+}
+
+std::unique_ptr<BusService> make_bus_service(const DaemonConfig& config, std::string& why_not) {
+  for (const Kind& k : kKinds)
+    if (k.kind == config.bus) return k.make(config, why_not);
+  why_not = fmt::format("bus '{}' has no driver in this build", to_string(config.bus));
+  return nullptr;
+}
+
+void register_bus_commands(control::Server& server, BusService& bus, const DaemonConfig& config) {
+  bus.register_commands(server, config.socket);
+  // Another kind's commands answer "not_<kind>" here, so a client learns why, not "unknown".
+  for (const BusCommandSet& set : bus_commands()) {
+    if (set.kind == config.bus) continue;
+    for (std::string_view command : set.commands) {
+      server.add_command(
+          std::string(command),
+          [kind = std::string(set.kind_name), have = std::string(bus.driver().name())](
+              const control::Request& req, control::Reply reply) {
+            reply.error("not_" + kind, "'" + req.command() + "' needs the " + kind +
+                                           " bus; this one is '" + have + "'");
+          });
+    }
+  }
+}
+
+std::vector<BusEvent> BusWatch::poll(BusService& bus, std::chrono::steady_clock::time_point now) {
   std::vector<BusEvent> events;
-  const BusState state = bus.state();
+  const BusState state = bus.driver().state();
   if (!seen_ || state != state_) {
     // The first look reports nothing: the start is logged on its own.
     if (seen_)
       events.push_back(
-          {state != BusState::Operational,
-           fmt::format("bus {}: {} -> {}", bus.name(), to_string(state_), to_string(state))});
+          {state != BusState::Operational, fmt::format("bus {}: {} -> {}", bus.driver().name(),
+                                                       to_string(state_), to_string(state))});
     state_ = state;
   }
-  const auto* pl = dynamic_cast<const powerlink::PowerlinkBus*>(&bus);
-  if (pl == nullptr) {
-    seen_ = true;
-    return events;
-  }
-  const auto st = pl->status();
-  uint32_t more = 0;
-  const uint32_t ct_fired = st.counters.cycle_time_exceeded.fired;
-  if (!seen_) {
-    cycle_time_exceeded_.said = ct_fired;
-  } else if (cycle_time_exceeded_.due(ct_fired, now, more)) {
-    events.push_back(
-        {true, fmt::format("powerlink: cycle time exceeded threshold reached {} time(s) (a cycle's "
-                           "exchange took longer than the period; {} in total)",
-                           more, ct_fired)});
-  }
-  if (nodes_.size() < st.node_count) nodes_.resize(st.node_count);
-  for (std::size_t i = 0; i < st.node_count; ++i) {
-    const auto& n = st.nodes[i];
-    NodeSeen& seen = nodes_[i];
-    if (!seen_) {
-      seen.late_pres.said = n.late_pres.fired;
-      seen.nmt_refused.said = n.nmt_requests_refused;
-    } else {
-      if (n.resets > seen.resets) {
-        std::string reason =
-            n.last_reset_reason ? n.last_reset_reason.message() : std::string("unknown reason");
-        if (n.identity_mismatch) reason += ": " + powerlink::describe(n.mismatch);
-        events.push_back(
-            {true, fmt::format("powerlink node {}: reset by the MN ({}; resets {}, PRes losses {})",
-                               n.node, reason, n.resets, n.loss_of_pres.events)});
-      }
-      if (n.object_failures > seen.object_failures) {
-        std::string list;
-        for (std::size_t k = 0; k < n.last_failure_count; ++k)
-          list += (k ? "; " : "") + powerlink::describe(n.last_failures[k]);
-        events.push_back(
-            {true, fmt::format("powerlink node {}: {} object(s) of its configuration "
-                               "refused ({})",
-                               n.node, n.object_failures - seen.object_failures, list)});
-      }
-      if (n.boots > seen.boots)
-        events.push_back(
-            {false, fmt::format("powerlink node {}: operational (boot {})", n.node, n.boots)});
-      if (seen.late_pres.due(n.late_pres.fired, now, more))
-        events.push_back({true, fmt::format("powerlink node {}: late PRes threshold reached {} "
-                                            "time(s) (answers after the PRes timeout; {} in total)",
-                                            n.node, more, n.late_pres.fired)});
-      if (seen.nmt_refused.due(n.nmt_requests_refused, now, more))
-        events.push_back({true, fmt::format("powerlink node {}: {} NMTRequest(s) refused (only a "
-                                            "node's own reset is served; {} in total)",
-                                            n.node, more, n.nmt_requests_refused)});
-    }
-    seen.resets = n.resets;
-    seen.boots = n.boots;
-    seen.object_failures = n.object_failures;
-  }
+  bus.watch(events, !seen_, now);
   seen_ = true;
   return events;
 }

@@ -9,8 +9,6 @@
 #include "config/config_loader.hpp"
 #include "control/socket_path.hpp"
 #include "endat_service.hpp"
-#include "powerlink_commands.hpp"
-#include "sim/simulated_bus.hpp"
 
 namespace ds1928 {
 
@@ -59,7 +57,7 @@ std::error_code Daemon::start() {
     return ec;
   }
   std::string why_not;
-  bus_ = make_bus(config_, why_not);
+  bus_ = make_bus_service(config_, why_not);
   if (!bus_) {
     spdlog::error("{}", why_not);
     return std::make_error_code(std::errc::not_supported);
@@ -69,10 +67,10 @@ std::error_code Daemon::start() {
     spdlog::error("shared memory {}: {}", config_.shm.name, ec.message());
     return ec;
   }
-  if (auto ec = bus_->start()) {
-    const auto* sim = dynamic_cast<const sim::SimulatedBus*>(bus_.get());
-    spdlog::error("{} bus: {}{}", bus_->name(), ec.message(),
-                  sim && !sim->load_error().empty() ? ": " + sim->load_error() : std::string());
+  if (auto ec = bus().start()) {
+    const std::string detail = bus_->start_detail();
+    spdlog::error("{} bus: {}{}", bus().name(), ec.message(),
+                  detail.empty() ? std::string() : ": " + detail);
     return ec;
   }
 
@@ -99,8 +97,8 @@ std::error_code Daemon::start() {
   }
   socket_path_ = socket.path;
 
-  work_ = std::make_unique<CycleWork>(config_, *bus_, publisher_);
-  registers_ = std::make_unique<RegisterClient>(io_, *bus_);
+  work_ = std::make_unique<CycleWork>(config_, bus(), publisher_);
+  registers_ = std::make_unique<RegisterClient>(io_, bus());
   engine_ = std::make_unique<CycleEngine>(config_.cycle, *work_);
   auto started = engine_->start();
   if (!started) {
@@ -116,7 +114,7 @@ std::error_code Daemon::start() {
   notifier_.supervise(
       io_, [this] { return engine_->cycle_count(); }, [this] { return summary_line(); });
   spdlog::info("ds1928d {} cycling: bus {}, {} axis(es), period {} µs; {}; shm {}; socket {}",
-               PROJECT_VERSION, bus_->name(), config_.axes.size(), config_.cycle.period_us,
+               PROJECT_VERSION, bus().name(), config_.axes.size(), config_.cycle.period_us,
                engine_->rt_status_text(), config_.shm.name, socket_path_);
   return {};
 }
@@ -130,7 +128,7 @@ void Daemon::stop() noexcept {
   if (engine_) engine_->stop();
   if (registers_) registers_->stop();
   if (server_) server_->stop();
-  if (bus_) bus_->stop();
+  if (bus_) bus().stop();
   publisher_.close();
   started_ = false;
 }
@@ -199,10 +197,12 @@ void Daemon::on_tick() {
 
 std::string Daemon::summary_line() const {
   const auto s = engine_->stats_snapshot();
-  std::string line = fmt::format(
-      "cycle {} | late p99 {:.1f} µs max {:.1f} µs | overruns {} | {}{}", engine_->cycle_count(),
-      s.wake_latency.p99_ns / 1000.0, s.wake_latency.max_ns / 1000.0, s.overruns, bus_->name(),
-      bus_->state() == BusState::Operational ? "" : fmt::format(" {}", to_string(bus_->state())));
+  std::string line = fmt::format("cycle {} | late p99 {:.1f} µs max {:.1f} µs | overruns {} | {}{}",
+                                 engine_->cycle_count(), s.wake_latency.p99_ns / 1000.0,
+                                 s.wake_latency.max_ns / 1000.0, s.overruns, bus_->driver().name(),
+                                 bus_->driver().state() == BusState::Operational
+                                     ? ""
+                                     : fmt::format(" {}", to_string(bus_->driver().state())));
   if (!engine_->realtime()) line += " | NOT real-time";
   if (work_->axis_count() > 0) {
     const AxisCounters& c = work_->counters(0);
@@ -273,7 +273,7 @@ json Daemon::axes_json() const {
 
 json Daemon::stats_json() const {
   const auto s = engine_->stats_snapshot();
-  json bus = bus_status_json(*bus_);
+  json bus = bus_->status_json();
   bus["frames_lost"] = work_->frames_lost();
   bus["exchanges"] = work_->exchanges();
   return {{"since_reset_s", seconds_since(stats_reset_at_)},
@@ -304,7 +304,7 @@ json Daemon::status_json() const {
             {"rt_status", engine_->rt_status_text()},
             {"socket", socket_path_}}},
           {"shm", {{"name", config_.shm.name}, {"generation", publisher_.generation()}}},
-          {"bus", bus_status_json(*bus_)},
+          {"bus", bus_->status_json()},
           {"cycle",
            {{"period_us", config_.cycle.period_us},
             {"count", engine_->cycle_count()},
@@ -318,7 +318,7 @@ void Daemon::register_commands() {
   using control::Reply;
   using control::Request;
   server_->add_command("status", [this](const Request&, Reply reply) { reply.ok(status_json()); });
-  register_powerlink_commands(*server_, *bus_, config_.socket.privileged_group);
+  register_bus_commands(*server_, *bus_, config_);
   server_->add_command("axes", [this](const Request&, Reply reply) { reply.ok(axes_json()); });
   server_->add_command("stats", [this](const Request&, Reply reply) { reply.ok(stats_json()); });
   server_->add_command("stats-reset", [this](const Request&, Reply reply) {
@@ -340,9 +340,9 @@ void Daemon::register_commands() {
                                            config_.socket.privileged_group + "'");
       return;
     }
-    if (bus_->state() != BusState::Operational) {
+    if (bus().state() != BusState::Operational) {
       reply.error("bus_down", fmt::format("the {} bus is {}: nothing to acknowledge to",
-                                          bus_->name(), to_string(bus_->state())));
+                                          bus().name(), to_string(bus().state())));
       return;
     }
     if (!work_->post({AxisCommand::Kind::AckErrors, static_cast<uint16_t>(axis),

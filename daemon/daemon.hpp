@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "bus_service.hpp"
 #include "config/config.hpp"
 #include "control/control_server.hpp"
 #include "control/systemd_notifier.hpp"
@@ -23,41 +24,18 @@
 
 namespace ds1928 {
 
-// What changed on the bus since the last look, worded for the log: state transitions and, on
-// POWERLINK, nodes reset or booted by the MN (with the reason). Normal thread.
-struct BusEvent {
-  bool warning = false;
-  std::string text;
-};
+// What changed on the bus since the last look, worded for the log: state transitions and what
+// the bus kind adds (POWERLINK: nodes reset or booted by the MN, with the reason). Normal thread.
 class BusWatch {
  public:
-  // Thresholds that only count (cycle time exceeded, late PRes) are said at most once per
-  // `repeat` per source, with how often they fired meanwhile: a cycle that is too short for its
-  // network must not flood the journal.
   [[nodiscard]] std::vector<BusEvent> poll(
-      const BusDriver& bus,
+      BusService& bus,
       std::chrono::steady_clock::time_point now = std::chrono::steady_clock::now());
-  static constexpr std::chrono::seconds kRepeat{1};
+  static constexpr std::chrono::seconds kRepeat = SaidCounter::kRepeat;
 
  private:
-  // A counter whose increases are reported, rate-limited.
-  struct Said {
-    uint32_t said = 0;  // value when last reported
-    std::chrono::steady_clock::time_point at{};
-    // True (and `more` set) when `value` grew and the last report is old enough.
-    bool due(uint32_t value, std::chrono::steady_clock::time_point now, uint32_t& more);
-  };
-  struct NodeSeen {
-    uint32_t resets = 0;
-    uint32_t boots = 0;
-    uint32_t object_failures = 0;
-    Said late_pres;
-    Said nmt_refused;
-  };
   bool seen_ = false;
   BusState state_ = BusState::Down;
-  Said cycle_time_exceeded_;
-  std::vector<NodeSeen> nodes_;
 };
 
 class Daemon {
@@ -83,7 +61,8 @@ class Daemon {
   [[nodiscard]] const DaemonConfig& config() const noexcept { return config_; }
   [[nodiscard]] CycleWork& cycle_work() noexcept { return *work_; }
   [[nodiscard]] CycleEngine& engine() noexcept { return *engine_; }
-  [[nodiscard]] BusDriver& bus() noexcept { return *bus_; }
+  [[nodiscard]] BusDriver& bus() noexcept { return bus_->driver(); }
+  [[nodiscard]] BusService& bus_service() noexcept { return *bus_; }
   [[nodiscard]] boost::asio::io_context& io() noexcept { return io_; }
   [[nodiscard]] const std::string& socket_path() const noexcept { return socket_path_; }
 
@@ -96,7 +75,7 @@ class Daemon {
   boost::asio::io_context io_;
   boost::asio::signal_set signals_;
   boost::asio::steady_timer tick_timer_;
-  std::unique_ptr<BusDriver> bus_;
+  std::unique_ptr<BusService> bus_;
   shm::Publisher publisher_;
   std::unique_ptr<CycleWork> work_;
   std::unique_ptr<CycleEngine> engine_;
@@ -113,7 +92,7 @@ class Daemon {
   bool started_ = false;
 };
 
-[[nodiscard]] std::unique_ptr<BusDriver> make_bus(const DaemonConfig& config, std::string& why_not);
-[[nodiscard]] nlohmann::json bus_status_json(const BusDriver& bus);
+// The bus' own socket commands, and "not_<kind>" answers for the other kinds' commands.
+void register_bus_commands(control::Server& server, BusService& bus, const DaemonConfig& config);
 
 }  // namespace ds1928

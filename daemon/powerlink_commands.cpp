@@ -62,18 +62,13 @@ std::vector<uint8_t> parse_hex(const std::string& s) {
 
 }  // namespace
 
-void register_powerlink_commands(control::Server& server, BusDriver& bus,
+void register_powerlink_commands(control::Server& server, PowerlinkBus& bus,
                                  std::string privileged_group) {
   using control::Reply;
   using control::Request;
-  auto* pl = dynamic_cast<PowerlinkBus*>(&bus);
-  auto not_powerlink = [b = &bus](const Request& req, const Reply& reply) {
-    reply.error("not_powerlink", "'" + req.command() + "' needs the powerlink bus; this one is '" +
-                                     std::string(b->name()) + "'");
-  };
+  PowerlinkBus* pl = &bus;
 
-  server.add_command("pl-pres", [pl, not_powerlink](const Request& req, Reply reply) {
-    if (!pl) return not_powerlink(req, reply);
+  server.add_command("pl-pres", [pl](const Request& req, Reply reply) {
     const auto node = static_cast<uint8_t>(req.get_uint("node", 255));
     // A snapshot is ~1.5 kB per CN: on the heap, not on the handler's stack.
     auto snap = std::make_unique<powerlink::PresSnapshot>();
@@ -91,9 +86,8 @@ void register_powerlink_commands(control::Server& server, BusDriver& bus,
     reply.ok(std::move(j));
   });
 
-  server.add_command("pl-preq-set", [pl, not_powerlink, group = std::move(privileged_group)](
-                                        const Request& req, Reply reply) {
-    if (!pl) return not_powerlink(req, reply);
+  server.add_command("pl-preq-set", [pl, group = std::move(privileged_group)](const Request& req,
+                                                                              Reply reply) {
     if (!peer_is_privileged(req.peer(), group))
       return reply.error(
           "permission_denied",

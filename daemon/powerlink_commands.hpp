@@ -5,13 +5,13 @@
 #include <string>
 
 #include "control/control_server.hpp"
-#include "core/bus.hpp"
+#include "powerlink/powerlink_bus.hpp"
 
 namespace ds1928 {
 
-// `bus` outlives the server. When it is not a PowerlinkBus both commands answer not_powerlink.
-// pl-preq-set needs uid 0 or membership of `privileged_group` (as endat-write-param).
-void register_powerlink_commands(control::Server& server, BusDriver& bus,
+// `bus` outlives the server. pl-preq-set needs uid 0 or membership of `privileged_group` (as
+// endat-write-param). On other buses the daemon answers not_powerlink (register_bus_commands).
+void register_powerlink_commands(control::Server& server, powerlink::PowerlinkBus& bus,
                                  std::string privileged_group = {});
 
 }  // namespace ds1928

@@ -24,6 +24,7 @@
 #include <sstream>
 #include <utility>
 
+#include "config/config_canio.hpp"
 #include "config/config_loader.hpp"
 #include "config/config_powerlink.hpp"
 #include "config/config_reader.hpp"
@@ -169,24 +170,6 @@ void parse_sim_axis(Section s, SimAxisConfig& a, const std::filesystem::path& ba
   s.finish();
 }
 
-void parse_canio(Section s, CanioBusConfig& c) {
-  if (s.text("interface", c.interface, 15) && !valid_interface_name(c.interface)) {
-    s.error("interface", "'" + c.interface + "' is not a network interface name");
-  }
-  if (s.integer("bitrate", c.bitrate, 0, kU32, "bit/s")) {
-    constexpr std::array<uint32_t, 9> kRates{10000,  20000,  50000,  100000, 125000,
-                                             250000, 500000, 800000, 1000000};
-    if (std::find(kRates.begin(), kRates.end(), c.bitrate) == kRates.end()) {
-      s.error("bitrate", std::to_string(c.bitrate) +
-                             " is not a CAN bit rate; expected one of 10000, 20000, 50000, 100000, "
-                             "125000, 250000, 500000, 800000, 1000000");
-    }
-  }
-  s.integer("response_timeout_us", c.response_timeout_us, 1, 100000, "µs");
-  s.choice("byte_order", c.little_endian, {{"little", true}, {"big", false}});
-  s.finish();
-}
-
 void parse_shm(Section s, ShmConfig& c) {
   if (s.text("name", c.name, 255)) {
     const bool ok = c.name.size() >= 2 && c.name[0] == '/' &&
@@ -220,7 +203,7 @@ void parse_socket(Section s, SocketConfig& c) {
 // ---------------------------------------------------------------------------------------------
 
 void check_cross_fields(Diagnostics& diag, const DaemonConfig& c, const std::vector<AxisSite>& axes,
-                        const PowerlinkSites& pl_sites, Loc spin_at, Loc canio_timeout_at) {
+                        const PowerlinkSites& pl_sites, Loc spin_at) {
   std::map<std::string, size_t> names;
   std::map<std::pair<uint8_t, uint8_t>, size_t> places;
   for (size_t i = 0; i < axes.size() && i < c.axes.size(); ++i) {
@@ -252,12 +235,6 @@ void check_cross_fields(Diagnostics& diag, const DaemonConfig& c, const std::vec
                    ")");
   }
   if (c.bus == BusKind::Powerlink) check_powerlink(diag, c, axes, pl_sites);
-  if (c.bus == BusKind::Canio && c.canio.response_timeout_us >= c.cycle.period_us) {
-    diag.error(canio_timeout_at, "canio.response_timeout_us",
-               "response_timeout_us (" + std::to_string(c.canio.response_timeout_us) +
-                   ") must be less than cycle.period_us (" + std::to_string(c.cycle.period_us) +
-                   ")");
-  }
 }
 
 DaemonConfig parse_document(Diagnostics& diag, const YAML::Node& doc, const std::string& name,
@@ -349,8 +326,8 @@ DaemonConfig parse_document(Diagnostics& diag, const YAML::Node& doc, const std:
   parse_socket(root.section("socket"), c.socket);
   root.finish();
 
-  check_cross_fields(diag, c, axis_sites, pl_sites, locate(doc, {"cycle", "spin_us"}),
-                     locate(doc, {"canio", "response_timeout_us"}));
+  check_cross_fields(diag, c, axis_sites, pl_sites, locate(doc, {"cycle", "spin_us"}));
+  if (c.bus == BusKind::Canio) check_canio(diag, c, doc);
   return c;
 }
 
@@ -543,11 +520,7 @@ std::string dump_config(const DaemonConfig& c) {
       << "      inject_error_info: " << hex(a.inject_error_info) << "\n";
   }
   dump_powerlink(o, c.powerlink);
-  o << "canio:\n"
-    << "  interface: " << quote(c.canio.interface) << "\n"
-    << "  bitrate: " << c.canio.bitrate << "\n"
-    << "  response_timeout_us: " << c.canio.response_timeout_us << "\n"
-    << "  byte_order: " << (c.canio.little_endian ? "little" : "big") << "\n";
+  dump_canio(o, c.canio);
   o << "axes:\n";
   for (const auto& a : c.axes) {
     const auto& m = a.module;

@@ -9,39 +9,12 @@
 #include <vector>
 
 #include "core/module_image.hpp"
+#include "core/module_settings.hpp"
 
 namespace ds1928 {
 
 enum class BusKind : uint8_t { Simulated, Powerlink, Canio };
 enum class MotionProfile : uint8_t { ConstantVelocity, Sine, Stop };
-
-// Module settings of X20DS1928.md §3, defaults = the datasheet's defaults unless noted.
-struct ModuleSettings {
-  // EnDatMode bits. The datasheet's default is 0 (interface disabled); the daemon defaults to
-  // enabled because a master that does not enable the encoder reads nothing.
-  bool endat_enable = true;
-  bool position_signed = false;
-  bool fast_clock_off = false;
-  bool sincos_unused = false;
-  uint16_t prescaler = 2;          // CfO_SystemCyclePrescaler, EnDat cycle = module cycle × this
-  uint8_t slframe_gen_id = 14;     // CfO_SlframeGenID: 9 fastest, 14 X2X-aligned (default)
-  uint8_t error_enable = 0xFF;     // ErrorEnableID_1710
-  uint16_t vss_min_mv = 800;       // SinCosVssMin 0..1500
-  uint16_t vss_max_mv = 1200;      // SinCosVssMax 0..1500
-  uint32_t quit_time_us = 100000;  // SinCosQuitTime 0..20 000 000
-  uint8_t output_mtu = 7;          // OutputMTU (Tx bytes), ≤15 (model 0) / ≤5 (model 254)
-  uint8_t input_mtu = 7;           // InputMTU (Rx bytes)
-  uint8_t flatstream_mode = 0;     // bit 0 MultiSegmentMTU, bit 1 large segments
-  uint8_t forward = 1;             // 1..7
-  uint16_t forward_delay_us = 0;   // ForwardDelay
-
-  [[nodiscard]] uint8_t endat_mode() const noexcept {
-    return static_cast<uint8_t>((endat_enable ? endat_mode::kEnable : 0) |
-                                (position_signed ? endat_mode::kSigned : 0) |
-                                (fast_clock_off ? endat_mode::kFastClockOff : 0) |
-                                (sincos_unused ? endat_mode::kSinCosUnused : 0));
-  }
-};
 
 struct AxisConfig {
   std::string name;  // shown in status; default "axis<N>"
@@ -159,12 +132,52 @@ struct PowerlinkBusConfig {
   std::map<uint16_t, std::pair<uint16_t, uint8_t>> sdo_overrides;
 };
 
+// CAN-I/O (function model 254). The datasheet fixes the byte offsets inside the CAN objects, not
+// the identifiers, the acyclic transport or the SYNC: those are configurable, with defaults that
+// are ASSUMPTIONS (docs/canio.md §Assumptions).
+enum class CanIdScheme : uint8_t {
+  CanopenPredefined,  // CiA 301 predefined connection set, analog PDOs from PDO2 (CiA 401)
+  Explicit,           // canio.axes[i].input_ids / output_id
+};
+enum class CanAcyclicTransport : uint8_t {
+  CanopenSdo,  // expedited SDO, 0x600 + node → 0x580 + node
+  None,        // no acyclic access: an axis needing configuration is refused at start
+};
+// One axis' objects on the bus (index = axes[i]).
+struct CanioAxisConfig {
+  uint8_t first_analog_slot = 1;         // the module's first of its 2 analog logical slots
+  std::optional<uint32_t> input_ids[2];  // explicit: object 1 (position), object 2
+  std::optional<uint32_t> output_id;     // explicit: the output object
+};
+// The resolved identifiers of one axis (config_canio.cpp canio_axis_ids()).
+struct CanioAxisIds {
+  uint32_t input[2] = {0, 0};
+  uint32_t output = 0;
+};
 struct CanioBusConfig {
   std::string interface = "can0";
-  uint32_t bitrate = 500000;  // informational: SocketCAN's bitrate is set with `ip link`
-  uint32_t response_timeout_us = 500;
+  // Checked against the interface at start (SocketCAN's bit rate is set with `ip link`).
+  uint32_t bitrate = 500000;
+  uint32_t response_timeout_us = 500;  // wait for this cycle's input objects after the outputs
+  uint32_t input_timeout_ms = 20;      // no complete sample for this long: the node is silent
   bool little_endian = true;
+  bool sync_enabled = true;
+  uint32_t sync_id = 0x080;
+  CanIdScheme identifiers = CanIdScheme::CanopenPredefined;
+  std::vector<CanioAxisConfig> axes;  // one per configured axis (missing entries: defaults)
+  CanAcyclicTransport acyclic = CanAcyclicTransport::CanopenSdo;
+  uint32_t sdo_timeout_ms = 100;
+  // Register → (index, subindex) overrides of the default SDO scheme (same as POWERLINK's,
+  // docs/powerlink.md §SDO mapping): the configured index addresses slot 1.
+  std::map<uint16_t, std::pair<uint16_t, uint8_t>> sdo_overrides;
+  // Test transport instead of SocketCAN: the cross-process virtual bus of this name
+  // (docs/canio.md).
+  std::string virtual_bus;
 };
+
+// The identifiers of axis `axis` under `canio` (generator or explicit table); node from the axis.
+[[nodiscard]] CanioAxisIds canio_axis_ids(const CanioBusConfig& canio, const AxisConfig& axis,
+                                          std::size_t index);
 
 struct ShmConfig {
   std::string name = "/ds1928d";  // POSIX shm object name (/dev/shm/ds1928d)

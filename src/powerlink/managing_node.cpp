@@ -7,6 +7,7 @@
 #include <string>
 
 #include "powerlink/concise_dcf.hpp"
+#include "core/register_catalogue.hpp"
 
 namespace ds1928::powerlink {
 
@@ -199,25 +200,8 @@ ManagingNode::ManagingNode(const MnConfig& config)
       if (a.node != nc.node_id) continue;
       specs.push_back(
           {a.slot, a.module.input_mtu, a.module.output_mtu, a.pres_offset, a.preq_offset});
-      const ModuleSettings& m = a.module;
-      auto add = [&](uint16_t reg, uint32_t value) {
-        cn->boot_ops.push_back(
-            {0, nc.node_id, a.slot, reg, register_size(reg).value_or(1), true, value});
-      };
-      add(reg::kSinCosEnable, 1);
-      add(reg::kSinCosRefSource, 1);
-      add(reg::kEnDatMode, m.endat_mode());
-      add(reg::kSystemCyclePrescaler, m.prescaler);
-      add(reg::kSlframeGenId, m.slframe_gen_id);
-      add(reg::kErrorEnable, m.error_enable);
-      add(reg::kSinCosVssMin, m.vss_min_mv);
-      add(reg::kSinCosVssMax, m.vss_max_mv);
-      add(reg::kSinCosQuitTime, m.quit_time_us);
-      add(reg::kOutputMtu, m.output_mtu);
-      add(reg::kInputMtu, m.input_mtu);
-      add(reg::kFlatstreamMode, m.flatstream_mode);
-      add(reg::kForward, m.forward);
-      add(reg::kForwardDelay, m.forward_delay_us);
+      for (const RegisterWrite& w : startup_writes(a.module))
+        cn->boot_ops.push_back({0, nc.node_id, a.slot, w.reg, w.size, true, w.value});
     }
     LayoutIssue issue;
     auto layout = make_layout(specs, &issue);

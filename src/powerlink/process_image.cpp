@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cstring>
 
+#include "core/register_catalogue.hpp"
 #include "powerlink/frames.hpp"
 
 namespace ds1928::powerlink {
@@ -63,14 +64,14 @@ bool write_inputs(std::span<uint8_t> payload, const ModuleMapping& m,
                   const ModuleInputs& in) noexcept {
   if (m.pres_offset + pres_module_size(m.input_mtu) > payload.size()) return false;
   uint8_t* p = payload.data() + m.pres_offset;
-  store_le32(p, in.position_hw);
-  store_le32(p + 4, in.position_lw);
-  store_le32(p + 8, in.pos_time_us);
-  p[12] = static_cast<uint8_t>(in.pos_cycle);
-  p[13] = static_cast<uint8_t>(in.sdc_life_count);
-  p[14] = in.error_info;
-  p[15] = in.input_sequence;
-  std::memcpy(p + kPresModuleFixedSize, in.rx_bytes.data(), m.input_mtu);
+  store_le32(p + fm0::kPositionHw, in.position_hw);
+  store_le32(p + fm0::kPositionLw, in.position_lw);
+  store_le32(p + fm0::kPosTime, in.pos_time_us);
+  p[fm0::kPosCycle] = static_cast<uint8_t>(in.pos_cycle);
+  p[fm0::kSdcLifeCount] = static_cast<uint8_t>(in.sdc_life_count);
+  p[fm0::kErrorInfo] = in.error_info;
+  p[fm0::kInputSequence] = in.input_sequence;
+  std::memcpy(p + fm0::kRxBytes, in.rx_bytes.data(), m.input_mtu);
   return true;
 }
 
@@ -78,15 +79,15 @@ bool read_inputs(std::span<const uint8_t> payload, const ModuleMapping& m,
                  ModuleInputs& in) noexcept {
   if (m.pres_offset + pres_module_size(m.input_mtu) > payload.size()) return false;
   const uint8_t* p = payload.data() + m.pres_offset;
-  in.position_hw = load_le32(p);
-  in.position_lw = load_le32(p + 4);
-  in.pos_time_us = load_le32(p + 8);
-  in.pos_cycle = static_cast<int8_t>(p[12]);
-  in.sdc_life_count = static_cast<int8_t>(p[13]);
-  in.error_info = p[14];
-  in.input_sequence = p[15];
+  in.position_hw = load_le32(p + fm0::kPositionHw);
+  in.position_lw = load_le32(p + fm0::kPositionLw);
+  in.pos_time_us = load_le32(p + fm0::kPosTime);
+  in.pos_cycle = static_cast<int8_t>(p[fm0::kPosCycle]);
+  in.sdc_life_count = static_cast<int8_t>(p[fm0::kSdcLifeCount]);
+  in.error_info = p[fm0::kErrorInfo];
+  in.input_sequence = p[fm0::kInputSequence];
   in.rx_bytes.fill(0);
-  std::memcpy(in.rx_bytes.data(), p + kPresModuleFixedSize, m.input_mtu);
+  std::memcpy(in.rx_bytes.data(), p + fm0::kRxBytes, m.input_mtu);
   return true;
 }
 
@@ -94,9 +95,9 @@ bool write_outputs(std::span<uint8_t> payload, const ModuleMapping& m,
                    const ModuleOutputs& out) noexcept {
   if (m.preq_offset + preq_module_size(m.output_mtu) > payload.size()) return false;
   uint8_t* p = payload.data() + m.preq_offset;
-  p[0] = out.output_sequence;
-  std::memcpy(p + 1, out.tx_bytes.data(), m.output_mtu);
-  p[1 + m.output_mtu] = out.ack_error_info;
+  p[fm0::kOutputSequence] = out.output_sequence;
+  std::memcpy(p + fm0::kTxBytes, out.tx_bytes.data(), m.output_mtu);
+  p[fm0::kTxBytes + m.output_mtu] = out.ack_error_info;
   return true;
 }
 
@@ -104,10 +105,10 @@ bool read_outputs(std::span<const uint8_t> payload, const ModuleMapping& m,
                   ModuleOutputs& out) noexcept {
   if (m.preq_offset + preq_module_size(m.output_mtu) > payload.size()) return false;
   const uint8_t* p = payload.data() + m.preq_offset;
-  out.output_sequence = p[0];
+  out.output_sequence = p[fm0::kOutputSequence];
   out.tx_bytes.fill(0);
-  std::memcpy(out.tx_bytes.data(), p + 1, m.output_mtu);
-  out.ack_error_info = p[1 + m.output_mtu];
+  std::memcpy(out.tx_bytes.data(), p + fm0::kTxBytes, m.output_mtu);
+  out.ack_error_info = p[fm0::kTxBytes + m.output_mtu];
   return true;
 }
 

@@ -10,37 +10,36 @@ namespace {
 struct TableEntry {
   uint16_t reg;
   uint8_t subindex;
-  uint8_t size;
 };
 
 // Configuration and control registers: subindex 0x01..0x1A (docs/powerlink.md, SDO mapping).
 constexpr std::array<TableEntry, 26> kTable{{
-    {reg::kEnDatMode, 0x01, 1},
-    {reg::kSystemCyclePrescaler, 0x02, 2},
-    {reg::kSlframeGenId, 0x03, 1},
-    {reg::kErrorEnable, 0x04, 1},
-    {reg::kSinCosEnable, 0x05, 1},
-    {reg::kSinCosRefSource, 0x06, 1},
-    {reg::kSinCosVssMin, 0x07, 2},
-    {reg::kSinCosVssMax, 0x08, 2},
-    {reg::kSinCosQuitTime, 0x09, 4},
-    {reg::kOutputMtu, 0x0A, 1},
-    {reg::kInputMtu, 0x0B, 1},
-    {reg::kFlatstreamMode, 0x0C, 1},
-    {reg::kForward, 0x0D, 1},
-    {reg::kForwardDelay, 0x0E, 2},
-    {reg::kEnDatAck, 0x0F, 1},
-    {261, 0x10, 1},   // ErrorInfo
-    {325, 0x11, 1},   // AckErrorInfo
-    {4868, 0x12, 4},  // EnDatInfoCmd01..04 (4860 + N·8)
-    {4876, 0x13, 4},
-    {4884, 0x14, 4},
-    {4892, 0x15, 4},
-    {4935, 0x16, 1},  // EnDatInfoOK
-    {4994, 0x17, 2},  // EnDatInfo01..04 (4978 + N·16)
-    {5010, 0x18, 2},
-    {5026, 0x19, 2},
-    {5042, 0x1A, 2},
+    {reg::kEnDatMode, 0x01},
+    {reg::kSystemCyclePrescaler, 0x02},
+    {reg::kSlframeGenId, 0x03},
+    {reg::kErrorEnable, 0x04},
+    {reg::kSinCosEnable, 0x05},
+    {reg::kSinCosRefSource, 0x06},
+    {reg::kSinCosVssMin, 0x07},
+    {reg::kSinCosVssMax, 0x08},
+    {reg::kSinCosQuitTime, 0x09},
+    {reg::kOutputMtu, 0x0A},
+    {reg::kInputMtu, 0x0B},
+    {reg::kFlatstreamMode, 0x0C},
+    {reg::kForward, 0x0D},
+    {reg::kForwardDelay, 0x0E},
+    {reg::kEnDatAck, 0x0F},
+    {261, 0x10},   // ErrorInfo
+    {325, 0x11},   // AckErrorInfo
+    {4868, 0x12},  // EnDatInfoCmd01..04 (4860 + N·8)
+    {4876, 0x13},
+    {4884, 0x14},
+    {4892, 0x15},
+    {4935, 0x16},  // EnDatInfoOK
+    {4994, 0x17},  // EnDatInfo01..04 (4978 + N·16)
+    {5010, 0x18},
+    {5026, 0x19},
+    {5042, 0x1A},
 }};
 
 // Register ranges of UINT words: OperatingStatus/ParamManuf 4352..4399, OperatingParam
@@ -71,14 +70,6 @@ std::optional<uint16_t> default_register(uint8_t subindex) noexcept {
 }
 
 }  // namespace
-
-std::optional<uint8_t> register_size(uint16_t reg) noexcept {
-  for (const TableEntry& e : kTable)
-    if (e.reg == reg) return e.size;
-  for (const Range& r : kRanges)
-    if (reg >= r.first && reg < r.first + r.count) return uint8_t{2};
-  return std::nullopt;
-}
 
 SdoMapping::SdoMapping(const Overrides& overrides) : overrides_(overrides) {}
 

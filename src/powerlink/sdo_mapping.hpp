@@ -11,6 +11,8 @@
 #include <optional>
 #include <utility>
 
+#include "core/register_catalogue.hpp"
+
 namespace ds1928::powerlink {
 
 inline constexpr uint16_t kModuleIndexBase = 0x2000;
@@ -27,8 +29,8 @@ struct RegisterAddress {
   friend bool operator==(const RegisterAddress&, const RegisterAddress&) = default;
 };
 
-// The register's data size in bytes (1, 2 or 4) from the datasheet, nullopt when unknown.
-[[nodiscard]] std::optional<uint8_t> register_size(uint16_t reg) noexcept;
+// Register sizes come from the register catalogue.
+using ds1928::register_size;
 
 class SdoMapping {
  public:

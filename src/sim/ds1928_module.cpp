@@ -3,30 +3,50 @@
 #include <cmath>
 #include <numbers>
 
+#include "core/register_catalogue.hpp"
 #include "sim/sim_error.hpp"
 
 namespace ds1928::sim {
 
 namespace {
 
-// Acyclic registers with their bus-controller defaults (X20DS1928.md §3). EnDatMode = 0: the
-// encoder interface starts disabled, so a master that configures nothing reads nothing.
+// Acyclic registers. power_up() gives them the bus-controller defaults of the register catalogue
+// (EnDatMode = 0: the encoder interface starts disabled, so a master that configures nothing
+// reads nothing).
 struct Registers {
-  uint8_t slframe_gen_id = 14;
-  uint16_t prescaler = 2;
-  uint8_t error_enable = 0xFF;
-  uint8_t sincos_enable = 1;
-  uint8_t sincos_ref_source = 1;
-  uint16_t vss_min_mv = 800;
-  uint16_t vss_max_mv = 1200;
-  uint32_t quit_time_us = 100000;
+  uint8_t slframe_gen_id = 0;
+  uint16_t prescaler = 0;
+  uint8_t error_enable = 0;
+  uint8_t sincos_enable = 0;
+  uint8_t sincos_ref_source = 0;
+  uint16_t vss_min_mv = 0;
+  uint16_t vss_max_mv = 0;
+  uint32_t quit_time_us = 0;
   uint8_t endat_mode = 0;
-  uint8_t output_mtu = 7;
+  uint8_t output_mtu = 7;  // no datasheet default: the simulator starts with 7
   uint8_t input_mtu = 7;
   uint8_t flatstream_mode = 0;
-  uint8_t forward = 1;
+  uint8_t forward = 0;
   uint16_t forward_delay_us = 0;
 };
+
+[[nodiscard]] Registers power_up_registers() noexcept {
+  Registers g;
+  auto def = [](uint16_t r) { return find_register(r)->default_value.value_or(0); };
+  g.slframe_gen_id = static_cast<uint8_t>(def(reg::kSlframeGenId));
+  g.prescaler = static_cast<uint16_t>(def(reg::kSystemCyclePrescaler));
+  g.error_enable = static_cast<uint8_t>(def(reg::kErrorEnable));
+  g.sincos_enable = static_cast<uint8_t>(def(reg::kSinCosEnable));
+  g.sincos_ref_source = static_cast<uint8_t>(def(reg::kSinCosRefSource));
+  g.vss_min_mv = static_cast<uint16_t>(def(reg::kSinCosVssMin));
+  g.vss_max_mv = static_cast<uint16_t>(def(reg::kSinCosVssMax));
+  g.quit_time_us = def(reg::kSinCosQuitTime);
+  g.endat_mode = static_cast<uint8_t>(def(reg::kEnDatMode));
+  g.flatstream_mode = static_cast<uint8_t>(def(reg::kFlatstreamMode));
+  g.forward = static_cast<uint8_t>(def(reg::kForward));
+  g.forward_delay_us = static_cast<uint16_t>(def(reg::kForwardDelay));
+  return g;
+}
 
 [[nodiscard]] uint8_t max_mtu(FunctionModel model) noexcept {
   return model == FunctionModel::Standard ? 15 : 5;
@@ -50,7 +70,7 @@ struct Ds1928Module::State {
                              ? 1.0
                              : static_cast<double>(encoder.steps_per_revolution) /
                                    encoder.signal_periods),
-        channel(channel_config(Registers{})),
+        channel(channel_config(power_up_registers())),
         bridge(EnDatEncoder(std::move(encoder))) {}
   double steps_per_period;  // the encoder's measuring steps per sine period
   FunctionModel model;
@@ -91,7 +111,7 @@ FunctionModel Ds1928Module::function_model() const noexcept {
 
 void Ds1928Module::power_up() noexcept {
   State& s = *state_;
-  s.regs = Registers{};
+  s.regs = power_up_registers();
   s.in = ModuleInputs{};
   s.out = ModuleOutputs{};
   s.latched_errors = s.sim.inject_error_info;
@@ -347,28 +367,7 @@ std::error_code Ds1928Module::read_register(uint16_t r, uint8_t size, uint32_t& 
 }
 
 std::error_code configure_module(Ds1928Module& m, const ModuleSettings& s) {
-  struct Write {
-    uint16_t reg;
-    uint8_t size;
-    uint32_t value;
-  };
-  const Write writes[] = {
-      {reg::kSlframeGenId, 1, s.slframe_gen_id},
-      {reg::kSystemCyclePrescaler, 2, s.prescaler},
-      {reg::kErrorEnable, 1, s.error_enable},
-      {reg::kSinCosEnable, 1, 1},
-      {reg::kSinCosRefSource, 1, 1},
-      {reg::kSinCosVssMin, 2, s.vss_min_mv},
-      {reg::kSinCosVssMax, 2, s.vss_max_mv},
-      {reg::kSinCosQuitTime, 4, s.quit_time_us},
-      {reg::kOutputMtu, 1, s.output_mtu},
-      {reg::kInputMtu, 1, s.input_mtu},
-      {reg::kFlatstreamMode, 1, s.flatstream_mode},
-      {reg::kForward, 1, s.forward},
-      {reg::kForwardDelay, 2, s.forward_delay_us},
-      {reg::kEnDatMode, 1, s.endat_mode()},  // last: enable the encoder once everything is set
-  };
-  for (const Write& w : writes) {
+  for (const RegisterWrite& w : startup_writes(s)) {
     if (auto ec = m.write_register(w.reg, w.size, w.value)) return ec;
   }
   return {};

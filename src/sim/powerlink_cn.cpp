@@ -87,7 +87,7 @@ class PowerlinkCn::Objects final : public pl::SdoObjectAccess {
       Ds1928Module* module = nullptr;
       uint16_t reg = 0;
       if (const uint32_t abort = locate(index, subindex, module, reg)) return abort;
-      width = pl::register_size(reg).value_or(4);
+      width = ds1928::register_size(reg).value_or(4);
       if (auto ec = module->read_register(reg, width, value)) return abort_for(ec);
     }
     if (out.size() < width) return kAbortGeneral;
@@ -103,7 +103,7 @@ class PowerlinkCn::Objects final : public pl::SdoObjectAccess {
     Ds1928Module* module = nullptr;
     uint16_t reg = 0;
     if (const uint32_t abort = locate(index, subindex, module, reg)) return abort;
-    const uint8_t width = pl::register_size(reg).value_or(static_cast<uint8_t>(data.size()));
+    const uint8_t width = ds1928::register_size(reg).value_or(static_cast<uint8_t>(data.size()));
     if (data.size() != width || (width != 1 && width != 2 && width != 4)) return kAbortTypeLength;
     uint32_t value = 0;
     for (std::size_t i = 0; i < data.size(); ++i)

@@ -83,6 +83,19 @@ const Expected kBadFiles[] = {
      "not a regular file: /dev/zero is a character device"},
     {"deep_nesting.yaml", 3, 1, "", "YAML nested deeper than"},
     {"billion_laughs.yaml", 4, 3, "log_level", "a list is not allowed"},
+    {"canio_node.yaml", 6, 11, "axes[0].node", "200 is out of range 1..127"},
+    {"canio_mtu.yaml", 7, 18, "axes[0].module.input_mtu",
+     "2 is below 3: the module's Flatstream MTU is 3..27 bytes"},
+    {"canio_id_collision.yaml", 10, 18, "canio.axes[1]",
+     "CAN identifier 0x181 of axes[1] (b) input object 2 is already used by axes[0] (a) input "
+     "object 1"},
+    {"canio_bus_load.yaml", 3, 14, "cycle.period_us",
+     "2000 µs is too short for the CAN-I/O bus: 10 frames a cycle (3 module(s) × 3 + SYNC) are "
+     "1270 bits with worst-case stuffing = 2540 µs at 500000 bit/s, 540 µs more than the period"},
+    {"canio_analog_slot.yaml", 5, 26, "canio.axes[0].first_analog_slot",
+     "analog slots 3 and 4 need TPDO4 and TPDO5"},
+    {"canio_transport.yaml", 5, 16, "canio.acyclic.transport",
+     "'sdo' is not allowed; expected one of: canopen_sdo, none"},
 };
 
 void check_bad(const Expected& e) {

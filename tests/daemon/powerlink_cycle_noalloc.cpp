@@ -44,11 +44,12 @@ int main(int argc, char** argv) {
   config.shm.name = "/ds1928d-pl-noalloc-" + std::to_string(::getpid());
   config.cycle.hold_cpu_dma_latency = false;
   std::string why_not;
-  std::unique_ptr<BusDriver> bus = make_bus(config, why_not);
-  if (!bus) {
+  std::unique_ptr<BusService> service = make_bus_service(config, why_not);
+  if (!service) {
     std::fprintf(stderr, "bus: %s\n", why_not.c_str());
     return 2;
   }
+  BusDriver* bus = &service->driver();
   if (auto ec = bus->start()) {
     std::fprintf(stderr, "bus start: %s\n", ec.message().c_str());
     return 2;

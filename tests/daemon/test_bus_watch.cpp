@@ -7,6 +7,7 @@
 #include "daemon.hpp"
 #include "mn_rig.hpp"
 #include "powerlink/powerlink_bus.hpp"
+#include "powerlink_service.hpp"
 
 using namespace ds1928;
 using namespace ds1928::powerlink;
@@ -26,21 +27,22 @@ std::string joined(const std::vector<BusEvent>& events) {
 TEST_CASE("BusWatch names state changes, resets with their reason and boots", "[daemon][log]") {
   Rig rig({1}, 1);
   BusWatch watch;
-  CHECK(watch.poll(*rig.bus).empty());  // the first look is the baseline
+  PowerlinkService service(*rig.bus);
+  CHECK(watch.poll(service).empty());  // the first look is the baseline
   REQUIRE(rig.run_until([&] { return rig.bus->state() == BusState::Operational; }));
-  auto events = watch.poll(*rig.bus);
+  auto events = watch.poll(service);
   INFO(joined(events));
   REQUIRE(events.size() == 2);
   CHECK_FALSE(events[0].warning);
   CHECK(events[0].text == "bus powerlink: booting -> operational");
   CHECK(events[1].text == "powerlink node 1: operational (boot 1)");
-  CHECK(watch.poll(*rig.bus).empty());  // nothing new, nothing said
+  CHECK(watch.poll(service).empty());  // nothing new, nothing said
 
   rig.cns[0]->drop_pres = true;  // two lost PRes in a row reach the default threshold
   rig.step();
   rig.step();
   rig.cns[0]->drop_pres = false;
-  events = watch.poll(*rig.bus);
+  events = watch.poll(service);
   INFO(joined(events));
   REQUIRE(events.size() == 2);
   CHECK(events[0].warning);
@@ -51,7 +53,7 @@ TEST_CASE("BusWatch names state changes, resets with their reason and boots", "[
         "2)");
 
   REQUIRE(rig.run_until([&] { return rig.bus->state() == BusState::Operational; }));
-  events = watch.poll(*rig.bus);
+  events = watch.poll(service);
   INFO(joined(events));
   REQUIRE(events.size() == 2);
   CHECK(events[0].text == "bus powerlink: booting -> operational");
@@ -62,10 +64,11 @@ TEST_CASE("BusWatch says counting-only thresholds at most once a second, with th
           "[daemon][log]") {
   Rig rig({1}, 1);
   BusWatch watch;
+  PowerlinkService service(*rig.bus);
   const auto t0 = std::chrono::steady_clock::now();
-  (void)watch.poll(*rig.bus, t0);
+  (void)watch.poll(service, t0);
   REQUIRE(rig.run_until([&] { return rig.bus->state() == BusState::Operational; }));
-  (void)watch.poll(*rig.bus, t0);  // the boot's lines
+  (void)watch.poll(service, t0);  // the boot's lines
 
   // Every clock read inside the exchange advances 300 µs: each cycle's exchange outlasts the
   // 1 ms period, the counter (+8, threshold 15) fires every second cycle.
@@ -73,7 +76,7 @@ TEST_CASE("BusWatch says counting-only thresholds at most once a second, with th
   for (int i = 0; i < 20; ++i) rig.step();
   const uint32_t fired_first = rig.bus->status().counters.cycle_time_exceeded.fired;
   REQUIRE(fired_first >= 5);
-  auto events = watch.poll(*rig.bus, t0 + std::chrono::milliseconds(10));
+  auto events = watch.poll(service, t0 + std::chrono::milliseconds(10));
   INFO(joined(events));
   REQUIRE(events.size() == 1);
   CHECK(events[0].warning);
@@ -83,10 +86,10 @@ TEST_CASE("BusWatch says counting-only thresholds at most once a second, with th
                     fired_first, fired_first));
 
   for (int i = 0; i < 20; ++i) rig.step();
-  CHECK(watch.poll(*rig.bus, t0 + std::chrono::milliseconds(500)).empty());  // too soon
+  CHECK(watch.poll(service, t0 + std::chrono::milliseconds(500)).empty());  // too soon
   const uint32_t fired_second = rig.bus->status().counters.cycle_time_exceeded.fired;
   REQUIRE(fired_second > fired_first);
-  events = watch.poll(*rig.bus, t0 + std::chrono::milliseconds(1100));
+  events = watch.poll(service, t0 + std::chrono::milliseconds(1100));
   INFO(joined(events));
   REQUIRE(events.size() == 1);
   CHECK_THAT(events[0].text,
@@ -94,5 +97,5 @@ TEST_CASE("BusWatch says counting-only thresholds at most once a second, with th
                                            fired_second - fired_first)));
   test::g_clock_step_ns = 0;
   for (int i = 0; i < 20; ++i) rig.step();
-  CHECK(watch.poll(*rig.bus, t0 + std::chrono::seconds(5)).empty());  // nothing new: silent
+  CHECK(watch.poll(service, t0 + std::chrono::seconds(5)).empty());  // nothing new: silent
 }

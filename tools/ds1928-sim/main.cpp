@@ -5,7 +5,10 @@
 // runs POWERLINK Controlled Node(s) with simulated X20DS1928 modules on a raw socket and prints
 // every NMT state change. SIGUSR1 power-cycles the node(s); SIGUSR2 makes them ask the MN for
 // their own reset (NMTRequest); SIGINT/SIGTERM stop.
-// Further buses (CAN-I/O) become further subcommands.
+//   ds1928-sim canio (--iface IF | --virtual NAME) [--node N] [--modules K] [--config FILE]
+//                    [--drop P] [--wrong-length-every N] [--unexpected-id ID] [--no-sdo] ...
+// runs a CAN-I/O bus controller with simulated X20DS1928 modules (function model 254) on
+// SocketCAN or on the cross-process virtual test bus (docs/canio.md).
 #include <sched.h>
 #include <sys/mman.h>
 #include <time.h>
@@ -19,6 +22,7 @@
 #include <string>
 #include <vector>
 
+#include "canio_main.hpp"
 #include "config/config_loader.hpp"
 #include "powerlink/raw_link.hpp"
 #include "sim/powerlink_cn.hpp"
@@ -329,7 +333,46 @@ int main(int argc, char** argv) {
   plk->add_option("--ready-after-soc-us", o.ready_after_soc_us,
                   "no PRes earlier than this after the SoC (software-cn: 20)");
 
+  CanioOptions co;
+  CLI::App* can = app.add_subcommand(
+      "canio", "CAN-I/O bus controller with X20DS1928 modules (function model 254)");
+  auto* iface = can->add_option("--iface", co.iface, "SocketCAN interface (e.g. can1)");
+  auto* virt = can->add_option("--virtual", co.virtual_bus,
+                               "the cross-process virtual test bus of this name instead");
+  iface->excludes(virt);
+  can->add_option("--node", co.node, "node number of the bus controller")
+      ->check(CLI::Range(1, 127));
+  can->add_option("--modules", co.modules,
+                  "X20DS1928 modules (slots 1..K, analog slots 1, 3, ...; without --config)")
+      ->check(CLI::Range(1, 8));
+  can->add_option("--config", co.config_file,
+                  "daemon YAML: the axes on --node become the modules (identifiers, SYNC, byte "
+                  "order, SDO objects, simulated motion)");
+  can->add_option("--bitrate", co.bitrate, "expected interface bit rate (default: the config's)");
+  can->add_option("--byte-order", co.byte_order, "little | big (without --config)")
+      ->check(CLI::IsMember({"little", "big"}));
+  can->add_flag("--no-sync", co.no_sync,
+                "answer output objects instead of SYNC (without --config)");
+  can->add_option("--sync-id", co.sync_id, "SYNC identifier (without --config)");
+  can->add_option("--drop", co.drop, "probability that an input object is not sent")
+      ->check(CLI::Range(0.0, 1.0));
+  can->add_option("--wrong-length-every", co.wrong_length_every,
+                  "every N-th position object with 7 instead of 8 bytes");
+  can->add_option("--unexpected-id", co.unexpected_id,
+                  "also send a frame with this identifier after every SYNC");
+  can->add_flag("--no-sdo", co.no_sdo, "ignore SDO requests (no acyclic access)");
+  can->add_option("--silent-after", co.silent_after_s, "stop answering after S seconds");
+  can->add_option("--silent-for-ms", co.silent_for_ms, "... for this long (0: for good)");
+  can->add_flag("--power-cycle-when-back", co.power_cycle_when_back,
+                "modules come back with their bus-controller defaults (EnDat disabled)");
+  can->add_option("--seed", co.seed, "fault injection random seed");
+  can->add_option("--duration", co.duration_s, "stop after S seconds (0: until SIGTERM)");
+
   CLI11_PARSE(app, argc, argv);
+  if (can->parsed() && co.iface.empty() == co.virtual_bus.empty()) {
+    std::fprintf(stderr, "ds1928-sim canio: give --iface IFACE or --virtual NAME\n");
+    return 2;
+  }
   std::signal(SIGINT, on_stop);
   std::signal(SIGTERM, on_stop);
   std::signal(SIGUSR1, on_usr1);
@@ -343,5 +386,6 @@ int main(int argc, char** argv) {
     apply_profile(o, given);
     return run_powerlink(o);
   }
+  if (can->parsed()) return run_canio(co, g_stop);
   return 1;
 }

@@ -12,7 +12,8 @@ per publication) and checks what must hold on every sample whatever the machine'
 
 Nothing about timing is asserted (the QEMU guest is TCG-emulated). Exit 0 when everything held,
 1 otherwise, with one line per problem. --expect-no-fresh inverts the purpose: the daemon was
-given a wrong identifier, so no sample may be fresh or valid (exit 0 when none is).
+given a wrong identifier, so no sample may be fresh or valid (exit 0 when none is; the positive
+check then necessarily fails on --min-fresh, which must be at least 1).
 """
 import argparse
 import json
@@ -56,6 +57,8 @@ def main() -> int:
             print(f"FAIL: expected no fresh or valid sample, got {summary}")
             return 1
         print(f"ok: no fresh sample: {summary}")
+        print(f"ok: and the position check fails: only 0 fresh samples, expected at least "
+              f"{args.min_fresh}")
         return 0
 
     problems = []

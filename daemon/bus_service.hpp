@@ -1,0 +1,80 @@
+// The daemon's side of a bus: beside the cycle interface (core/bus.hpp BusDriver) every bus kind
+// contributes its part of `status`, its own socket commands and the log lines that explain gaps in
+// the positions. The daemon creates buses only through make_bus_service() and talks to them only
+// through this interface: no code outside a bus kind's own files knows its concrete type.
+#pragma once
+
+#include <chrono>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <span>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "config/config.hpp"
+#include "control/control_server.hpp"
+#include "core/bus.hpp"
+
+namespace ds1928 {
+
+// One log line about the bus, worded for the journal.
+struct BusEvent {
+  bool warning = false;
+  std::string text;
+};
+
+// A counter whose increases are reported, rate-limited: thresholds that only count (cycle time
+// exceeded, late PRes, bus errors) are said at most once per kRepeat with how often they fired.
+struct SaidCounter {
+  static constexpr std::chrono::seconds kRepeat{1};
+  uint64_t said = 0;  // value when last reported
+  std::chrono::steady_clock::time_point at{};
+  // True (and `more` set) when `value` grew and the last report is old enough.
+  bool due(uint64_t value, std::chrono::steady_clock::time_point now, uint64_t& more);
+};
+
+class BusService {
+ public:
+  virtual ~BusService() = default;
+
+  [[nodiscard]] virtual BusDriver& driver() noexcept = 0;
+  [[nodiscard]] const BusDriver& driver() const noexcept {
+    return const_cast<BusService*>(this)->driver();
+  }
+
+  // {"kind", "state"} plus what the kind adds (status_extra). Normal thread.
+  [[nodiscard]] nlohmann::json status_json() const;
+  // The bus kind's own socket commands (names listed by bus_commands()).
+  virtual void register_commands(control::Server& server, const SocketConfig& socket);
+  // Why start() failed, beyond the error code (file:line of an encoder file...); may be empty.
+  [[nodiscard]] virtual std::string start_detail() const { return {}; }
+  // Kind-specific log lines since the last call. `first`: the baseline look, say nothing.
+  virtual void watch(std::vector<BusEvent>& events, bool first,
+                     std::chrono::steady_clock::time_point now);
+
+ protected:
+  virtual void status_extra(nlohmann::json& j) const;
+};
+
+// Creates the configured bus kind; nullptr and `why_not` set when it cannot be created.
+[[nodiscard]] std::unique_ptr<BusService> make_bus_service(const DaemonConfig& config,
+                                                           std::string& why_not);
+
+// Socket commands that belong to one bus kind: on another bus they answer "not_<kind>".
+struct BusCommandSet {
+  BusKind kind;
+  std::string_view kind_name;
+  std::span<const std::string_view> commands;
+};
+[[nodiscard]] std::span<const BusCommandSet> bus_commands() noexcept;
+
+// The factories of the bus kinds (one file each).
+[[nodiscard]] std::unique_ptr<BusService> make_simulated_service(const DaemonConfig& config,
+                                                                 std::string& why_not);
+[[nodiscard]] std::unique_ptr<BusService> make_powerlink_service(const DaemonConfig& config,
+                                                                 std::string& why_not);
+[[nodiscard]] std::unique_ptr<BusService> make_canio_service(const DaemonConfig& config,
+                                                             std::string& why_not);
+
+}  // namespace ds1928

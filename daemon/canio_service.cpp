@@ -1,0 +1,173 @@
+// The daemon's side of the CAN-I/O bus: opens the ports (SocketCAN, or the cross-process virtual
+// test bus when canio.virtual_bus is set), checks the interface's bit rate, and contributes the
+// CAN state, counters and per-node figures to `status` and the log.
+#include <fmt/format.h>
+
+#include "bus_service.hpp"
+#include "canio/canio_bus.hpp"
+#include "canio/socketcan_port.hpp"
+#include "canio/virtual_bus.hpp"
+
+namespace ds1928 {
+namespace {
+
+using canio::CanioBus;
+
+class CanioService final : public BusService {
+ public:
+  CanioService(std::unique_ptr<CanioBus> bus, std::shared_ptr<canio::VirtualCanBus> vbus)
+      : vbus_(std::move(vbus)), bus_(std::move(bus)) {}
+
+  [[nodiscard]] BusDriver& driver() noexcept override { return *bus_; }
+  [[nodiscard]] std::string start_detail() const override { return bus_->start_error(); }
+
+  void watch(std::vector<BusEvent>& events, bool first,
+             std::chrono::steady_clock::time_point now) override {
+    const canio::CanState s = bus_->can_state();
+    if (!first && s != can_state_)
+      events.push_back({!canio::can_transmit(s),
+                        fmt::format("canio {}: controller {} -> {}{}", bus_->port_name(),
+                                    canio::to_string(can_state_), canio::to_string(s),
+                                    s == canio::CanState::BusOff
+                                        ? " (no frames until the controller restarts: restart-ms)"
+                                        : "")});
+    can_state_ = s;
+    const auto& c = bus_->counters();
+    uint64_t more = 0;
+    const uint64_t full = c.tx_queue_full.load();
+    if (first)
+      tx_full_.said = full;
+    else if (tx_full_.due(full, now, more))
+      events.push_back({true, fmt::format("canio {}: TX queue full (ENOBUFS) {} time(s), frames "
+                                          "dropped ({} in total; raise txqueuelen)",
+                                          bus_->port_name(), more, full)});
+    if (silent_.size() < bus_->options().axes.size()) silent_.resize(bus_->options().axes.size());
+    for (std::size_t i = 0; i < bus_->options().axes.size(); ++i) {
+      const auto& a = bus_->options().axes[i];
+      const auto& ac = bus_->axis_counters(i);
+      const bool silent = ac.silent.load() && bus_->state() != BusState::Down;
+      if (!first && silent != silent_[i])
+        events.push_back(
+            {silent,
+             silent ? fmt::format("canio node {}: silent (no complete sample of axis '{}' "
+                                  "for {} ms)",
+                                  a.node, a.name, bus_->options().bus.input_timeout_ms)
+                    : fmt::format("canio node {}: axis '{}' answering again", a.node, a.name)});
+      silent_[i] = silent;
+    }
+  }
+
+ protected:
+  void status_extra(nlohmann::json& j) const override {
+    const auto info = bus_->interface_info();
+    const auto pc = bus_->port_counters();
+    const auto& c = bus_->counters();
+    j["interface"] = std::string(bus_->port_name());
+    j["transport"] = vbus_ ? "virtual" : "socketcan";
+    j["can_state"] = std::string(canio::to_string(bus_->can_state()));
+    j["bitrate"] = info.bitrate;
+    j["restart_ms"] = info.restart_ms;
+    j["counters"] = {{"cycles", c.cycles.load()},
+                     {"sync_sent", c.sync_sent.load()},
+                     {"tx_queue_full", c.tx_queue_full.load()},
+                     {"tx_failed", c.tx_failed.load()},
+                     {"unexpected_ids", c.unexpected_ids.load()},
+                     {"error_frames", c.error_frames.load()},
+                     {"receive_errors", c.receive_errors.load()},
+                     {"bus_off_cycles", c.bus_off_cycles.load()},
+                     {"bus_off_events", pc.bus_off_events},
+                     {"restarts", pc.restarts},
+                     {"rx_frames", pc.rx_frames},
+                     {"tx_frames", pc.tx_frames},
+                     {"rx_kernel_drops", pc.rx_kernel_drops}};
+    nlohmann::json axes = nlohmann::json::array();
+    for (std::size_t i = 0; i < bus_->options().axes.size(); ++i) {
+      const auto& a = bus_->options().axes[i];
+      const auto& ac = bus_->axis_counters(i);
+      axes.push_back({{"axis", i},
+                      {"node", a.node},
+                      {"input_ids", {a.ids.input[0], a.ids.input[1]}},
+                      {"output_id", a.ids.output},
+                      {"configured", ac.configured.load()},
+                      {"silent", ac.silent.load()},
+                      {"samples", ac.samples.load()},
+                      {"half_samples", ac.half_samples.load()},
+                      {"missing", ac.missing.load()},
+                      {"duplicates", ac.duplicates.load()},
+                      {"wrong_length", ac.wrong_length.load()},
+                      {"late_frames", ac.late_frames.load()},
+                      {"sdo_transfers", ac.sdo_transfers.load()},
+                      {"sdo_errors", ac.sdo_errors.load()},
+                      {"configurations", ac.configurations.load()},
+                      {"last_error", bus_->axis_last_error(i)}});
+    }
+    j["nodes"] = std::move(axes);
+  }
+
+ private:
+  std::shared_ptr<canio::VirtualCanBus> vbus_;  // outlives the ports
+  std::unique_ptr<CanioBus> bus_;
+  canio::CanState can_state_ = canio::CanState::Unknown;
+  SaidCounter tx_full_;
+  std::vector<bool> silent_;
+};
+
+}  // namespace
+
+std::unique_ptr<BusService> make_canio_service(const DaemonConfig& config, std::string& why_not) {
+  const canio::CanioBusOptions options = canio::make_canio_options(config);
+  std::unique_ptr<canio::CanPort> cycle_port;
+  std::unique_ptr<canio::CanPort> sdo_port;
+  std::shared_ptr<canio::VirtualCanBus> vbus;
+  if (!config.canio.virtual_bus.empty()) {
+    auto bus = canio::VirtualCanBus::open_shared(config.canio.virtual_bus);
+    if (!bus) {
+      why_not = fmt::format("canio: virtual bus '{}': {}", config.canio.virtual_bus,
+                            bus.error().message());
+      return nullptr;
+    }
+    vbus = bus.value();
+    for (auto* port : {&cycle_port, &sdo_port}) {
+      canio::VirtualPortOptions po;
+      po.name = config.canio.virtual_bus;
+      po.bitrate = config.canio.bitrate;
+      auto p = vbus->open_port(po);
+      if (!p) {
+        why_not = fmt::format("canio: virtual bus '{}': {}", config.canio.virtual_bus,
+                              p.error().message());
+        return nullptr;
+      }
+      *port = std::move(p.value());
+    }
+  } else {
+    for (auto* port : {&cycle_port, &sdo_port}) {
+      canio::SocketCanOptions so;
+      so.interface = config.canio.interface;
+      so.expected_bitrate = config.canio.bitrate;
+      canio::SocketCanOpen opened = canio::SocketCanPort::open(so);
+      if (!opened.port) {
+        why_not = opened.message.empty()
+                      ? fmt::format("canio: {}: {}", config.canio.interface, opened.error.message())
+                      : "canio: " + opened.message;
+        return nullptr;
+      }
+      *port = std::move(opened.port);
+    }
+  }
+  // State and bit rate as the interface reports them (SocketCanPort::open checked them already;
+  // this words the same error for every port kind).
+  if (std::string problem = canio::check_interface(*cycle_port, config.canio.bitrate);
+      !problem.empty()) {
+    why_not = "canio: " + problem;
+    return nullptr;
+  }
+  try {
+    auto bus = std::make_unique<CanioBus>(options, std::move(cycle_port), std::move(sdo_port));
+    return std::make_unique<CanioService>(std::move(bus), std::move(vbus));
+  } catch (const std::exception& e) {
+    why_not = fmt::format("canio: {}", e.what());
+    return nullptr;
+  }
+}
+
+}  // namespace ds1928

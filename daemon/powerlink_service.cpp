@@ -1,0 +1,168 @@
+#include "powerlink_service.hpp"
+
+#include <fmt/format.h>
+
+#include "powerlink/raw_link.hpp"
+#include "powerlink/rx_wait.hpp"
+#include "powerlink_commands.hpp"
+
+namespace ds1928 {
+namespace {
+
+// Boot step "configure" of a CN: objects written, the failures of the last run (index/subindex,
+// abort code), and an identity mismatch.
+nlohmann::json configuration_json(const powerlink::CnStatus& n) {
+  nlohmann::json failures = nlohmann::json::array();
+  for (std::size_t i = 0; i < n.last_failure_count; ++i)
+    failures.push_back(powerlink::describe(n.last_failures[i]));
+  return {{"objects_written", n.objects_written},
+          {"object_failures", n.object_failures},
+          {"last_failures", std::move(failures)},
+          {"identity_mismatch",
+           n.identity_mismatch ? nlohmann::json(powerlink::describe(n.mismatch)) : nullptr}};
+}
+
+}  // namespace
+
+PowerlinkService::PowerlinkService(std::unique_ptr<powerlink::PowerlinkBus> bus)
+    : owned_(std::move(bus)), bus_(*owned_) {}
+
+PowerlinkService::PowerlinkService(powerlink::PowerlinkBus& bus) : bus_(bus) {}
+
+void PowerlinkService::register_commands(control::Server& server, const SocketConfig& socket) {
+  register_powerlink_commands(server, bus_, socket.privileged_group);
+}
+
+void PowerlinkService::status_extra(nlohmann::json& j) const {
+  const auto st = bus_.status();
+  j["mn_state"] = std::string(powerlink::to_string(st.mn_state));
+  j["link_up"] = st.link_up;
+  j["counters"] = {{"cycles", st.counters.cycles},
+                   {"cycle_time_exceeded", st.counters.cycle_time_exceeded.events},
+                   {"cycle_time_exceeded_fired", st.counters.cycle_time_exceeded.fired},
+                   {"unexpected_frames", st.counters.unexpected_frames},
+                   {"invalid_frames", st.counters.invalid_frames},
+                   {"short_frames", st.counters.short_frames},
+                   {"async_timeouts", st.counters.async_timeouts},
+                   {"async_invites_unused", st.counters.async_invites_unused}};
+  nlohmann::json nodes = nlohmann::json::array();
+  for (std::size_t i = 0; i < st.node_count; ++i) {
+    const auto& n = st.nodes[i];
+    nodes.push_back({{"node", n.node},
+                     {"boot", std::string(powerlink::to_string(n.boot))},
+                     {"nmt", std::string(powerlink::to_string(n.nmt))},
+                     {"in_isochronous", n.in_isochronous},
+                     {"vendor_id", n.vendor_id},
+                     {"product_code", n.product_code},
+                     {"preq_size", n.preq_size},
+                     {"pres_size", n.pres_size},
+                     {"pres_received", n.pres_received},
+                     {"loss_of_pres",
+                      {{"events", n.loss_of_pres.events},
+                       {"counter", n.loss_of_pres.value},
+                       {"fired", n.loss_of_pres.fired},
+                       {"threshold", n.loss_of_pres_threshold}}},
+                     {"late_pres", {{"events", n.late_pres.events}, {"fired", n.late_pres.fired}}},
+                     {"stale_pres_dropped", n.stale_pres_dropped},
+                     {"pres_size_mismatches", n.pres_size_mismatches},
+                     {"last_pres_size", n.last_pres_size},
+                     {"status_error_entries", n.status_error_entries},
+                     {"boots", n.boots},
+                     {"resets", n.resets},
+                     {"sdo_errors", n.sdo_errors},
+                     {"nmt_requests", n.nmt_requests},
+                     {"nmt_requests_refused", n.nmt_requests_refused},
+                     {"last_error", n.last_error ? n.last_error.message() : std::string()},
+                     {"last_reset_reason",
+                      n.last_reset_reason ? n.last_reset_reason.message() : std::string()}});
+    nodes.back()["configuration"] = configuration_json(n);
+    nodes.back()["exception"] = {{"new", n.exception_new},
+                                 {"acknowledged", n.exception_acknowledge},
+                                 {"signalled", n.exceptions_signalled}};
+  }
+  j["nodes"] = std::move(nodes);
+}
+
+void PowerlinkService::watch(std::vector<BusEvent>& events, bool first,
+                             std::chrono::steady_clock::time_point now) {
+  const auto st = bus_.status();
+  uint64_t more = 0;
+  const uint32_t ct_fired = st.counters.cycle_time_exceeded.fired;
+  if (first) {
+    cycle_time_exceeded_.said = ct_fired;
+  } else if (cycle_time_exceeded_.due(ct_fired, now, more)) {
+    events.push_back(
+        {true, fmt::format("powerlink: cycle time exceeded threshold reached {} time(s) (a cycle's "
+                           "exchange took longer than the period; {} in total)",
+                           more, ct_fired)});
+  }
+  if (nodes_.size() < st.node_count) nodes_.resize(st.node_count);
+  for (std::size_t i = 0; i < st.node_count; ++i) {
+    const auto& n = st.nodes[i];
+    NodeSeen& seen = nodes_[i];
+    if (first) {
+      seen.late_pres.said = n.late_pres.fired;
+      seen.nmt_refused.said = n.nmt_requests_refused;
+    } else {
+      if (n.resets > seen.resets) {
+        std::string reason =
+            n.last_reset_reason ? n.last_reset_reason.message() : std::string("unknown reason");
+        if (n.identity_mismatch) reason += ": " + powerlink::describe(n.mismatch);
+        events.push_back(
+            {true, fmt::format("powerlink node {}: reset by the MN ({}; resets {}, PRes losses {})",
+                               n.node, reason, n.resets, n.loss_of_pres.events)});
+      }
+      if (n.object_failures > seen.object_failures) {
+        std::string list;
+        for (std::size_t k = 0; k < n.last_failure_count; ++k)
+          list += (k ? "; " : "") + powerlink::describe(n.last_failures[k]);
+        events.push_back(
+            {true, fmt::format("powerlink node {}: {} object(s) of its configuration "
+                               "refused ({})",
+                               n.node, n.object_failures - seen.object_failures, list)});
+      }
+      if (n.boots > seen.boots)
+        events.push_back(
+            {false, fmt::format("powerlink node {}: operational (boot {})", n.node, n.boots)});
+      if (seen.late_pres.due(n.late_pres.fired, now, more))
+        events.push_back({true, fmt::format("powerlink node {}: late PRes threshold reached {} "
+                                            "time(s) (answers after the PRes timeout; {} in total)",
+                                            n.node, more, n.late_pres.fired)});
+      if (seen.nmt_refused.due(n.nmt_requests_refused, now, more))
+        events.push_back({true, fmt::format("powerlink node {}: {} NMTRequest(s) refused (only a "
+                                            "node's own reset is served; {} in total)",
+                                            n.node, more, n.nmt_requests_refused)});
+    }
+    seen.resets = n.resets;
+    seen.boots = n.boots;
+    seen.object_failures = n.object_failures;
+  }
+}
+
+std::unique_ptr<BusService> make_powerlink_service(const DaemonConfig& config,
+                                                   std::string& why_not) {
+  auto link = std::make_unique<powerlink::RawLink>();
+  powerlink::RawLinkOptions options;
+  options.interface = config.powerlink.interface;
+  powerlink::apply_rx_wait(config.powerlink.rx_wait, config.powerlink.rx_spin_us, options);
+  if (auto ec = link->open(options)) {
+    why_not = fmt::format(
+        "powerlink: cannot open raw socket on '{}': {}{}", config.powerlink.interface, ec.message(),
+        ec == std::errc::operation_not_permitted ? " (needs root or CAP_NET_RAW)" : "");
+    return nullptr;
+  }
+  powerlink::MnConfig mn;
+  mn.bus = config.powerlink;
+  mn.axes = config.axes;
+  mn.cycle_us = config.cycle.period_us;
+  mn.mac = link->mac();
+  try {
+    return std::make_unique<PowerlinkService>(
+        std::make_unique<powerlink::PowerlinkBus>(mn, std::move(link)));
+  } catch (const std::exception& e) {
+    why_not = fmt::format("powerlink: {}", e.what());
+    return nullptr;
+  }
+}
+
+}  // namespace ds1928

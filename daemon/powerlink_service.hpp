@@ -1,0 +1,42 @@
+// The daemon's side of the POWERLINK bus: status (MN state, counters, per CN), the pl-* socket
+// commands and the log lines about CNs reset or booted by the MN.
+#pragma once
+
+#include <memory>
+#include <vector>
+
+#include "bus_service.hpp"
+#include "powerlink/powerlink_bus.hpp"
+
+namespace ds1928 {
+
+class PowerlinkService final : public BusService {
+ public:
+  // Owns the bus.
+  explicit PowerlinkService(std::unique_ptr<powerlink::PowerlinkBus> bus);
+  // Borrows a bus that outlives the service (tests driving a PowerlinkBus themselves).
+  explicit PowerlinkService(powerlink::PowerlinkBus& bus);
+
+  [[nodiscard]] BusDriver& driver() noexcept override { return bus_; }
+  void register_commands(control::Server& server, const SocketConfig& socket) override;
+  void watch(std::vector<BusEvent>& events, bool first,
+             std::chrono::steady_clock::time_point now) override;
+
+ protected:
+  void status_extra(nlohmann::json& j) const override;
+
+ private:
+  struct NodeSeen {
+    uint32_t resets = 0;
+    uint32_t boots = 0;
+    uint32_t object_failures = 0;
+    SaidCounter late_pres;
+    SaidCounter nmt_refused;
+  };
+  std::unique_ptr<powerlink::PowerlinkBus> owned_;
+  powerlink::PowerlinkBus& bus_;
+  SaidCounter cycle_time_exceeded_;
+  std::vector<NodeSeen> nodes_;
+};
+
+}  // namespace ds1928

@@ -1,0 +1,21 @@
+// The `canio` section of the configuration (internal to the configuration library).
+#pragma once
+
+#include <ostream>
+
+#include "config/config.hpp"
+#include "config/config_reader.hpp"
+
+namespace ds1928::config_detail {
+
+// Parses the section into `c`; `axis_count` = entries of the top-level axes list.
+void parse_canio(Section s, CanioBusConfig& c);
+
+// Checks that need the whole document (axes, cycle) when the bus is canio: node numbers,
+// MTUs, identifiers (range, collisions, predefined-set limits), timeouts, bus load.
+void check_canio(Diagnostics& diag, const DaemonConfig& c, const YAML::Node& doc);
+
+// The section as dump_config() prints it.
+void dump_canio(std::ostream& o, const CanioBusConfig& c);
+
+}  // namespace ds1928::config_detail

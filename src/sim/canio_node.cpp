@@ -1,0 +1,185 @@
+#include "sim/canio_node.hpp"
+
+#include <array>
+
+#include "canio/object_codec.hpp"
+#include "canio/sdo_expedited.hpp"
+#include "core/register_catalogue.hpp"
+#include "sim/sim_error.hpp"
+
+namespace ds1928::sim {
+namespace {
+
+// CiA 301 abort codes.
+constexpr uint32_t kAbortNoObject = 0x0602'0000;
+constexpr uint32_t kAbortReadOnly = 0x0601'0002;
+constexpr uint32_t kAbortTypeLength = 0x0607'0010;
+constexpr uint32_t kAbortOutOfRange = 0x0609'0030;
+constexpr uint32_t kAbortGeneral = 0x0800'0000;
+
+[[nodiscard]] uint32_t abort_for(std::error_code ec) noexcept {
+  if (ec == SimErrc::unknown_register) return kAbortNoObject;
+  if (ec == SimErrc::read_only) return kAbortReadOnly;
+  if (ec == SimErrc::wrong_size) return kAbortTypeLength;
+  if (ec == SimErrc::out_of_range) return kAbortOutOfRange;
+  return kAbortGeneral;
+}
+
+}  // namespace
+
+CanioNodeConfig canio_node_from_config(const DaemonConfig& config, uint8_t node) {
+  CanioNodeConfig n;
+  n.node = node;
+  n.little_endian = config.canio.little_endian;
+  n.sync_enabled = config.canio.sync_enabled;
+  n.sync_id = config.canio.sync_id;
+  n.sdo_overrides = config.canio.sdo_overrides;
+  for (std::size_t i = 0; i < config.axes.size(); ++i) {
+    const AxisConfig& a = config.axes[i];
+    if (a.node != node) continue;
+    CanioNodeModule m;
+    m.slot = a.slot;
+    m.ids = canio_axis_ids(config.canio, a, i);
+    if (i < config.simulated.axes.size()) m.sim = config.simulated.axes[i];
+    n.modules.push_back(m);
+  }
+  return n;
+}
+
+CanioNode::CanioNode(CanioNodeConfig config, canio::CanPort& port)
+    : config_(std::move(config)),
+      port_(port),
+      mapping_(config_.sdo_overrides),
+      rng_(config_.faults.seed) {
+  for (const CanioNodeModule& m : config_.modules) {
+    // An encoder file that does not load was refused by the configuration already.
+    auto encoder = load_encoder(m.sim);
+    modules_.push_back(std::make_unique<Ds1928Module>(
+        FunctionModel::BusController, m.sim,
+        encoder.description ? std::move(*encoder.description) : default_encoder_description()));
+  }
+}
+
+CanioNode::~CanioNode() = default;
+
+std::error_code CanioNode::open() {
+  std::vector<canio::CanIdFilter> ids;
+  if (config_.sync_enabled) ids.push_back({config_.sync_id, false});
+  for (const CanioNodeModule& m : config_.modules) ids.push_back({m.ids.output, false});
+  ids.push_back({canio::kSdoRequestBase + config_.node, false});
+  return port_.set_filters(ids);
+}
+
+void CanioNode::power_up() {
+  for (auto& m : modules_) m->power_up();
+}
+
+void CanioNode::send(const canio::CanFrame& f) {
+  if (!port_.send(f).sent()) ++counters_.send_failures;
+}
+
+void CanioNode::answer(std::size_t i, int64_t time_ns) {
+  Ds1928Module& m = *modules_[i];
+  m.tick(time_ns, static_cast<uint64_t>(time_ns / 1000));
+  const ModuleInputs in = m.inputs();
+  if (on_inputs) on_inputs(i, time_ns, in);
+  const CanioNodeModule& cfg = config_.modules[i];
+  canio::CanObject pos{};
+  canio::CanObject status{};
+  canio::pack_position_object(
+      in, config_.little_endian ? canio::ByteOrder::Little : canio::ByteOrder::Big, pos);
+  canio::pack_status_object(in, status);
+  std::bernoulli_distribution drop(config_.faults.drop);
+  for (int k = 0; k < 2; ++k) {
+    canio::CanFrame f = canio::make_standard_frame(cfg.ids.input[k], k == 0 ? pos : status);
+    if (k == 0 && config_.faults.wrong_length_every != 0 &&
+        ++position_objects_ % config_.faults.wrong_length_every == 0)
+      f.dlc = 7;
+    if (config_.faults.drop > 0 && drop(rng_)) {
+      ++counters_.inputs_dropped;
+      continue;
+    }
+    send(f);
+    ++counters_.inputs_sent;
+  }
+}
+
+void CanioNode::serve_sdo(const canio::CanFrame& f) {
+  using canio::SdoCommand;
+  ++counters_.sdo_requests;
+  auto request = canio::parse_sdo(config_.node, false, f);
+  if (!request) return;  // not an expedited request: a real server would abort; nothing to name
+  canio::SdoMessage reply;
+  reply.index = request->index;
+  reply.subindex = request->subindex;
+  auto abort = [&](uint32_t code) {
+    ++counters_.sdo_aborts;
+    reply.command = SdoCommand::Abort;
+    reply.size = 0;
+    reply.value = code;
+  };
+  const auto where = mapping_.register_for({request->index, request->subindex});
+  Ds1928Module* module = nullptr;
+  if (where) {
+    for (std::size_t i = 0; i < config_.modules.size(); ++i)
+      if (config_.modules[i].slot == where->slot) module = modules_[i].get();
+  }
+  const uint8_t size = where ? register_size(where->reg).value_or(0) : uint8_t{0};
+  if (!module || size == 0) {
+    abort(kAbortNoObject);
+  } else if (request->command == SdoCommand::UploadRequest) {
+    uint32_t value = 0;
+    if (auto ec = module->read_register(where->reg, size, value)) {
+      abort(abort_for(ec));
+    } else {
+      reply.command = SdoCommand::UploadResponse;
+      reply.size = size;
+      reply.value = value;
+    }
+  } else if (request->command == SdoCommand::DownloadRequest) {
+    if (request->size != size) {
+      abort(kAbortTypeLength);
+    } else if (auto ec = module->write_register(where->reg, size, request->value)) {
+      abort(abort_for(ec));
+    } else {
+      reply.command = SdoCommand::DownloadResponse;
+    }
+  } else {
+    abort(kAbortGeneral);
+  }
+  if (auto frame = canio::build_sdo_response(config_.node, reply)) send(*frame);
+}
+
+std::size_t CanioNode::service(int64_t deadline_ns) {
+  std::array<canio::CanFrame, 32> rx{};
+  const canio::ReceiveResult r = port_.receive(rx, deadline_ns);
+  for (std::size_t k = 0; k < r.count; ++k) {
+    const canio::CanFrame& f = rx[k];
+    if (f.error || f.extended || silent_) continue;
+    if (config_.sync_enabled && f.id == config_.sync_id) {
+      ++counters_.syncs;
+      for (std::size_t i = 0; i < modules_.size(); ++i) answer(i, f.rx_time_ns);
+      if (config_.faults.unexpected_id != 0) {
+        const std::array<uint8_t, 8> junk{0xDE, 0xAD, 0xBE, 0xEF, 0, 0, 0, 0};
+        send(canio::make_standard_frame(config_.faults.unexpected_id, junk));
+      }
+      continue;
+    }
+    if (f.id == canio::kSdoRequestBase + config_.node) {
+      if (config_.faults.answer_sdo) serve_sdo(f);
+      continue;
+    }
+    for (std::size_t i = 0; i < modules_.size(); ++i) {
+      if (f.id != config_.modules[i].ids.output) continue;
+      ModuleOutputs out;
+      if (!canio::unpack_output_object(f.payload(), out)) break;
+      ++counters_.outputs;
+      modules_[i]->apply_outputs(out);
+      if (!config_.sync_enabled) answer(i, f.rx_time_ns);
+      break;
+    }
+  }
+  return r.count;
+}
+
+}  // namespace ds1928::sim

@@ -1,0 +1,103 @@
+// Simulated CAN-I/O node: a bus controller with simulated X20DS1928 modules in function model 254
+// on a CanPort (SocketCAN or the virtual test bus). It answers the master's SYNC with every
+// module's two input objects (without SYNC: a module's output object triggers its answer), takes
+// the output objects, and serves expedited SDO (0x600 + node → 0x580 + node) on the register →
+// index/subindex scheme the daemon uses. Single-threaded: the owner calls service() in a loop.
+// Faults for tests: random loss of its frames, wrong lengths, foreign identifiers, silence.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <memory>
+#include <random>
+#include <utility>
+#include <vector>
+
+#include "canio/can_port.hpp"
+#include "config/config.hpp"
+#include "powerlink/sdo_mapping.hpp"
+#include "sim/ds1928_module.hpp"
+
+namespace ds1928::sim {
+
+struct CanioNodeModule {
+  uint8_t slot = 1;
+  CanioAxisIds ids;
+  SimAxisConfig sim;
+};
+
+struct CanioNodeFaults {
+  double drop = 0.0;                // probability of not sending an input object
+  uint32_t wrong_length_every = 0;  // every n-th position object with 7 bytes (0: off)
+  uint32_t unexpected_id = 0;       // also send a frame with this id per SYNC (0: off)
+  bool answer_sdo = true;           // false: SDO requests are ignored (no acyclic access)
+  uint64_t seed = 1;
+};
+
+struct CanioNodeConfig {
+  uint8_t node = 1;
+  std::vector<CanioNodeModule> modules;
+  bool little_endian = true;
+  bool sync_enabled = true;
+  uint32_t sync_id = 0x080;
+  std::map<uint16_t, std::pair<uint16_t, uint8_t>> sdo_overrides;
+  CanioNodeFaults faults;
+};
+
+// The node behind `node` of a daemon configuration: the axes on that node become its modules.
+[[nodiscard]] CanioNodeConfig canio_node_from_config(const DaemonConfig& config, uint8_t node);
+
+struct CanioNodeCounters {
+  uint64_t syncs = 0;
+  uint64_t outputs = 0;
+  uint64_t inputs_sent = 0;  // input objects sent
+  uint64_t inputs_dropped = 0;
+  uint64_t send_failures = 0;
+  uint64_t sdo_requests = 0;
+  uint64_t sdo_aborts = 0;
+};
+
+class CanioNode {
+ public:
+  CanioNode(CanioNodeConfig config, canio::CanPort& port);
+  ~CanioNode();
+  CanioNode(const CanioNode&) = delete;
+  CanioNode& operator=(const CanioNode&) = delete;
+
+  // Filters on the port (SYNC, output objects, SDO requests).
+  [[nodiscard]] std::error_code open();
+  // Handles what arrives until `deadline_ns` (one receive call; a deadline in the past polls).
+  // Returns the frames handled.
+  std::size_t service(int64_t deadline_ns);
+
+  // Power-cycle: every module back to its bus-controller defaults (EnDat disabled).
+  void power_up();
+  // No answers at all while true (a node that lost power or its bus connection).
+  void set_silent(bool silent) noexcept { silent_.store(silent); }
+
+  [[nodiscard]] std::size_t module_count() const noexcept { return modules_.size(); }
+  [[nodiscard]] Ds1928Module& module(std::size_t i) { return *modules_.at(i); }
+  [[nodiscard]] const CanioNodeCounters& counters() const noexcept { return counters_; }
+  [[nodiscard]] const CanioNodeConfig& config() const noexcept { return config_; }
+
+  // Test hook: module i's inputs as sent in answer to the SYNC received at `sync_time_ns`.
+  std::function<void(std::size_t module, int64_t sync_time_ns, const ModuleInputs&)> on_inputs;
+
+ private:
+  void answer(std::size_t module, int64_t time_ns);
+  void serve_sdo(const canio::CanFrame& f);
+  void send(const canio::CanFrame& f);
+
+  CanioNodeConfig config_;
+  canio::CanPort& port_;
+  powerlink::SdoMapping mapping_;
+  std::vector<std::unique_ptr<Ds1928Module>> modules_;
+  CanioNodeCounters counters_;
+  std::mt19937_64 rng_;
+  std::atomic<bool> silent_{false};  // set from another thread (tests, the simulator main)
+  uint64_t position_objects_ = 0;
+};
+
+}  // namespace ds1928::sim

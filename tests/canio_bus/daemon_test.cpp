@@ -1,0 +1,138 @@
+// ds1928d with `bus: canio` on the cross-process virtual bus against the simulated CAN-I/O node:
+// the module is configured at start over SDO, positions arrive in shared memory stamped with
+// their reception time, `status` shows the CAN bus per node, and the EnDat commands of the
+// socket (ident, read-param) work over Flatstream at MTU 5 and SDO.
+#include "daemon.hpp"
+
+#include <unistd.h>
+
+#include <catch2/catch.hpp>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <thread>
+
+#include "../control/control_test_util.hpp"
+#include "canio/virtual_bus.hpp"
+#include "rig.hpp"
+
+using namespace ds1928;
+using json = nlohmann::json;
+
+namespace {
+
+struct SimulatedNodeThread {
+  SimulatedNodeThread(const DaemonConfig& config, const std::string& bus_name) {
+    auto b = canio::VirtualCanBus::open_shared(bus_name);
+    if (!b) throw std::runtime_error("virtual bus: " + b.error().message());
+    bus = b.value();
+    auto p = bus->open_port({});
+    if (!p) throw std::runtime_error("virtual port: " + p.error().message());
+    port = std::move(p.value());
+    node = std::make_unique<sim::CanioNode>(sim::canio_node_from_config(config, 1), *port);
+    if (node->open()) throw std::runtime_error("node filters");
+    thread = std::thread([this] {
+      while (!stop.load()) (void)node->service(test::Rig::monotonic() + 2'000'000);
+    });
+  }
+  ~SimulatedNodeThread() {
+    stop.store(true);
+    thread.join();
+  }
+  std::shared_ptr<canio::VirtualCanBus> bus;
+  std::unique_ptr<canio::VirtualCanPort> port;
+  std::unique_ptr<sim::CanioNode> node;
+  std::atomic<bool> stop{false};
+  std::thread thread;
+};
+
+json request(const std::string& path, const json& j) {
+  control::test::LineClient c(path, 10000);
+  const json r = c.request(j);
+  return r.is_object() ? r : json::object();
+}
+
+}  // namespace
+
+TEST_CASE("ds1928d on bus canio: configured at start, positions, status, EnDat commands",
+          "[canio][daemon][socket]") {
+  const std::string tag = std::to_string(::getpid());
+  const std::string bus_name = "ds1928d-test-" + tag;
+  const auto dir = std::filesystem::temp_directory_path() / ("ds1928d-canio-" + tag);
+  std::filesystem::create_directories(dir);
+  struct Cleanup {
+    std::filesystem::path dir;
+    std::string bus;
+    ~Cleanup() {
+      std::error_code ec;
+      std::filesystem::remove_all(dir, ec);
+      (void)canio::VirtualCanBus::remove_shared(bus);
+    }
+  } cleanup{dir, bus_name};
+
+  DaemonConfig c = test::canio_config(1, 2000);
+  c.canio.virtual_bus = bus_name;
+  c.canio.response_timeout_us = 1000;
+  c.cycle.hold_cpu_dma_latency = false;
+  c.cycle.lock_memory = false;
+  c.shm.name = "/ds1928d-canio-daemon-" + tag;
+  c.socket.path = (dir / "control.sock").string();
+  SimulatedNodeThread node(c, bus_name);
+
+  Daemon daemon(c);
+  int rc = -1;
+  std::thread t([&] { rc = daemon.run(); });
+  struct Join {
+    Daemon& d;
+    std::thread& t;
+    ~Join() {
+      d.request_stop();
+      t.join();
+    }
+  } join{daemon, t};
+  for (int i = 0; i < 500 && !std::filesystem::exists(c.socket.path); ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  REQUIRE(std::filesystem::exists(c.socket.path));
+
+  // Configured over SDO, then operational with fresh positions.
+  json status;
+  for (int i = 0; i < 500; ++i) {
+    status = request(c.socket.path, {{"cmd", "status"}});
+    if (status.value("ok", false) && status["bus"]["state"] == "operational" &&
+        status["bus"]["nodes"][0]["samples"].get<uint64_t>() > 50)
+      break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  INFO(status.dump(2));
+  REQUIRE(status["bus"]["kind"] == "canio");
+  REQUIRE(status["bus"]["state"] == "operational");
+  CHECK(status["bus"]["transport"] == "virtual");
+  CHECK(status["bus"]["can_state"] == "error-active");
+  CHECK(status["bus"]["nodes"][0]["configured"] == true);
+  CHECK(status["bus"]["nodes"][0]["input_ids"] == json::array({0x281, 0x381}));
+  CHECK(status["bus"]["nodes"][0]["output_id"] == 0x301);
+  CHECK(status["bus"]["nodes"][0]["configurations"] == 1);
+  // The module really holds the configuration the daemon wrote (EnDat enabled, MTU 5).
+  uint32_t v = 0;
+  CHECK_FALSE(node.node->module(0).read_register(reg::kEnDatMode, 1, v));
+  CHECK(v == endat_mode::kEnable);
+  CHECK_FALSE(node.node->module(0).read_register(reg::kOutputMtu, 1, v));
+  CHECK(v == 5);
+
+  const json axes = request(c.socket.path, {{"cmd", "axes"}});
+  INFO(axes.dump(2));
+  CHECK(axes["axes"][0]["state"] == "valid");
+  CHECK(axes["axes"][0]["time_source"] == "rx_timestamp");
+  CHECK(axes["axes"][0]["pos_time_ns"].get<int64_t>() > 0);
+
+  // POWERLINK's raw commands name the bus they need.
+  CHECK(request(c.socket.path, {{"cmd", "pl-pres"}, {"node", 1}})["error"]["code"] ==
+        "not_powerlink");
+
+  const json ident = request(c.socket.path, {{"cmd", "endat-ident"}, {"axis", 0}});
+  INFO(ident.dump(2));
+  CHECK(ident.value("ok", false));
+  const json param = request(
+      c.socket.path, {{"cmd", "endat-read-param"}, {"axis", 0}, {"mrs", 0xA1}, {"param", 13}});
+  INFO(param.dump(2));
+  CHECK(param.value("ok", false));
+}

@@ -1,0 +1,71 @@
+// The daemon's whole cycle on `bus: canio` — SYNC, output objects, input objects, decoding,
+// Flatstream tunnels with EnDat traffic, acknowledgements, shared memory — makes no heap
+// allocation and takes no mutex on the cycle thread, while the normal thread feeds it EnDat
+// commands and acyclic register reads (SDO on the driver's worker thread). The simulated node
+// answers from its own thread over the virtual bus.
+#include <unistd.h>
+
+#include <catch2/catch.hpp>
+#include <thread>
+
+#include "core/cycle_engine.hpp"
+#include "cycle_proof.hpp"
+#include "cycle_work.hpp"
+#include "endat/command.hpp"
+#include "rig.hpp"
+#include "shm/publisher.hpp"
+
+using namespace ds1928;
+
+TEST_CASE("bus canio: the cycle allocates nothing and locks no mutex", "[canio][daemon][rt]") {
+  DaemonConfig config = test::canio_config(2, 1000);
+  config.canio.response_timeout_us = 500;
+  config.cycle.hold_cpu_dma_latency = false;
+  config.shm.name = "/ds1928d-canio-noalloc-" + std::to_string(::getpid());
+  test::Rig rig(config, false, false);
+  REQUIRE_FALSE(rig.canio->start());
+  shm::Publisher publisher;
+  REQUIRE_FALSE(publisher.open(config.shm, 2, 1'000'000));
+  CycleWork work(config, *rig.canio, publisher);
+  constexpr uint64_t kCounted = 3000;
+  test::CountingTask task(work, kCounted, 0, false);  // armed once the modules are configured
+  auto engine = std::make_unique<CycleEngine>(config.cycle, task);
+  auto started = engine->start();
+  REQUIRE(started);
+  const auto up_deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+  while (rig.canio->state() != BusState::Operational &&
+         std::chrono::steady_clock::now() < up_deadline)
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  REQUIRE(rig.canio->state() == BusState::Operational);
+  task.arm();
+
+  const auto read =
+      endat::encode_request(endat::Request::read(0xA1, 13), endat::CommandSet::EnDat22);
+  REQUIRE(read);
+  test::CycleTraffic traffic;
+  while (!task.done()) {
+    traffic.round(work, *rig.canio, 2, *read, 1, 0);
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  engine->stop();
+  const auto counts = task.result();
+  INFO("new " << counts.new_calls << ", malloc " << counts.malloc_calls << " (first size "
+              << counts.first_size << "), mutex locks " << counts.mutex_locks);
+  INFO("traffic: " << traffic.sent << " messages, " << traffic.replies << " replies, "
+                   << traffic.acks << " acks, " << traffic.registers << " register reads, "
+                   << traffic.register_results << " results");
+  std::printf(
+      "canio noalloc: %llu cycles counted: %llu allocations, %llu mutex locks; %llu "
+      "EnDat replies, %llu register results\n",
+      static_cast<unsigned long long>(kCounted),
+      static_cast<unsigned long long>(counts.allocations()),
+      static_cast<unsigned long long>(counts.mutex_locks),
+      static_cast<unsigned long long>(traffic.replies),
+      static_cast<unsigned long long>(traffic.register_results));
+  CHECK(counts.allocations() == 0);
+  CHECK(counts.deallocations() == 0);
+  CHECK(counts.mutex_locks == 0);
+  CHECK(traffic.replies > 20);
+  CHECK(traffic.register_results > 20);
+  CHECK(rig.canio->axis_counters(0).samples.load() > kCounted / 2);
+}

@@ -1,0 +1,153 @@
+// ds1928-sim canio: a simulated CAN-I/O bus controller with X20DS1928 modules in function model
+// 254, on a SocketCAN interface (--iface) or on the cross-process virtual test bus (--virtual).
+#include "canio_main.hpp"
+
+#include <time.h>
+
+#include <atomic>
+#include <cstdio>
+#include <memory>
+#include <string>
+
+#include "canio/socketcan_port.hpp"
+#include "canio/virtual_bus.hpp"
+#include "config/config_loader.hpp"
+#include "sim/canio_node.hpp"
+
+namespace sim = ds1928::sim;
+namespace canio = ds1928::canio;
+
+namespace {
+
+[[nodiscard]] int64_t now_ns() {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
+
+}  // namespace
+
+int run_canio(const CanioOptions& o, const std::atomic<bool>& stop) {
+  sim::CanioNodeConfig node;
+  uint32_t bitrate = o.bitrate;
+  if (!o.config_file.empty()) {
+    auto loaded = ds1928::load_config(o.config_file);
+    if (!loaded) {
+      std::fprintf(stderr, "%s", loaded.error_report().c_str());
+      return 1;
+    }
+    node = sim::canio_node_from_config(loaded.config(), static_cast<uint8_t>(o.node));
+    if (node.modules.empty()) {
+      std::fprintf(stderr, "ds1928-sim: %s has no axis on node %d\n", o.config_file.c_str(),
+                   o.node);
+      return 1;
+    }
+    if (bitrate == 0) bitrate = loaded.config().canio.bitrate;
+  } else {
+    ds1928::DaemonConfig c;
+    c.bus = ds1928::BusKind::Canio;
+    c.canio.little_endian = o.byte_order == "little";
+    c.canio.sync_enabled = !o.no_sync;
+    c.canio.sync_id = o.sync_id;
+    for (int m = 0; m < o.modules; ++m) {
+      ds1928::AxisConfig a;
+      a.node = static_cast<uint8_t>(o.node);
+      a.slot = static_cast<uint8_t>(m + 1);
+      a.function_model = ds1928::FunctionModel::BusController;
+      c.axes.push_back(a);
+      ds1928::CanioAxisConfig ca;
+      ca.first_analog_slot = static_cast<uint8_t>(1 + 2 * m);
+      c.canio.axes.push_back(ca);
+    }
+    c.simulated.axes.resize(c.axes.size());
+    node = sim::canio_node_from_config(c, static_cast<uint8_t>(o.node));
+  }
+  node.faults.drop = o.drop;
+  node.faults.wrong_length_every = o.wrong_length_every;
+  node.faults.unexpected_id = o.unexpected_id;
+  node.faults.answer_sdo = !o.no_sdo;
+  node.faults.seed = o.seed;
+
+  std::shared_ptr<canio::VirtualCanBus> vbus;
+  std::unique_ptr<canio::CanPort> port;
+  if (!o.virtual_bus.empty()) {
+    auto bus = canio::VirtualCanBus::open_shared(o.virtual_bus);
+    if (!bus) {
+      std::fprintf(stderr, "ds1928-sim: virtual bus '%s': %s\n", o.virtual_bus.c_str(),
+                   bus.error().message().c_str());
+      return 2;
+    }
+    vbus = bus.value();
+    canio::VirtualPortOptions po;
+    po.name = o.virtual_bus;
+    po.bitrate = bitrate == 0 ? 500'000 : bitrate;
+    auto p = vbus->open_port(po);
+    if (!p) {
+      std::fprintf(stderr, "ds1928-sim: virtual bus '%s': %s\n", o.virtual_bus.c_str(),
+                   p.error().message().c_str());
+      return 2;
+    }
+    port = std::move(p.value());
+  } else {
+    canio::SocketCanOptions so;
+    so.interface = o.iface;
+    so.expected_bitrate = bitrate;
+    auto opened = canio::SocketCanPort::open(so);
+    if (!opened.port) {
+      std::fprintf(
+          stderr, "ds1928-sim: %s\n",
+          opened.message.empty() ? opened.error.message().c_str() : opened.message.c_str());
+      return 2;
+    }
+    port = std::move(opened.port);
+  }
+
+  sim::CanioNode n(node, *port);
+  if (auto ec = n.open()) {
+    std::fprintf(stderr, "ds1928-sim: CAN filters on %s: %s\n", std::string(port->name()).c_str(),
+                 ec.message().c_str());
+    return 2;
+  }
+  std::printf("canio node %d: %zu module(s) on %s (%s), SYNC %s", o.node, n.module_count(),
+              std::string(port->name()).c_str(), vbus ? "virtual bus" : "socketcan",
+              node.sync_enabled ? "" : "off");
+  if (node.sync_enabled) std::printf("0x%03X", node.sync_id);
+  for (const auto& m : node.modules)
+    std::printf(", slot %u: in 0x%03X/0x%03X out 0x%03X", m.slot, m.ids.input[0], m.ids.input[1],
+                m.ids.output);
+  std::printf(", SDO 0x%03X/0x%03X\n", 0x600 + o.node, 0x580 + o.node);
+  std::fflush(stdout);
+
+  const int64_t start = now_ns();
+  const int64_t stop_at = o.duration_s > 0 ? start + static_cast<int64_t>(o.duration_s * 1e9) : 0;
+  const int64_t silent_at =
+      o.silent_after_s > 0 ? start + static_cast<int64_t>(o.silent_after_s * 1e9) : 0;
+  const int64_t silent_until = silent_at + static_cast<int64_t>(o.silent_for_ms) * 1'000'000;
+  bool was_silent = false;
+  while (!stop.load(std::memory_order_relaxed)) {
+    (void)n.service(now_ns() + 20'000'000);
+    const int64_t now = now_ns();
+    const bool silent =
+        silent_at != 0 && now >= silent_at && (o.silent_for_ms == 0 || now < silent_until);
+    if (silent != was_silent) {
+      was_silent = silent;
+      if (!silent && o.power_cycle_when_back) n.power_up();
+      n.set_silent(silent);
+      std::printf("%10.6f node %s\n", static_cast<double>(now - start) / 1e9,
+                  silent ? "silent" : "answering again");
+      std::fflush(stdout);
+    }
+    if (stop_at != 0 && now >= stop_at) break;
+  }
+  const auto& c = n.counters();
+  std::printf(
+      "canio node %d stats: sync=%llu outputs=%llu inputs_sent=%llu dropped=%llu sdo=%llu "
+      "sdo_aborts=%llu send_failures=%llu\n",
+      o.node, static_cast<unsigned long long>(c.syncs), static_cast<unsigned long long>(c.outputs),
+      static_cast<unsigned long long>(c.inputs_sent),
+      static_cast<unsigned long long>(c.inputs_dropped),
+      static_cast<unsigned long long>(c.sdo_requests),
+      static_cast<unsigned long long>(c.sdo_aborts),
+      static_cast<unsigned long long>(c.send_failures));
+  return 0;
+}
