@@ -37,7 +37,8 @@ STRESS_DEPS := $(TEST_DEPS) stress-ng
 CCACHE     := $(shell command -v ccache 2>/dev/null)
 LAUNCHER   := $(if $(CCACHE),-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache)
 FUZZ_SECONDS ?= 60
-FUZZ_TARGETS := powerlink_frame sdo flatstream_receiver endat_reply control_request config_loader
+FUZZ_TARGETS := powerlink_frame sdo flatstream_receiver endat_reply control_request config_loader \
+                canio_frame
 # The sanitizer runtimes stop at the first report, so a finding fails its test.
 ASAN_ENV   := ASAN_OPTIONS=detect_leaks=1:abort_on_error=1:strict_string_checks=1 \
               UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1

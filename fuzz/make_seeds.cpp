@@ -12,6 +12,9 @@
 #include <vector>
 
 #include "../tests/powerlink/frame_samples.hpp"
+#include "canio/can_error_frame.hpp"
+#include "canio/object_codec.hpp"
+#include "canio/sdo_expedited.hpp"
 #include "endat/command.hpp"
 #include "flatstream/receiver.hpp"
 #include "flatstream/sender.hpp"
@@ -21,6 +24,7 @@ namespace fs = std::filesystem;
 namespace pl = ds1928::powerlink;
 namespace fst = ds1928::flatstream;
 namespace endat = ds1928::endat;
+namespace can = ds1928::canio;
 
 namespace {
 
@@ -122,6 +126,79 @@ void endat_seeds() {
   }
 }
 
+// One CAN frame in the canio_frame harness' layout (flags, identifier, dlc, data), then the
+// node the SDO parser is asked about and an SDO request to match the frame against.
+std::vector<uint8_t> canio_input(const can::CanFrame& f, uint8_t node,
+                                 std::initializer_list<uint8_t> request) {
+  std::vector<uint8_t> b{static_cast<uint8_t>((f.extended ? 1 : 0) | (f.rtr ? 2 : 0) |
+                                              (f.error ? 4 : 0)),
+                         static_cast<uint8_t>(f.id), static_cast<uint8_t>(f.id >> 8),
+                         static_cast<uint8_t>(f.id >> 16), static_cast<uint8_t>(f.id >> 24),
+                         f.dlc};
+  b.insert(b.end(), f.data.begin(), f.data.end());
+  b.push_back(static_cast<uint8_t>(node - 1));
+  b.insert(b.end(), request);
+  return b;
+}
+
+void canio_seeds() {
+  ds1928::ModuleInputs in;
+  in.position_hw = 0x00000012;
+  in.position_lw = 0x3456789A;
+  in.pos_cycle = -3;
+  in.error_info = 0x10;
+  in.input_sequence = 0x85;
+  in.rx_bytes = {0xC3, 0x02, 0x40, 0x00, 0x00};
+  can::CanObject o{};
+  can::pack_position_object(in, can::ByteOrder::Little, o);
+  write("canio_frame", "position_object", canio_input(can::make_standard_frame(0x181, o), 1, {}));
+  can::pack_status_object(in, o);
+  write("canio_frame", "status_object", canio_input(can::make_standard_frame(0x281, o), 1, {}));
+  ds1928::ModuleOutputs out;
+  out.output_sequence = 0x81;
+  out.tx_bytes = {0xC2, 0x03, 0x00, 0x00, 0x00};
+  out.ack_error_info = 0x10;
+  can::pack_output_object(out, o);
+  write("canio_frame", "output_object", canio_input(can::make_standard_frame(0x201, o), 1, {}));
+
+  // SDO: a write of EnDatMode and its acknowledgement, a read and its answer, an abort.
+  const can::SdoMessage write_req{can::SdoCommand::DownloadRequest, 0x2101, 1, 1, 0x01};
+  const can::SdoMessage write_ack{can::SdoCommand::DownloadResponse, 0x2101, 1, 0, 0};
+  const can::SdoMessage read_req{can::SdoCommand::UploadRequest, 0x2102, 2, 0, 0};
+  const can::SdoMessage read_ans{can::SdoCommand::UploadResponse, 0x2102, 2, 2, 0x0005};
+  const can::SdoMessage abort{can::SdoCommand::Abort, 0x2102, 2, 0, 0x06020000};
+  if (auto f = can::build_sdo_request(5, write_req))
+    write("canio_frame", "sdo_download_request", canio_input(*f, 5, {1, 0x01, 0x21, 1, 0, 1, 0}));
+  if (auto f = can::build_sdo_response(5, write_ack))
+    write("canio_frame", "sdo_download_response", canio_input(*f, 5, {1, 0x01, 0x21, 1, 0, 1, 0}));
+  if (auto f = can::build_sdo_request(5, read_req))
+    write("canio_frame", "sdo_upload_request", canio_input(*f, 5, {0, 0x02, 0x21, 2, 0, 0, 2}));
+  if (auto f = can::build_sdo_response(5, read_ans))
+    write("canio_frame", "sdo_upload_response", canio_input(*f, 5, {0, 0x02, 0x21, 2, 0, 0, 2}));
+  if (auto f = can::build_sdo_response(5, abort))
+    write("canio_frame", "sdo_abort", canio_input(*f, 5, {0, 0x02, 0x21, 2, 0, 0, 2}));
+
+  // Error frames as the kernel reports them: bus-off, error-passive, a stuff error, restarted.
+  can::CanErrorEvent bus_off;
+  bus_off.bus_off = true;
+  write("canio_frame", "error_bus_off", canio_input(can::encode_error_frame(bus_off), 1, {}));
+  can::CanErrorEvent passive;
+  passive.controller = true;
+  passive.controller_status = can::err_ctrl::kRxPassive | can::err_ctrl::kTxPassive;
+  passive.counters_flagged = true;
+  passive.tx_error_count = 130;
+  passive.rx_error_count = 128;
+  write("canio_frame", "error_passive", canio_input(can::encode_error_frame(passive), 1, {}));
+  can::CanErrorEvent stuff;
+  stuff.protocol = true;
+  stuff.protocol_type = can::err_prot::kStuff | can::err_prot::kTx;
+  stuff.protocol_location = 0x0A;
+  write("canio_frame", "error_stuff", canio_input(can::encode_error_frame(stuff), 1, {}));
+  can::CanErrorEvent restarted;
+  restarted.restarted = true;
+  write("canio_frame", "error_restarted", canio_input(can::encode_error_frame(restarted), 1, {}));
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -133,5 +210,6 @@ int main(int argc, char** argv) {
   powerlink_seeds();
   flatstream_seeds();
   endat_seeds();
+  canio_seeds();
   return 0;
 }

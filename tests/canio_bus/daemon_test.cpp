@@ -14,6 +14,8 @@
 #include "../control/control_test_util.hpp"
 #include "canio/virtual_bus.hpp"
 #include "rig.hpp"
+#include "support/unix_socket.hpp"
+#include "support/wait.hpp"
 
 using namespace ds1928;
 using json = nlohmann::json;
@@ -89,19 +91,15 @@ TEST_CASE("ds1928d on bus canio: configured at start, positions, status, EnDat c
       t.join();
     }
   } join{daemon, t};
-  for (int i = 0; i < 500 && !std::filesystem::exists(c.socket.path); ++i)
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
-  REQUIRE(std::filesystem::exists(c.socket.path));
+  REQUIRE(test::wait_until([&] { return test::unix_socket_accepts(c.socket.path); }));
 
   // Configured over SDO, then operational with fresh positions.
   json status;
-  for (int i = 0; i < 500; ++i) {
+  (void)test::wait_until([&] {
     status = request(c.socket.path, {{"cmd", "status"}});
-    if (status.value("ok", false) && status["bus"]["state"] == "operational" &&
-        status["bus"]["nodes"][0]["samples"].get<uint64_t>() > 50)
-      break;
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  }
+    return status.value("ok", false) && status["bus"]["state"] == "operational" &&
+           status["bus"]["nodes"][0]["samples"].get<uint64_t>() > 50;
+  });
   INFO(status.dump(2));
   REQUIRE(status["bus"]["kind"] == "canio");
   REQUIRE(status["bus"]["state"] == "operational");

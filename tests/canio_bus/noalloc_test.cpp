@@ -14,6 +14,7 @@
 #include "endat/command.hpp"
 #include "rig.hpp"
 #include "shm/publisher.hpp"
+#include "support/wait.hpp"
 
 using namespace ds1928;
 
@@ -32,11 +33,7 @@ TEST_CASE("bus canio: the cycle allocates nothing and locks no mutex", "[canio][
   auto engine = std::make_unique<CycleEngine>(config.cycle, task);
   auto started = engine->start();
   REQUIRE(started);
-  const auto up_deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
-  while (rig.canio->state() != BusState::Operational &&
-         std::chrono::steady_clock::now() < up_deadline)
-    std::this_thread::sleep_for(std::chrono::milliseconds(5));
-  REQUIRE(rig.canio->state() == BusState::Operational);
+  REQUIRE(test::wait_until([&] { return rig.canio->state() == BusState::Operational; }));
   task.arm();
 
   const auto read =

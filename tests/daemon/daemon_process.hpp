@@ -18,6 +18,7 @@
 #include <thread>
 
 #include "ds1928/shm.hpp"
+#include "support/unix_socket.hpp"
 #include "support/wait.hpp"
 
 namespace ds1928::test {
@@ -77,14 +78,14 @@ class DaemonProcess {
   DaemonProcess(const DaemonProcess&) = delete;
   DaemonProcess& operator=(const DaemonProcess&) = delete;
 
-  // Waits (bounded, support/wait.hpp) until the daemon publishes cycles and its socket exists.
+  // Waits (bounded, support/wait.hpp) until the daemon publishes cycles and its socket accepts.
   [[nodiscard]] bool wait_ready() {
     bool ready = false;
     (void)ds1928::test::wait_until([&] {
       if (!running()) return true;  // gone: no use waiting
       if (!reader_.is_open()) (void)reader_.open(shm_name_);
       ready = reader_.is_open() && reader_.header().publish_count > 0 &&
-              std::filesystem::exists(socket_path_);
+              unix_socket_accepts(socket_path_);
       return ready;
     });
     return ready;

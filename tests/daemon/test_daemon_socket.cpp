@@ -14,6 +14,7 @@
 
 #include "../control/control_test_util.hpp"
 #include "daemon.hpp"
+#include "support/unix_socket.hpp"
 #include "support/wait.hpp"
 
 using namespace ds1928;
@@ -61,7 +62,7 @@ struct RunningDaemon {
     if (const group* g = getgrgid(getegid())) c.socket.privileged_group = g->gr_name;
     daemon = std::make_unique<Daemon>(c);
     thread = std::thread([this] { rc = daemon->run(); });
-    (void)test::wait_until([&] { return std::filesystem::exists(c.socket.path); });
+    (void)test::wait_until([&] { return test::unix_socket_accepts(c.socket.path); });
     path = c.socket.path;
   }
   ~RunningDaemon() {
