@@ -130,11 +130,13 @@ void endat_seeds() {
 // node the SDO parser is asked about and an SDO request to match the frame against.
 std::vector<uint8_t> canio_input(const can::CanFrame& f, uint8_t node,
                                  std::initializer_list<uint8_t> request) {
-  std::vector<uint8_t> b{static_cast<uint8_t>((f.extended ? 1 : 0) | (f.rtr ? 2 : 0) |
-                                              (f.error ? 4 : 0)),
-                         static_cast<uint8_t>(f.id), static_cast<uint8_t>(f.id >> 8),
-                         static_cast<uint8_t>(f.id >> 16), static_cast<uint8_t>(f.id >> 24),
-                         f.dlc};
+  std::vector<uint8_t> b{
+      static_cast<uint8_t>((f.extended ? 1 : 0) | (f.rtr ? 2 : 0) | (f.error ? 4 : 0)),
+      static_cast<uint8_t>(f.id),
+      static_cast<uint8_t>(f.id >> 8),
+      static_cast<uint8_t>(f.id >> 16),
+      static_cast<uint8_t>(f.id >> 24),
+      f.dlc};
   b.insert(b.end(), f.data.begin(), f.data.end());
   b.push_back(static_cast<uint8_t>(node - 1));
   b.insert(b.end(), request);

@@ -28,11 +28,17 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, std::size_t size) {
   const std::span<const uint8_t> frame(data, size);
   volatile uint64_t sink = 0;
   if (auto f = parse_frame(frame)) {
-    check(size >= kMinFrameSize && size <= kMaxFrameSize);
+    // Short (unpadded) frames are accepted when their message is complete: never less than
+    // the header, and for the fixed-size messages never less than the message.
+    check(size > kHeaderSize && size <= kMaxFrameSize);
     std::visit(
         [&](const auto& m) {
           using T = std::decay_t<decltype(m)>;
-          if constexpr (std::is_same_v<T, PReq> || std::is_same_v<T, PRes>) {
+          if constexpr (std::is_same_v<T, Soc>) {
+            check(size >= kSocSize);
+          } else if constexpr (std::is_same_v<T, SoA>) {
+            check(size >= kSoaSize);
+          } else if constexpr (std::is_same_v<T, PReq> || std::is_same_v<T, PRes>) {
             check(m.payload.size() <= kMaxIsoPayload);
             sink = sink + touch(m.payload, frame);
           } else if constexpr (std::is_same_v<T, Asnd>) {

@@ -6,8 +6,8 @@
 #include <numeric>
 #include <string>
 
-#include "powerlink/concise_dcf.hpp"
 #include "core/register_catalogue.hpp"
+#include "powerlink/concise_dcf.hpp"
 
 namespace ds1928::powerlink {
 

@@ -59,41 +59,9 @@ pass() { echo "ok: $*"; }
 ctlj() { ip netns exec "$ns_mn" "$ctl" -s "$tmp/ctl.sock" --json "$@"; }
 node9() { ctlj status 2>/dev/null | jq -c '.bus.nodes[] | select(.node == 9)' 2>/dev/null; }
 
-# ---- The concise DCF --------------------------------------------------------------------------
-# Little-endian fields as printf escapes.
-le() {  # VALUE BYTES
-  local v=$1 n=$2 i out=""
-  for ((i = 0; i < n; i++)); do out+=$(printf '\\x%02x' $(((v >> (8 * i)) & 0xff))); done
-  printf '%s' "$out"
-}
-entry() {  # INDEX SUB SIZE VALUE: one concise DCF entry with a numeric value
-  printf '%s%s%s%s' "$(le "$1" 2)" "$(le "$2" 1)" "$(le "$3" 4)" "$(le "$4" "$3")"
-}
-map() {  # INDEX SUB OFFSET_BITS LENGTH_BITS: a PDO mapping entry (u64)
-  echo $(($1 | ($2 << 16) | ($3 << 32) | ($4 << 48)))
-}
-# Node 9's objects: cycle length, loss-of-frame tolerance, TPDO mapping (disable, 2 entries of
-# 64 + 16 bits = 10 bytes, enable), PReq limit 4 bytes.
-cn_entries=(
-  "$(entry 0x1006 0 4 1000)"
-  "$(entry 0x1C14 0 4 300000)"
-  "$(entry 0x1800 1 1 0)"
-  "$(entry 0x1A00 0 1 0)"
-  "$(entry 0x1A00 1 8 "$(map 0x6000 1 0 64)")"
-  "$(entry 0x1A00 2 8 "$(map 0x6000 2 64 16)")"
-  "$(entry 0x1A00 0 1 2)"
-  "$(entry 0x1F98 4 2 4)"
-)
-{ printf "$(le ${#cn_entries[@]} 4)"; for e in "${cn_entries[@]}"; do printf "$e"; done; } >"$tmp/cn9.cdc"
-cn_size=$(stat -c %s "$tmp/cn9.cdc")
-# The MN's file: its own cycle, node 9's concise DCF (0x1F22/9, a domain), node 9's vendor.
-{
-  printf "$(le 3 4)"
-  printf "$(entry 0x1006 0 4 1000)"
-  printf "$(le 0x1F22 2)$(le 9 1)$(le "$cn_size" 4)"
-  cat "$tmp/cn9.cdc"
-  printf "$(entry 0x1F85 9 4 0x1A)"
-} >"$tmp/mnobd.cdc"
+# ---- The concise DCF (node 9's objects: tests/integration/generic_cdc.sh) -------------------
+. "$src/tests/integration/generic_cdc.sh"
+write_generic_cdc "$tmp" 9
 
 cat >"$tmp/generic.yaml" <<YAML
 # A generic CN (no X20DS1928) configured from openCONFIGURATOR's mnobd.cdc.
