@@ -88,8 +88,14 @@ if [ -n "$cycle_tid" ]; then
 fi
 lck=$(field VmLck) rss=$(field VmRSS)
 echo "  VmLck $lck kB, VmRSS $rss kB"
-check "memory is locked (VmLck > 0 and ≥ 90 % of VmRSS)" \
-  test "${lck:-0}" -gt 0 -a $((${lck:-0} * 10)) -ge $((${rss:-1} * 9))
+# The sanitizer runtimes intercept mlockall and report success without locking anything (their
+# shadow memory could not be locked): VmLck says nothing in such a build.
+if ldd "$daemon" 2>/dev/null | grep -qE 'lib(a|t)san'; then
+  echo "  NOTE: sanitizer build: mlockall is faked by the runtime, VmLck not checked"
+else
+  check "memory is locked (VmLck > 0 and ≥ 90 % of VmRSS)" \
+    test "${lck:-0}" -gt 0 -a $((${lck:-0} * 10)) -ge $((${rss:-1} * 9))
+fi
 
 reply=$("$ctl" --socket "$run/control.sock" --json status)
 echo "  status: $(cut -c1-300 <<<"$reply")"

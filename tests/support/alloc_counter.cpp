@@ -28,7 +28,10 @@ __asm__(".symver ds1928_real_pthread_mutex_trylock,__pthread_mutex_trylock@GLIBC
 #if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
 #define DS1928_SANITIZER_ALLOCATOR 1
 #endif
-#if defined(__SANITIZE_THREAD__)
+// TSan intercepts pthread_mutex_lock itself; GCC 12's libasan interposes glibc's
+// __pthread_mutex_lock, and its interceptor, reached from a program that defines
+// pthread_mutex_lock, has no real function behind it (a call through address 0).
+#if defined(__SANITIZE_THREAD__) || defined(__SANITIZE_ADDRESS__)
 #define DS1928_SANITIZER_MUTEXES 1
 #endif
 

@@ -9,9 +9,10 @@
 // can switch counting on inside the cycle thread while its main thread does what it likes.
 //
 // Under ASan and TSan the sanitizer's allocator cannot be replaced: its malloc/free hooks count
-// instead, and operator new is counted as malloc (counts_new_separately() is false). TSan
-// intercepts pthread_mutex_lock itself, so mutex locks are not counted there (counts_mutexes()
-// is false): tests then skip that one check and say so.
+// instead, and operator new is counted as malloc (counts_new_separately() is false). Their
+// runtimes also intercept the mutex entry points (TSan pthread_mutex_lock, ASan glibc's
+// __pthread_mutex_lock), so mutex locks are not counted there (counts_mutexes() is false): tests
+// then skip that one check and say so; the normal build makes it.
 //
 // Counting only sees calls that reach these symbols: glibc-internal locks (lll_lock) and
 // direct futex system calls are not mutex locks in this sense.
