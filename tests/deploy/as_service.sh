@@ -35,6 +35,12 @@ done
 [ -n "$user" ] && [ -n "$group" ] && [ $# -gt 0 ] || { echo "usage: $0 --user U --group G [--rw DIR]... -- CMD" >&2; exit 2; }
 
 if [ -z "${inside:-}" ]; then
+  # The unit's PrivateTmp and ProtectHome hide these trees: a command inside would not exist.
+  case "$(readlink -f "$(command -v "$1" || echo "$1")")" in
+    /tmp/* | /var/tmp/* | /home/* | /root/*)
+      echo "as_service.sh: $1 lies where the unit's PrivateTmp/ProtectHome hide it; build outside /tmp, /var/tmp, /home and /root" >&2
+      exit 2 ;;
+  esac
   args=(--user "$user" --group "$group")
   for d in "${rw[@]}"; do args+=(--rw "$d"); done
   # A private mount namespace: the mounts below vanish with the process. No --fork: the command

@@ -41,6 +41,12 @@ if [ "$(id -u)" != 0 ]; then
 fi
 
 cache=${CANIO_QEMU_CACHE:-$build/canio-qemu}
+# The guest mounts a tmpfs on /tmp: a build tree or cache below the host's /tmp is not there.
+case "$(readlink -f "$build")/ $(readlink -m "$cache")/" in
+  /tmp/* | *" /tmp/"*)
+    echo "FAIL: $build or $cache lies below /tmp, which the guest covers with its own tmpfs; build elsewhere or set CANIO_QEMU_CACHE outside /tmp"
+    exit 1 ;;
+esac
 mkdir -p "$cache" || exit 1
 note() { echo "run-guest: $*"; }
 fail() { echo "FAIL: $*"; exit 1; }
