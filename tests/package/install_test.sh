@@ -47,8 +47,9 @@ if [ -f "$cache" ]; then
   echo "base root: cached $cache"
 else
   echo "base root: mmdebstrap bookworm (minbase + $include)"
-  rm -f "$debs"/pkgtest-bookworm-*.tar
-  mmdebstrap --variant=minbase --include="$include" bookworm "$cache.part" \
+  rm -rf "$debs"/pkgtest-bookworm-*.tar "$debs"/pkgtest-bookworm-*.tar.part
+  # --format: mmdebstrap picks the format from the name's ending, and "*.part" is no tarball.
+  mmdebstrap --variant=minbase --format=tar --include="$include" bookworm "$cache.part" \
     || { echo "FAIL: mmdebstrap"; exit 1; }
   mv "$cache.part" "$cache"
 fi
