@@ -249,6 +249,8 @@ TEST_CASE("position --follow says when the daemon stops, hangs or restarts, and 
   last_cycle = 0;
   while (positions < 120) expect_positions(1);
   CHECK(next().is_null());  // --count reached: the follower exits
+  // The publishing thread ends before `third`, declared after it, is closed and unmapped.
+  publishing.reset();
   const int status = follower.wait();
   CHECK(WIFEXITED(status));
   CHECK(WEXITSTATUS(status) == 0);
