@@ -82,9 +82,9 @@ int main(int argc, char** argv) {
                 config.cycle.period_us);
     return 0;
   }
-  // mlockall locks every thread's whole stack in RAM: 1 MiB each (the cycle thread pre-faults
-  // 256 KiB of it) instead of glibc's default of RLIMIT_STACK, usually 8 MiB. Before the first
-  // thread (the logger's) starts.
+  // mlockall locks every thread's whole stack in RAM: 1 MiB usable each (the cycle thread
+  // pre-faults 256 KiB of it) instead of glibc's default of RLIMIT_STACK, usually 8 MiB. Before the
+  // first thread (the logger's) starts.
   const ds1928::rt::SetupStep stack = ds1928::rt::limit_default_thread_stack(kThreadStackBytes);
   const auto level =
       ds1928::control::parse_log_level(config.log_level).value_or(spdlog::level::info);

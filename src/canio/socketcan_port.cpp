@@ -206,8 +206,12 @@ ReceiveResult SocketCanPort::receive(std::span<CanFrame> out, int64_t deadline_n
     const int n = recvmmsg(fd_.get(), p.msgs.data(), want, MSG_DONTWAIT, nullptr);
     if (n > 0) {
       // One REALTIME→MONOTONIC offset per batch: the frames arrived within microseconds.
+      // REALTIME is read first: a delay between the two reads then moves a stamp later, never
+      // earlier, and never past `mono` — so a stamp stays between the send and this read. (The
+      // other order put a stamp before its own send when the thread was preempted in between.)
+      const int64_t realtime = clock_ns(CLOCK_REALTIME);
       const int64_t mono = clock_ns(CLOCK_MONOTONIC);
-      const int64_t offset = clock_ns(CLOCK_REALTIME) - mono;
+      const int64_t offset = realtime - mono;
       std::size_t count = 0;
       for (int i = 0; i < n; ++i) {
         const msghdr& h = p.msgs[i].msg_hdr;

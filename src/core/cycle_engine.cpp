@@ -135,7 +135,7 @@ void CycleEngine::thread_main() noexcept {
     return;
   }
   fifo_error_ = rt::set_fifo_priority(config_.rt_priority).error;
-  rt::prefault_stack(kPrefaultStackBytes);
+  prefaulted_stack_ = rt::prefault_stack(kPrefaultStackBytes);
   pthread_setname_np(pthread_self(), "ds1928-cycle");
   realtime_.store(fifo_error_ == 0 && mlock_error_ == 0, std::memory_order_release);
   setup_.store(static_cast<int>(Setup::Ready), std::memory_order_release);
@@ -212,6 +212,9 @@ void CycleEngine::compose_status() {
     case rt::CpuDmaLatencyHold::State::Off:
       break;
   }
+  if (prefaulted_stack_ < kPrefaultStackBytes)
+    s += ", stack pre-faulted " + std::to_string(prefaulted_stack_ / 1024) + " of " +
+         std::to_string(kPrefaultStackBytes / 1024) + " KiB (thread stack too small)";
   if (config_.spin_us > 0) s += ", spin " + std::to_string(config_.spin_us) + " us";
   if (!rt_ok) s += "; cycle timing is best effort";
   status_text_ = std::move(s);

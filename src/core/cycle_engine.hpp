@@ -115,6 +115,7 @@ class CycleEngine {
   int mlock_error_ = 0;
   int fifo_error_ = 0;
   int affinity_error_ = 0;
+  std::size_t prefaulted_stack_ = 0;
   bool mlock_attempted_ = false;
   rt::CpuDmaLatencyHold dma_latency_;
   std::string status_text_;

@@ -65,27 +65,84 @@ bool cpu_usable(int cpu) noexcept {
   return CPU_ISSET(cpu, &set);
 }
 
-// noinline keeps the frame where the caller expects it: the pages touched here are the ones the
-// caller's callees will use.
+namespace {
+constexpr std::size_t kPage = 4096;
+
+std::size_t round_up_to_page(std::size_t bytes) noexcept {
+  return (bytes + kPage - 1) / kPage * kPage;
+}
+
+// Lowest address of the calling thread's stack, or nullptr if glibc cannot say.
+const unsigned char* stack_bottom() noexcept {
+  pthread_attr_t attr;
+  if (pthread_getattr_np(pthread_self(), &attr) != 0) return nullptr;
+  void* low = nullptr;
+  std::size_t size = 0;
+  const int e = pthread_attr_getstack(&attr, &low, &size);
+  pthread_attr_destroy(&attr);
+  return e == 0 ? static_cast<const unsigned char*>(low) : nullptr;
+}
+
+void* measure_thread_overhead(void* out) noexcept {
+  pthread_attr_t attr;
+  if (pthread_getattr_np(pthread_self(), &attr) != 0) return nullptr;
+  void* low = nullptr;
+  std::size_t size = 0;
+  if (pthread_attr_getstack(&attr, &low, &size) == 0) {
+    const auto* top = static_cast<const unsigned char*>(low) + size;
+    const auto* frame = static_cast<const unsigned char*>(__builtin_frame_address(0));
+    *static_cast<std::size_t*>(out) = static_cast<std::size_t>(top - frame);
+  }
+  pthread_attr_destroy(&attr);
+  return nullptr;
+}
+}  // namespace
+
+std::size_t stack_left() noexcept {
+  const unsigned char* bottom = stack_bottom();
+  const auto* frame = static_cast<const unsigned char*>(__builtin_frame_address(0));
+  if (bottom == nullptr || frame <= bottom) return 0;
+  return static_cast<std::size_t>(frame - bottom);
+}
+
+std::size_t thread_stack_overhead() noexcept {
+  std::size_t overhead = 0;
+  pthread_t probe;
+  if (pthread_create(&probe, nullptr, measure_thread_overhead, &overhead) != 0) return 0;
+  pthread_join(probe, nullptr);
+  return overhead;
+}
+
 SetupStep limit_default_thread_stack(std::size_t bytes) noexcept {
+  // glibc carves a thread's static TLS and descriptor out of its stack. That is a few KiB
+  // normally, but TSan keeps ~770 KiB of its own state in TLS: a bare 1 MiB would leave the
+  // cycle thread too little to pre-fault its 256 KiB.
+  const std::size_t wanted = round_up_to_page(bytes + thread_stack_overhead());
   pthread_attr_t attr;
   if (int e = pthread_getattr_default_np(&attr); e != 0) return SetupStep{e};
   std::size_t current = 0;
   int e = pthread_attr_getstacksize(&attr, &current);
-  if (e == 0 && current > bytes) {
-    e = pthread_attr_setstacksize(&attr, bytes);
+  if (e == 0 && current > wanted) {
+    e = pthread_attr_setstacksize(&attr, wanted);
     if (e == 0) e = pthread_setattr_default_np(&attr);
   }
   pthread_attr_destroy(&attr);
   return SetupStep{e};
 }
 
-__attribute__((noinline)) void prefault_stack(std::size_t bytes) noexcept {
-  constexpr std::size_t kPage = 4096;
+// noinline keeps the frame where the caller expects it: the pages touched here are the ones the
+// caller's callees will use.
+__attribute__((noinline)) std::size_t prefault_stack(std::size_t bytes) noexcept {
   constexpr std::size_t kMax = 1024 * 1024;
   if (bytes > kMax) bytes = kMax;
+  // Never reach the guard page: a thread with a smaller stack than asked pre-faults what it has.
+  const std::size_t left = stack_left();
+  const std::size_t usable = left > kStackReserve ? left - kStackReserve : 0;
+  if (bytes > usable) bytes = usable / kPage * kPage;
+  if (bytes == 0) return 0;
   auto* area = static_cast<volatile unsigned char*>(__builtin_alloca(bytes));
   for (std::size_t i = 0; i < bytes; i += kPage) area[i] = 0;
+  return bytes;
 }
 
 CpuDmaLatencyHold::State CpuDmaLatencyHold::acquire(const char* path) noexcept {

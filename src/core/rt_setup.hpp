@@ -33,15 +33,25 @@ struct SetupStep {
 // mlockall(MCL_CURRENT | MCL_FUTURE): process-wide, never undone (a daemon that locked its
 // memory once wants it locked for its lifetime).
 [[nodiscard]] SetupStep lock_all_memory() noexcept;
-// Makes `bytes` the stack size of threads created from now on without their own attributes
+// Makes `bytes` the usable stack of threads created from now on without their own attributes
 // (glibc's default follows RLIMIT_STACK, usually 8 MiB). With mlockall(MCL_FUTURE) every thread's
-// whole stack is locked in RAM, so the default decides the daemon's resident size. Never raises
-// the default. Call before the first thread is started.
+// whole stack is locked in RAM, so the default decides the daemon's resident size. The size set
+// is `bytes` plus what glibc takes from each stack for TLS (thread_stack_overhead()). Never
+// raises the default. Call before the first thread is started.
 [[nodiscard]] SetupStep limit_default_thread_stack(std::size_t bytes) noexcept;
+// Bytes at the top of a new thread's stack that its code cannot use (static TLS, thread
+// descriptor), measured on a probe thread started with the current defaults. 0 if that fails.
+[[nodiscard]] std::size_t thread_stack_overhead() noexcept;
+// Bytes of the calling thread's stack below the caller's frame, 0 if glibc cannot say.
+[[nodiscard]] std::size_t stack_left() noexcept;
 
-// Touches `bytes` of the calling thread's stack so that the first deep call on the RT path does
-// not page-fault.
-void prefault_stack(std::size_t bytes) noexcept;
+// Stack that prefault_stack() leaves untouched below its own frame, for signal handlers and
+// for what the sanitizer runtimes put on the stack.
+inline constexpr std::size_t kStackReserve = 64 * 1024;
+// Touches up to `bytes` of the calling thread's stack so that the first deep call on the RT path
+// does not page-fault, and returns how many it touched: fewer when the stack left, less
+// kStackReserve, is smaller.
+[[nodiscard]] std::size_t prefault_stack(std::size_t bytes) noexcept;
 // Whether `cpu` exists and the process may run on it.
 [[nodiscard]] bool cpu_usable(int cpu) noexcept;
 

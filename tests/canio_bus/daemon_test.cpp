@@ -33,16 +33,38 @@ struct SimulatedNodeThread {
     node = std::make_unique<sim::CanioNode>(sim::canio_node_from_config(config, 1), *port);
     if (node->open()) throw std::runtime_error("node filters");
     thread = std::thread([this] {
-      while (!stop.load()) (void)node->service(test::Rig::monotonic() + 2'000'000);
+      while (!stop.load()) {
+        if (pause.load()) {
+          paused.store(true);
+          paused.notify_all();
+          pause.wait(true);
+          paused.store(false);
+          paused.notify_all();
+        }
+        (void)node->service(test::Rig::monotonic() + 2'000'000);
+      }
     });
   }
   ~SimulatedNodeThread() {
     stop.store(true);
+    resume();
     thread.join();
   }
   std::shared_ptr<canio::VirtualCanBus> bus;
   std::unique_ptr<canio::VirtualCanPort> port;
   std::unique_ptr<sim::CanioNode> node;
+  // The test reads the module's registers between two services, not while the node writes them.
+  void pause_serving() {
+    pause.store(true);
+    paused.wait(false);
+  }
+  void resume() {
+    pause.store(false);
+    pause.notify_all();
+    paused.wait(true);
+  }
+  std::atomic<bool> pause{false};
+  std::atomic<bool> paused{false};
   std::atomic<bool> stop{false};
   std::thread thread;
 };
@@ -110,11 +132,15 @@ TEST_CASE("ds1928d on bus canio: configured at start, positions, status, EnDat c
   CHECK(status["bus"]["nodes"][0]["output_id"] == 0x301);
   CHECK(status["bus"]["nodes"][0]["configurations"] == 1);
   // The module really holds the configuration the daemon wrote (EnDat enabled, MTU 5).
-  uint32_t v = 0;
-  CHECK_FALSE(node.node->module(0).read_register(reg::kEnDatMode, 1, v));
-  CHECK(v == endat_mode::kEnable);
-  CHECK_FALSE(node.node->module(0).read_register(reg::kOutputMtu, 1, v));
-  CHECK(v == 5);
+  {
+    node.pause_serving();
+    uint32_t v = 0;
+    CHECK_FALSE(node.node->module(0).read_register(reg::kEnDatMode, 1, v));
+    CHECK(v == endat_mode::kEnable);
+    CHECK_FALSE(node.node->module(0).read_register(reg::kOutputMtu, 1, v));
+    CHECK(v == 5);
+    node.resume();
+  }
 
   const json axes = request(c.socket.path, {{"cmd", "axes"}});
   INFO(axes.dump(2));
