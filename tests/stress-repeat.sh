@@ -17,6 +17,13 @@ stress_pid=$!
 trap 'kill "$stress_pid" 2>/dev/null; wait "$stress_pid" 2>/dev/null' EXIT
 trap 'exit 1' INT TERM
 
+# The names ctest lists under "The following tests FAILED:" (a tab, number, " - ", name, status).
+failed_tests() {
+  awk '/The following tests FAILED/ { f = 1; next }
+       f && /^[[:space:]]+[0-9]+ - / { sub(/^[[:space:]]+[0-9]+ - /, ""); sub(/ \([^)]*\)$/, "");
+                                       printf "%s; ", $0 }' "$1"
+}
+
 failed_runs=0
 start=$(date +%s)
 for ((run = 1; run <= runs; run++)); do
@@ -28,7 +35,7 @@ for ((run = 1; run <= runs; run++)); do
     rm -f "$logs/run$run.log"
   else
     failed_runs=$((failed_runs + 1))
-    echo "run $run/$runs: FAILED ($(($(date +%s) - t0)) s): $(sed -n 's/^ *[0-9]* - \(.*\) (.*/\1/p' "$logs/run$run.log" | tr '\n' ' ')"
+    echo "run $run/$runs: FAILED ($(($(date +%s) - t0)) s): $(failed_tests "$logs/run$run.log")"
   fi
 done
 echo "$runs runs of the test suite under stress-ng --cpu 2: $failed_runs failed ($(($(date +%s) - start)) s)"

@@ -145,6 +145,9 @@ TEST_CASE("privileged commands need the privileged group", "[endat_e2e]") {
 TEST_CASE("echo mismatch, truncated reply and timeout are reported, and the next command is right",
           "[endat_e2e]") {
   Rig rig({.peer = Peer::Scripted, .command_timeout_ms = 400});
+  // The identification reads at start first: a read queued behind them would spend part of its
+  // 400 ms waiting (under TSan on a loaded machine, all of it).
+  REQUIRE(rig.wait_identified());
   LineClient c(rig.socket_path(), kClientTimeoutMs);
   auto read = [&](int param) {
     return c.request({{"cmd", "endat-read-param"}, {"mrs", 0xA9}, {"param", param}});

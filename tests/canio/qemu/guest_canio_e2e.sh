@@ -149,7 +149,9 @@ pass "ds1928d: bus canio operational over socketcan on can0, $bitrate bit/s, res
 pass "module configured at start by SDO: ${n_sdo_transfers} transfers, ${n_configurations:-?} configuration(s); log: $(grep -m1 -E "axis 0: EnDat" "$tmp/good.log" | cut -d' ' -f4-)"
 
 # ---- 3. positions with receive-time stamps ------------------------------------------------------
-positions "$tmp/positions.txt" 100 || fail "ds1928ctl position --follow failed: $(tail -n 3 "$tmp/ctl.log")"
+# 300 publications for 30 fresh samples: in a QEMU guest under TSan on a loaded host, 26 in 100
+# were fresh (the node answers fewer SYNCs), so the window is wide; 30 fresh still shows flow.
+positions "$tmp/positions.txt" 300 || fail "ds1928ctl position --follow failed: $(tail -n 3 "$tmp/ctl.log")"
 python3 "$here/check_positions.py" --min-fresh 30 --since-ns "$((t_start - 20000000))" \
   < "$tmp/positions.txt" > "$tmp/check.txt"
 rc=$?
