@@ -144,9 +144,11 @@ TEST_CASE("privileged commands need the privileged group", "[endat_e2e]") {
 
 TEST_CASE("echo mismatch, truncated reply and timeout are reported, and the next command is right",
           "[endat_e2e]") {
-  Rig rig({.peer = Peer::Scripted, .command_timeout_ms = 400});
+  // Timeouts of 2 s: a good reply must come within it even when the rig's (normal-priority)
+  // cycle thread stalls, as under TSan on a loaded machine, where 400 ms was not always enough.
+  Rig rig({.peer = Peer::Scripted, .command_timeout_ms = 2000});
   // The identification reads at start first: a read queued behind them would spend part of its
-  // 400 ms waiting (under TSan on a loaded machine, all of it).
+  // timeout waiting.
   REQUIRE(rig.wait_identified());
   LineClient c(rig.socket_path(), kClientTimeoutMs);
   auto read = [&](int param) {
@@ -177,10 +179,10 @@ TEST_CASE("echo mismatch, truncated reply and timeout are reported, and the next
   CHECK(read(11)["value"] == (0xA9 << 8 | 11));
 
   // A late reply (after the timeout) is never taken for the next command's: let
-  // the reply of a read come 600 cycles late, then read another parameter at once. 600 ms
-  // lies midway between the timeout (400 ms) and the end of the quiet period after it
-  // (800 ms), so a thread stalled for up to ~150 ms on a loaded machine changes nothing.
-  rig.scripted().inject(ScriptedModule::Fault::Late, 1, 600);
+  // the reply of a read come 3000 cycles late, then read another parameter at once. 3 s
+  // lies midway between the timeout (2 s) and the end of the quiet period after it (4 s), so
+  // a cycle thread stalled for up to ~1 s in all changes nothing.
+  rig.scripted().inject(ScriptedModule::Fault::Late, 1, 3000);
   const json late = read(12);
   CHECK(error_code_of(late) == "timeout");
   const json after = read(13);
