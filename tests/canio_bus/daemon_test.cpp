@@ -142,7 +142,12 @@ TEST_CASE("ds1928d on bus canio: configured at start, positions, status, EnDat c
     node.resume();
   }
 
-  const json axes = request(c.socket.path, {{"cmd", "axes"}});
+  // The pause may have cost the axis a sample or more (stale): fresh ones follow.
+  json axes;
+  (void)test::wait_until([&] {
+    axes = request(c.socket.path, {{"cmd", "axes"}});
+    return axes.value("ok", false) && axes["axes"][0]["state"] == "valid";
+  });
   INFO(axes.dump(2));
   CHECK(axes["axes"][0]["state"] == "valid");
   CHECK(axes["axes"][0]["time_source"] == "rx_timestamp");
