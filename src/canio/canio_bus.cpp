@@ -426,16 +426,24 @@ std::error_code CanioBus::configure_axis(std::size_t axis) {
   return {};
 }
 
-bool CanioBus::configuration_intact(std::size_t axis) {
+CanioBus::ConfigurationCheck CanioBus::check_configuration(std::size_t axis) {
   const ModuleSettings& m = options_.axes[axis].module;
   const std::array<RegisterWrite, 3> checks{{{reg::kEnDatMode, 1, m.endat_mode()},
                                              {reg::kOutputMtu, 1, m.output_mtu},
                                              {reg::kInputMtu, 1, m.input_mtu}}};
   for (const RegisterWrite& c : checks) {
     uint32_t v = 0;
-    if (sdo_read(axis, c.reg, c.size, v) || v != c.value) return false;
+    if (auto ec = sdo_read(axis, c.reg, c.size, v)) {
+      const RegisterInfo* info = find_register(c.reg);
+      set_last_error(axis, "checking the configuration after silence: register " +
+                               std::to_string(c.reg) + " (" + std::string(info ? info->name : "?") +
+                               "): " + ec.message());
+      return ConfigurationCheck::Unknown;
+    }
+    if (v != c.value) return ConfigurationCheck::Changed;
   }
-  return true;
+  set_last_error(axis, {});
+  return ConfigurationCheck::Intact;
 }
 
 void CanioBus::worker() noexcept {
@@ -450,11 +458,21 @@ void CanioBus::worker() noexcept {
       if (!reconfigure_[i].load(std::memory_order_acquire) || now < retry_at[i]) continue;
       busy = true;
       // Back after silence: a module that kept its configuration (the node was only late or
-      // disconnected) needs three reads; one that was power-cycled is configured anew.
-      if (axis_counters_[i].configurations.load() > 0 && configuration_intact(i)) {
-        reconfigure_[i].store(false, std::memory_order_release);
-        axis_counters_[i].configured.store(true, std::memory_order_release);
-        continue;
+      // disconnected) needs three reads; one that was power-cycled is configured anew. A read
+      // that fails (the node's SDO server not answering yet, a loaded bus) proves neither:
+      // the check is repeated, and nothing is published meanwhile.
+      if (axis_counters_[i].configurations.load() > 0) {
+        const ConfigurationCheck check = check_configuration(i);
+        if (check == ConfigurationCheck::Unknown) {
+          bump(axis_counters_[i].sdo_errors);
+          retry_at[i] = now + kRetryConfigure;
+          continue;
+        }
+        if (check == ConfigurationCheck::Intact) {
+          reconfigure_[i].store(false, std::memory_order_release);
+          axis_counters_[i].configured.store(true, std::memory_order_release);
+          continue;
+        }
       }
       if (configure_axis(i)) {
         bump(axis_counters_[i].sdo_errors);

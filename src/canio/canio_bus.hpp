@@ -173,7 +173,10 @@ class CanioBus final : public BusDriver {
   // SDO worker.
   void worker() noexcept;
   [[nodiscard]] std::error_code configure_axis(std::size_t axis);
-  [[nodiscard]] bool configuration_intact(std::size_t axis);
+  // The module's read-back after a silence: Unknown when an SDO transfer failed (timeout,
+  // abort), which says nothing about the module's configuration.
+  enum class ConfigurationCheck { Intact, Changed, Unknown };
+  [[nodiscard]] ConfigurationCheck check_configuration(std::size_t axis);
   [[nodiscard]] std::error_code sdo_read(std::size_t axis, uint16_t reg, uint8_t size,
                                          uint32_t& value);
   [[nodiscard]] std::error_code sdo_write(std::size_t axis, uint16_t reg, uint8_t size,

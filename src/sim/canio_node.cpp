@@ -166,7 +166,10 @@ std::size_t CanioNode::service(int64_t deadline_ns) {
       continue;
     }
     if (f.id == canio::kSdoRequestBase + config_.node) {
-      if (config_.faults.answer_sdo) serve_sdo(f);
+      uint32_t drops = sdo_drops_.load();
+      while (drops > 0 && !sdo_drops_.compare_exchange_weak(drops, drops - 1)) {
+      }
+      if (config_.faults.answer_sdo && drops == 0) serve_sdo(f);
       continue;
     }
     for (std::size_t i = 0; i < modules_.size(); ++i) {

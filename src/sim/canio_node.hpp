@@ -76,6 +76,9 @@ class CanioNode {
   void power_up();
   // No answers at all while true (a node that lost power or its bus connection).
   void set_silent(bool silent) noexcept { silent_.store(silent); }
+  // The next `n` SDO requests go unanswered, the objects are still sent (an SDO server that
+  // lags behind after a restart).
+  void drop_sdo_requests(uint32_t n) noexcept { sdo_drops_.store(n); }
 
   [[nodiscard]] std::size_t module_count() const noexcept { return modules_.size(); }
   [[nodiscard]] Ds1928Module& module(std::size_t i) { return *modules_.at(i); }
@@ -97,6 +100,7 @@ class CanioNode {
   CanioNodeCounters counters_;
   std::mt19937_64 rng_;
   std::atomic<bool> silent_{false};  // set from another thread (tests, the simulator main)
+  std::atomic<uint32_t> sdo_drops_{0};
   uint64_t position_objects_ = 0;
 };
 

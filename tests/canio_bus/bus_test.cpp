@@ -279,4 +279,21 @@ TEST_CASE("CAN-I/O: modules configured over SDO with read-back, checked again af
   rig.nodes[0]->set_silent(false);
   REQUIRE(run_until([&] { return rig.io[0].inputs_fresh; }));
   CHECK(rig.canio->axis_counters(0).configurations.load() == 1);
+
+  // Back again, but its SDO server misses the first read-back request: a failed read proves
+  // nothing, so the check is repeated (500 ms later) instead of the module being written.
+  rig.nodes[0]->set_silent(true);
+  REQUIRE(run_until([&] { return rig.canio->axis_counters(0).silent.load(); }));
+  const uint64_t errors_before = rig.canio->axis_counters(0).sdo_errors.load();
+  rig.nodes[0]->drop_sdo_requests(1);
+  rig.nodes[0]->set_silent(false);
+  REQUIRE(run_until([&] { return rig.canio->axis_counters(0).sdo_errors.load() > errors_before; }));
+  (void)rig.cycle(c++);
+  CHECK_FALSE(rig.io[0].inputs_fresh);
+  CHECK_THAT(
+      rig.canio->axis_last_error(0),
+      Catch::Contains("checking the configuration after silence") && Catch::Contains("EnDatMode"));
+  REQUIRE(run_until([&] { return rig.io[0].inputs_fresh; }));
+  CHECK(rig.canio->axis_counters(0).configurations.load() == 1);
+  CHECK(rig.canio->axis_last_error(0).empty());
 }
