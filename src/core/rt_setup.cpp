@@ -72,37 +72,36 @@ std::size_t round_up_to_page(std::size_t bytes) noexcept {
   return (bytes + kPage - 1) / kPage * kPage;
 }
 
-// Lowest address of the calling thread's stack, or nullptr if glibc cannot say.
-const unsigned char* stack_bottom() noexcept {
-  pthread_attr_t attr;
-  if (pthread_getattr_np(pthread_self(), &attr) != 0) return nullptr;
-  void* low = nullptr;
+// The calling thread's stack as glibc knows it: [low, low + size), the top holding its TLS.
+struct StackBounds {
+  const unsigned char* low = nullptr;
   std::size_t size = 0;
-  const int e = pthread_attr_getstack(&attr, &low, &size);
+};
+StackBounds stack_bounds() noexcept {
+  StackBounds b;
+  pthread_attr_t attr;
+  if (pthread_getattr_np(pthread_self(), &attr) != 0) return b;
+  void* low = nullptr;
+  if (pthread_attr_getstack(&attr, &low, &b.size) == 0)
+    b.low = static_cast<const unsigned char*>(low);
   pthread_attr_destroy(&attr);
-  return e == 0 ? static_cast<const unsigned char*>(low) : nullptr;
+  return b;
 }
 
 void* measure_thread_overhead(void* out) noexcept {
-  pthread_attr_t attr;
-  if (pthread_getattr_np(pthread_self(), &attr) != 0) return nullptr;
-  void* low = nullptr;
-  std::size_t size = 0;
-  if (pthread_attr_getstack(&attr, &low, &size) == 0) {
-    const auto* top = static_cast<const unsigned char*>(low) + size;
-    const auto* frame = static_cast<const unsigned char*>(__builtin_frame_address(0));
-    *static_cast<std::size_t*>(out) = static_cast<std::size_t>(top - frame);
-  }
-  pthread_attr_destroy(&attr);
+  const StackBounds b = stack_bounds();
+  const auto* frame = static_cast<const unsigned char*>(__builtin_frame_address(0));
+  if (b.low != nullptr)
+    *static_cast<std::size_t*>(out) = static_cast<std::size_t>(b.low + b.size - frame);
   return nullptr;
 }
 }  // namespace
 
 std::size_t stack_left() noexcept {
-  const unsigned char* bottom = stack_bottom();
+  const StackBounds b = stack_bounds();
   const auto* frame = static_cast<const unsigned char*>(__builtin_frame_address(0));
-  if (bottom == nullptr || frame <= bottom) return 0;
-  return static_cast<std::size_t>(frame - bottom);
+  if (b.low == nullptr || frame <= b.low) return 0;
+  return static_cast<std::size_t>(frame - b.low);
 }
 
 std::size_t thread_stack_overhead() noexcept {

@@ -33,38 +33,18 @@ struct SimulatedNodeThread {
     node = std::make_unique<sim::CanioNode>(sim::canio_node_from_config(config, 1), *port);
     if (node->open()) throw std::runtime_error("node filters");
     thread = std::thread([this] {
-      while (!stop.load()) {
-        if (pause.load()) {
-          paused.store(true);
-          paused.notify_all();
-          pause.wait(true);
-          paused.store(false);
-          paused.notify_all();
-        }
-        (void)node->service(test::Rig::monotonic() + 2'000'000);
-      }
+      while (!stop.load()) (void)node->service(test::Rig::monotonic() + 2'000'000);
     });
   }
-  ~SimulatedNodeThread() {
+  ~SimulatedNodeThread() { stop_serving(); }
+  // After this the test may read the module's registers: the node thread no longer writes them.
+  void stop_serving() {
     stop.store(true);
-    resume();
-    thread.join();
+    if (thread.joinable()) thread.join();
   }
   std::shared_ptr<canio::VirtualCanBus> bus;
   std::unique_ptr<canio::VirtualCanPort> port;
   std::unique_ptr<sim::CanioNode> node;
-  // The test reads the module's registers between two services, not while the node writes them.
-  void pause_serving() {
-    pause.store(true);
-    paused.wait(false);
-  }
-  void resume() {
-    pause.store(false);
-    pause.notify_all();
-    paused.wait(true);
-  }
-  std::atomic<bool> pause{false};
-  std::atomic<bool> paused{false};
   std::atomic<bool> stop{false};
   std::thread thread;
 };
@@ -131,23 +111,7 @@ TEST_CASE("ds1928d on bus canio: configured at start, positions, status, EnDat c
   CHECK(status["bus"]["nodes"][0]["input_ids"] == json::array({0x281, 0x381}));
   CHECK(status["bus"]["nodes"][0]["output_id"] == 0x301);
   CHECK(status["bus"]["nodes"][0]["configurations"] == 1);
-  // The module really holds the configuration the daemon wrote (EnDat enabled, MTU 5).
-  {
-    node.pause_serving();
-    uint32_t v = 0;
-    CHECK_FALSE(node.node->module(0).read_register(reg::kEnDatMode, 1, v));
-    CHECK(v == endat_mode::kEnable);
-    CHECK_FALSE(node.node->module(0).read_register(reg::kOutputMtu, 1, v));
-    CHECK(v == 5);
-    node.resume();
-  }
-
-  // The pause may have cost the axis a sample or more (stale): fresh ones follow.
-  json axes;
-  (void)test::wait_until([&] {
-    axes = request(c.socket.path, {{"cmd", "axes"}});
-    return axes.value("ok", false) && axes["axes"][0]["state"] == "valid";
-  });
+  const json axes = request(c.socket.path, {{"cmd", "axes"}});
   INFO(axes.dump(2));
   CHECK(axes["axes"][0]["state"] == "valid");
   CHECK(axes["axes"][0]["time_source"] == "rx_timestamp");
@@ -164,4 +128,12 @@ TEST_CASE("ds1928d on bus canio: configured at start, positions, status, EnDat c
       c.socket.path, {{"cmd", "endat-read-param"}, {"axis", 0}, {"mrs", 0xA1}, {"param", 13}});
   INFO(param.dump(2));
   CHECK(param.value("ok", false));
+
+  // The module really holds the configuration the daemon wrote (EnDat enabled, MTU 5).
+  node.stop_serving();
+  uint32_t v = 0;
+  CHECK_FALSE(node.node->module(0).read_register(reg::kEnDatMode, 1, v));
+  CHECK(v == endat_mode::kEnable);
+  CHECK_FALSE(node.node->module(0).read_register(reg::kOutputMtu, 1, v));
+  CHECK(v == 5);
 }
