@@ -17,9 +17,8 @@
 set -u
 build=${1:?build dir}
 src=${2:?source dir}
-daemon=$build/daemon/ds1928d
-ctl=$build/tools/ds1928ctl/ds1928ctl
 here=$(cd "$(dirname "$0")" && pwd)
+. "$here/stage.sh"
 
 if [ "$(id -u)" != 0 ]; then
   echo "SKIP: needs root (throwaway users and groups, uid changes); run ctest as root"
@@ -43,7 +42,10 @@ cleanup() {
   rm -rf "$run" "$run"-*
   rm -f /dev/shm/ds1928d-perm-"$tag"*
 }
-trap cleanup EXIT
+trap 'cleanup; unstage_programs' EXIT
+stage_programs "$build/daemon/ds1928d" "$build/tools/ds1928ctl/ds1928ctl" ||
+  { echo "FAIL: cannot stage the programs under /var/lib/ds1928d-test"; exit 1; }
+daemon=${staged[ds1928d]} ctl=${staged[ds1928ctl]}
 check() {  # check DESCRIPTION COMMAND...
   if "${@:2}"; then echo "ok:   $1"; else echo "FAIL: $1"; fail=1; fi
 }
