@@ -23,39 +23,20 @@ sim=$build/tools/ds1928-sim/ds1928-sim
 daemon=$build/daemon/ds1928d
 ctl=$build/tools/ds1928ctl/ds1928ctl
 
-if [ "$(id -u)" != 0 ]; then
-  echo "SKIP: needs root (network namespaces, veth, AF_PACKET raw sockets); run ctest as root"
-  exit 77
-fi
-for bin in "$sim" "$daemon" "$ctl"; do
-  [ -x "$bin" ] || { echo "FAIL: $bin not built"; exit 1; }
-done
+. "$src/tests/lib/netns.sh"
+require_root "network namespaces, veth, AF_PACKET raw sockets"
+require_programs "$sim" "$daemon" "$ctl"
 command -v jq >/dev/null || { echo "FAIL: jq not installed"; exit 1; }
 have_tshark=1
 command -v tshark >/dev/null || { have_tshark=0; echo "NOTE: tshark not installed, frame check skipped"; }
 
-tag=$$
+test_init powerlink_generic
 ns_mn=plg_mn_$tag
 ns_cn=plg_cn_$tag
 if_mn=plg_mn
 if_cn=plg_cn
-tmp=$(mktemp -d /tmp/powerlink_generic.XXXXXX)
-pids=()
-failed=0
+on_cleanup 'rm -f "/dev/shm/ds1928d_plg_$tag" "/dev/shm/ds1928d_plg_$tag.wait"'
 
-cleanup() {
-  for p in "${pids[@]}"; do kill "$p" 2>/dev/null; done
-  for p in "${pids[@]}"; do wait "$p" 2>/dev/null; done
-  ip netns del "$ns_mn" 2>/dev/null
-  ip netns del "$ns_cn" 2>/dev/null
-  rm -f "/dev/shm/ds1928d_plg_$tag" "/dev/shm/ds1928d_plg_$tag.wait"
-  if [ "$failed" = 0 ] && [ -z "${KEEP_TMP:-}" ]; then rm -rf "$tmp"; else echo "logs kept in $tmp"; fi
-}
-trap cleanup EXIT
-trap 'exit 1' INT TERM
-
-fail() { echo "FAIL: $*"; failed=1; for f in "$tmp"/*.log; do echo "---- $f"; tail -n 25 "$f"; done; exit 1; }
-pass() { echo "ok: $*"; }
 ctlj() { ip netns exec "$ns_mn" "$ctl" -s "$tmp/ctl.sock" --json "$@"; }
 node9() { ctlj status 2>/dev/null | jq -c '.bus.nodes[] | select(.node == 9)' 2>/dev/null; }
 
@@ -89,17 +70,8 @@ YAML
 "$daemon" --check-config "$tmp/generic.yaml" >"$tmp/check.log" 2>&1 || fail "check-config refused it"
 pass "configuration without axes, from a concise DCF, accepted ($(tail -n1 "$tmp/check.log"))"
 
-ip netns add "$ns_mn" || fail "cannot create network namespace"
-ip netns add "$ns_cn" || fail "cannot create network namespace"
-ip link add "$if_mn" netns "$ns_mn" type veth peer name "$if_cn" netns "$ns_cn" || fail "veth"
-ip -n "$ns_mn" link set "$if_mn" up
-ip -n "$ns_cn" link set "$if_cn" up
-
-wait_for() {  # FILE REGEX SECONDS
-  local i
-  for ((i = 0; i < $3 * 20; i++)); do grep -qE "$2" "$1" 2>/dev/null && return 0; sleep 0.05; done
-  return 1
-}
+netns_add "$ns_mn" "$ns_cn"
+veth_pair "$ns_mn" "$if_mn" "$ns_cn" "$if_cn"
 if [ $have_tshark = 1 ]; then
   ip netns exec "$ns_cn" tshark -i "$if_cn" -f "ether proto 0x88ab" -w "$tmp/mn_frames.pcapng" \
       >"$tmp/tshark.log" 2>&1 &

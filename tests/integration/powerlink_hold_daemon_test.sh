@@ -23,31 +23,15 @@ ctl=$build/tools/ds1928ctl/ds1928ctl
 hold=${HOLD_SECONDS:-100}
 cpu=$(( $(nproc) > 1 ? 1 : 0 ))
 
-if [ "$(id -u)" != 0 ]; then
-  echo "SKIP: needs root (network namespaces, veth, raw sockets, SCHED_FIFO)"
-  exit 77
-fi
-for bin in "$sim" "$daemon" "$ctl"; do [ -x "$bin" ] || { echo "FAIL: $bin not built"; exit 1; }; done
+. "$src/tests/lib/netns.sh"
+require_root "network namespaces, veth, raw sockets, SCHED_FIFO"
+require_programs "$sim" "$daemon" "$ctl"
 command -v jq >/dev/null || { echo "FAIL: jq not installed"; exit 1; }
 
-tag=$$
+test_init powerlink_hold_daemon
 ns_mn=plhd_mn_$tag
 ns_cn=plhd_cn_$tag
-tmp=$(mktemp -d /tmp/powerlink_hold_daemon.XXXXXX)
-pids=()
-failed=0
-cleanup() {
-  for p in "${pids[@]}"; do kill "$p" 2>/dev/null; done
-  for p in "${pids[@]}"; do wait "$p" 2>/dev/null; done
-  ip netns del "$ns_mn" 2>/dev/null
-  ip netns del "$ns_cn" 2>/dev/null
-  rm -f "/dev/shm/ds1928d_plhd_$tag" "/dev/shm/ds1928d_plhd_$tag.wait"
-  if [ "$failed" = 0 ]; then rm -rf "$tmp"; else echo "logs kept in $tmp"; fi
-}
-trap cleanup EXIT
-trap 'exit 1' INT TERM
-fail() { echo "FAIL: $*"; failed=1; for f in "$tmp"/*.log; do echo "---- $f"; tail -n 25 "$f"; done; exit 1; }
-pass() { echo "ok: $*"; }
+on_cleanup 'rm -f "/dev/shm/ds1928d_plhd_$tag" "/dev/shm/ds1928d_plhd_$tag.wait"'
 status() { ip netns exec "$ns_mn" "$ctl" -s "$tmp/ctl.sock" --json status 2>/dev/null; }
 node() { jq -c ".bus.nodes[] | select(.node == $1)" <<<"$2"; }
 
@@ -79,10 +63,8 @@ socket:
 YAML
 "$daemon" --check-config "$tmp/hold.yaml" >"$tmp/check.log" 2>&1 || fail "check-config refused it"
 
-ip netns add "$ns_mn" && ip netns add "$ns_cn" || fail "cannot create network namespaces"
-ip link add plhd_mn netns "$ns_mn" type veth peer name plhd_cn netns "$ns_cn" || fail "veth"
-ip -n "$ns_mn" link set plhd_mn up
-ip -n "$ns_cn" link set plhd_cn up
+netns_add "$ns_mn" "$ns_cn"
+veth_pair "$ns_mn" plhd_mn "$ns_cn" plhd_cn
 
 start_cn() {  # NODE LOG
   ip netns exec "$ns_cn" "$sim" powerlink --iface plhd_cn --node "$1" --config "$tmp/hold.yaml" \

@@ -22,43 +22,16 @@ config=$src/tests/integration/powerlink_hold.yaml
 hold=${HOLD_SECONDS:-100}
 cpu=$(( $(nproc) > 1 ? 1 : 0 ))
 
-if [ "$(id -u)" != 0 ]; then
-  echo "SKIP: needs root (network namespaces, veth, raw sockets, SCHED_FIFO)"
-  exit 77
-fi
-for bin in "$sim" "$mn"; do [ -x "$bin" ] || { echo "FAIL: $bin not built"; exit 1; }; done
+. "$src/tests/lib/netns.sh"
+require_root "network namespaces, veth, raw sockets, SCHED_FIFO"
+require_programs "$sim" "$mn"
 
-tag=$$
+test_init powerlink_hold
 ns_mn=plh_mn_$tag
 ns_cn=plh_cn_$tag
-tmp=$(mktemp -d /tmp/powerlink_hold.XXXXXX)
-pids=()
-cleanup() {
-  for p in "${pids[@]}"; do kill "$p" 2>/dev/null; done
-  for p in "${pids[@]}"; do wait "$p" 2>/dev/null; done
-  ip netns del "$ns_mn" 2>/dev/null
-  ip netns del "$ns_cn" 2>/dev/null
-  if [ "${failed:-0}" = 0 ]; then rm -rf "$tmp"; else echo "logs kept in $tmp"; fi
-}
-trap cleanup EXIT
-trap 'exit 1' INT TERM
-failed=0
-fail() { echo "FAIL: $*"; failed=1; for f in "$tmp"/*.log; do echo "---- $f"; tail -n 25 "$f"; done; exit 1; }
-pass() { echo "ok: $*"; }
-wait_for() {
-  local file=$1 regex=$2 secs=$3 i
-  for ((i = 0; i < secs * 20; i++)); do
-    grep -qE "$regex" "$file" 2>/dev/null && return 0
-    sleep 0.05
-  done
-  return 1
-}
-field() { sed -n "s/.*[ ]$2=\([-0-9.]*\).*/\1/p" "$1" | tail -n1; }
 
-ip netns add "$ns_mn" && ip netns add "$ns_cn" || fail "cannot create network namespaces"
-ip link add plh_mn netns "$ns_mn" type veth peer name plh_cn netns "$ns_cn" || fail "veth"
-ip -n "$ns_mn" link set plh_mn up
-ip -n "$ns_cn" link set plh_cn up
+netns_add "$ns_mn" "$ns_cn"
+veth_pair "$ns_mn" plh_mn "$ns_cn" plh_cn
 
 start_cn() {
   ip netns exec "$ns_cn" "$sim" powerlink --iface plh_cn --node 1 --config "$config" \

@@ -15,53 +15,22 @@ sim=$build/tools/ds1928-sim/ds1928-sim
 mn=$build/bench/powerlink/pl_mn_runner
 sender=$src/tests/integration/pl_send_frames.py
 
-if [ "$(id -u)" != 0 ]; then
-  echo "SKIP: needs root (network namespaces, veth, raw sockets)"
-  exit 77
-fi
-for bin in "$sim" "$mn"; do [ -x "$bin" ] || { echo "FAIL: $bin not built"; exit 1; }; done
+. "$src/tests/lib/netns.sh"
+require_root "network namespaces, veth, raw sockets"
+require_programs "$sim" "$mn"
 
-tag=$$
+test_init powerlink_short
 ns_a=plsf_a_$tag
 ns_b=plsf_b_$tag
-tmp=$(mktemp -d /tmp/powerlink_short.XXXXXX)
-pids=()
-cleanup() {
-  for p in "${pids[@]}"; do kill "$p" 2>/dev/null; done
-  for p in "${pids[@]}"; do wait "$p" 2>/dev/null; done
-  ip netns del "$ns_a" 2>/dev/null
-  ip netns del "$ns_b" 2>/dev/null
-  if [ "${failed:-0}" = 0 ]; then rm -rf "$tmp"; else echo "logs kept in $tmp"; fi
-}
-trap cleanup EXIT
-trap 'exit 1' INT TERM
-failed=0
-fail() { echo "FAIL: $*"; failed=1; for f in "$tmp"/*.log; do echo "---- $f"; tail -n 20 "$f"; done; exit 1; }
-pass() { echo "ok: $*"; }
-wait_for() {
-  local file=$1 regex=$2 secs=$3 i
-  for ((i = 0; i < secs * 20; i++)); do
-    grep -qE "$regex" "$file" 2>/dev/null && return 0
-    sleep 0.05
-  done
-  return 1
-}
-field() { sed -n "s/.*[ ]$2=\([-0-9.]*\).*/\1/p" "$1" | tail -n1; }
+FAIL_LOG_LINES=20
 expect() {  # FILE FIELD VALUE WHAT
   local v
   v=$(field "$1" "$2")
   [ "$v" = "$3" ] || fail "$4: $2=$v, expected $3"
 }
 
-ip netns add "$ns_a" && ip netns add "$ns_b" || fail "cannot create network namespaces"
-ip link add plsf_a netns "$ns_a" type veth peer name plsf_b netns "$ns_b" || fail "veth"
-ip -n "$ns_a" link set plsf_a up
-ip -n "$ns_b" link set plsf_b up
-# A fresh veth has carrier only after the kernel's link watch ran.
-for ((i = 0; i < 200; i++)); do
-  ip -n "$ns_b" link show plsf_b | grep -q "LOWER_UP" && break
-  sleep 0.05
-done
+netns_add "$ns_a" "$ns_b"
+veth_pair "$ns_a" plsf_a "$ns_b" plsf_b
 
 # ---- 1. ds1928-sim as the receiver -----------------------------------------------------------
 ip netns exec "$ns_b" "$sim" powerlink --iface plsf_b --node 1 --rt-priority 0 \
