@@ -69,7 +69,13 @@ void Daemon::start_metrics() {
   // Observability must not stop the cycle: an address in use or not on this host is said, and
   // the daemon runs without the endpoint (status shows "metrics": "unavailable").
   if (auto e = server->start()) {
-    spdlog::warn("metrics endpoint {}:{}: {}; running without it", l.address, l.port, e.message());
+    // The hardened unit allows no IP unless its drop-in is installed: say so.
+    const bool no_ip = e == std::errc::address_family_not_supported;
+    spdlog::warn("metrics endpoint {}:{}: {}; running without it{}", l.address, l.port,
+                 e.message(),
+                 no_ip ? " (IP sockets are not allowed here: install the unit's drop-in "
+                         "ds1928d-metrics.conf, or set metrics.listen: off; docs/operations.md)"
+                       : "");
     metrics_failed_ = true;
     return;
   }

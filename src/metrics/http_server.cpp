@@ -59,6 +59,7 @@ struct HttpServer::Impl::Connection : std::enable_shared_from_this<Connection> {
   std::size_t used = 0;
   std::string response;
   bool writing = false;
+  bool draining = false;
   bool closed = false;
   Handle self;
 
@@ -74,9 +75,10 @@ struct HttpServer::Impl::Connection : std::enable_shared_from_this<Connection> {
     timer.async_wait([c = shared_from_this()](const boost::system::error_code& ec) {
       if (ec || c->closed) return;
       if (auto s = c->server.lock()) {
-        if (c->writing)
+        // Draining: the response is out, the rest of the request is not worth waiting for.
+        if (c->writing && !c->draining)
           ++s->counters.write_timeouts;
-        else
+        else if (!c->writing)
           ++s->counters.read_timeouts;
         s->close(c);
       }
@@ -130,14 +132,34 @@ struct HttpServer::Impl::Connection : std::enable_shared_from_this<Connection> {
     writing = true;
     arm(write_timeout);
     asio::async_write(socket, asio::buffer(response),
-                      [c = shared_from_this()](const boost::system::error_code&, std::size_t) {
+                      [c = shared_from_this()](const boost::system::error_code& ec, std::size_t) {
                         if (c->closed) return;
-                        // Done or failed: either way the exchange is over. Half-close first so
-                        // the peer reads the whole response before the end of the stream.
+                        auto s = c->server.lock();
+                        if (!s) return;
+                        if (ec) {
+                          s->close(c);
+                          return;
+                        }
+                        // Half-close, then read what the client still sends until it closes:
+                        // closing with unread bytes would reset the connection and could destroy
+                        // the response before the client read it (a refused oversized request).
                         boost::system::error_code ignored;
                         c->socket.shutdown(tcp::socket::shutdown_send, ignored);
-                        if (auto s = c->server.lock()) s->close(c);
+                        c->draining = true;
+                        c->arm(s->options.read_timeout);
+                        c->drain();
                       });
+  }
+
+  // Reads and discards into the fixed buffer until end of stream, error or the timer.
+  void drain() {
+    socket.async_read_some(
+        asio::buffer(buffer),
+        [c = shared_from_this()](const boost::system::error_code& ec, std::size_t) {
+          if (c->closed) return;
+          if (!ec) return c->drain();
+          if (auto s = c->server.lock()) s->close(c);
+        });
   }
 };
 
