@@ -71,8 +71,7 @@ void Daemon::start_metrics() {
   if (auto e = server->start()) {
     // The hardened unit allows no IP unless its drop-in is installed: say so.
     const bool no_ip = e == std::errc::address_family_not_supported;
-    spdlog::warn("metrics endpoint {}:{}: {}; running without it{}", l.address, l.port,
-                 e.message(),
+    spdlog::warn("metrics endpoint {}:{}: {}; running without it{}", l.address, l.port, e.message(),
                  no_ip ? " (IP sockets are not allowed here: install the unit's drop-in "
                          "ds1928d-metrics.conf, or set metrics.listen: off; docs/operations.md)"
                        : "");
@@ -194,6 +193,10 @@ std::string Daemon::metrics_text(metrics::Format format) const {
                "Connections to this endpoint: served, or refused over the connection limit.");
     out.sample({{"result", "served"}}, h.accepted - h.refused);
     out.sample({{"result", "refused"}}, h.refused);
+    out.family(
+        "ds1928_http_connections_peak", Type::Gauge,
+        "Most connections this endpoint held open at once (limit: metrics.max_connections).");
+    out.sample(h.peak_open);
     out.family("ds1928_http_responses", Type::Counter, "Responses of this endpoint by class.");
     out.sample({{"class", "2xx"}}, h.responses_ok);
     out.sample({{"class", "error"}}, h.responses_error);

@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <array>
 #include <list>
 
@@ -195,12 +196,18 @@ void HttpServer::Impl::accept() {
           boost::system::error_code ignored;
           socket.non_blocking(true, ignored);
           (void)socket.write_some(asio::buffer(busy), ignored);
+          // What the client sent already is read (once, without waiting): closing with unread
+          // bytes would reset the connection and could destroy the 503 before it is read.
+          std::array<char, 1024> sink;
+          (void)socket.read_some(asio::buffer(sink), ignored);
           socket.shutdown(tcp::socket::shutdown_send, ignored);
           socket.close(ignored);
         } else {
           auto c = std::make_shared<Connection>(self, std::move(socket));
           self->connections.push_front(c);
           c->self = self->connections.begin();
+          self->counters.peak_open =
+              std::max<uint64_t>(self->counters.peak_open, self->connections.size());
           c->start(self->options.read_timeout);
         }
         self->accept();

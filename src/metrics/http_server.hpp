@@ -33,7 +33,8 @@ struct HttpServerOptions {
 // What the server saw, for the ds1928_http_* metrics and the tests.
 struct HttpServerCounters {
   uint64_t accepted = 0;
-  uint64_t refused = 0;  // over max_connections: 503 and closed
+  uint64_t peak_open = 0;  // most connections open at once
+  uint64_t refused = 0;    // over max_connections: 503 and closed
   uint64_t responses_ok = 0;
   uint64_t responses_error = 0;  // 4xx/5xx answered
   uint64_t read_timeouts = 0;
