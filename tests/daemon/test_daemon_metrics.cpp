@@ -222,7 +222,7 @@ TEST_CASE("The metrics endpoint refuses bad requests with a status and a reason"
   CHECK(status_of("\x16\x03\x01\x00\xa5\x01\x00\x00").status == 400);  // a TLS ClientHello
 }
 
-TEST_CASE("The metrics endpoint survives abuse; the daemon cycles on, memory bounded",
+TEST_CASE("The metrics endpoint survives abuse, the daemon cycles on, memory stays bounded",
           "[daemon][metrics][hostile]") {
   test::raise_fd_limit();
   DaemonProcess d("metrics-abuse", "", kMetricsYaml);
