@@ -48,6 +48,13 @@ void BusService::register_commands(control::Server&, const SocketConfig&) {}
 
 void BusService::watch(std::vector<BusEvent>&, bool, std::chrono::steady_clock::time_point) {}
 
+void BusService::append_metrics(metrics::Exposition&) const {}
+
+void log_bus_event(const BusEvent& e, std::string_view bus) {
+  control::log_event(e.warning ? spdlog::level::warn : spdlog::level::info,
+                     {e.event, bus, e.node, e.axis, e.reason}, e.text);
+}
+
 std::span<const BusCommandSet> bus_commands() noexcept {
   return kCommandSets;
 }
@@ -82,9 +89,10 @@ std::vector<BusEvent> BusWatch::poll(BusService& bus, std::chrono::steady_clock:
   if (!seen_ || state != state_) {
     // The first look reports nothing: the start is logged on its own.
     if (seen_)
-      events.push_back(
-          {state != BusState::Operational, fmt::format("bus {}: {} -> {}", bus.driver().name(),
-                                                       to_string(state_), to_string(state))});
+      events.push_back({state != BusState::Operational,
+                        fmt::format("bus {}: {} -> {}", bus.driver().name(), to_string(state_),
+                                    to_string(state)),
+                        control::LogEvent::BusState});
     state_ = state;
   }
   bus.watch(events, !seen_, now);

@@ -14,14 +14,30 @@
 
 #include "config/config.hpp"
 #include "control/control_server.hpp"
+#include "control/journal.hpp"
 #include "core/bus.hpp"
+#include "metrics/exposition.hpp"
 
 namespace ds1928 {
 
-// One log line about the bus, worded for the journal.
+// One log line about the bus, worded for the journal, with its journal fields (journal.hpp).
 struct BusEvent {
+  BusEvent() = default;
+  BusEvent(bool warning_, std::string text_, control::LogEvent event_ = control::LogEvent::None,
+           int node_ = -1, int axis_ = -1, std::string reason_ = {})
+      : warning(warning_),
+        text(std::move(text_)),
+        event(event_),
+        node(node_),
+        axis(axis_),
+        reason(std::move(reason_)) {}
+
   bool warning = false;
   std::string text;
+  control::LogEvent event = control::LogEvent::None;
+  int node = -1;       // DS1928_NODE, -1: none
+  int axis = -1;       // DS1928_AXIS, -1: none
+  std::string reason;  // DS1928_REASON
 };
 
 // A counter whose increases are reported, rate-limited: thresholds that only count (cycle time
@@ -52,6 +68,8 @@ class BusService {
   // Kind-specific log lines since the last call. `first`: the baseline look, say nothing.
   virtual void watch(std::vector<BusEvent>& events, bool first,
                      std::chrono::steady_clock::time_point now);
+  // The kind's metric families for the OpenMetrics endpoint (daemon_metrics.cpp). Normal thread.
+  virtual void append_metrics(metrics::Exposition& out) const;
 
  protected:
   virtual void status_extra(nlohmann::json& j) const;

@@ -7,6 +7,7 @@
 #include "canio/canio_bus.hpp"
 #include "canio/socketcan_port.hpp"
 #include "canio/virtual_bus.hpp"
+#include "canio_metrics.hpp"
 
 namespace ds1928 {
 namespace {
@@ -25,12 +26,14 @@ class CanioService final : public BusService {
              std::chrono::steady_clock::time_point now) override {
     const canio::CanState s = bus_->can_state();
     if (!first && s != can_state_)
-      events.push_back({!canio::can_transmit(s),
-                        fmt::format("canio {}: controller {} -> {}{}", bus_->port_name(),
-                                    canio::to_string(can_state_), canio::to_string(s),
-                                    s == canio::CanState::BusOff
-                                        ? " (no frames until the controller restarts: restart-ms)"
-                                        : "")});
+      events.push_back(
+          {!canio::can_transmit(s),
+           fmt::format("canio {}: controller {} -> {}{}", bus_->port_name(),
+                       canio::to_string(can_state_), canio::to_string(s),
+                       s == canio::CanState::BusOff
+                           ? " (no frames until the controller restarts: restart-ms)"
+                           : ""),
+           s == canio::CanState::BusOff ? control::LogEvent::BusOff : control::LogEvent::BusState});
     can_state_ = s;
     const auto& c = bus_->counters();
     uint64_t more = 0;
@@ -49,15 +52,18 @@ class CanioService final : public BusService {
       if (!first && silent != silent_[i])
         events.push_back(
             {silent,
-             silent ? fmt::format("canio node {}: silent (no complete sample of axis '{}' "
-                                  "for {} ms)",
+             silent ? fmt::format("canio node {}: silent (no complete sample of axis "
+                                  "'{}' for {} ms)",
                                   a.node, a.name, bus_->options().bus.input_timeout_ms)
-                    : fmt::format("canio node {}: axis '{}' answering again", a.node, a.name)});
+                    : fmt::format("canio node {}: axis '{}' answering again", a.node, a.name),
+             silent ? control::LogEvent::NodeSilent : control::LogEvent::NodeOperational,
+             static_cast<int>(a.node), static_cast<int>(i)});
       silent_[i] = silent;
     }
   }
 
  protected:
+  void append_metrics(metrics::Exposition& out) const override { append_canio_metrics(out, *bus_); }
   void status_extra(nlohmann::json& j) const override {
     const auto info = bus_->interface_info();
     const auto pc = bus_->port_counters();

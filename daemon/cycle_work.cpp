@@ -84,6 +84,8 @@ void CycleWork::run_cycle(const CycleContext& ctx) noexcept {
     }
     c.cycle.store(ctx.index, std::memory_order_relaxed);
     c.validity.store(static_cast<uint8_t>(st.validity), std::memory_order_relaxed);
+    if (const auto v = static_cast<std::size_t>(st.validity); v < c.published.size())
+      bump(c.published[v]);
   }
   const uint64_t now_us = static_cast<uint64_t>(ctx.start_ns / 1000);
   for (std::size_t i = 0; i < io_.size(); ++i) run_tunnel(i, now_us);

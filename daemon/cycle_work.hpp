@@ -86,6 +86,8 @@ struct AxisCounters {
   std::atomic<uint8_t> validity{0};        // shm::AxisValidity
   std::atomic<uint32_t> endat_error{0};    // written by the normal thread from acyclic reads
   std::atomic<uint32_t> endat_warning{0};  // idem
+  // Cycles published per shm::AxisValidity (the metrics endpoint's publications by validity).
+  std::array<std::atomic<uint64_t>, 4> published{};
 };
 
 class CycleWork final : public CycleTask {

@@ -7,6 +7,7 @@
 #include <cstdio>
 
 #include "config/config_loader.hpp"
+#include "control/journal.hpp"
 #include "control/socket_path.hpp"
 #include "endat_service.hpp"
 
@@ -59,7 +60,8 @@ std::error_code Daemon::start() {
   std::string why_not;
   bus_ = make_bus_service(config_, why_not);
   if (!bus_) {
-    spdlog::error("{}", why_not);
+    control::log_event(spdlog::level::err, {control::LogEvent::StartFailed, to_string(config_.bus)},
+                       why_not);
     return std::make_error_code(std::errc::not_supported);
   }
   if (auto ec = publisher_.open(config_.shm, static_cast<uint32_t>(config_.axes.size()),
@@ -69,8 +71,10 @@ std::error_code Daemon::start() {
   }
   if (auto ec = bus().start()) {
     const std::string detail = bus_->start_detail();
-    spdlog::error("{} bus: {}{}", bus().name(), ec.message(),
-                  detail.empty() ? std::string() : ": " + detail);
+    control::log_event(spdlog::level::err,
+                       {control::LogEvent::StartFailed, bus().name(), -1, -1, ec.message()},
+                       fmt::format("{} bus: {}{}", bus().name(), ec.message(),
+                                   detail.empty() ? std::string() : ": " + detail));
     return ec;
   }
 
@@ -113,14 +117,20 @@ std::error_code Daemon::start() {
   endat_->start();
   notifier_.supervise(
       io_, [this] { return engine_->cycle_count(); }, [this] { return summary_line(); });
-  spdlog::info("ds1928d {} cycling: bus {}, {} axis(es), period {} µs; {}; shm {}; socket {}",
-               PROJECT_VERSION, bus().name(), config_.axes.size(), config_.cycle.period_us,
-               engine_->rt_status_text(), config_.shm.name, socket_path_);
+  start_metrics();
+  control::log_event(
+      spdlog::level::info, {control::LogEvent::Started, bus().name()},
+      fmt::format("ds1928d {} cycling: bus {}, {} axis(es), period {} µs; {}; shm {}; socket {}",
+                  PROJECT_VERSION, bus().name(), config_.axes.size(), config_.cycle.period_us,
+                  engine_->rt_status_text(), config_.shm.name, socket_path_));
   return {};
 }
 
 void Daemon::stop() noexcept {
-  if (started_) spdlog::info("ds1928d stopping");
+  if (started_)
+    control::log_event(spdlog::level::info, {control::LogEvent::Stopping, bus_ ? bus().name() : ""},
+                       "ds1928d stopping");
+  if (metrics_) metrics_->stop();
   notifier_.stop_supervising();
   if (started_) notifier_.stopping();
   publisher_.set_state(shm::DaemonState::Stopping);
@@ -178,12 +188,7 @@ void Daemon::on_tick() {
     notifier_.ready(summary_line());
     spdlog::info("first data exchanged: ready");
   }
-  for (const BusEvent& e : bus_watch_.poll(*bus_)) {
-    if (e.warning)
-      spdlog::warn("{}", e.text);
-    else
-      spdlog::info("{}", e.text);
-  }
+  for (const BusEvent& e : bus_watch_.poll(*bus_)) log_bus_event(e, bus().name());
   const auto now = std::chrono::steady_clock::now();
   if (now - last_log_ >= std::chrono::seconds(1)) {
     last_log_ = now;
@@ -302,7 +307,8 @@ json Daemon::status_json() const {
             {"uptime_s", seconds_since(started_at_)},
             {"realtime", engine_->realtime()},
             {"rt_status", engine_->rt_status_text()},
-            {"socket", socket_path_}}},
+            {"socket", socket_path_},
+            {"metrics", metrics_address()}}},
           {"shm", {{"name", config_.shm.name}, {"generation", publisher_.generation()}}},
           {"bus", bus_->status_json()},
           {"cycle",

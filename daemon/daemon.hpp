@@ -19,6 +19,7 @@
 #include "core/cycle_engine.hpp"
 #include "cycle_work.hpp"
 #include "endat_service.hpp"
+#include "metrics/http_server.hpp"
 #include "register_client.hpp"
 #include "shm/publisher.hpp"
 
@@ -65,10 +66,14 @@ class Daemon {
   [[nodiscard]] BusService& bus_service() noexcept { return *bus_; }
   [[nodiscard]] boost::asio::io_context& io() noexcept { return io_; }
   [[nodiscard]] const std::string& socket_path() const noexcept { return socket_path_; }
+  // The OpenMetrics text of GET /metrics (daemon_metrics.cpp); the bound address or "off".
+  [[nodiscard]] std::string metrics_text(metrics::Format format) const;
+  [[nodiscard]] std::string metrics_address() const;
 
  private:
   void register_commands();
   void on_tick();
+  void start_metrics();
   [[nodiscard]] nlohmann::json axis_json(std::size_t axis, bool with_sample) const;
 
   DaemonConfig config_;
@@ -82,15 +87,20 @@ class Daemon {
   std::unique_ptr<RegisterClient> registers_;
   std::unique_ptr<EnDatService> endat_;
   std::unique_ptr<control::Server> server_;
+  std::unique_ptr<metrics::HttpServer> metrics_;
   control::SystemdNotifier notifier_;
   std::string socket_path_;
   std::chrono::steady_clock::time_point started_at_;
   std::chrono::steady_clock::time_point stats_reset_at_;
   std::chrono::steady_clock::time_point last_log_;
   BusWatch bus_watch_;
+  bool metrics_failed_ = false;
   bool ready_sent_ = false;
   bool started_ = false;
 };
+
+// Logs a bus event with its journal fields (DS1928_BUS = `bus`).
+void log_bus_event(const BusEvent& e, std::string_view bus);
 
 // The bus' own socket commands, and "not_<kind>" answers for the other kinds' commands.
 void register_bus_commands(control::Server& server, BusService& bus, const DaemonConfig& config);

@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cstdio>
 
+#include "control/journal.hpp"
 #include "core/module_image.hpp"
 #include "endat/names.hpp"
 
@@ -208,6 +209,7 @@ struct EnDatService::Axis {
   Clock::time_point quiet_until{};
   std::chrono::milliseconds timeout{2000};
   Counters counters;
+  LatencyHistogram latency;
 
   // Identification.
   std::optional<endat::Identification> ident;
@@ -300,6 +302,10 @@ const std::optional<endat::Identification>& EnDatService::identification(std::si
 
 EnDatService::Counters EnDatService::counters(std::size_t axis) const {
   return axes_.at(axis)->counters;
+}
+
+const EnDatService::LatencyHistogram& EnDatService::command_latency(std::size_t axis) const {
+  return axes_.at(axis)->latency;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -507,6 +513,10 @@ void EnDatService::poll_axis(std::size_t index, Clock::time_point now) {
           break;
         }
         ++a.counters.replies;
+        // The deadline runs from the first submission (transmit()).
+        a.latency.record(std::chrono::duration_cast<std::chrono::nanoseconds>(
+                             now - (a.in_flight->deadline - a.timeout))
+                             .count());
         if (a.in_flight->job->cancelled) ++a.counters.discarded_replies;
         const endat::Request& request = a.in_flight->job->steps[a.in_flight->job->next];
         if (event->full_size > event->size) {
@@ -712,7 +722,10 @@ void EnDatService::identification_done(std::size_t index, std::error_code error)
   a.ident_error = error;
   if (error) {
     a.ident_state = "failed";
-    spdlog::warn("axis {}: encoder identification failed: {}", index, error.message());
+    control::log_event(
+        spdlog::level::warn,
+        {control::LogEvent::IdentificationFailed, {}, -1, static_cast<int>(index), error.message()},
+        fmt::format("axis {}: encoder identification failed: {}", index, error.message()));
   } else {
     a.ident_state = "ok";
     spdlog::info("axis {}: EnDat {} {} encoder, {} position bits, ID {}, serial {} (from {})",

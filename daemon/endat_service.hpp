@@ -28,6 +28,7 @@
 
 #include "config/config.hpp"
 #include "control/control_server.hpp"
+#include "core/bucket_histogram.hpp"
 #include "cycle_work.hpp"
 #include "endat/command.hpp"
 #include "endat/ident.hpp"
@@ -36,6 +37,12 @@
 namespace ds1928 {
 
 // Failures the service adds to the codec's endat::Errc.
+// Bucket bounds of the EnDat command latency (metrics endpoint), ns: a command crosses the
+// Flatstream tunnel in a few cycles, a slow one (EEPROM write) takes tens of ms.
+inline constexpr std::array<int64_t, 12> kEnDatLatencyBoundsNs{
+    1'000'000,   2'000'000,   5'000'000,   10'000'000,   20'000'000,   50'000'000,
+    100'000'000, 200'000'000, 500'000'000, 1000'000'000, 2000'000'000, 5000'000'000};
+
 enum class EnDatServiceErrc : int {
   timeout = 1,     // no reply within AxisConfig::command_timeout_ms
   not_delivered,   // Flatstream gave up before the module had the whole command (not executed)
@@ -142,6 +149,9 @@ class EnDatService {
     uint64_t jobs_cancelled = 0;
   };
   [[nodiscard]] Counters counters(std::size_t axis) const;
+  // Command latency (first submission to the tunnel → matching reply) of one axis.
+  using LatencyHistogram = BucketHistogram<kEnDatLatencyBoundsNs>;
+  [[nodiscard]] const LatencyHistogram& command_latency(std::size_t axis) const;
 
  private:
   struct Job;

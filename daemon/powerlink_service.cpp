@@ -109,21 +109,25 @@ void PowerlinkService::watch(std::vector<BusEvent>& events, bool first,
             n.last_reset_reason ? n.last_reset_reason.message() : std::string("unknown reason");
         if (n.identity_mismatch) reason += ": " + powerlink::describe(n.mismatch);
         events.push_back(
-            {true, fmt::format("powerlink node {}: reset by the MN ({}; resets {}, PRes losses {})",
-                               n.node, reason, n.resets, n.loss_of_pres.events)});
+            {true,
+             fmt::format("powerlink node {}: reset by the MN ({}; resets {}, PRes losses {})",
+                         n.node, reason, n.resets, n.loss_of_pres.events),
+             control::LogEvent::NodeReset, n.node, -1, reason});
       }
       if (n.object_failures > seen.object_failures) {
         std::string list;
         for (std::size_t k = 0; k < n.last_failure_count; ++k)
           list += (k ? "; " : "") + powerlink::describe(n.last_failures[k]);
-        events.push_back(
-            {true, fmt::format("powerlink node {}: {} object(s) of its configuration "
-                               "refused ({})",
-                               n.node, n.object_failures - seen.object_failures, list)});
+        events.push_back({true,
+                          fmt::format("powerlink node {}: {} object(s) of its configuration "
+                                      "refused ({})",
+                                      n.node, n.object_failures - seen.object_failures, list),
+                          control::LogEvent::ConfigurationFailed, n.node, -1, list});
       }
       if (n.boots > seen.boots)
-        events.push_back(
-            {false, fmt::format("powerlink node {}: operational (boot {})", n.node, n.boots)});
+        events.push_back({false,
+                          fmt::format("powerlink node {}: operational (boot {})", n.node, n.boots),
+                          control::LogEvent::NodeOperational, n.node});
       if (seen.late_pres.due(n.late_pres.fired, now, more))
         events.push_back({true, fmt::format("powerlink node {}: late PRes threshold reached {} "
                                             "time(s) (answers after the PRes timeout; {} in total)",

@@ -21,6 +21,7 @@ class PowerlinkService final : public BusService {
   void register_commands(control::Server& server, const SocketConfig& socket) override;
   void watch(std::vector<BusEvent>& events, bool first,
              std::chrono::steady_clock::time_point now) override;
+  void append_metrics(metrics::Exposition& out) const override;  // powerlink_metrics.cpp
 
  protected:
   void status_extra(nlohmann::json& j) const override;

@@ -26,6 +26,7 @@
 
 #include "config/config_canio.hpp"
 #include "config/config_loader.hpp"
+#include "config/config_metrics.hpp"
 #include "config/config_powerlink.hpp"
 #include "config/config_reader.hpp"
 
@@ -324,6 +325,7 @@ DaemonConfig parse_document(Diagnostics& diag, const YAML::Node& doc, const std:
 
   parse_shm(root.section("shm"), c.shm);
   parse_socket(root.section("socket"), c.socket);
+  parse_metrics(root.section("metrics"), c.metrics);
   root.finish();
 
   check_cross_fields(diag, c, axis_sites, pl_sites, locate(doc, {"cycle", "spin_us"}));
@@ -565,6 +567,16 @@ std::string dump_config(const DaemonConfig& c) {
     << "  idle_timeout_ms: " << k.idle_timeout_ms << "\n"
     << "  reply_buffer_bytes: " << k.reply_buffer_bytes << "\n"
     << "  reply_stall_timeout_ms: " << k.reply_stall_timeout_ms << "\n";
+  const auto& m = c.metrics;
+  o << "metrics:\n"
+    << "  listen: "
+    << (m.listen ? quote(m.listen->address.find(':') == std::string::npos
+                             ? m.listen->address + ":" + std::to_string(m.listen->port)
+                             : "[" + m.listen->address + "]:" + std::to_string(m.listen->port))
+                 : quote("off"))
+    << "\n"
+    << "  max_connections: " << m.max_connections << "\n"
+    << "  timeout_ms: " << m.timeout_ms << "\n";
   return o.str();
 }
 

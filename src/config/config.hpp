@@ -199,6 +199,18 @@ struct SocketConfig {
   uint32_t reply_stall_timeout_ms = 10000;
 };
 
+// The OpenMetrics endpoint (docs/operations.md "Metrics"). Localhost by default: the figures
+// describe the machine, and the endpoint has no authentication of its own.
+struct MetricsListen {
+  std::string address;  // IPv4 or IPv6 literal
+  uint16_t port = 0;    // 0: any free port (tests)
+};
+struct MetricsConfig {
+  std::optional<MetricsListen> listen = MetricsListen{"127.0.0.1", 9928};  // nullopt: off
+  uint32_t max_connections = 64;
+  uint32_t timeout_ms = 5000;  // to receive a request, and again to send the response
+};
+
 struct CycleConfig {
   uint32_t period_us = 1000;
   int rt_priority = 80;  // SCHED_FIFO 1..99
@@ -218,6 +230,7 @@ struct DaemonConfig {
   std::vector<AxisConfig> axes;
   ShmConfig shm;
   SocketConfig socket;
+  MetricsConfig metrics;
   std::string log_level = "info";
 };
 

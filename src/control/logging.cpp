@@ -2,10 +2,11 @@
 
 #include <spdlog/async.h>
 #include <spdlog/sinks/stdout_color_sinks.h>
-#include <spdlog/sinks/systemd_sink.h>
 
 #include <cstdlib>
 #include <string>
+
+#include "control/journal.hpp"
 
 namespace ds1928::control {
 
@@ -35,8 +36,9 @@ std::shared_ptr<spdlog::logger> setup_logging(spdlog::level::level_enum level, L
   if (!spdlog::thread_pool()) spdlog::init_thread_pool(8192, 1);
   spdlog::sink_ptr out;
   if (sink == LogSink::Journald) {
-    // The journal stamps time, priority and identifier itself.
-    out = std::make_shared<spdlog::sinks::systemd_sink_mt>(std::string(name));
+    // The journal stamps time itself; the sink adds priority, identifier and the records'
+    // fields (journal.hpp).
+    out = std::make_shared<JournalSink>(std::string(name));
   } else {
     out = std::make_shared<spdlog::sinks::stderr_color_sink_mt>();
     out->set_pattern("%Y-%m-%d %H:%M:%S.%e %^%-5l%$ %v");
@@ -44,6 +46,7 @@ std::shared_ptr<spdlog::logger> setup_logging(spdlog::level::level_enum level, L
   auto logger = std::make_shared<spdlog::async_logger>(
       std::string(name), std::move(out), spdlog::thread_pool(),
       spdlog::async_overflow_policy::overrun_oldest);
+  set_structured_logging(sink == LogSink::Journald);
   logger->set_level(level);
   logger->flush_on(spdlog::level::warn);
   spdlog::set_default_logger(logger);
@@ -56,6 +59,7 @@ void shutdown_logging() noexcept {
   } catch (...) {
   }
   spdlog::shutdown();
+  set_structured_logging(false);
 }
 
 }  // namespace ds1928::control

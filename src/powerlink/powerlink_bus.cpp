@@ -38,6 +38,7 @@ PowerlinkBus::PowerlinkBus(const MnConfig& config, Link& link)
     if (const ModuleMapping* m = layout->find(a.slot)) axis_map_[i] = {a.node, *m, true};
   }
   raw_.resize(config_.bus.nodes.size());
+  pres_latency_ = std::make_unique<PresLatencyHistogram[]>(raw_.size());
   Snapshot initial;
   initial.pres.resize(config_.bus.nodes.size());
   for (std::size_t i = 0; i < raw_.size(); ++i) {
@@ -57,6 +58,11 @@ const PowerlinkBus::NodeRaw* PowerlinkBus::raw(uint8_t node) const noexcept {
   for (const NodeRaw& r : raw_)
     if (r.node == node) return &r;
   return nullptr;
+}
+
+const PresLatencyHistogram* PowerlinkBus::pres_latency(uint8_t node) const noexcept {
+  const NodeRaw* r = raw(node);
+  return r ? &pres_latency_[static_cast<std::size_t>(r - raw_.data())] : nullptr;
 }
 
 PreqWriteCheck PowerlinkBus::set_preq(uint8_t node, uint16_t offset,
@@ -207,6 +213,7 @@ ExchangeResult PowerlinkBus::exchange(std::span<AxisIo> axes, int64_t cycle_star
         if (nr->preq_mask.test(b)) preq[b] = nr->preq_set[b];
     }
     drain(0);  // the late PRes of an earlier PReq to this node must not pass for this one's
+    const int64_t preq_ns = clock_();
     send(mn_.build_preq(node, tx_));
     const int64_t deadline = clock_() + static_cast<int64_t>(mn_.pres_timeout_us(node)) * 1000;
     for (;;) {
@@ -222,6 +229,7 @@ ExchangeResult PowerlinkBus::exchange(std::span<AxisIo> axes, int64_t cycle_star
         for (std::size_t i = 0; i < n_axes; ++i)
           if (axis_map_[i].node == node) rx_time_[i] = t;
         if (nr) {
+          pres_latency_[static_cast<std::size_t>(nr - raw_.data())].record(t - preq_ns);
           nr->pres_fresh = nr->pres_received = true;
           nr->pres_rx_ns = t;
           nr->pres_cycle = mn_.counters().cycles;

@@ -10,6 +10,7 @@
 #include <memory>
 #include <vector>
 
+#include "core/bucket_histogram.hpp"
 #include "core/bus.hpp"
 #include "core/spsc_queue.hpp"
 #include "core/triple_buffer.hpp"
@@ -53,6 +54,13 @@ struct PreqWriteCheck {
   ModuleMapping module{};  // kPreqRegionOwnedByModule: the module whose bytes it overlaps
 };
 
+// PRes latency per CN: PReq handed to the link → its PRes received (the link's receive stamp),
+// bucket bounds in ns for the metrics endpoint. Written by the cycle thread.
+inline constexpr std::array<int64_t, 12> kPresLatencyBoundsNs{
+    10'000,  20'000,  50'000,  100'000,   150'000,   200'000,
+    300'000, 500'000, 750'000, 1'000'000, 2'000'000, 5'000'000};
+using PresLatencyHistogram = BucketHistogram<kPresLatencyBoundsNs>;
+
 class PowerlinkBus final : public BusDriver {
  public:
   // `config.axes` are the axes in the order exchange() receives them. The link outlives the bus.
@@ -81,6 +89,8 @@ class PowerlinkBus final : public BusDriver {
   // (0 until the CN is identified) and against the module regions, which belong to the axes.
   [[nodiscard]] PreqWriteCheck set_preq(uint8_t node, uint16_t offset,
                                         std::span<const uint8_t> bytes);
+  // Any thread: the PRes latency of a configured CN; nullptr when `node` is not configured.
+  [[nodiscard]] const PresLatencyHistogram* pres_latency(uint8_t node) const noexcept;
   // Cycle thread (or tests driving exchange() themselves).
   [[nodiscard]] const ManagingNode& managing_node() const noexcept { return mn_; }
 
@@ -133,6 +143,7 @@ class PowerlinkBus final : public BusDriver {
   SpscQueue<RegisterRequest, 64> requests_;
   SpscQueue<RegisterResult, 64> results_;
   std::vector<NodeRaw> raw_;
+  std::unique_ptr<PresLatencyHistogram[]> pres_latency_;  // per raw_ entry
   SpscQueue<PreqWrite, 16> preq_writes_;
   // What the cycle thread publishes each cycle for the normal thread; `pres` per raw_ entry.
   struct Snapshot {

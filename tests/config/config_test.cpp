@@ -547,3 +547,28 @@ TEST_CASE("a file is read up to 1 MiB; devices and unreadable files say why", "[
   CHECK_THAT(one_error("simulated:\n  axes: [{encoder_file: /tmp}]\naxes: [{name: x}]\n"),
              Catch::Contains("not a regular file: /tmp is a directory"));
 }
+
+TEST_CASE("metrics section: listen address, off, limits", "[config]") {
+  const ConfigResult d = from("{}");
+  REQUIRE(d.ok());
+  REQUIRE(d.config().metrics.listen);
+  CHECK(d.config().metrics.listen->address == "127.0.0.1");
+  CHECK(d.config().metrics.listen->port == 9928);
+  CHECK(d.config().metrics.max_connections == 64u);
+
+  const ConfigResult off = from("metrics: {listen: 'off'}");
+  REQUIRE(off.ok());
+  CHECK_FALSE(off.config().metrics.listen);
+  CHECK(from(dump_config(off.config())).ok());
+
+  const ConfigResult v6 = from("metrics: {listen: '[::1]:9100', timeout_ms: 200}");
+  REQUIRE(v6.ok());
+  CHECK(v6.config().metrics.listen->address == "::1");
+  CHECK(v6.config().metrics.timeout_ms == 200u);
+  CHECK(dump_config(from(dump_config(v6.config())).config()) == dump_config(v6.config()));
+
+  CHECK_THAT(one_error("metrics: {listen: 'localhost:9928'}"),
+             Catch::Contains("'localhost:9928' is neither 'off' nor an address"));
+  CHECK_THAT(one_error("metrics: {max_connections: 0}"), Catch::Contains("max_connections"));
+  CHECK_THAT(one_error("metrics: {port: 1}"), Catch::Contains("port"));
+}

@@ -25,8 +25,10 @@ namespace ds1928::test {
 
 class DaemonProcess {
  public:
-  // `socket_extra`: more keys of the socket section, YAML flow style ("max_clients: 100").
-  DaemonProcess(const std::string& tag, const std::string& socket_extra) {
+  // `socket_extra`: more keys of the socket section, YAML flow style ("max_clients: 100");
+  // `extra_yaml`: more top-level lines ("metrics: {listen: off}\n").
+  DaemonProcess(const std::string& tag, const std::string& socket_extra,
+                const std::string& extra_yaml = {}) {
     char tmpl[] = "/tmp/ds1928d-proc-XXXXXX";
     if (mkdtemp(tmpl) == nullptr) return;
     dir_ = tmpl;
@@ -39,7 +41,8 @@ class DaemonProcess {
         << "axes: [{name: x}, {name: y, slot: 2}]\n"
         << "shm: {name: " << shm_name_ << "}\n"
         << "socket: {path: " << socket_path_ << (socket_extra.empty() ? "" : ", ") << socket_extra
-        << "}\n";
+        << "}\n"
+        << extra_yaml;
     }
     pid_ = fork();
     if (pid_ == 0) {

@@ -1,0 +1,104 @@
+#include "canio_metrics.hpp"
+
+#include <string>
+#include <vector>
+
+#include "canio/bit_budget.hpp"
+#include "canio/can_state.hpp"
+
+namespace ds1928 {
+
+using metrics::Type;
+
+void append_canio_metrics(metrics::Exposition& out, const canio::CanioBus& bus) {
+  const auto& c = bus.counters();
+  const canio::CanPortCounters pc = bus.port_counters();
+  const std::string port(bus.port_name());
+  const auto relaxed = [](const std::atomic<uint64_t>& a) {
+    return a.load(std::memory_order_relaxed);
+  };
+
+  out.family("ds1928_canio_frames", Type::Counter,
+             "CAN frames on the cycle port by direction (data and remote frames).");
+  out.sample({{"interface", port}, {"direction", "rx"}}, pc.rx_frames);
+  out.sample({{"interface", port}, {"direction", "tx"}}, pc.tx_frames);
+  out.family("ds1928_canio_error_frames", Type::Counter, "CAN error frames received.");
+  out.sample({{"interface", port}}, relaxed(c.error_frames));
+  out.family("ds1928_canio_tx_dropped", Type::Counter,
+             "Frames not sent: TX queue full, or bus-off / interface down / other errors.");
+  out.sample({{"interface", port}, {"reason", "queue_full"}}, relaxed(c.tx_queue_full));
+  out.sample({{"interface", port}, {"reason", "failed"}}, relaxed(c.tx_failed));
+  out.family("ds1928_canio_rx_kernel_drops", Type::Counter,
+             "Frames the kernel dropped for a full socket receive queue.");
+  out.sample({{"interface", port}}, pc.rx_kernel_drops);
+  out.family("ds1928_canio_unexpected_ids", Type::Counter,
+             "Data frames with an identifier no configured axis uses.");
+  out.sample({{"interface", port}}, relaxed(c.unexpected_ids));
+
+  out.family("ds1928_canio_controller_state", Type::Gauge,
+             "CAN controller state: 1 for the current state.");
+  const canio::CanState state = bus.can_state();
+  for (auto s : {canio::CanState::ErrorActive, canio::CanState::ErrorWarning,
+                 canio::CanState::ErrorPassive, canio::CanState::BusOff, canio::CanState::Stopped,
+                 canio::CanState::Sleeping, canio::CanState::Down, canio::CanState::Unknown})
+    out.sample({{"interface", port}, {"state", canio::to_string(s)}},
+               uint64_t{s == state ? 1u : 0u});
+  out.family("ds1928_canio_bus_off", Type::Counter, "Bus-off events of the controller.");
+  out.sample({{"interface", port}}, pc.bus_off_events);
+  out.family("ds1928_canio_bus_off_cycles", Type::Counter,
+             "Cycles skipped while the controller was bus-off or the interface down.");
+  out.sample({{"interface", port}}, relaxed(c.bus_off_cycles));
+
+  // The planned cyclic load: the configured frames per cycle at the bit rate against the period
+  // (bit_budget.hpp). The measured rate follows from rate(ds1928_canio_frames_total).
+  canio::CycleLoad load;
+  load.modules = static_cast<uint32_t>(bus.options().axes.size());
+  load.bitrate = bus.options().bus.bitrate;
+  load.sync = bus.options().bus.sync_enabled;
+  const canio::CycleFit fit =
+      canio::check_cycle(load, static_cast<int64_t>(bus.options().period_us) * 1000);
+  out.family("ds1928_canio_bus_load_ratio", Type::Gauge,
+             "Planned share of the bus time the cyclic frames take (nominal and worst-case "
+             "bit stuffing).");
+  out.sample({{"interface", port}, {"estimate", "nominal"}}, fit.load_nominal);
+  out.sample({{"interface", port}, {"estimate", "worst_case"}}, fit.load_worst_case);
+
+  // Per node (one module per CAN-I/O node).
+  const auto& axes = bus.options().axes;
+  std::vector<std::string> node(axes.size()), axis(axes.size());
+  for (std::size_t i = 0; i < axes.size(); ++i) {
+    node[i] = std::to_string(axes[i].node);
+    axis[i] = std::to_string(i);
+  }
+  const auto per_node = [&](std::string_view name, std::string_view help,
+                            std::atomic<uint64_t> canio::CanioAxisCounters::*field) {
+    out.family(name, Type::Counter, help);
+    for (std::size_t i = 0; i < axes.size(); ++i)
+      out.sample({{"node", node[i]}, {"axis", axis[i]}}, relaxed(bus.axis_counters(i).*field));
+  };
+  per_node("ds1928_canio_samples", "Cycles with both input objects of the node: complete sample.",
+           &canio::CanioAxisCounters::samples);
+  per_node("ds1928_canio_half_samples",
+           "Cycles with only one of the two input objects: no sample published.",
+           &canio::CanioAxisCounters::half_samples);
+  per_node("ds1928_canio_missing_samples", "Cycles with neither input object.",
+           &canio::CanioAxisCounters::missing);
+  per_node("ds1928_canio_late_frames", "Input objects that arrived after their cycle.",
+           &canio::CanioAxisCounters::late_frames);
+  per_node("ds1928_canio_duplicate_frames",
+           "Input objects seen twice in one cycle (sample dropped).",
+           &canio::CanioAxisCounters::duplicates);
+  per_node("ds1928_canio_sdo_transfers", "Expedited SDO transfers to the node.",
+           &canio::CanioAxisCounters::sdo_transfers);
+  per_node("ds1928_canio_sdo_errors", "SDO transfers that failed (abort, timeout, mismatch).",
+           &canio::CanioAxisCounters::sdo_errors);
+  per_node("ds1928_canio_configurations", "Completed start-up configurations of the module.",
+           &canio::CanioAxisCounters::configurations);
+  out.family("ds1928_canio_node_silent", Type::Gauge,
+             "1 while the node sent no complete sample for input_timeout_ms.");
+  for (std::size_t i = 0; i < axes.size(); ++i)
+    out.sample({{"node", node[i]}, {"axis", axis[i]}},
+               uint64_t{bus.axis_counters(i).silent.load(std::memory_order_relaxed) ? 1u : 0u});
+}
+
+}  // namespace ds1928

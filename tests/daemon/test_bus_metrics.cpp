@@ -1,0 +1,67 @@
+// The POWERLINK bus' metric families from a real PowerlinkBus over an in-memory CN: per node NMT
+// state, PRes counters and the PRes latency histogram, whose samples are the PRes received.
+#include <catch2/catch.hpp>
+#include <string>
+
+#include "mn_rig.hpp"
+#include "powerlink/powerlink_bus.hpp"
+#include "powerlink_service.hpp"
+
+using namespace ds1928;
+
+namespace {
+
+double value_of(const std::string& body, const std::string& series) {
+  const auto at = body.find("\n" + series + " ");
+  if (at == std::string::npos) return -1;
+  return std::strtod(body.c_str() + at + series.size() + 2, nullptr);
+}
+
+std::string render(const PowerlinkService& service) {
+  metrics::Exposition out(metrics::Format::Prometheus);
+  service.append_metrics(out);
+  return "\n" + out.finish();
+}
+
+}  // namespace
+
+TEST_CASE("POWERLINK metrics: NMT state, PRes counters and latency per node", "[daemon][metrics]") {
+  powerlink::test::Rig rig({1, 2}, 1);
+  PowerlinkService service(*rig.bus);
+  REQUIRE(rig.run_until([&] { return rig.bus->state() == BusState::Operational; }));
+  // Each clock read inside the exchange advances 30 µs: PReq sent → PRes received is a fixed
+  // number of reads, so every sample lands in one known bucket.
+  powerlink::test::g_clock_step_ns = 30'000;
+  for (int i = 0; i < 10; ++i) rig.step();
+  powerlink::test::g_clock_step_ns = 0;
+  rig.step();  // publish
+
+  const std::string text = render(service);
+  INFO(text);
+  for (const std::string node : {"1", "2"}) {
+    const auto st = rig.bus->status();
+    const auto* cn = &st.nodes[node == "1" ? 0 : 1];
+    REQUIRE(cn->node == std::stoi(node));
+    CHECK(value_of(text, "ds1928_powerlink_cn_nmt_state{node=\"" + node +
+                             "\",state=\"OPERATIONAL\"}") == 1);
+    CHECK(value_of(text,
+                   "ds1928_powerlink_cn_nmt_state{node=\"" + node + "\",state=\"STOPPED\"}") == 0);
+    CHECK(value_of(text, "ds1928_powerlink_pres_received_total{node=\"" + node + "\"}") ==
+          cn->pres_received);
+    CHECK(value_of(text, "ds1928_powerlink_cn_boots_total{node=\"" + node + "\"}") == 1);
+    // One latency sample per PRes received.
+    CHECK(value_of(text, "ds1928_powerlink_pres_latency_seconds_count{node=\"" + node + "\"}") ==
+          cn->pres_received);
+    // The stepped cycles' samples are ≥ 30 µs: above the first bucket (10 µs).
+    const double first = value_of(
+        text, "ds1928_powerlink_pres_latency_seconds_bucket{node=\"" + node + "\",le=\"1e-05\"}");
+    CHECK(first >= 0);
+    CHECK(first <= cn->pres_received - 10);
+  }
+  CHECK(value_of(text, "ds1928_powerlink_pres_lost_total{node=\"1\"}") == 0);
+  rig.cns[0]->drop_pres = true;
+  rig.step();
+  rig.cns[0]->drop_pres = false;
+  rig.step();
+  CHECK(value_of(render(service), "ds1928_powerlink_pres_lost_total{node=\"1\"}") == 1);
+}
