@@ -111,8 +111,8 @@ point() {
       mn_pid=$!
       ;;
     openpowerlink)
-      # The demo MN reads its CDC from the working directory's file given with -c.
-      (cd "$d" && exec "$src/tests/peers/opl_run.sh" "$ns_mn" -- "$OPL_DEMO_MN" -d plb_mn -c "$d/mnobd.cdc") \
+      # The demo MN reads the CDC given with -c (an absolute path: it runs in its own directory).
+      "$src/tests/peers/opl_run.sh" "$ns_mn" -- "$OPL_DEMO_MN" -d plb_mn -c "$d/mnobd.cdc" \
           >"$d/mn.log" 2>&1 &
       mn_pid=$!
       ;;

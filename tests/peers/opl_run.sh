@@ -8,6 +8,9 @@
 # The demos poll the keyboard: stdin is a FIFO this script holds open for the whole run (EOF would read as a
 # stream of key presses). The program is stopped with SIGTERM — the demos take it as "shut the stack down" —
 # when this script gets SIGTERM/SIGINT or after --for SECONDS; if it has not exited 5 s later it is killed.
+# The program runs in a fresh working directory (removed afterwards): the demos store their object
+# dictionary there (oplkOd_part*.bin), which must neither land in the source tree nor carry
+# parameters from one run into the next. Give paths (e.g. the MN's -c CDC) as absolute paths.
 # Exit status: the program's (143 = it needed the SIGKILL or died of a signal).
 set -euo pipefail
 
@@ -23,11 +26,12 @@ fi
 netns=$1
 shift 2
 
-fifo_dir=$(mktemp -d /tmp/ds1928-opl-stdin.XXXXXX)
-mkfifo "$fifo_dir/stdin"
+work_dir=$(mktemp -d /tmp/ds1928-opl-run.XXXXXX)
+mkfifo "$work_dir/stdin"
 # Read-write open: never blocks, and this script stays a writer, so the program never sees EOF.
-exec 3<>"$fifo_dir/stdin"
-rm -rf "$fifo_dir"
+exec 3<>"$work_dir/stdin"
+rm -f "$work_dir/stdin"
+cd "$work_dir"
 
 # ip netns exec, unshare (no --fork) and sh all exec: $! is the program itself.
 ip netns exec "$netns" unshare --ipc --mount --propagation private -- \
@@ -45,13 +49,14 @@ stop() {
   kill -KILL "$pid" 2>/dev/null || true
 }
 
+timer=""
 trap 'stop "$1"; wait "$pid"; exit $?' TERM INT
+trap '[[ -n "$timer" ]] && kill "$timer" 2>/dev/null; cd /; rm -rf "$work_dir"' EXIT
 
 if [[ -n "$run_for" ]]; then
   # The timer is a child of this script; it is ended with the script.
   (sleep "$run_for" && kill -TERM $$) &
   timer=$!
-  trap 'kill "$timer" 2>/dev/null || true' EXIT
 fi
 
 set +e
