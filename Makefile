@@ -22,8 +22,11 @@ BUILD_DEPS := cmake make g++ pkg-config libyaml-cpp-dev libspdlog-dev libfmt-dev
               catch2 nlohmann-json3-dev libcli11-dev libsystemd-dev
 # qemu-system-x86 … can-utils: the real-kernel CAN test (tests/canio/qemu), which also downloads
 # Debian's linux-image package into the build tree with apt-get download.
+# prometheus: promtool checks a scrape of the metrics endpoint. build-essential, libpcap-dev: the
+# openPOWERLINK test peer (tests/peers/openpowerlink.sh).
 TEST_DEPS  := $(BUILD_DEPS) rt-tests tshark iproute2 python3 util-linux passwd jq \
-              qemu-system-x86 busybox-static cpio kmod xz-utils can-utils prometheus
+              qemu-system-x86 busybox-static cpio kmod xz-utils can-utils prometheus \
+              build-essential libpcap-dev
 # dpkg-buildpackage and the Build-Depends of packaging/debian/control.
 DEB_DEPS   := $(BUILD_DEPS) build-essential debhelper devscripts fakeroot lintian help2man
 PKGTEST_DEPS := mmdebstrap util-linux systemd

@@ -336,6 +336,7 @@ int main(int argc, char** argv) {
   uint64_t measured_cycles = 0;
   uint32_t fired_at_start = 0, events_at_start = 0;
   bool all_op = false, measuring = false, readback_done = false, readback_sent = false;
+  int readback_failures = 0;
   const int64_t start = pl::monotonic_now_ns();
   int64_t all_op_at = 0, measure_from = 0, measure_until = 0;
   int exit_code = 0;
@@ -426,6 +427,15 @@ int main(int argc, char** argv) {
     }
     ds1928::RegisterResult rr;
     while (bus->poll(rr)) {
+      // A read that failed (SDO timeout or abort: the CN was reset meanwhile, e.g. after a
+      // stall of this machine beyond the loss-of-PRes ride-through) is asked again once the CN
+      // is operational again, up to 3 times; a wrong value is never retried.
+      if (rr.tag == 1 && !readback_done && rr.error && ++readback_failures < 3) {
+        std::printf("EVENT t=%.3f sdo-readback-retry error=\"%s\"\n", t_s,
+                    rr.error.message().c_str());
+        readback_sent = false;
+        continue;
+      }
       if (rr.tag == 1 && !readback_done) {
         readback_done = true;
         const unsigned want = config.axes[0].module.endat_mode();

@@ -1,0 +1,232 @@
+#!/bin/bash
+# ds1928d holds an independent POWERLINK CN: openPOWERLINK V2.7.2's Linux demo CN (user-space stack,
+# its PRes sent by a thread at SCHED_FIFO 50 that the demo pins to CPU 1), built from
+# ../shared/peers by tests/peers/openpowerlink.sh, in its own network namespace with private IPC and
+# /dev/shm (tests/peers/opl_run.sh); ds1928d in another, joined by a veth pair.
+#
+# The daemon runs with the documented defaults (no timing or threshold keys) and boots the demo CN
+# (node 1) from the demo's own concise DCF (openCONFIGURATOR's mnobd.cdc: PDO mapping, payload
+# limits, PRes timeout), with the cycle time of the run written into it (tests/peers/opl_cdc.py).
+# The cycle thread is pinned to the CN's CPU ("pinned": cycle.cpu 1) or left to the scheduler
+# ("unpinned").
+#
+# Checks, over HOLD_SECONDS (default 20) after the CN reached OPERATIONAL:
+#  1. node 1 OPERATIONAL, 0 resets (status sampled every second, and at the end);
+#  2. the cycle count advanced by at least 90 % of the hold's cycles (the cycle really ran);
+#  3. the demo CN never left NmtCsOperational (its own log) and logged no cycle/communication error;
+#  4. on the wire (tshark on the MN's veth end): every PRes of node 1 from its first OPERATIONAL
+#     one on carries NMT state OPERATIONAL (0xFD), at least one PRes per cycle minus the losses the
+#     daemon counted; Wireshark finds no malformed frame and no expert error in the CN's frames.
+# This machine (2 shared vCPUs) stalls now and then. The defaults ride through ~20 ms of silence at
+# 1 ms (50 ms at 10 ms); a reset is accepted only when the run measured a stall at least that long
+# — the CN silent on the wire, or the daemon's cycle thread woken that late — and the test says so
+# (NOTE line); 1.-4. then hold per boot. A reset without such a stall fails.
+# A missing openPOWERLINK archive or a failed peer build FAILS the test (exit 1), with the message
+# of tests/peers/openpowerlink.sh; it never skips or passes silently.
+#
+# Usage: powerlink_opl_cn_test.sh BUILD_DIR SOURCE_DIR PERIOD_US pinned|unpinned
+#        (root; exit 77 = skipped without root)
+set -u
+build=${1:?build dir}
+src=${2:?source dir}
+period_us=${3:?period in us}
+placement=${4:?pinned or unpinned}
+hold=${HOLD_SECONDS:-20}
+daemon=$build/daemon/ds1928d
+ctl=$build/tools/ds1928ctl/ds1928ctl
+# The demo pins its threads to CPU 1 (on a 1-CPU machine there is only CPU 0 to share).
+cn_cpu=$(($(nproc) > 1 ? 1 : 0))
+
+case $placement in pinned | unpinned) ;; *) echo "FAIL: placement must be pinned or unpinned"; exit 1 ;; esac
+if [ "$(id -u)" != 0 ]; then
+  echo "SKIP: needs root (network namespaces, veth, AF_PACKET raw sockets, SCHED_FIFO)"
+  exit 77
+fi
+for bin in "$daemon" "$ctl"; do [ -x "$bin" ] || { echo "FAIL: $bin not built"; exit 1; }; done
+command -v jq >/dev/null || { echo "FAIL: jq not installed"; exit 1; }
+command -v tshark >/dev/null || { echo "FAIL: tshark not installed (make deps-test)"; exit 1; }
+
+# The peer: built once into the shared cache (minutes the first time), FAIL when it cannot be.
+peer_env=$("$src/tests/peers/openpowerlink.sh") || {
+  echo "FAIL: the openPOWERLINK test peer is not available (see the message above)"
+  exit 1
+}
+eval "$peer_env"
+
+tag=$$
+ns_mn=plo_mn_$tag
+ns_cn=plo_cn_$tag
+if_mn=plo_mn
+if_cn=plo_cn
+tmp=$(mktemp -d /tmp/powerlink_opl_cn.XXXXXX)
+pids=()
+failed=0
+cleanup() {
+  # opl_run.sh stops the demo with SIGTERM (its stack shuts down) and waits for it.
+  for p in "${pids[@]}"; do kill "$p" 2>/dev/null; done
+  for p in "${pids[@]}"; do wait "$p" 2>/dev/null; done
+  ip netns del "$ns_mn" 2>/dev/null
+  ip netns del "$ns_cn" 2>/dev/null
+  rm -f "/dev/shm/ds1928d_plo_$tag" "/dev/shm/ds1928d_plo_$tag.wait"
+  if [ "$failed" = 0 ] && [ -z "${KEEP_TMP:-}" ]; then rm -rf "$tmp"; else echo "logs kept in $tmp"; fi
+}
+trap cleanup EXIT
+trap 'exit 1' INT TERM
+fail() { echo "FAIL: $*"; failed=1; for f in "$tmp"/*.log; do echo "---- $f"; tail -n 25 "$f"; done; exit 1; }
+pass() { echo "ok: $*"; }
+scale=${DS1928_WAIT_SCALE:-3}
+wait_for() {  # FILE REGEX SECONDS
+  local i
+  for ((i = 0; i < $3 * 20 * scale; i++)); do grep -qE "$2" "$1" 2>/dev/null && return 0; sleep 0.05; done
+  return 1
+}
+status() { ip netns exec "$ns_mn" "$ctl" -s "$tmp/ctl.sock" --json status 2>/dev/null; }
+node1() { jq -c '.bus.nodes[] | select(.node == 1)' <<<"$1" 2>/dev/null; }
+
+"$src/tests/peers/opl_cdc.py" "$OPL_MNOBD_CDC" "$tmp/mnobd.cdc" --cycle-us "$period_us" ||
+  fail "cannot write the demo's concise DCF with a $period_us us cycle"
+cpu_line=""
+[ "$placement" = pinned ] && cpu_line="  cpu: $cn_cpu"
+# The documented defaults: no timing or threshold keys.
+cat >"$tmp/opl.yaml" <<YAML
+bus: powerlink
+cycle:
+  period_us: $period_us
+$cpu_line
+powerlink:
+  interface: $if_mn
+  cdc: mnobd.cdc
+  nodes:
+    - node_id: 1
+shm:
+  name: /ds1928d_plo_$tag
+socket:
+  path: $tmp/ctl.sock
+  privileged_group: ""
+YAML
+"$daemon" --check-config "$tmp/opl.yaml" >"$tmp/check.log" 2>&1 || fail "check-config refused it"
+
+ip netns add "$ns_mn" && ip netns add "$ns_cn" || fail "cannot create network namespaces"
+ip link add "$if_mn" netns "$ns_mn" type veth peer name "$if_cn" netns "$ns_cn" || fail "veth"
+ip -n "$ns_mn" link set "$if_mn" up
+ip -n "$ns_cn" link set "$if_cn" up
+
+# The CN's frames as the MN receives them.
+ip netns exec "$ns_mn" tshark -i "$if_mn" -f "ether proto 0x88ab" -w "$tmp/cn_frames.pcapng" \
+    >"$tmp/tshark.log" 2>&1 &
+tshark_pid=$!
+pids+=($tshark_pid)
+wait_for "$tmp/tshark.log" "Capturing on" 30 || fail "tshark did not start"
+
+"$src/tests/peers/opl_run.sh" "$ns_cn" -- "$OPL_DEMO_CN" -d "$if_cn" -n 1 >"$tmp/demo_cn.log" 2>&1 &
+cn_pid=$!
+pids+=($cn_pid)
+wait_for "$tmp/demo_cn.log" "NmtCsNotActive" 30 || fail "the demo CN did not start"
+ip netns exec "$ns_mn" "$daemon" --config "$tmp/opl.yaml" >"$tmp/daemon.log" 2>&1 &
+pids+=($!)
+
+up=0
+for ((i = 0; i < 300 * scale; i++)); do
+  [ "$(node1 "$(status)" | jq -r .boot)" = operational ] && { up=1; break; }
+  sleep 0.1
+done
+[ $up = 1 ] || fail "ds1928d did not bring the demo CN to OPERATIONAL"
+wait_for "$tmp/demo_cn.log" "NmtCsReadyToOperate->NmtCsOperational" 10 ||
+  fail "the daemon says OPERATIONAL, the demo CN's log does not"
+s0=$(status)
+c0=$(jq .cycle.count <<<"$s0")
+pass "demo CN OPERATIONAL at ${period_us} us, cycle thread $placement: $(node1 "$s0" | jq -c '{boots, pres_size, preq_size}')"
+
+# The hold: node 1 sampled every second; a reset is not fatal at once, it must be explained below.
+resets_seen=0
+for ((t = 0; t < hold; t++)); do
+  sleep 1
+  n=$(node1 "$(status)")
+  r=$(jq .resets <<<"$n")
+  if [ "${r:-0}" != "$resets_seen" ]; then
+    echo "note: after $t s of the hold: node 1 $(jq -c '{boot, resets, last_reset_reason, loss_of_pres}' <<<"$n")"
+    resets_seen=${r:-0}
+  fi
+done
+s1=$(status)
+n=$(node1 "$s1")
+c1=$(jq .cycle.count <<<"$s1")
+ran=$((c1 - c0))
+[ "$ran" -ge $((hold * 1000000 / period_us * 9 / 10)) ] ||
+  fail "only $ran cycles in $hold s at $period_us us"
+resets=$(jq .resets <<<"$n")
+lost=$(jq .loss_of_pres.events <<<"$n")
+threshold=$(jq .loss_of_pres.threshold <<<"$n")
+wake_max_us=$(jq '.cycle.wake_latency_ns.max / 1000 | floor' <<<"$s1")
+cyc=$(jq -c '{wake_p99_us: (.cycle.wake_latency_ns.p99 / 1000), wake_max_us: (.cycle.wake_latency_ns.max / 1000), overruns: .cycle.overruns}' <<<"$s1")
+summary="PRes lost $lost (late $(jq .late_pres.events <<<"$n"), stale dropped $(jq .stale_pres_dropped <<<"$n")), threshold $threshold; cycle $cyc"
+
+kill -INT "$tshark_pid"
+wait "$tshark_pid" 2>/dev/null
+tshark() { command tshark --disable-protocol opensafety "$@"; }
+tshark -r "$tmp/cn_frames.pcapng" -Y "epl.src == 1 && epl.mtyp == 4" -T fields -e frame.time_epoch \
+    -e epl.pres.stat >"$tmp/pres.txt" 2>"$tmp/tshark_read.log" || fail "tshark could not read the capture"
+# From node 1's first OPERATIONAL PRes on: how many PRes, how many in another NMT state, and the
+# longest silence of the CN between two OPERATIONAL PRes (ms) — the CN's host stalled; a silence
+# that spans a reset (the CN re-booting) is not one.
+read -r total other gap_ms < <(python3 - "$tmp/pres.txt" <<'PY'
+import sys
+seen, total, other, gap, last = False, 0, 0, 0.0, None
+for line in open(sys.argv[1]):
+    f = line.split()
+    if len(f) < 2:
+        continue
+    t, st = float(f[0]), int(f[1], 0)
+    if st == 0xFD:
+        seen = True
+    if not seen:
+        continue
+    total += 1
+    if st != 0xFD:
+        other += 1
+    if st != 0xFD:
+        last = None
+        continue
+    if last is not None:
+        gap = max(gap, (t - last) * 1000)
+    last = t
+print(total, other, int(gap))
+PY
+)
+[ "${total:-0}" -gt 0 ] || fail "no OPERATIONAL PRes of node 1 in the capture"
+
+# A reset must be the machine's, measured, not luck: the defaults ride through `threshold`/8 - 1
+# lost PRes in a row; a reset is accepted only when this run measured a stall at least that long
+# (the CN silent on the wire, or the daemon's cycle thread waking that late) — and it is said.
+ride_ms=$(( (threshold / 8 - 1) * period_us / 1000 ))
+if [ "$resets" != 0 ]; then
+  stall_ms=$(( gap_ms > wake_max_us / 1000 ? gap_ms : wake_max_us / 1000 ))
+  [ "$stall_ms" -ge "$ride_ms" ] ||
+    fail "node 1 was reset $resets time(s) ($(jq -r .last_reset_reason <<<"$n")) without a stall beyond the ${ride_ms} ms ride-through (longest CN silence $gap_ms ms, cycle thread woke up to $((wake_max_us / 1000)) ms late); $summary"
+  echo "NOTE: node 1 was reset $resets time(s) after this machine stalled ${stall_ms} ms (longest CN silence on the wire $gap_ms ms, cycle thread up to $((wake_max_us / 1000)) ms late), beyond the ${ride_ms} ms the defaults ride through: not a failure of the MN"
+fi
+[ "$(jq -r .boot <<<"$n")" = operational ] || fail "node 1 not OPERATIONAL at the end: $n"
+pass "held for $ran cycles: $resets resets; $summary"
+
+# The demo CN's own view: OPERATIONAL once, never left, no cycle error. After an explained reset
+# the CN's log runs on while the test reads it (it may be re-booting again): reported only.
+entered=$(grep -c 'NmtCsReadyToOperate->NmtCsOperational' "$tmp/demo_cn.log")
+left=$(grep -c 'NmtCsOperational->' "$tmp/demo_cn.log")
+if [ "$resets" = 0 ]; then
+  [ "$entered" = 1 ] || fail "the demo CN entered OPERATIONAL $entered times without a reset"
+  [ "$left" = 0 ] || fail "the demo CN left OPERATIONAL: $(grep -m1 'NmtCsOperational->' "$tmp/demo_cn.log")"
+  grep -qE 'NmtEventNmtCycleError|NmtEventInternComError' "$tmp/demo_cn.log" &&
+    fail "the demo CN logged a cycle/communication error: $(grep -m1 -E 'NmtEventNmtCycleError|NmtEventInternComError' "$tmp/demo_cn.log")"
+fi
+pass "the demo CN's log: OPERATIONAL entered $entered time(s), left $left time(s)"
+
+# Every PRes since the first OPERATIONAL one is OPERATIONAL (the CN never fell back without a reset).
+if [ "$resets" = 0 ]; then
+  [ "$other" = 0 ] || fail "$other PRes of node 1 after OPERATIONAL carry another NMT state"
+  [ "$total" -ge $((ran - lost)) ] || fail "only $total OPERATIONAL PRes on the wire for $ran cycles and $lost lost"
+fi
+tshark -r "$tmp/cn_frames.pcapng" -Y "_ws.malformed || _ws.expert.severity >= 0x00600000" \
+    -T fields -e frame.number -e epl.src -e epl.mtyp -e _ws.expert.message >"$tmp/expert.txt" 2>/dev/null
+[ -s "$tmp/expert.txt" ] && { head "$tmp/expert.txt"; fail "Wireshark finds malformed CN frames or expert errors"; }
+pass "on the wire: $total PRes of node 1 since its first OPERATIONAL one, $other in another state; longest CN silence $gap_ms ms; Wireshark clean"
+echo "PASS"

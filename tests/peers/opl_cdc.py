@@ -1,0 +1,69 @@
+#!/usr/bin/env python3
+"""Copies openPOWERLINK's demo concise DCF (mnobd.cdc) with another cycle time.
+
+  opl_cdc.py IN.cdc OUT.cdc --cycle-us N [--list]
+
+The demo's CDC (openCONFIGURATOR project Demo_3CN) sets NMT_CycleLen_U32 (0x1006) to 50 ms, for
+the MN and, inside each CN's concise DCF (0x1F22/node), for the CNs. Both MNs under test — ds1928d
+(`powerlink.cdc`) and openPOWERLINK's demo MN (`-c`) — boot the demo CN from the same file, so the
+cycle is changed in both places and nothing else; every other entry (mapping, PRes timeouts,
+loss-of-frame tolerance, payload limits) stays as openCONFIGURATOR wrote it.
+--list prints the entries (nested ones indented) instead of writing.
+"""
+import argparse
+import struct
+import sys
+
+CYCLE_LEN = 0x1006
+CN_DCF = 0x1F22
+
+
+def rewrite(data, cycle_us, depth, out_lines):
+    if len(data) < 4:
+        raise ValueError("concise DCF shorter than its entry count")
+    count = struct.unpack_from("<I", data, 0)[0]
+    off = 4
+    out = bytearray(data[:4])
+    for _ in range(count):
+        if off + 7 > len(data):
+            raise ValueError("concise DCF truncated at byte %d" % off)
+        index, sub, size = struct.unpack_from("<HBI", data, off)
+        value = data[off + 7:off + 7 + size]
+        if len(value) != size:
+            raise ValueError("entry %04X/%d truncated" % (index, sub))
+        if index == CN_DCF and size >= 4:
+            out_lines.append("%s%04X/%d: concise DCF of node %d" % ("  " * depth, index, sub, sub))
+            value = rewrite(value, cycle_us, depth + 1, out_lines)
+        elif index == CYCLE_LEN and sub == 0 and size == 4 and cycle_us is not None:
+            value = struct.pack("<I", cycle_us)
+        if index != CN_DCF or size < 4:
+            out_lines.append("%s%04X/%d = 0x%s" % ("  " * depth, index, sub,
+                                                   bytes(reversed(value)).hex() or "-"))
+        out += struct.pack("<HBI", index, sub, len(value)) + value
+        off += 7 + size
+    return bytes(out)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("input")
+    ap.add_argument("output", nargs="?")
+    ap.add_argument("--cycle-us", type=int)
+    ap.add_argument("--list", action="store_true")
+    a = ap.parse_args()
+    with open(a.input, "rb") as f:
+        data = f.read()
+    lines = []
+    out = rewrite(data, a.cycle_us, 0, lines)
+    if a.list:
+        print("\n".join(lines))
+        return 0
+    if not a.output or a.cycle_us is None:
+        ap.error("OUT.cdc and --cycle-us are needed unless --list")
+    with open(a.output, "wb") as f:
+        f.write(out)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
