@@ -16,6 +16,10 @@
 #include "control/control_server.hpp"
 #include "core/bus.hpp"
 
+namespace ds1928::capture {
+class Tap;
+}
+
 namespace ds1928 {
 
 // One log line about the bus, worded for the journal.
@@ -53,8 +57,18 @@ class BusService {
   virtual void watch(std::vector<BusEvent>& events, bool first,
                      std::chrono::steady_clock::time_point now);
 
+  // The capture points the bus kind installed on its links/ports (`ds1928ctl capture`); they
+  // live as long as the service. Empty: nothing to capture (simulated bus).
+  [[nodiscard]] std::span<capture::Tap* const> capture_taps() const noexcept {
+    return capture_taps_;
+  }
+  void add_capture_tap(capture::Tap& tap) { capture_taps_.push_back(&tap); }
+
  protected:
   virtual void status_extra(nlohmann::json& j) const;
+
+ private:
+  std::vector<capture::Tap*> capture_taps_;
 };
 
 // Creates the configured bus kind; nullptr and `why_not` set when it cannot be created.
