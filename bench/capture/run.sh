@@ -65,7 +65,7 @@ YAML
     run=(ip netns exec "cbmn_$tag")
     ;;
   canio)
-    sed -e "s/virtual_bus: ds1928-sim/virtual_bus: cb-$tag/" "$root/config/canio-sim.yaml" >"$tmp/cfg.yaml"
+    sed -e "s/virtual_bus: ds1928-sim/virtual_bus: cb-$tag/" -e '/^shm:/,$d' "$root/config/canio-sim.yaml" >"$tmp/cfg.yaml"
     "$sim" canio --virtual "cb-$tag" --config "$tmp/cfg.yaml" >"$tmp/sim.log" 2>&1 &
     pids+=($!)
     ;;

@@ -45,7 +45,7 @@ ctl() { "$ctl" -s "$tmp/ctl.sock" "$@"; }
 status() { ctl --json status 2>/dev/null; }
 
 # The shipped run-canio configuration, on this test's own virtual bus, shm and socket.
-sed -e "s/virtual_bus: ds1928-sim/virtual_bus: $vbus/" "$src/config/canio-sim.yaml" >"$tmp/can.yaml"
+sed -e "s/virtual_bus: ds1928-sim/virtual_bus: $vbus/" -e '/^shm:/,$d' "$src/config/canio-sim.yaml" >"$tmp/can.yaml"
 cat >>"$tmp/can.yaml" <<YAML
 shm:
   name: /ds1928d_capcan_$tag
