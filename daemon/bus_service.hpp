@@ -18,6 +18,10 @@
 #include "core/bus.hpp"
 #include "metrics/exposition.hpp"
 
+namespace ds1928::capture {
+class Tap;
+}
+
 namespace ds1928 {
 
 // One log line about the bus, worded for the journal, with its journal fields (journal.hpp).
@@ -71,8 +75,18 @@ class BusService {
   // The kind's metric families for the OpenMetrics endpoint (daemon_metrics.cpp). Normal thread.
   virtual void append_metrics(metrics::Exposition& out) const;
 
+  // The capture points the bus kind installed on its links/ports (`ds1928ctl capture`); they
+  // live as long as the service. Empty: nothing to capture (simulated bus).
+  [[nodiscard]] std::span<capture::Tap* const> capture_taps() const noexcept {
+    return capture_taps_;
+  }
+  void add_capture_tap(capture::Tap& tap) { capture_taps_.push_back(&tap); }
+
  protected:
   virtual void status_extra(nlohmann::json& j) const;
+
+ private:
+  std::vector<capture::Tap*> capture_taps_;
 };
 
 // Creates the configured bus kind; nullptr and `why_not` set when it cannot be created.

@@ -8,6 +8,7 @@
 #include "canio/socketcan_port.hpp"
 #include "canio/virtual_bus.hpp"
 #include "canio_metrics.hpp"
+#include "capture/capturing_can_port.hpp"
 
 namespace ds1928 {
 namespace {
@@ -168,8 +169,21 @@ std::unique_ptr<BusService> make_canio_service(const DaemonConfig& config, std::
     return nullptr;
   }
   try {
-    auto bus = std::make_unique<CanioBus>(options, std::move(cycle_port), std::move(sdo_port));
-    return std::make_unique<CanioService>(std::move(bus), std::move(vbus));
+    // Both ports pass a capture point (ds1928ctl capture); it only copies while a capture runs.
+    const std::string name(cycle_port->name());
+    auto cycle = std::make_unique<capture::CapturingCanPort>(std::move(cycle_port), name,
+                                                             config.capture.ring_frames);
+    auto sdo = std::make_unique<capture::CapturingCanPort>(std::move(sdo_port), name,
+                                                           config.capture.ring_frames);
+    cycle->tap().set_description("CAN-I/O cycle port (SYNC, objects, error frames)");
+    sdo->tap().set_description("CAN-I/O SDO port");
+    capture::Tap& cycle_tap = cycle->tap();
+    capture::Tap& sdo_tap = sdo->tap();
+    auto bus = std::make_unique<CanioBus>(options, std::move(cycle), std::move(sdo));
+    auto service = std::make_unique<CanioService>(std::move(bus), std::move(vbus));
+    service->add_capture_tap(cycle_tap);
+    service->add_capture_tap(sdo_tap);
+    return service;
   } catch (const std::exception& e) {
     why_not = fmt::format("canio: {}", e.what());
     return nullptr;

@@ -64,6 +64,7 @@ std::error_code Daemon::start() {
                        why_not);
     return std::make_error_code(std::errc::not_supported);
   }
+  capture_ = std::make_unique<CaptureService>(io_, config_, bus_->capture_taps());
   if (auto ec = publisher_.open(config_.shm, static_cast<uint32_t>(config_.axes.size()),
                                 uint64_t{config_.cycle.period_us} * 1000)) {
     spdlog::error("shared memory {}: {}", config_.shm.name, ec.message());
@@ -137,6 +138,7 @@ void Daemon::stop() noexcept {
   if (endat_) endat_->stop();
   if (engine_) engine_->stop();
   if (registers_) registers_->stop();
+  if (capture_) capture_->abort();
   if (server_) server_->stop();
   if (bus_) bus().stop();
   publisher_.close();
@@ -311,6 +313,7 @@ json Daemon::status_json() const {
             {"metrics", metrics_address()}}},
           {"shm", {{"name", config_.shm.name}, {"generation", publisher_.generation()}}},
           {"bus", bus_->status_json()},
+          {"capture", capture_->status_json()},
           {"cycle",
            {{"period_us", config_.cycle.period_us},
             {"count", engine_->cycle_count()},
@@ -325,6 +328,7 @@ void Daemon::register_commands() {
   using control::Request;
   server_->add_command("status", [this](const Request&, Reply reply) { reply.ok(status_json()); });
   register_bus_commands(*server_, *bus_, config_);
+  capture_->register_commands(*server_);
   server_->add_command("axes", [this](const Request&, Reply reply) { reply.ok(axes_json()); });
   server_->add_command("stats", [this](const Request&, Reply reply) { reply.ok(stats_json()); });
   server_->add_command("stats-reset", [this](const Request&, Reply reply) {

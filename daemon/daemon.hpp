@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "bus_service.hpp"
+#include "capture_service.hpp"
 #include "config/config.hpp"
 #include "control/control_server.hpp"
 #include "control/systemd_notifier.hpp"
@@ -81,6 +82,7 @@ class Daemon {
   boost::asio::signal_set signals_;
   boost::asio::steady_timer tick_timer_;
   std::unique_ptr<BusService> bus_;
+  std::unique_ptr<CaptureService> capture_;  // uses the bus' capture points: after bus_
   shm::Publisher publisher_;
   std::unique_ptr<CycleWork> work_;
   std::unique_ptr<CycleEngine> engine_;

@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include "capture/capturing_link.hpp"
 #include "powerlink/raw_link.hpp"
 #include "powerlink/rx_wait.hpp"
 #include "powerlink_commands.hpp"
@@ -161,8 +162,16 @@ std::unique_ptr<BusService> make_powerlink_service(const DaemonConfig& config,
   mn.cycle_us = config.cycle.period_us;
   mn.mac = link->mac();
   try {
-    return std::make_unique<PowerlinkService>(
-        std::make_unique<powerlink::PowerlinkBus>(mn, std::move(link)));
+    // Every frame passes the capture point (ds1928ctl capture); it only copies while a capture
+    // runs.
+    auto tapped = std::make_unique<capture::CapturingLink>(
+        std::move(link), config.powerlink.interface, config.capture.ring_frames);
+    capture::Tap& tap = tapped->tap();
+    tap.set_description("POWERLINK MN raw socket");
+    auto service = std::make_unique<PowerlinkService>(
+        std::make_unique<powerlink::PowerlinkBus>(mn, std::move(tapped)));
+    service->add_capture_tap(tap);
+    return service;
   } catch (const std::exception& e) {
     why_not = fmt::format("powerlink: {}", e.what());
     return nullptr;

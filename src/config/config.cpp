@@ -201,6 +201,15 @@ void parse_socket(Section s, SocketConfig& c) {
   s.finish();
 }
 
+void parse_capture(Section s, CaptureConfig& c) {
+  if (s.integer("ring_frames", c.ring_frames, 64, 65536, "frames") &&
+      (c.ring_frames & (c.ring_frames - 1)) != 0)
+    s.error("ring_frames", std::to_string(c.ring_frames) + " is not a power of two");
+  s.integer("max_duration_s", c.max_duration_s, 1, 604800, "s");
+  s.integer("max_bytes", c.max_bytes, 65536, int64_t{1} << 40, "bytes");
+  s.finish();
+}
+
 // ---------------------------------------------------------------------------------------------
 
 void check_cross_fields(Diagnostics& diag, const DaemonConfig& c, const std::vector<AxisSite>& axes,
@@ -326,6 +335,7 @@ DaemonConfig parse_document(Diagnostics& diag, const YAML::Node& doc, const std:
   parse_shm(root.section("shm"), c.shm);
   parse_socket(root.section("socket"), c.socket);
   parse_metrics(root.section("metrics"), c.metrics);
+  parse_capture(root.section("capture"), c.capture);
   root.finish();
 
   check_cross_fields(diag, c, axis_sites, pl_sites, locate(doc, {"cycle", "spin_us"}));
@@ -577,6 +587,11 @@ std::string dump_config(const DaemonConfig& c) {
     << "\n"
     << "  max_connections: " << m.max_connections << "\n"
     << "  timeout_ms: " << m.timeout_ms << "\n";
+  const auto& cap = c.capture;
+  o << "capture:\n"
+    << "  ring_frames: " << cap.ring_frames << "\n"
+    << "  max_duration_s: " << cap.max_duration_s << "\n"
+    << "  max_bytes: " << cap.max_bytes << "\n";
   return o.str();
 }
 

@@ -211,6 +211,14 @@ struct MetricsConfig {
   uint32_t timeout_ms = 5000;  // to receive a request, and again to send the response
 };
 
+// `ds1928ctl capture` (docs/operations.md): the fixed ring each captured link/port gets at start,
+// and the limits of one capture.
+struct CaptureConfig {
+  uint32_t ring_frames = 4096;             // frames per link/port, power of two
+  uint32_t max_duration_s = 3600;          // a capture ends after this long at the latest
+  uint64_t max_bytes = 1024ULL * 1048576;  // ... or once this many bytes were written
+};
+
 struct CycleConfig {
   uint32_t period_us = 1000;
   int rt_priority = 80;  // SCHED_FIFO 1..99
@@ -231,6 +239,7 @@ struct DaemonConfig {
   ShmConfig shm;
   SocketConfig socket;
   MetricsConfig metrics;
+  CaptureConfig capture;
   std::string log_level = "info";
 };
 

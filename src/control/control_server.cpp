@@ -187,6 +187,7 @@ class Session : public std::enable_shared_from_this<Session> {
   void start();
   void close();
   void deliver(uint64_t serial, json reply);
+  [[nodiscard]] bool progress(uint64_t serial, json line);
 
  private:
   void read_more();
@@ -411,6 +412,12 @@ void Session::deliver(uint64_t serial, json reply) {
   read_more();
 }
 
+bool Session::progress(uint64_t serial, json line) {
+  if (closed_ || closing_ || serial != pending_ || output_full()) return false;
+  send(std::move(line), false);
+  return true;
+}
+
 void Session::send(json reply, bool close_after) {
   if (closed_ || closing_) return;
   if (close_after) closing_ = true;
@@ -511,6 +518,14 @@ void Reply::on_cancel(std::function<void()> callback) const {
       state->on_cancel = std::move(callback);
     }
   });
+}
+
+bool Reply::progress(json line) const {
+  if (state_->done.load() || state_->cancelled.load()) return false;
+  auto s = state_->session.lock();
+  if (!s) return false;
+  if (!state_->id.is_null()) line["id"] = state_->id;
+  return s->progress(state_->serial, std::move(line));
 }
 
 // ---- Server ---------------------------------------------------------------------------------

@@ -114,6 +114,13 @@ class Reply {
   // once if it already did).
   void on_cancel(std::function<void()> callback) const;
 
+  // Server thread only. Sends `line` (an object; the request's "id" is added) to the client as
+  // an intermediate line before the reply, for commands that stream (capture). False, and
+  // nothing sent, when the client is gone, the request is complete, or the client's unread
+  // output has reached SocketConfig.reply_buffer_bytes: the caller keeps the data and tries
+  // again later (back-pressure).
+  [[nodiscard]] bool progress(nlohmann::json line) const;
+
  private:
   std::shared_ptr<detail::ReplyState> state_;
 };

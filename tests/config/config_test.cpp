@@ -572,3 +572,22 @@ TEST_CASE("metrics section: listen address, off, limits", "[config]") {
   CHECK_THAT(one_error("metrics: {max_connections: 0}"), Catch::Contains("max_connections"));
   CHECK_THAT(one_error("metrics: {port: 1}"), Catch::Contains("port"));
 }
+
+TEST_CASE("capture limits: defaults, values, a ring that is not a power of two", "[config]") {
+  const ConfigResult d = load_config_from_string("{}\n", "test.yaml");
+  REQUIRE(d.ok());
+  CHECK(d.config().capture.ring_frames == 4096);
+  CHECK(d.config().capture.max_duration_s == 3600);
+  CHECK(d.config().capture.max_bytes == 1024ULL * 1048576);
+  const ConfigResult set = load_config_from_string(
+      "capture: {ring_frames: 1024, max_duration_s: 60, max_bytes: 1000000}\n", "test.yaml");
+  INFO(set.error_report());
+  REQUIRE(set.ok());
+  CHECK(set.config().capture.ring_frames == 1024);
+  CHECK(set.config().capture.max_duration_s == 60);
+  CHECK(set.config().capture.max_bytes == 1000000);
+  const ConfigResult bad = load_config_from_string("capture: {ring_frames: 1000}\n", "test.yaml");
+  REQUIRE(bad.errors().size() == 1);
+  CHECK(bad.errors()[0].key == "capture.ring_frames");
+  CHECK_THAT(bad.errors()[0].message, Catch::Contains("power of two"));
+}

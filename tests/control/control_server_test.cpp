@@ -465,3 +465,31 @@ TEST_CASE("a client that reads slowly gets every reply, in order") {
   }
   CHECK(t.clients() == 1);
 }
+
+TEST_CASE("a streaming command sends progress lines before its reply, never after") {
+  ServerThread t(config_for("progress"));
+  std::atomic<int> refused_after{-1};
+  t.server().add_command("stream", [&](const Request&, Reply reply) {
+    for (int i = 0; i < 3; ++i) CHECK(reply.progress({{"part", i}}));
+    reply.ok({{"parts", 3}});
+    // Completed: nothing more reaches the client.
+    refused_after = reply.progress({{"part", 99}}) ? 0 : 1;
+  });
+  REQUIRE_FALSE(t.start());
+  LineClient c(t.server().path());
+  REQUIRE(c.send_raw("{\"cmd\":\"stream\",\"id\":5}\n"));
+  for (int i = 0; i < 3; ++i) {
+    const auto line = c.read_line();
+    REQUIRE(line);
+    const json j = json::parse(*line);
+    CHECK(j["part"] == i);
+    CHECK(j["id"] == 5);
+    CHECK_FALSE(j.contains("ok"));
+  }
+  const auto last = c.read_line();
+  REQUIRE(last);
+  CHECK(json::parse(*last)["parts"] == 3);
+  CHECK(refused_after == 1);
+  // The connection goes on with ordinary requests.
+  CHECK(c.request({{"cmd", "stream"}})["part"] == 0);
+}

@@ -4,7 +4,11 @@
 // no mutex on the cycle thread once the bus is operational. Run by powerlink_veth_test.sh in the
 // MN's network namespace with ds1928-sim answering on the other end of a veth pair:
 //
-//   powerlink_cycle_noalloc CONFIG [CYCLES]
+//   powerlink_cycle_noalloc CONFIG [CYCLES] [capture]
+//
+// With `capture` a capture runs on every capture point of the bus through the counted cycles
+// (ds1928ctl capture: the cycle thread copies each frame into the tap's ring, this thread drains
+// it) and the frames it took must be there.
 //
 // Exit 0: zero allocations and mutex locks with the traffic really flowing; 1: something counted
 // or the traffic did not get through; 2: the bus did not come up (or a setup error).
@@ -17,6 +21,7 @@
 #include <string>
 #include <thread>
 
+#include "capture/tap.hpp"
 #include "config/config_loader.hpp"
 #include "core/cycle_engine.hpp"
 #include "cycle_proof.hpp"
@@ -35,6 +40,7 @@ int main(int argc, char** argv) {
     return 2;
   }
   const uint64_t cycles = argc > 2 ? std::strtoull(argv[2], nullptr, 10) : 3000;
+  const bool with_capture = argc > 3 && std::string(argv[3]) == "capture";
   const ConfigResult loaded = load_config(argv[1]);
   if (!loaded.ok()) {
     std::fprintf(stderr, "%s", loaded.error_report().c_str());
@@ -76,6 +82,20 @@ int main(int argc, char** argv) {
     bus->stop();
     return 2;
   }
+  const auto taps = service->capture_taps();
+  if (with_capture) {
+    if (taps.empty()) {
+      std::fprintf(stderr, "the bus has no capture point\n");
+      return 2;
+    }
+    for (capture::Tap* tap : taps) (void)tap->begin();
+  }
+  uint64_t drained = 0;
+  auto drain = [&] {
+    for (capture::Tap* tap : taps)
+      while (tap->pop([&](const capture::TapFrame&) { ++drained; })) {
+      }
+  };
   task.arm();  // count from here on
 
   // The normal thread's traffic while the cycles are counted: EnDat read-param through the
@@ -87,11 +107,20 @@ int main(int argc, char** argv) {
   // One round every 5 cycles: traffic per counted cycle independent of the scheduler.
   while (!task.done()) {
     t.round(work, *bus, config.axes.size(), *read, 0, 0);
+    if (with_capture) drain();
     const uint64_t next = engine->cycle_count() + 5;
     if (!test::wait_until([&] { return task.done() || engine->cycle_count() >= next; })) break;
   }
   engine->stop();
   bus->stop();
+  uint64_t dropped = 0;
+  if (with_capture) {
+    for (capture::Tap* tap : taps) {
+      (void)tap->finish();
+      dropped += tap->counters().dropped;
+    }
+    drain();
+  }
   const test::HeapCounts counts = task.result();
   std::printf(
       "counted %llu cycles over POWERLINK: new %llu, malloc %llu (first size %zu), delete %llu, "
@@ -107,6 +136,11 @@ int main(int argc, char** argv) {
       static_cast<unsigned long long>(t.sent), static_cast<unsigned long long>(t.replies),
       static_cast<unsigned long long>(t.acks), static_cast<unsigned long long>(t.registers),
       static_cast<unsigned long long>(t.register_results));
+  if (with_capture)
+    std::printf("capture on: %llu frames captured, %llu dropped\n",
+                static_cast<unsigned long long>(drained), static_cast<unsigned long long>(dropped));
+  const bool captured = !with_capture || drained >= cycles;
+  if (!captured) std::printf("FAIL: the capture took fewer frames than cycles\n");
   const bool clean =
       counts.allocations() == 0 && counts.deallocations() == 0 && counts.mutex_locks == 0;
   const bool traffic = t.replies >= 10 && t.acks >= 10 && t.register_results >= 10;
@@ -114,5 +148,5 @@ int main(int argc, char** argv) {
   if (!ds1928::test::counts_mutexes())
     std::printf("TSan build: mutex locks are not counted; the mutex check is void\n");
   if (!traffic) std::printf("FAIL: too little traffic went through the counted cycles\n");
-  return clean && traffic ? 0 : 1;
+  return clean && traffic && captured ? 0 : 1;
 }

@@ -155,6 +155,13 @@ TEST_CASE("every command answers with its documented fields", "[daemon][socket]"
   // The EnDat service answers through the same socket.
   const json ident = c.request({{"cmd", "endat-ident"}, {"axis", 0}});
   CHECK(ident.value("ok", false));
+  // The simulated bus has no wire: nothing to capture, said so; status shows no capture.
+  CHECK(status["capture"]["running"] == false);
+  CHECK(status["capture"]["interfaces"].empty());
+  const json cap = c.request({{"cmd", "capture"}, {"duration_ms", 100}});
+  CHECK(cap["error"]["code"] == "no_capture_point");
+  CHECK(c.request({{"cmd", "capture"}, {"format", "tcpdump"}})["error"]["code"] == "bad_argument");
+  CHECK(c.request({{"cmd", "capture-stop"}})["error"]["code"] == "no_capture");
 }
 
 TEST_CASE("bad requests get precise errors and the connection survives", "[daemon][socket]") {

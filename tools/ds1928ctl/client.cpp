@@ -36,32 +36,70 @@ std::string errno_text() {
   return std::strerror(errno);
 }
 
+// Connects and sends `request` as one line; the socket, or -1 with `out` set.
+int connect_and_send(const Context& ctx, const nlohmann::json& request, Outcome& out) {
+  sockaddr_un addr{};
+  addr.sun_family = AF_UNIX;
+  if (ctx.socket_path.size() >= sizeof(addr.sun_path)) {
+    out = {kUsage, nullptr, "socket path too long: " + ctx.socket_path};
+    return -1;
+  }
+  std::memcpy(addr.sun_path, ctx.socket_path.c_str(), ctx.socket_path.size() + 1);
+  const int fd = socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  if (fd < 0) {
+    out = {kUnavailable, nullptr, "socket: " + errno_text()};
+    return -1;
+  }
+  if (connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) != 0) {
+    out = {kUnavailable, nullptr,
+           "cannot connect to " + ctx.socket_path + ": " + errno_text() +
+               (errno == ENOENT || errno == ECONNREFUSED ? " (is ds1928d running?)" : "")};
+    ::close(fd);
+    return -1;
+  }
+  const std::string line = request.dump() + "\n";
+  for (std::size_t off = 0; off < line.size();) {
+    const ssize_t n = ::send(fd, line.data() + off, line.size() - off, MSG_NOSIGNAL);
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      out = {kUnavailable, nullptr, "send: " + errno_text()};
+      ::close(fd);
+      return -1;
+    }
+    off += static_cast<std::size_t>(n);
+  }
+  return fd;
+}
+
+// Checks a reply line and fills `out` (exit, reply, problem).
+void take_reply(const std::string& text, Outcome& out) {
+  out.reply = nlohmann::json::parse(text, nullptr, false);
+  if (out.reply.is_discarded() || !out.reply.is_object() || !out.reply.contains("ok") ||
+      !out.reply["ok"].is_boolean()) {
+    out = {kBadReply, nullptr, "invalid reply from the daemon: " + text};
+    return;
+  }
+  out.exit = kOk;
+  if (out.reply["ok"] == true) return;
+  // value() throws on a non-object or a non-string member: look before taking.
+  const auto field = [](const nlohmann::json& j, const char* key, const char* fallback) {
+    const auto it = j.is_object() ? j.find(key) : j.end();
+    return it != j.end() && it->is_string() ? it->get<std::string>() : std::string(fallback);
+  };
+  const auto err = out.reply.find("error");
+  const nlohmann::json none = nlohmann::json::object();
+  const nlohmann::json& e = err != out.reply.end() ? *err : none;
+  out.exit = kDaemonError;
+  out.problem = field(e, "code", "error") + ": " + field(e, "message", "");
+}
+
 }  // namespace
 
 Outcome send_request(const Context& ctx, const nlohmann::json& request) {
   Outcome out;
-  sockaddr_un addr{};
-  addr.sun_family = AF_UNIX;
-  if (ctx.socket_path.size() >= sizeof(addr.sun_path)) {
-    return {kUsage, nullptr, "socket path too long: " + ctx.socket_path};
-  }
-  std::memcpy(addr.sun_path, ctx.socket_path.c_str(), ctx.socket_path.size() + 1);
-  Fd fd(socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0));
-  if (fd.get() < 0) return {kUnavailable, nullptr, "socket: " + errno_text()};
-  if (connect(fd.get(), reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) != 0)
-    return {kUnavailable, nullptr,
-            "cannot connect to " + ctx.socket_path + ": " + errno_text() +
-                (errno == ENOENT || errno == ECONNREFUSED ? " (is ds1928d running?)" : "")};
-
-  const std::string line = request.dump() + "\n";
-  for (std::size_t off = 0; off < line.size();) {
-    const ssize_t n = ::send(fd.get(), line.data() + off, line.size() - off, MSG_NOSIGNAL);
-    if (n < 0) {
-      if (errno == EINTR) continue;
-      return {kUnavailable, nullptr, "send: " + errno_text()};
-    }
-    off += static_cast<std::size_t>(n);
-  }
+  const int raw = connect_and_send(ctx, request, out);
+  if (raw < 0) return out;
+  Fd fd(raw);
 
   std::string buffer;
   const auto deadline =
@@ -93,23 +131,57 @@ Outcome send_request(const Context& ctx, const nlohmann::json& request) {
       return {kBadReply, nullptr,
               "reply longer than " + std::to_string(kMaxReplyBytes) + " bytes without a newline"};
   }
-
-  out.reply = nlohmann::json::parse(buffer, nullptr, false);
-  if (out.reply.is_discarded() || !out.reply.is_object() || !out.reply.contains("ok") ||
-      !out.reply["ok"].is_boolean())
-    return {kBadReply, nullptr, "invalid reply from the daemon: " + buffer};
-  if (out.reply["ok"] == true) return out;
-  // value() throws on a non-object or a non-string member: look before taking.
-  const auto text = [](const nlohmann::json& j, const char* key, const char* fallback) {
-    const auto it = j.is_object() ? j.find(key) : j.end();
-    return it != j.end() && it->is_string() ? it->get<std::string>() : std::string(fallback);
-  };
-  const auto err = out.reply.find("error");
-  const nlohmann::json none = nlohmann::json::object();
-  const nlohmann::json& e = err != out.reply.end() ? *err : none;
-  out.exit = kDaemonError;
-  out.problem = text(e, "code", "error") + ": " + text(e, "message", "");
+  take_reply(buffer, out);
   return out;
+}
+
+StreamOutcome stream_request(const Context& ctx, const nlohmann::json& request,
+                             const std::function<bool(const nlohmann::json&)>& on_line,
+                             const std::function<void()>& idle) {
+  Outcome out;
+  const int raw = connect_and_send(ctx, request, out);
+  if (raw < 0) return out;
+  Fd fd(raw);
+  std::string buffer;
+  std::size_t scanned = 0;
+  for (;;) {
+    for (auto nl = buffer.find('\n', scanned); nl != std::string::npos;
+         nl = buffer.find('\n', scanned)) {
+      const std::string_view text(buffer.data() + scanned, nl - scanned);
+      scanned = nl + 1;
+      nlohmann::json line = nlohmann::json::parse(text, nullptr, false);
+      if (line.is_discarded() || !line.is_object())
+        return {kBadReply, nullptr, "invalid line from the daemon: " + std::string(text)};
+      if (line.contains("ok")) {
+        take_reply(std::string(text), out);
+        return out;
+      }
+      try {
+        if (!on_line(line)) return {kUnavailable, nullptr, "stopped"};
+      } catch (const std::exception& e) {
+        return {kBadReply, nullptr, std::string("invalid line from the daemon: ") + e.what()};
+      }
+    }
+    buffer.erase(0, scanned);
+    scanned = 0;
+    idle();
+    pollfd p{fd.get(), POLLIN, 0};
+    const int r = poll(&p, 1, 200);
+    if (r < 0 && errno == EINTR) continue;
+    if (r < 0) return {kUnavailable, nullptr, "poll: " + errno_text()};
+    if (r == 0) continue;
+    char chunk[65536];
+    const ssize_t n = ::recv(fd.get(), chunk, sizeof(chunk), 0);
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      return {kUnavailable, nullptr, "receive: " + errno_text()};
+    }
+    if (n == 0) return {kUnavailable, nullptr, "the daemon closed the connection without a reply"};
+    buffer.append(chunk, static_cast<std::size_t>(n));
+    if (buffer.size() > kMaxReplyBytes && buffer.find('\n') == std::string::npos)
+      return {kBadReply, nullptr,
+              "line longer than " + std::to_string(kMaxReplyBytes) + " bytes without a newline"};
+  }
 }
 
 int request_and_print(const Context& ctx, const nlohmann::json& request,

@@ -19,6 +19,15 @@ struct Outcome {
 // Connects to ctx.socket_path, sends `request` as one line, reads one reply line.
 [[nodiscard]] Outcome send_request(const Context& ctx, const nlohmann::json& request);
 
+// A request whose reply is preceded by intermediate lines (capture): every line without "ok"
+// goes to `on_line` (false from it: stop, the connection is closed: exit kUnavailable with no
+// problem text); `idle` is called at least every 200 ms while waiting. No reply timeout: the
+// stream lasts as long as the daemon sends. Returns like send_request once the reply arrives.
+using StreamOutcome = Outcome;
+[[nodiscard]] StreamOutcome stream_request(
+    const Context& ctx, const nlohmann::json& request,
+    const std::function<bool(const nlohmann::json&)>& on_line, const std::function<void()>& idle);
+
 // The common case of a command: send, then on {"ok":true} print the reply (as one JSON line
 // with --json, else through `print_human`), on {"ok":false} print "error: <code>: <message>" to
 // stderr. Returns the exit code. A new command group needs nothing more than this.

@@ -17,5 +17,7 @@ void add_position_command(CLI::App& app, Context& ctx);
 void add_endat_commands(CLI::App& app, Context& ctx);
 // `pl pres` / `pl preq-set`: raw process data of POWERLINK CNs.
 void add_powerlink_commands(CLI::App& app, Context& ctx);
+// `capture -w FILE [--duration S | --count N] [--format F]`, `capture-stop` (privileged).
+void add_capture_commands(CLI::App& app, Context& ctx);
 
 }  // namespace ds1928::ctl

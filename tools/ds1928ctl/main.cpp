@@ -26,6 +26,7 @@ int main(int argc, char** argv) {
   add_position_command(app, ctx);
   add_endat_commands(app, ctx);
   add_powerlink_commands(app, ctx);
+  add_capture_commands(app, ctx);
 
   try {
     app.parse(argc, argv);

@@ -1,0 +1,87 @@
+#include "capture/tap.hpp"
+
+#include <sched.h>
+#include <time.h>
+
+#include <algorithm>
+#include <cstring>
+#include <stdexcept>
+
+namespace ds1928::capture {
+namespace {
+
+int64_t monotonic_ns() noexcept {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
+
+// The single writer of a counter updates it without a read-modify-write.
+void bump(std::atomic<uint64_t>& c) noexcept {
+  c.store(c.load(std::memory_order_relaxed) + 1, std::memory_order_relaxed);
+}
+
+}  // namespace
+
+Tap::Tap(std::string name, uint16_t link_type, std::size_t max_frame, std::size_t ring_frames)
+    : name_(std::move(name)),
+      link_type_(link_type),
+      max_frame_(std::min<std::size_t>(max_frame, UINT16_MAX)),
+      capacity_(ring_frames),
+      // Slots on cache-line boundaries: the producer's copy never shares a line with the slot the
+      // consumer reads.
+      slot_size_((sizeof(Header) + max_frame_ + 63) / 64 * 64) {
+  if (ring_frames < 2 || (ring_frames & (ring_frames - 1)) != 0)
+    throw std::invalid_argument("capture ring of " + std::to_string(ring_frames) +
+                                " frames: must be a power of two, at least 2");
+  // Value-initialised: every page is touched now, not by the cycle thread's first copy.
+  ring_ = std::make_unique<uint8_t[]>(capacity_ * slot_size_);
+}
+
+void Tap::record(Direction direction, int64_t time_ns, std::span<const uint8_t> bytes) noexcept {
+  const uint64_t seq = seq_.load(std::memory_order_relaxed) + 1;
+  seq_.store(seq, std::memory_order_seq_cst);
+  bump(direction == Direction::Outbound ? tx_ : rx_);
+  if (active_.load(std::memory_order_seq_cst)) {
+    const std::size_t head = head_.load(std::memory_order_relaxed);
+    if (head - tail_.load(std::memory_order_acquire) == capacity_) {
+      bump(dropped_);
+    } else {
+      uint8_t* slot = slot_at(head);
+      const std::size_t length = std::min(bytes.size(), max_frame_);
+      const Header h{seq, time_ns != 0 ? time_ns : monotonic_ns(), static_cast<uint16_t>(length),
+                     static_cast<uint8_t>(direction)};
+      std::memcpy(slot, &h, sizeof h);
+      if (length != 0) std::memcpy(slot + sizeof h, bytes.data(), length);
+      head_.store(head + 1, std::memory_order_release);
+      bump(captured_);
+    }
+  }
+  done_.store(seq, std::memory_order_release);
+}
+
+uint64_t Tap::begin() noexcept {
+  active_.store(true, std::memory_order_seq_cst);
+  return seq_.load(std::memory_order_seq_cst);
+}
+
+uint64_t Tap::finish() noexcept {
+  const uint64_t end = seq_.load(std::memory_order_seq_cst);
+  // The producer stores done_ right after seq_ within one record() call (no syscall between):
+  // this wait is a few hundred nanoseconds unless the producer was preempted in between.
+  while (done_.load(std::memory_order_acquire) < end) sched_yield();
+  active_.store(false, std::memory_order_seq_cst);
+  return end;
+}
+
+void Tap::deactivate() noexcept {
+  active_.store(false, std::memory_order_seq_cst);
+}
+
+TapCounters Tap::counters() const noexcept {
+  return {seq_.load(std::memory_order_acquire), tx_.load(std::memory_order_relaxed),
+          rx_.load(std::memory_order_relaxed), captured_.load(std::memory_order_relaxed),
+          dropped_.load(std::memory_order_relaxed)};
+}
+
+}  // namespace ds1928::capture
