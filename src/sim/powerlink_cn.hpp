@@ -252,7 +252,8 @@ class PowerlinkCn {
 // Drives a set of PowerlinkCn from one link. Polls with the link's receive in the cycle's busy
 // phase and sleeps in its idle phase: after a SoA it sleeps until `guard_ns` before the next
 // SoC is due (a SCHED_FIFO task that spins all the time is throttled by the kernel and starves
-// the other core's work), and blocks in wait_readable() when no cycle rhythm is known.
+// the other core's work), and blocks in wait_readable() when no SoC rhythm is known (silence, or
+// an MN's reduced cycle, whose SoAs need not be periodic).
 class PowerlinkCnLoop {
  public:
   struct Options {

@@ -46,8 +46,12 @@ void PowerlinkCnLoop::Rhythm::note(int64_t t) noexcept {
 }
 
 int64_t PowerlinkCnLoop::next_cycle_start(int64_t now) const noexcept {
+  // Only full cycles have a start to sleep toward: an MN's reduced cycle (PRE_OPERATIONAL_1,
+  // SoA only) need not be periodic — openPOWERLINK's sends its next SoA as soon as the previous
+  // slot is over — and an IdentRequest or StatusRequest that waited in the ring until a planned
+  // wake-up would be answered after the MN's slot timeout. Without a SoC rhythm the loop blocks
+  // until a frame arrives.
   if (soc_.valid(now)) return soc_.last + soc_.period;
-  if (soa_.valid(now)) return soa_.last + soa_.period;
   return 0;
 }
 

@@ -136,4 +136,12 @@ if [ -s "$tmp/expert.txt" ]; then
 fi
 statuses=$(tshark -r "$tmp/mn.pcapng" -Y "epl.asnd.svid == 2 && epl.src == 1" 2>/dev/null | wc -l)
 pass "tshark: $frames POWERLINK frames ($statuses StatusResponses of node 1), none malformed, no expert warning"
+# The whole run, boot included: resets of node 1 for an error (the MN names the reason in its
+# NMTResetNode) and the MN's node error events. The one plain NMTResetNode after restoring the
+# defaults (0x1011) is the configuration manager's normal path.
+tshark -r "$tmp/mn.pcapng" -Y "epl.asnd.nmtcmd.cmdid && epl.dest == 1" 2>/dev/null >"$tmp/nmt.txt"
+error_resets=$(grep -c "NMTResetNode (E_" "$tmp/nmt.txt")
+node_errors=$(grep -c "Node=  1, NmtNodeEventError" "$tmp/opl_mn.log")
+echo "whole run: NMT commands to node 1: $(sed 's/.*(NMT_COMMAND) //' "$tmp/nmt.txt" | tr '\n' ';')"
+echo "whole run: resets of node 1 for an error: $error_resets, MN node error events: $node_errors"
 exit 0
