@@ -139,7 +139,7 @@ pass "tshark: $frames POWERLINK frames ($statuses StatusResponses of node 1), no
 # The whole run, boot included: resets of node 1 for an error (the MN names the reason in its
 # NMTResetNode) and the MN's node error events. The one plain NMTResetNode after restoring the
 # defaults (0x1011) is the configuration manager's normal path.
-tshark -r "$tmp/mn.pcapng" -Y "epl.asnd.nmtcmd.cmdid && epl.dest == 1" 2>/dev/null >"$tmp/nmt.txt"
+tshark -r "$tmp/mn.pcapng" -Y "epl.asnd.svid == 4" 2>/dev/null | grep "240->  1 " >"$tmp/nmt.txt"
 error_resets=$(grep -c "NMTResetNode (E_" "$tmp/nmt.txt")
 node_errors=$(grep -c "Node=  1, NmtNodeEventError" "$tmp/opl_mn.log")
 echo "whole run: NMT commands to node 1: $(sed 's/.*(NMT_COMMAND) //' "$tmp/nmt.txt" | tr '\n' ';')"
