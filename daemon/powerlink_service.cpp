@@ -2,6 +2,8 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
+
 #include "capture/capturing_link.hpp"
 #include "powerlink/raw_link.hpp"
 #include "powerlink/rx_wait.hpp"
@@ -21,6 +23,29 @@ nlohmann::json configuration_json(const powerlink::CnStatus& n) {
           {"last_failures", std::move(failures)},
           {"identity_mismatch",
            n.identity_mismatch ? nlohmann::json(powerlink::describe(n.mismatch)) : nullptr}};
+}
+
+// Error signalling of a CN: the handshake, EN/EA, the entries fetched (the last ones, described).
+nlohmann::json exception_json(const powerlink::CnStatus& n) {
+  nlohmann::json entries = nlohmann::json::array();
+  for (std::size_t i = 0; i < n.error_entry_count; ++i) {
+    const powerlink::ErrorEntry& e = n.error_entries[i];
+    entries.push_back({{"type", e.type},
+                       {"code", e.code},
+                       {"timestamp_s", static_cast<uint32_t>(e.timestamp)},
+                       {"timestamp_ns", static_cast<uint32_t>(e.timestamp >> 32)},
+                       {"text", powerlink::describe(e)}});
+  }
+  return {{"signalling", std::string(powerlink::to_string(n.errsig))},
+          {"handshakes", n.errsig_handshakes},
+          {"handshakes_given_up", n.errsig_gave_up},
+          {"new", n.exception_new},
+          {"acknowledged", n.exception_acknowledge},
+          {"signalled", n.exceptions_signalled},
+          {"error_register", static_cast<unsigned>(n.static_error_bits & 0xFF)},
+          {"static_error_bits", n.static_error_bits},
+          {"entries_total", n.status_error_entries},
+          {"entries", std::move(entries)}};
 }
 
 }  // namespace
@@ -77,9 +102,7 @@ void PowerlinkService::status_extra(nlohmann::json& j) const {
                      {"last_reset_reason",
                       n.last_reset_reason ? n.last_reset_reason.message() : std::string()}});
     nodes.back()["configuration"] = configuration_json(n);
-    nodes.back()["exception"] = {{"new", n.exception_new},
-                                 {"acknowledged", n.exception_acknowledge},
-                                 {"signalled", n.exceptions_signalled}};
+    nodes.back()["exception"] = exception_json(n);
   }
   j["nodes"] = std::move(nodes);
 }
@@ -104,7 +127,27 @@ void PowerlinkService::watch(std::vector<BusEvent>& events, bool first,
     if (first) {
       seen.late_pres.said = n.late_pres.fired;
       seen.nmt_refused.said = n.nmt_requests_refused;
+      seen.error_entries = n.status_error_entries;
     } else {
+      if (n.status_error_entries > seen.error_entries) {
+        // The new ones still in the reported window, oldest first.
+        const uint32_t fresh = n.status_error_entries - seen.error_entries;
+        const std::size_t shown = std::min<std::size_t>(fresh, n.error_entry_count);
+        for (std::size_t k = n.error_entry_count - shown; k < n.error_entry_count; ++k)
+          events.push_back({true, fmt::format("powerlink node {}: error entry {}", n.node,
+                                              powerlink::describe(n.error_entries[k]))});
+        if (fresh > shown)
+          events.push_back({true, fmt::format("powerlink node {}: {} more error entries", n.node,
+                                              fresh - shown)});
+      }
+      if (n.errsig_gave_up > 0 && !seen.errsig_gave_up_said) {
+        seen.errsig_gave_up_said = true;
+        events.push_back(
+            {true, fmt::format("powerlink node {}: no error signalling handshake (EC did not "
+                               "follow ER within {} StatusRequests); the node runs without it, "
+                               "EN toggles are still fetched",
+                               n.node, powerlink::MnErrorSignalling::kMaxAttempts)});
+      }
       if (n.resets > seen.resets) {
         std::string reason =
             n.last_reset_reason ? n.last_reset_reason.message() : std::string("unknown reason");
@@ -141,6 +184,7 @@ void PowerlinkService::watch(std::vector<BusEvent>& events, bool first,
     seen.resets = n.resets;
     seen.boots = n.boots;
     seen.object_failures = n.object_failures;
+    seen.error_entries = n.status_error_entries;
   }
 }
 

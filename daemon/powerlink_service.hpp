@@ -31,6 +31,8 @@ class PowerlinkService final : public BusService {
     uint32_t resets = 0;
     uint32_t boots = 0;
     uint32_t object_failures = 0;
+    uint32_t error_entries = 0;        // CnStatus::status_error_entries said
+    bool errsig_gave_up_said = false;  // "no error signalling" is said once per node
     SaidCounter late_pres;
     SaidCounter nmt_refused;
   };

@@ -8,6 +8,7 @@
 
 #include "core/register_catalogue.hpp"
 #include "powerlink/concise_dcf.hpp"
+#include "powerlink/managing_node_cn.hpp"
 
 namespace ds1928::powerlink {
 
@@ -64,85 +65,6 @@ bool DllCounter::step(bool error, uint32_t threshold) noexcept {
   ++fired;
   return true;
 }
-
-namespace {
-constexpr std::size_t kOutboxDepth = 4;
-constexpr std::size_t kOpQueueDepth = 32;
-
-// What an SDO transfer of a CN is for.
-enum class OpKind : uint8_t {
-  kRegister,      // a module register (boot configuration or a client's request)
-  kIdentityRead,  // 0x1000 / 0x1018 read back and compared
-  kObjectWrite,   // an object of the CN's configuration (concise DCF, sdo_writes, cycle objects)
-};
-// Where an object write's value comes from: fixed bytes, or what is known only at boot.
-enum class ValueSource : uint8_t { kData, kCycleUs, kPreqSize, kPresSize };
-struct ObjectOp {
-  OpKind kind = OpKind::kObjectWrite;
-  uint16_t index = 0;
-  uint8_t subindex = 0;
-  ValueSource source = ValueSource::kData;
-  uint32_t expected = 0;  // identity read
-  std::size_t data_offset = 0;
-  std::size_t data_size = 0;
-};
-}  // namespace
-
-struct ManagingNode::Cn {
-  PowerlinkNodeConfig cfg;
-  CnStatus* st = nullptr;
-  NodeImageLayout layout;
-  std::array<uint8_t, kMaxIsoPayload> preq{};
-  std::array<uint8_t, kMaxIsoPayload> pres{};
-  bool polled = false;          // PReq sent this cycle
-  uint32_t loss_threshold = 0;  // DLL_MNCNLossPResThreshold (0x1C09) in effect
-  bool pres_seen = false;       // its PRes arrived this cycle
-  bool pres_usable = false;     // ... with a payload the layout fits in
-  bool timed_out = false;       // the driver gave up waiting for it this cycle
-  bool late = false;            // a PRes came after its timeout
-  int64_t state_since_ns = 0;
-  uint64_t last_status_request = 0;
-  uint8_t rs = 0;  // CN's pending async requests (RS) and their priority (PR)
-  uint8_t pr = 0;
-  bool sdo_wait_answer = false;
-  // Frames the MN sends to this CN in the async phase (NMT commands, SDO).
-  std::array<std::array<uint8_t, kMaxFrameSize>, kOutboxDepth> outbox{};
-  std::array<std::size_t, kOutboxDepth> outbox_len{};
-  std::size_t outbox_head = 0;
-  std::size_t outbox_count = 0;
-  uint32_t outbox_overflows = 0;
-  std::unique_ptr<SdoClient> sdo;
-  // Boot step "configure", built once: identity reads and object writes first, then the module
-  // registers. Object values live in object_data.
-  std::vector<ObjectOp> object_ops;
-  std::vector<uint8_t> object_data;
-  std::size_t object_next = 0;
-  std::vector<SdoRegisterOp> boot_ops;  // module configuration
-  std::size_t boot_next = 0;
-  OpKind op_kind = OpKind::kRegister;
-  std::array<uint8_t, 4> op_value{};  // value of a ValueSource other than kData
-  // Exception signalling: EN changed since the last acknowledgement; ER still to be sent.
-  bool exception_pending = false;
-  bool exception_reset_due = false;
-  bool configuring = false;
-  std::array<SdoRegisterOp, kOpQueueDepth> ops{};
-  std::size_t ops_head = 0;
-  std::size_t ops_count = 0;
-  bool op_active = false;
-  bool op_internal = false;
-  SdoRegisterOp current{};
-
-  void push_outbox(std::span<const uint8_t> frame) noexcept {
-    if (outbox_count == kOutboxDepth || frame.size() > kMaxFrameSize) {
-      ++outbox_overflows;
-      return;
-    }
-    const std::size_t i = (outbox_head + outbox_count) % kOutboxDepth;
-    std::memcpy(outbox[i].data(), frame.data(), frame.size());
-    outbox_len[i] = frame.size();
-    ++outbox_count;
-  }
-};
 
 struct ManagingNode::Handler {
   void (ManagingNode::*enter)(Cn&) noexcept;
@@ -417,161 +339,6 @@ void ManagingNode::on_timeout_boot(Cn& cn) noexcept {
   reset_node(cn, make_error_code(MnError::kBootStepTimeout));
 }
 
-// ---- SDO
-// ------------------------------------------------------------------------------------------
-
-bool ManagingNode::submit(const SdoRegisterOp& op) noexcept {
-  Cn* cn = find(op.node);
-  if (!cn || cn->ops_count == kOpQueueDepth) return false;
-  cn->ops[(cn->ops_head + cn->ops_count) % kOpQueueDepth] = op;
-  ++cn->ops_count;
-  start_next_sdo(*cn);
-  return true;
-}
-
-bool ManagingNode::can_submit(uint8_t node) const noexcept {
-  const Cn* cn = find(node);
-  return cn != nullptr && cn->ops_count < kOpQueueDepth;
-}
-
-bool ManagingNode::poll(SdoRegisterResult& out) noexcept {
-  if (results_count_ == 0) return false;
-  out = results_[results_head_];
-  results_head_ = (results_head_ + 1) % results_.size();
-  --results_count_;
-  return true;
-}
-
-void ManagingNode::start_next_sdo(Cn& cn) noexcept {
-  while (!cn.op_active) {
-    const CnBootState b = cn.st->boot;
-    if (b == CnBootState::kIdentify || b == CnBootState::kReset) return;
-    if (cn.configuring && cn.object_next < cn.object_ops.size()) {
-      start_object_op(cn);
-      continue;
-    }
-    if (cn.configuring && cn.boot_next < cn.boot_ops.size()) {
-      cn.current = cn.boot_ops[cn.boot_next];
-      cn.op_internal = true;
-      cn.op_kind = OpKind::kRegister;
-    } else if (cn.configuring) {
-      cn.configuring = false;
-      enter(cn, CnBootState::kWaitReadyToOperate);
-      continue;
-    } else if (cn.ops_count > 0 && b != CnBootState::kWaitPreOp2) {
-      cn.current = cn.ops[cn.ops_head];
-      cn.ops_head = (cn.ops_head + 1) % kOpQueueDepth;
-      --cn.ops_count;
-      cn.op_internal = false;
-      cn.op_kind = OpKind::kRegister;
-    } else {
-      return;
-    }
-    const auto object = mapping_.object_for(cn.current.slot, cn.current.reg);
-    if (!object) {
-      sdo_done(cn, make_error_code(SdoError::kNoMapping), {});
-      continue;
-    }
-    cn.op_active = true;
-    std::error_code ec;
-    if (cn.current.write) {
-      std::array<uint8_t, 4> bytes{};
-      store_le32(bytes.data(), cn.current.value);
-      ec = cn.sdo->write(
-          object->index, object->subindex,
-          std::span<const uint8_t>(bytes.data(), std::min<std::size_t>(cn.current.size, 4)),
-          now_ns_);
-    } else {
-      ec = cn.sdo->read(object->index, object->subindex, now_ns_);
-    }
-    if (ec) {
-      cn.op_active = false;
-      sdo_done(cn, ec, {});
-    }
-  }
-}
-
-void ManagingNode::start_object_op(Cn& cn) noexcept {
-  const ObjectOp& op = cn.object_ops[cn.object_next];
-  cn.op_active = true;
-  cn.op_internal = true;
-  cn.op_kind = op.kind;
-  std::error_code ec;
-  if (op.kind == OpKind::kIdentityRead) {
-    ec = cn.sdo->read(op.index, op.subindex, now_ns_);
-  } else {
-    std::span<const uint8_t> value(cn.object_data.data() + op.data_offset, op.data_size);
-    if (op.source != ValueSource::kData) {
-      const uint32_t v = op.source == ValueSource::kCycleUs    ? config_.cycle_us
-                         : op.source == ValueSource::kPreqSize ? cn.st->preq_size
-                                                               : cn.st->pres_size;
-      store_le32(cn.op_value.data(), v);
-      value = std::span<const uint8_t>(cn.op_value.data(), op.data_size);
-    }
-    ec = cn.sdo->write(op.index, op.subindex, value, now_ns_);
-  }
-  if (ec) {
-    cn.op_active = false;
-    sdo_done(cn, ec, {});
-  }
-}
-
-void ManagingNode::object_done(Cn& cn, std::error_code ec, std::span<const uint8_t> data) noexcept {
-  const ObjectOp& op = cn.object_ops[cn.object_next++];
-  CnStatus& st = *cn.st;
-  if (ec) {
-    ++st.object_failures;
-    if (st.last_failure_count < st.last_failures.size())
-      st.last_failures[st.last_failure_count++] = {op.index, op.subindex,
-                                                   op.kind == OpKind::kIdentityRead, ec};
-  } else if (op.kind == OpKind::kObjectWrite) {
-    ++st.objects_written;
-  }
-  if (op.kind != OpKind::kIdentityRead) return;
-  uint32_t found = 0;
-  for (std::size_t i = 0; i < std::min<std::size_t>(data.size(), 4); ++i)
-    found |= static_cast<uint32_t>(data[i]) << (8 * i);
-  if (!ec && found == op.expected) {
-    if (st.identity_mismatch && st.mismatch.index == op.index &&
-        st.mismatch.subindex == op.subindex)
-      st.identity_mismatch = false;
-    return;
-  }
-  // Not the configured device (or one that cannot say): it is not booted, and is tried again
-  // after a reset in case it is replaced.
-  st.identity_mismatch = true;
-  st.mismatch = {op.index, op.subindex, op.expected, found, static_cast<bool>(ec)};
-  reset_node(cn, make_error_code(MnError::kIdentityCheckFailed));
-}
-
-void ManagingNode::sdo_done(Cn& cn, std::error_code ec, std::span<const uint8_t> data) noexcept {
-  cn.op_active = false;
-  cn.sdo_wait_answer = false;
-  if (cn.op_internal && cn.op_kind != OpKind::kRegister) {
-    if (ec) cn.st->last_error = ec;
-    if (ec == SdoError::kConnectionLost) return;  // the node is being reset
-    object_done(cn, ec, data);
-    if (cn.st->boot == CnBootState::kReset) return;
-    start_next_sdo(cn);
-    return;
-  }
-  uint32_t value = 0;
-  for (std::size_t i = 0; i < std::min<std::size_t>(data.size(), 4); ++i)
-    value |= static_cast<uint32_t>(data[i]) << (8 * i);
-  if (ec) {
-    ++cn.st->sdo_errors;
-    cn.st->last_error = ec;
-  }
-  if (cn.op_internal) {
-    // A setting the bus controller refuses is reported (status) but does not stop the boot.
-    ++cn.boot_next;
-  } else if (results_count_ < results_.size()) {
-    results_[(results_head_ + results_count_++) % results_.size()] = {cn.current.tag, ec, value};
-  }
-  if (ec == SdoError::kConnectionLost) return;  // the node is being reset
-  start_next_sdo(cn);
-}
-
 // ---- Cycle
 // ----------------------------------------------------------------------------------------
 
@@ -658,106 +425,13 @@ Result<std::size_t> ManagingNode::build_preq(uint8_t node, std::span<uint8_t> ou
   PReq preq;
   preq.ready = mn_state_ == NmtState::kOperational;
   preq.multiplexed_slot = cn->cfg.multiplex > 1;
-  preq.exception_acknowledge = cn->st->exception_acknowledge;
+  preq.exception_acknowledge = cn->errsig.exception_acknowledge();
   preq.payload = std::span<const uint8_t>(cn->preq.data(), cn->st->preq_size);
   return powerlink::build_preq(out, preq_header(config_.mac, cn->st->mac, node), preq);
 }
 
 void ManagingNode::on_pres_timeout(uint8_t node) noexcept {
   if (Cn* cn = find(node)) cn->timed_out = true;
-}
-
-Result<std::size_t> ManagingNode::build_soa(std::span<uint8_t> out) noexcept {
-  // One grant per cycle. Three classes take turns being asked first, so neither a long SDO
-  // transfer nor a silent CN starves the others: the MN's own frames, CN invitations, and
-  // Ident/StatusRequests.
-  const std::size_t n = cns_.size();
-  auto pick = [&](int cls) -> bool {
-    for (std::size_t k = 0; k < n; ++k) {
-      Cn& cn = *cns_[(async_rr_ + k) % n];
-      switch (cls) {
-        case 0:
-          if (cn.outbox_count > 0) {
-            soa_service_ = RequestedService::kUnspecifiedInvite;
-            soa_target_ = kNodeMn;
-            mn_asnd_from_ = &cn;
-            return true;
-          }
-          break;
-        case 1:
-          if (cn.st->identified && cn.rs > 0 && cn.pr == 7) {
-            soa_service_ = RequestedService::kNmtRequestInvite;
-          } else if (cn.st->identified && (cn.sdo_wait_answer || cn.rs > 0)) {
-            soa_service_ = RequestedService::kUnspecifiedInvite;
-          } else {
-            break;
-          }
-          soa_target_ = cn.cfg.node_id;
-          return true;
-        default:
-          if (cn.st->boot == CnBootState::kIdentify) {
-            soa_service_ = RequestedService::kIdentRequest;
-          } else if (cn.exception_pending && cn.st->boot != CnBootState::kReset) {
-            // Exception signalled: fetch its error entries, whatever the boot state.
-            soa_service_ = RequestedService::kStatusRequest;
-            cn.last_status_request = counters_.cycles;
-          } else if (cn.st->boot != CnBootState::kReset &&
-                     counters_.cycles - cn.last_status_request >=
-                         config_.bus.nmt.status_request_every &&
-                     cn.st->boot != CnBootState::kOperational) {
-            soa_service_ = RequestedService::kStatusRequest;
-            cn.last_status_request = counters_.cycles;
-          } else {
-            break;
-          }
-          soa_target_ = cn.cfg.node_id;
-          return true;
-      }
-    }
-    return false;
-  };
-  if (n > 0) {
-    const int first = static_cast<int>(counters_.cycles % 3);
-    for (int i = 0; i < 3; ++i)
-      if (pick((first + i) % 3)) break;
-    async_rr_ = (async_rr_ + 1) % n;
-  }
-  awaiting_asnd_ = soa_service_ != RequestedService::kNone && soa_target_ != kNodeMn;
-  SoA soa;
-  soa.mn_nmt_state = mn_state_;
-  soa.service = soa_service_;
-  soa.target = soa_target_;
-  if (soa_service_ == RequestedService::kStatusRequest) {
-    if (Cn* t = find(soa_target_)) {
-      soa.exception_acknowledge = t->st->exception_acknowledge;
-      soa.exception_reset = t->exception_reset_due;
-      t->exception_reset_due = false;
-    }
-  }
-  return powerlink::build_soa(out, soa_header(config_.mac), soa);
-}
-
-Result<std::size_t> ManagingNode::build_mn_asnd(std::span<uint8_t> out) noexcept {
-  Cn* cn = mn_asnd_from_;
-  if (!cn || cn->outbox_count == 0) return std::size_t{0};
-  const std::size_t len = cn->outbox_len[cn->outbox_head];
-  if (out.size() < len) return FrameError::kBufferTooSmall;
-  std::memcpy(out.data(), cn->outbox[cn->outbox_head].data(), len);
-  cn->outbox_head = (cn->outbox_head + 1) % kOutboxDepth;
-  --cn->outbox_count;
-  if (out[17] == static_cast<uint8_t>(AsndService::kSdo) && cn->sdo->busy())
-    cn->sdo_wait_answer = true;
-  mn_asnd_from_ = nullptr;
-  return len;
-}
-
-void ManagingNode::on_async_timeout() noexcept {
-  if (awaiting_asnd_) {
-    const bool mandatory = soa_service_ == RequestedService::kIdentRequest ||
-                           soa_service_ == RequestedService::kStatusRequest;
-    ++(mandatory ? counters_.async_timeouts : counters_.async_invites_unused);
-  }
-  awaiting_asnd_ = false;
 }
 
 std::error_code ManagingNode::on_frame(std::span<const uint8_t> bytes) noexcept {
@@ -801,12 +475,7 @@ void ManagingNode::handle_pres(Cn& cn, const PRes& pres, std::span<const uint8_t
   ++cn.st->pres_received;
   cn.rs = pres.request_count;
   cn.pr = pres.priority;
-  // EN differing from the EA the MN last sent: the CN has new error entries to fetch.
-  cn.st->exception_new = pres.exception_new;
-  if (pres.exception_new != cn.st->exception_acknowledge && !cn.exception_pending) {
-    cn.exception_pending = true;
-    ++cn.st->exceptions_signalled;
-  }
+  note_exception_new(cn, pres.exception_new);
   const std::size_t size = pres.payload.size();
   cn.st->last_pres_size = static_cast<uint16_t>(size);
   std::memcpy(cn.pres.data(), pres.payload.data(), size);
@@ -822,85 +491,6 @@ void ManagingNode::handle_pres(Cn& cn, const PRes& pres, std::span<const uint8_t
   // Inputs are usable when the modules' bytes are all there, whatever else the CN appends.
   cn.pres_usable = size >= cn.layout.pres_size;
   reported_state(cn, pres.nmt_state);
-}
-
-void ManagingNode::handle_asnd(const FrameHeader& h, const Asnd& asnd) noexcept {
-  Cn* cn = find(h.src_node);
-  if (!cn) {
-    ++counters_.unexpected_frames;
-    return;
-  }
-  if (h.src_node == soa_target_) awaiting_asnd_ = false;
-  if (const auto* ident = std::get_if<IdentResponse>(&asnd.body)) {
-    cn->rs = ident->request_count;
-    cn->pr = ident->priority;
-    if (cn->st->boot == CnBootState::kIdentify) {
-      const auto& c = cn->cfg;
-      if ((c.vendor_id && *c.vendor_id != ident->vendor_id) ||
-          (c.product_code && *c.product_code != ident->product_code) ||
-          (c.device_type && *c.device_type != ident->device_type) ||
-          (c.revision_no && *c.revision_no != ident->revision_no) ||
-          (c.serial_no && *c.serial_no != ident->serial_no)) {
-        cn->st->last_error = make_error_code(MnError::kIdentMismatch);
-        cn->st->nmt = ident->nmt_state;
-        return;
-      }
-      cn->st->identified = true;
-      cn->st->mac = h.src_mac;
-      cn->st->vendor_id = ident->vendor_id;
-      cn->st->product_code = ident->product_code;
-      cn->st->preq_size =
-          c.preq_size.value_or(ident->poll_out_size ? ident->poll_out_size : cn->layout.preq_size);
-      cn->st->pres_size =
-          c.pres_size.value_or(ident->poll_in_size ? ident->poll_in_size : cn->layout.pres_size);
-      cn->st->preq_size = std::min<uint16_t>(cn->st->preq_size, kMaxIsoPayload);
-      std::fill(cn->preq.begin(), cn->preq.end(), 0);
-      // Exception signalling starts afresh: ER in the next StatusRequest, EA cleared.
-      cn->exception_reset_due = true;
-      cn->exception_pending = false;
-      cn->st->exception_acknowledge = false;
-      enter(*cn, CnBootState::kWaitPreOp2);
-    }
-    reported_state(*cn, ident->nmt_state);
-  } else if (const auto* status = std::get_if<StatusResponse>(&asnd.body)) {
-    cn->rs = status->request_count;
-    cn->pr = status->priority;
-    if (status->entry_count() > 0) {
-      cn->st->status_error_entries += static_cast<uint32_t>(status->entry_count());
-      cn->st->last_error_code = status->entry(status->entry_count() - 1).code;
-    }
-    // The entries are read: acknowledge the EN the CN signals (EA follows EN).
-    cn->st->exception_new = status->exception_new;
-    cn->st->exception_acknowledge = status->exception_new;
-    cn->exception_pending = false;
-    reported_state(*cn, status->nmt_state);
-  } else if (const auto* sdo = std::get_if<Sdo>(&asnd.body)) {
-    if (h.dst_node != kNodeMn) return;
-    cn->sdo_wait_answer = false;
-    cn->sdo->receive(*sdo, now_ns_);
-  } else if (const auto* request = std::get_if<NmtRequest>(&asnd.body)) {
-    handle_nmt_request(*cn, *request);
-  } else {
-    // Services this MN does not use (SyncResponse, manufacturer-specific): accepted, and the
-    // invitation is not repeated until the CN announces a request again.
-    cn->rs = 0;
-  }
-}
-
-void ManagingNode::handle_nmt_request(Cn& from, const NmtRequest& request) noexcept {
-  ++from.st->nmt_requests;
-  // The MN alone drives a CN through its boot: a CN may ask to be reset (it is then booted and
-  // configured again from the start) but not to be started, stopped or reset elsewhere, which
-  // would move the machine behind the MN's back.
-  const bool reset = request.command >= static_cast<uint8_t>(NmtCommandId::kResetNode) &&
-                     request.command <= static_cast<uint8_t>(NmtCommandId::kSwReset);
-  if (!reset || request.target != from.cfg.node_id) {
-    ++from.st->nmt_requests_refused;
-    from.st->last_error = make_error_code(MnError::kNmtRequestRefused);
-    return;
-  }
-  if (from.st->boot != CnBootState::kReset)
-    reset_node(from, make_error_code(MnError::kResetRequested));
 }
 
 void ManagingNode::update_mn_state() noexcept {

@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "config/config.hpp"
+#include "powerlink/error_signalling.hpp"
 #include "powerlink/frames.hpp"
 #include "powerlink/process_image.hpp"
 #include "powerlink/sdo.hpp"
@@ -54,6 +55,7 @@ struct ObjectAccessFailure {
   std::error_code error;  // an SDO abort (sdo_abort_category, value = abort code) or SdoError
 };
 inline constexpr std::size_t kMaxReportedObjectFailures = 8;
+inline constexpr std::size_t kMaxReportedErrorEntries = 8;
 
 // The identity object that did not match (0x1000/0 device type, 0x1018/1..4).
 struct IdentityMismatch {
@@ -89,10 +91,14 @@ struct CnStatus {
   uint32_t stale_pres_dropped = 0;
   uint32_t pres_size_mismatches = 0;  // PRes payload size differed from pres_size
   uint16_t last_pres_size = 0;
-  uint32_t status_error_entries = 0;  // error entries seen in StatusResponses
+  uint32_t status_error_entries = 0;  // error entries fetched from the CN (new ones only)
   uint16_t last_error_code = 0;       // code of the last such entry
-  uint32_t boots = 0;                 // times the CN reached OPERATIONAL
-  uint32_t resets = 0;                // NMTResetNode sent
+  // The last kMaxReportedErrorEntries of them, oldest first.
+  std::array<ErrorEntry, kMaxReportedErrorEntries> error_entries{};
+  std::size_t error_entry_count = 0;
+  uint64_t static_error_bits = 0;  // of the last StatusResponse
+  uint32_t boots = 0;              // times the CN reached OPERATIONAL
+  uint32_t resets = 0;             // NMTResetNode sent
   uint32_t sdo_errors = 0;
   uint32_t nmt_requests = 0;          // NMTRequests received from the CN
   uint32_t nmt_requests_refused = 0;  // ... of them not served
@@ -108,8 +114,12 @@ struct CnStatus {
   // Set when the identity check by SDO failed (kept until the identity matches).
   bool identity_mismatch = false;
   IdentityMismatch mismatch{};
-  // Exception signalling: the CN's EN, the EA the MN acknowledges with in the PReq, and
-  // StatusRequests sent because EN changed (its error entries are fetched).
+  // Error signalling (powerlink/error_signalling.hpp): the handshake's state, how often it
+  // completed and was given up, the CN's EN, the EA the MN acknowledges with (PReq, SoA), and
+  // the EN toggles seen (each one a fetch of its entries).
+  ErrSigState errsig = ErrSigState::kInitWaitEc1;
+  uint32_t errsig_handshakes = 0;
+  uint32_t errsig_gave_up = 0;
   bool exception_new = false;
   bool exception_acknowledge = false;
   uint32_t exceptions_signalled = 0;
@@ -229,6 +239,9 @@ class ManagingNode {
   void handle_pres(Cn& cn, const PRes& pres, std::span<const uint8_t> frame) noexcept;
   void handle_asnd(const FrameHeader& h, const Asnd& asnd) noexcept;
   void handle_nmt_request(Cn& from, const NmtRequest& request) noexcept;
+  void note_exception_new(Cn& cn, bool en) noexcept;
+  void sync_errsig(Cn& cn) noexcept;
+  void record_error_entries(Cn& cn, const StatusResponse& status) noexcept;
   void reported_state(Cn& cn, NmtState state) noexcept;
   void start_next_sdo(Cn& cn) noexcept;
   void sdo_done(Cn& cn, std::error_code ec, std::span<const uint8_t> data) noexcept;

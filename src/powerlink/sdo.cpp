@@ -311,16 +311,25 @@ void SdoServer::receive(const Sdo& sdo, int64_t now_ns) noexcept {
     reply_seq(SdoRecvCon::kInit, SdoSendCon::kInit);
     return;
   }
+  if (seq.send_con == SdoSendCon::kNone) {
+    // The client closes the connection: nothing to answer. A close answered with a close reaches
+    // the client in a later async slot, after it may have opened its next connection, and ends
+    // that one (openPOWERLINK's MN closes after each transfer and after resetting a node).
+    reset();
+    return;
+  }
   if (!connected_) {
     if (seq.recv_con == SdoRecvCon::kInit && seq.send_con == SdoSendCon::kValid) {
       connected_ = true;
       recv_seq_ = seq.send_seq;
       send_seq_ = 0;
       reply_seq(SdoRecvCon::kValid, SdoSendCon::kValid);
-    } else {
+    } else if (sdo.has_command) {
       // No connection: tell the client so it reopens.
       reply_seq(SdoRecvCon::kNone, SdoSendCon::kNone);
     }
+    // A bare acknowledgement of a connection this side no longer has (it was reset) asks for
+    // nothing; answered, it would reach the client after it opened its next connection.
     return;
   }
   if (!sdo.has_command) {

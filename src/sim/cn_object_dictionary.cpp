@@ -14,6 +14,11 @@ constexpr uint32_t kAbortOutOfRange = 0x06090030;
 constexpr uint32_t kAbortGeneral = 0x08000000;
 // Mapping written while enabled (sub 0 ≠ 0): DS 301 wants it disabled first.
 constexpr uint32_t kAbortDeviceState = 0x08000022;
+// 0x1010/0x1011 written without the signature ("save" / "load"): DS 301's "data cannot be
+// transferred or stored".
+constexpr uint32_t kAbortCannotStore = 0x08000020;
+constexpr uint32_t kSignatureSave = 0x65766173;  // "save", little-endian
+constexpr uint32_t kSignatureLoad = 0x64616F6C;  // "load"
 
 uint64_t le(std::span<const uint8_t> d) noexcept {
   uint64_t v = 0;
@@ -53,7 +58,13 @@ uint16_t CnObjectDictionary::Mapping::end_bytes() const noexcept {
 bool CnObjectDictionary::handles(uint16_t index) noexcept {
   switch (index) {
     case 0x1006:
+    case 0x1010:
+    case 0x1011:
     case 0x1020:
+    case 0x1C0B:
+    case 0x1C0C:
+    case 0x1C0D:
+    case 0x1C0F:
     case 0x1C14:
     case 0x1F98:
     case 0x1400:
@@ -71,40 +82,56 @@ uint32_t CnObjectDictionary::read(uint16_t index, uint8_t sub, std::span<uint8_t
                                   std::size_t& size) const noexcept {
   switch (index) {
     case 0x1006:
-      return sub == 0 ? put(out, size, cycle_len_us_, 4) : kAbortNoSubindex;
+      return sub == 0 ? put(out, size, v_.cycle_len_us_, 4) : kAbortNoSubindex;
+    case 0x1010:
+    case 0x1011:
+      // Sub 1 (all parameters): bit 0 = the device saves (restores) on command.
+      if (sub == 0) return put(out, size, 1, 1);
+      return sub == 1 ? put(out, size, 1, 4) : kAbortNoSubindex;
+    case 0x1C0B:
+    case 0x1C0C:
+    case 0x1C0D:
+    case 0x1C0F: {
+      const LossCounter& c = loss_counter(index);
+      if (sub == 0) return put(out, size, 3, 1);
+      if (sub == 1) return put(out, size, c.cumulative, 4);
+      if (sub == 2) return put(out, size, c.threshold_count, 4);
+      if (sub == 3) return put(out, size, c.threshold, 4);
+      return kAbortNoSubindex;
+    }
     case 0x1020:
       if (sub == 0) return put(out, size, 2, 1);
-      return sub <= 2 ? put(out, size, conf_date_time_[sub - 1], 4) : kAbortNoSubindex;
+      return sub <= 2 ? put(out, size, v_.conf_date_time_[sub - 1], 4) : kAbortNoSubindex;
     case 0x1C14:
-      return sub == 0 ? put(out, size, lof_tolerance_ns_, 4) : kAbortNoSubindex;
+      return sub == 0 ? put(out, size, v_.lof_tolerance_ns_, 4) : kAbortNoSubindex;
     case 0x1F98:
       switch (sub) {
         case 0:
           return put(out, size, 9, 1);
         case 1:
-          return put(out, size, isochr_tx_max_payload_, 2);
+          return put(out, size, v_.isochr_tx_max_payload_, 2);
         case 2:
-          return put(out, size, isochr_rx_max_payload_, 2);
+          return put(out, size, v_.isochr_rx_max_payload_, 2);
         case 3:
-          return put(out, size, pres_max_latency_ns_, 4);
+          return put(out, size, v_.pres_max_latency_ns_, 4);
         case 4:
-          return put(out, size, preq_act_payload_, 2);
+          return put(out, size, v_.preq_act_payload_, 2);
         case 5:
-          return put(out, size, pres_act_payload_, 2);
+          return put(out, size, v_.pres_act_payload_, 2);
         case 6:
-          return put(out, size, asnd_max_latency_ns_, 4);
+          return put(out, size, v_.asnd_max_latency_ns_, 4);
         case 7:
-          return put(out, size, multipl_cycle_cnt_, 1);
+          return put(out, size, v_.multipl_cycle_cnt_, 1);
         case 8:
-          return put(out, size, async_mtu_, 2);
+          return put(out, size, v_.async_mtu_, 2);
         case 9:
-          return put(out, size, prescaler_, 2);
+          return put(out, size, v_.prescaler_, 2);
         default:
           return kAbortNoSubindex;
       }
     case 0x1400:
     case 0x1800: {
-      const PdoComm& c = index == 0x1400 ? rx_comm_ : tx_comm_;
+      const PdoComm& c = index == 0x1400 ? v_.rx_comm_ : v_.tx_comm_;
       if (sub == 0) return put(out, size, 2, 1);
       if (sub == 1) return put(out, size, c.node_id, 1);
       if (sub == 2) return put(out, size, c.mapping_version, 1);
@@ -112,16 +139,16 @@ uint32_t CnObjectDictionary::read(uint16_t index, uint8_t sub, std::span<uint8_t
     }
     case 0x1600:
     case 0x1A00: {
-      const Mapping& m = index == 0x1600 ? rx_map_ : tx_map_;
+      const Mapping& m = index == 0x1600 ? v_.rx_map_ : v_.tx_map_;
       if (sub == 0) return put(out, size, m.count, 1);
       if (sub > kMaxMapped) return kAbortNoSubindex;
       return put(out, size, m.entries[sub - 1], 8);
     }
     case 0x1F22:
       if (sub == 0) return put(out, size, 254, 1);
-      if (out.size() < dcf_size_) return kAbortGeneral;
-      std::memcpy(out.data(), dcf_.data(), dcf_size_);
-      size = dcf_size_;
+      if (out.size() < v_.dcf_size_) return kAbortGeneral;
+      std::memcpy(out.data(), v_.dcf_.data(), v_.dcf_size_);
+      size = v_.dcf_size_;
       return 0;
     default:
       return kAbortNoObject;
@@ -132,12 +159,39 @@ uint32_t CnObjectDictionary::write(uint16_t index, uint8_t sub,
                                    std::span<const uint8_t> data) noexcept {
   switch (index) {
     case 0x1006:
-      return sub == 0 ? take(cycle_len_us_, data) : kAbortNoSubindex;
+      return sub == 0 ? take(v_.cycle_len_us_, data) : kAbortNoSubindex;
+    case 0x1010:
+    case 0x1011: {
+      if (sub == 0) return kAbortReadOnly;
+      if (sub != 1) return kAbortNoSubindex;
+      uint32_t signature = 0;
+      if (const uint32_t a = take(signature, data)) return a;
+      if (index == 0x1010) {
+        if (signature != kSignatureSave) return kAbortCannotStore;
+        stored_ = v_;
+        has_stored_ = true;
+      } else {
+        // Defaults again from the next reset on (the values in use stay until then).
+        if (signature != kSignatureLoad) return kAbortCannotStore;
+        has_stored_ = false;
+      }
+      return 0;
+    }
+    case 0x1C0B:
+    case 0x1C0C:
+    case 0x1C0D:
+    case 0x1C0F: {
+      LossCounter& c = loss_counter(index);
+      if (sub == 0 || sub == 2) return kAbortReadOnly;
+      if (sub == 1) return take(c.cumulative, data);
+      if (sub == 3) return take(c.threshold, data);
+      return kAbortNoSubindex;
+    }
     case 0x1020:
       if (sub == 0) return kAbortReadOnly;
-      return sub <= 2 ? take(conf_date_time_[sub - 1], data) : kAbortNoSubindex;
+      return sub <= 2 ? take(v_.conf_date_time_[sub - 1], data) : kAbortNoSubindex;
     case 0x1C14:
-      return sub == 0 ? take(lof_tolerance_ns_, data) : kAbortNoSubindex;
+      return sub == 0 ? take(v_.lof_tolerance_ns_, data) : kAbortNoSubindex;
     case 0x1F98:
       switch (sub) {
         case 0:
@@ -150,23 +204,23 @@ uint32_t CnObjectDictionary::write(uint16_t index, uint8_t sub,
         case 5: {
           uint16_t v = 0;
           if (const uint32_t a = take(v, data)) return a;
-          const uint16_t limit = sub == 4 ? isochr_rx_max_payload_ : isochr_tx_max_payload_;
+          const uint16_t limit = sub == 4 ? v_.isochr_rx_max_payload_ : v_.isochr_tx_max_payload_;
           if (v > limit) return kAbortOutOfRange;
-          (sub == 4 ? preq_act_payload_ : pres_act_payload_) = v;
+          (sub == 4 ? v_.preq_act_payload_ : v_.pres_act_payload_) = v;
           return 0;
         }
         case 7:
-          return take(multipl_cycle_cnt_, data);
+          return take(v_.multipl_cycle_cnt_, data);
         case 8:
-          return take(async_mtu_, data);
+          return take(v_.async_mtu_, data);
         case 9:
-          return take(prescaler_, data);
+          return take(v_.prescaler_, data);
         default:
           return kAbortNoSubindex;
       }
     case 0x1400:
     case 0x1800: {
-      PdoComm& c = index == 0x1400 ? rx_comm_ : tx_comm_;
+      PdoComm& c = index == 0x1400 ? v_.rx_comm_ : v_.tx_comm_;
       if (sub == 0) return kAbortReadOnly;
       if (sub == 1) return take(c.node_id, data);
       if (sub == 2) return take(c.mapping_version, data);
@@ -174,7 +228,7 @@ uint32_t CnObjectDictionary::write(uint16_t index, uint8_t sub,
     }
     case 0x1600:
     case 0x1A00: {
-      Mapping& m = index == 0x1600 ? rx_map_ : tx_map_;
+      Mapping& m = index == 0x1600 ? v_.rx_map_ : v_.tx_map_;
       if (sub == 0) {
         uint8_t count = 0;
         if (const uint32_t a = take(count, data)) return a;
@@ -192,23 +246,35 @@ uint32_t CnObjectDictionary::write(uint16_t index, uint8_t sub,
     case 0x1F22:
       if (sub == 0) return kAbortReadOnly;
       if (data.size() > kMaxStoredDcf) return kAbortOutOfRange;
-      std::memcpy(dcf_.data(), data.data(), data.size());
-      dcf_size_ = data.size();
+      std::memcpy(v_.dcf_.data(), data.data(), data.size());
+      v_.dcf_size_ = data.size();
       return 0;
     default:
       return kAbortNoObject;
   }
 }
 
+CnObjectDictionary::LossCounter& CnObjectDictionary::loss_counter(uint16_t index) noexcept {
+  return index == 0x1C0B   ? v_.loss_of_soc
+         : index == 0x1C0C ? v_.loss_of_soa
+         : index == 0x1C0D ? v_.loss_of_preq
+                           : v_.crc_error;
+}
+
+const CnObjectDictionary::LossCounter& CnObjectDictionary::loss_counter(
+    uint16_t index) const noexcept {
+  return const_cast<CnObjectDictionary*>(this)->loss_counter(index);
+}
+
 uint16_t CnObjectDictionary::pres_size(uint16_t fallback) const noexcept {
-  if (pres_act_payload_ != 0) return pres_act_payload_;
-  if (tx_map_.count != 0) return std::max(fallback, tx_map_.end_bytes());
+  if (v_.pres_act_payload_ != 0) return v_.pres_act_payload_;
+  if (v_.tx_map_.count != 0) return std::max(fallback, v_.tx_map_.end_bytes());
   return fallback;
 }
 
 uint16_t CnObjectDictionary::preq_size(uint16_t fallback) const noexcept {
-  if (preq_act_payload_ != 0) return preq_act_payload_;
-  if (rx_map_.count != 0) return std::max(fallback, rx_map_.end_bytes());
+  if (v_.preq_act_payload_ != 0) return v_.preq_act_payload_;
+  if (v_.rx_map_.count != 0) return std::max(fallback, v_.rx_map_.end_bytes());
   return fallback;
 }
 

@@ -28,7 +28,8 @@ constexpr uint32_t kAbortGeneral = 0x08000000;
 // Error codes logged in the StatusResponse history (DS 301 DLL error codes).
 constexpr uint16_t kErrorLossOfSoc = 0x8245;
 constexpr uint16_t kErrorLossOfPReq = 0x8242;
-constexpr uint16_t kErrorEntryTypeHistory = 0x1001;  // mode history, profile DLL
+constexpr uint16_t kEntryDll = pl::entry_type::kModeOccurred | pl::entry_type::kProfilePowerlink;
+constexpr uint16_t kEntryVendor = pl::entry_type::kModeOccurred | pl::entry_type::kProfileVendor;
 
 constexpr uint8_t kPriorityGeneric = 3;
 constexpr uint8_t kPriorityNmtRequest = 7;
@@ -62,6 +63,11 @@ class PowerlinkCn::Objects final : public pl::SdoObjectAccess {
     if (index == 0x1000) {
       if (subindex != 0) return kAbortNoSubindex;
       value = cn_.config_.device_type;
+    } else if (index == 0x1001) {
+      // ERR_ErrorRegister_U8: byte 0 of the StatusResponse's static error bit field.
+      if (subindex != 0) return kAbortNoSubindex;
+      value = static_cast<uint8_t>(cn_.errsig_.static_error_bits());
+      width = 1;
     } else if (index == 0x1018) {
       switch (subindex) {
         case 0:
@@ -98,7 +104,7 @@ class PowerlinkCn::Objects final : public pl::SdoObjectAccess {
 
   uint32_t write_object(uint16_t index, uint8_t subindex,
                         std::span<const uint8_t> data) noexcept override {
-    if (index == 0x1000 || index == 0x1018) return kAbortReadOnly;
+    if (index == 0x1000 || index == 0x1001 || index == 0x1018) return kAbortReadOnly;
     if (CnObjectDictionary::handles(index)) return cn_.comm_.write(index, subindex, data);
     Ds1928Module* module = nullptr;
     uint16_t reg = 0;
@@ -226,8 +232,9 @@ void PowerlinkCn::reset(pl::NmtCommandId command, int64_t now_ns) noexcept {
     default:
       break;
   }
-  // Every reset restores the communication objects: the MN configures them again.
-  comm_.reset();
+  // NMTResetNode/ResetCommunication take the communication objects back to their stored (else
+  // default) values; NMTResetConfiguration is how an MN activates what it wrote: kept.
+  if (command != pl::NmtCommandId::kResetConfiguration) comm_.reset_communication();
   sdo_->reset();
   async_head_ = 0;
   async_count_ = 0;
@@ -238,8 +245,8 @@ void PowerlinkCn::reset(pl::NmtCommandId command, int64_t now_ns) noexcept {
   preq_interval_ = 0;
   loss_of_preq_counter_ = 0;
   pres_pending_ = false;
-  error_count_ = 0;
-  exception_new_ = false;
+  // EC=1 after every reset: the MN sees the reboot and initialises the signalling again.
+  errsig_.reset();
   enter(NmtState::kNotActive, now_ns);
 }
 
@@ -376,6 +383,7 @@ void PowerlinkCn::preq_answer(const pl::PReq& preq, int64_t now_ns) noexcept {
     preq_interval_ = cycles_since_preq_;
   }
   cycles_since_preq_ = 0;
+  errsig_.on_preq(preq.exception_acknowledge);
   // Outputs are applied only when the MN says they are valid and the node is operational.
   if (preq.ready && state_ == NmtState::kOperational) {
     for (HostedModule& m : modules_) {
@@ -423,7 +431,7 @@ void PowerlinkCn::send_pres(int64_t now_ns) noexcept {
   pl::PRes pres;
   pres.nmt_state = state_;
   pres.ready = state_ == NmtState::kOperational;
-  pres.exception_new = exception_new_;
+  pres.exception_new = errsig_.exception_new();
   pres.request_count = request_count();
   pres.priority = request_priority();
   pres.payload = std::span<const uint8_t>(payload.data(), size);
@@ -459,6 +467,8 @@ void PowerlinkCn::soa_answer(const pl::SoA& soa, int64_t now_ns) noexcept {
       send_ident_response();
       break;
     case pl::RequestedService::kStatusRequest:
+      // ER/EA of this request first: the answer carries the EC it asks for.
+      errsig_.on_status_request(soa.exception_reset, soa.exception_acknowledge);
       send_status_response();
       break;
     case pl::RequestedService::kUnspecifiedInvite:
@@ -497,6 +507,11 @@ void PowerlinkCn::on_asnd(const pl::Frame& frame, int64_t now_ns) noexcept {
   } else if (const auto* sdo = std::get_if<pl::Sdo>(&asnd.body)) {
     if (state_ == NmtState::kNotActive) return;  // SDO needs PRE_OPERATIONAL_1 or later
     ++stats_.sdo_frames_in;
+    if (sdo->sequence.send_con == pl::SdoSendCon::kInit) {
+      // A new connection: answers still queued for the old one would end it when they go out.
+      async_head_ = 0;
+      async_count_ = 0;
+    }
     sdo_->receive(*sdo, now_ns);
   }
 }
@@ -533,7 +548,7 @@ void PowerlinkCn::on_nmt_command(uint8_t command, int64_t now_ns) noexcept {
 void PowerlinkCn::send_ident_response() noexcept {
   pl::IdentResponse ident;
   ident.nmt_state = state_;
-  ident.exception_new = exception_new_;
+  ident.exception_new = errsig_.exception_new();
   ident.request_count = request_count();
   ident.priority = request_priority();
   ident.mtu = 300;
@@ -545,6 +560,8 @@ void PowerlinkCn::send_ident_response() noexcept {
   ident.product_code = config_.product_code;
   ident.revision_no = config_.revision_no;
   ident.serial_no = config_.serial_no;
+  ident.verify_conf_date = comm_.configuration_date();
+  ident.verify_conf_time = comm_.configuration_time();
   // Feature flags: SDO by ASnd (bit 2) and NMT Info services (bit 3) — no PDO over SDO, no PRC.
   ident.feature_flags = (1u << 2) | (1u << 3);
   ident.ip_address =
@@ -563,18 +580,18 @@ void PowerlinkCn::send_ident_response() noexcept {
 void PowerlinkCn::send_status_response() noexcept {
   pl::StatusResponse status;
   status.nmt_state = state_;
-  status.exception_new = exception_new_;
+  status.exception_new = errsig_.exception_new();
+  status.exception_clear = errsig_.exception_clear();
   status.request_count = request_count();
   status.priority = request_priority();
-  status.static_error_bits = error_count_ != 0 ? 1 : 0;  // bit 0: generic error present
+  status.static_error_bits = errsig_.static_error_bits();
   auto len = pl::build_status_response(
-      tx_, pl::asnd_header(config_.mac, config_.node_id, pl::kNodeMn), status,
-      std::span<const pl::ErrorEntry>(errors_.data(), error_count_));
+      tx_, pl::asnd_header(config_.mac, config_.node_id, pl::kNodeMn), status, errsig_.entries());
   if (!len) return;
   emit({tx_.data(), *len});
   ++stats_.asnd_sent;
-  // The history went out: the MN has it.
-  error_count_ = 0;
+  // Kept until the MN acknowledges them with EA.
+  errsig_.status_sent();
 }
 
 void PowerlinkCn::queue_async(std::span<const uint8_t> frame) noexcept {
@@ -596,17 +613,25 @@ uint8_t PowerlinkCn::request_priority() const noexcept {
 }
 
 void PowerlinkCn::log_error(uint16_t code, int64_t now_ns) noexcept {
+  queue_error(kEntryDll, code, {}, now_ns);
+}
+
+void PowerlinkCn::raise_error(uint16_t code, const std::array<uint8_t, 8>& info,
+                              int64_t now_ns) noexcept {
+  if (!powered_) return;
+  queue_error(kEntryVendor, code, info, now_ns);
+}
+
+void PowerlinkCn::queue_error(uint16_t type, uint16_t code, const std::array<uint8_t, 8>& info,
+                              int64_t now_ns) noexcept {
   pl::ErrorEntry e;
-  e.type = kErrorEntryTypeHistory;
+  e.type = type;
   e.code = code;
+  e.additional = info;
   const uint64_t net_us = net_time_us_at(now_ns);
   e.timestamp = (net_us / 1'000'000) | (((net_us % 1'000'000) * 1000) << 32);
-  if (error_count_ == kErrorSlots) {
-    std::move(errors_.begin() + 1, errors_.end(), errors_.begin());
-    --error_count_;
-  }
-  errors_[error_count_++] = e;
-  exception_new_ = !exception_new_;
+  errsig_.queue(e);
+  ++stats_.errors_raised;
 }
 
 // ---- Time and modules ---------------------------------------------------------------------
@@ -625,99 +650,6 @@ void PowerlinkCn::tick_modules(int64_t now_ns) noexcept {
 
 void PowerlinkCn::emit(std::span<const uint8_t> frame) noexcept {
   if (send_) send_(frame);
-}
-
-// ---- Loop -----------------------------------------------------------------------------------
-
-PowerlinkCnLoop::PowerlinkCnLoop(pl::Link& link, std::function<bool(int64_t)> wait_readable,
-                                 std::span<PowerlinkCn* const> nodes, Options options)
-    : link_(link),
-      wait_readable_(std::move(wait_readable)),
-      nodes_(nodes.begin(), nodes.end()),
-      options_(options) {}
-
-namespace {
-[[nodiscard]] int64_t now_monotonic_ns() noexcept {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
-}
-void sleep_until_ns(int64_t t) noexcept {
-  const timespec ts{static_cast<time_t>(t / 1'000'000'000), static_cast<long>(t % 1'000'000'000)};
-  while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
-  }
-}
-}  // namespace
-
-void PowerlinkCnLoop::Rhythm::note(int64_t t) noexcept {
-  if (last != 0) {
-    const int64_t gap = t - last;
-    if (period == 0 || gap > 4 * period) {
-      period = gap;
-    } else {
-      period += (gap - period) / 8;
-    }
-  }
-  last = t;
-}
-
-int64_t PowerlinkCnLoop::next_cycle_start(int64_t now) const noexcept {
-  if (soc_.valid(now)) return soc_.last + soc_.period;
-  if (soa_.valid(now)) return soa_.last + soa_.period;
-  return 0;
-}
-
-bool PowerlinkCnLoop::run_once() noexcept {
-  int64_t now = now_monotonic_ns();
-  int64_t node_deadline = INT64_MAX;
-  for (PowerlinkCn* n : nodes_) node_deadline = std::min(node_deadline, n->next_deadline_ns());
-
-  const int64_t next_start = next_cycle_start(now);
-  if (next_start != 0 && cycle_done_) {
-    // Idle phase: this cycle's frames are handled; frames that still come (an ASnd from the MN
-    // after its SoA) wait in the ring until the wake-up.
-    const int64_t wake =
-        std::min({next_start - options_.guard_ns, node_deadline, now + options_.idle_wait_ns});
-    if (wake > now) sleep_until_ns(wake);
-    now = now_monotonic_ns();
-  } else if (next_start == 0 && node_deadline > now) {
-    // No rhythm known (MN silent or just starting): block until something comes.
-    (void)wait_readable_(std::min(node_deadline, now + options_.idle_wait_ns));
-    now = now_monotonic_ns();
-  }
-  cycle_done_ = false;
-
-  // Busy phase: poll until this cycle's SoA went by (or a bounded window passed).
-  const int64_t period = soc_.valid(now) ? soc_.period : soa_.valid(now) ? soa_.period : 0;
-  const int64_t end = now + (period > 0 ? period + options_.guard_ns : options_.idle_wait_ns);
-  bool ok = true;
-  while (!cycle_done_ && now < end) {
-    const pl::Received r = link_.receive(rx_, std::min(end, node_deadline));
-    now = r.rx_time_ns != 0 ? r.rx_time_ns : now_monotonic_ns();
-    if (r.error && r.length == 0) {
-      ok = false;
-      break;
-    }
-    if (r.length > 14) {
-      const std::span<const uint8_t> frame(rx_.data(), r.length);
-      for (PowerlinkCn* n : nodes_) n->receive(frame, now);
-      if (rx_[12] == 0x88 && rx_[13] == 0xAB) {
-        const uint8_t type = rx_[14] & 0x7F;
-        if (type == 0x01) soc_.note(now);
-        if (type == 0x05) {
-          soa_.note(now);
-          cycle_done_ = true;  // after the SoA only the invited ASnd follows
-        }
-      }
-    }
-    node_deadline = INT64_MAX;
-    for (PowerlinkCn* n : nodes_) {
-      if (n->next_deadline_ns() <= now) n->tick(now);
-      node_deadline = std::min(node_deadline, n->next_deadline_ns());
-    }
-  }
-  for (PowerlinkCn* n : nodes_) n->tick(now);
-  return ok;
 }
 
 }  // namespace ds1928::sim

@@ -29,6 +29,7 @@
 #include <vector>
 
 #include "config/config.hpp"
+#include "powerlink/error_signalling.hpp"
 #include "powerlink/frames.hpp"
 #include "powerlink/link.hpp"
 #include "powerlink/process_image.hpp"
@@ -106,8 +107,9 @@ struct PowerlinkCnStats {
   uint64_t power_cycles = 0;
   uint64_t nmt_requests_sent = 0;
   uint64_t resets = 0;
-  uint64_t bad_frames = 0;    // rejected by the codec
-  uint64_t short_frames = 0;  // accepted although shorter than 60 bytes (unpadded sender)
+  uint64_t errors_raised = 0;  // error entries queued (raise_error, DLL errors)
+  uint64_t bad_frames = 0;     // rejected by the codec
+  uint64_t short_frames = 0;   // accepted although shorter than 60 bytes (unpadded sender)
 };
 
 class PowerlinkCn {
@@ -135,6 +137,13 @@ class PowerlinkCn {
   // PRes/StatusResponse, sent as an NMTRequest (NMTResetNode, target = itself) when the MN invites
   // it with NMTRequestInvite. A power cycle forgets it.
   void request_own_reset() noexcept { nmt_request_pending_ = true; }
+  // An error the node reports (a module error, a test's injection): queued in its emergency
+  // queue as a vendor-specific "occurred" entry stamped with the node's NetTime, signalled to
+  // the MN by toggling EN (powerlink/error_signalling.hpp). A reset empties the queue.
+  void raise_error(uint16_t code, const std::array<uint8_t, 8>& info, int64_t now_ns) noexcept;
+  [[nodiscard]] const powerlink::CnErrorSignalling& error_signalling() const noexcept {
+    return errsig_;
+  }
 
   [[nodiscard]] powerlink::NmtState nmt_state() const noexcept { return state_; }
   [[nodiscard]] uint8_t node_id() const noexcept { return config_.node_id; }
@@ -188,6 +197,8 @@ class PowerlinkCn {
   [[nodiscard]] uint8_t request_count() const noexcept;
   [[nodiscard]] uint8_t request_priority() const noexcept;
   void log_error(uint16_t code, int64_t now_ns) noexcept;
+  void queue_error(uint16_t type, uint16_t code, const std::array<uint8_t, 8>& info,
+                   int64_t now_ns) noexcept;
   void emit(std::span<const uint8_t> frame) noexcept;
 
   PowerlinkCnConfig config_;
@@ -232,11 +243,8 @@ class PowerlinkCn {
   std::array<std::size_t, kAsyncSlots> async_len_{};
   std::size_t async_head_ = 0;
   std::size_t async_count_ = 0;
-  // Error history for the StatusResponse (EN toggles on every new entry).
-  static constexpr std::size_t kErrorSlots = 4;
-  std::array<powerlink::ErrorEntry, kErrorSlots> errors_{};
-  std::size_t error_count_ = 0;
-  bool exception_new_ = false;
+  // Error signalling: ER/EC handshake, EN/EA, the emergency queue the StatusResponse carries.
+  powerlink::CnErrorSignalling errsig_;
   // PReq payload buffer for the outputs and frame scratch.
   std::array<uint8_t, powerlink::kMaxFrameSize> tx_{};
 };
@@ -244,7 +252,8 @@ class PowerlinkCn {
 // Drives a set of PowerlinkCn from one link. Polls with the link's receive in the cycle's busy
 // phase and sleeps in its idle phase: after a SoA it sleeps until `guard_ns` before the next
 // SoC is due (a SCHED_FIFO task that spins all the time is throttled by the kernel and starves
-// the other core's work), and blocks in wait_readable() when no cycle rhythm is known.
+// the other core's work), and blocks in wait_readable() when no SoC rhythm is known (silence, or
+// an MN's reduced cycle, whose SoAs need not be periodic).
 class PowerlinkCnLoop {
  public:
   struct Options {

@@ -38,8 +38,11 @@ struct Harness {
     REQUIRE(len.has_value());
     cn.receive(std::span<const uint8_t>(buf.data(), *len), now);
   }
-  void soa(pl::RequestedService service, uint8_t target, NmtState mn = NmtState::kPreOperational1) {
+  void soa(pl::RequestedService service, uint8_t target, NmtState mn = NmtState::kPreOperational1,
+           bool er = false, bool ea = false) {
     pl::SoA s;
+    s.exception_reset = er;
+    s.exception_acknowledge = ea;
     s.mn_nmt_state = mn;
     s.service = service;
     s.target = target;
@@ -50,9 +53,10 @@ struct Harness {
     s.relative_time_us = relative_us;
     deliver(pl::build_soc(buf, pl::soc_header(kMnMac), s));
   }
-  void preq(uint8_t node, std::span<const uint8_t> payload, bool ready) {
+  void preq(uint8_t node, std::span<const uint8_t> payload, bool ready, bool ea = false) {
     pl::PReq p;
     p.ready = ready;
+    p.exception_acknowledge = ea;
     p.payload = payload;
     deliver(pl::build_preq(buf, pl::preq_header(kMnMac, cn_mac(), node), p));
   }
@@ -372,4 +376,104 @@ TEST_CASE("CN fault injection: dropped, delayed and wrongly sized PRes") {
   auto pres = pl::parse_pres(frame);
   REQUIRE(pres.has_value());
   CHECK(pres->payload.size() == h.cn.layout().pres_size + 4u);
+}
+
+namespace {
+// A StatusRequest with ER/EA; returns the StatusResponse's bytes (the parsed view needs them).
+std::vector<uint8_t> status_request(Harness& h, uint8_t node, bool er, bool ea) {
+  h.out.clear();
+  h.soa(pl::RequestedService::kStatusRequest, node, NmtState::kPreOperational2, er, ea);
+  return h.pop();
+}
+pl::StatusResponse status_of(const std::vector<uint8_t>& frame) {
+  auto asnd = pl::parse_asnd(frame);
+  REQUIRE(asnd.has_value());
+  const auto* status = std::get_if<pl::StatusResponse>(&asnd->body);
+  REQUIRE(status != nullptr);
+  return *status;
+}
+}  // namespace
+
+TEST_CASE("CN error signalling: EC follows ER, a raised entry toggles EN until EA comes back") {
+  sim::PowerlinkCnConfig config;
+  config.node_id = 3;
+  Harness h(config);
+  boot_to_pre_op2(h, 3);
+  // After power-up EC=1: the MN sees the reboot.
+  auto f = status_request(h, 3, false, false);
+  CHECK(status_of(f).exception_clear);
+  f = status_request(h, 3, true, false);  // ER=1: the answer to it already has EC=1
+  CHECK(status_of(f).exception_clear);
+  f = status_request(h, 3, false, false);  // ER=0: EC=0
+  CHECK_FALSE(status_of(f).exception_clear);
+  CHECK_FALSE(status_of(f).exception_new);
+  CHECK(status_of(f).entry_count() == 0);
+
+  h.cn.raise_error(0x1928, {9, 0, 0, 0, 0, 0, 0, 0}, h.now);
+  CHECK(h.cn.error_signalling().exception_new());
+  std::vector<uint8_t> payload(h.cn.layout().preq_size, 0);
+  h.out.clear();
+  h.soc();
+  h.preq(3, payload, false, false);
+  const auto pres_frame = h.pop();
+  auto pres = pl::parse_pres(pres_frame);
+  REQUIRE(pres.has_value());
+  CHECK(pres->exception_new);  // EN in the PRes
+  f = status_request(h, 3, false, false);
+  const auto st = status_of(f);
+  CHECK(st.exception_new);
+  CHECK(st.static_error_bits == pl::kErrorRegisterGeneric);
+  REQUIRE(st.entry_count() == 1);
+  CHECK(st.entry(0).code == 0x1928);
+  CHECK(st.entry(0).type == (pl::entry_type::kEmergency | pl::entry_type::kModeOccurred |
+                             pl::entry_type::kProfileVendor));
+  CHECK(st.entry(0).additional[0] == 9);
+  // Not acknowledged yet: the entry is sent again.
+  f = status_request(h, 3, false, false);
+  CHECK(status_of(f).entry_count() == 1);
+  // EA = EN in the PReq: delivered.
+  h.preq(3, payload, false, true);
+  f = status_request(h, 3, false, true);
+  CHECK(status_of(f).entry_count() == 0);
+  CHECK(status_of(f).static_error_bits == 0);
+  CHECK(status_of(f).exception_new);  // EN stays where it is until the next entry
+  // A reset: EC=1 again, the queue is empty.
+  h.cn.raise_error(0x1929, {}, h.now);
+  h.nmt(pl::NmtCommandId::kResetNode, 3);
+  boot_to_pre_op2(h, 3);
+  f = status_request(h, 3, false, false);
+  CHECK(status_of(f).exception_clear);
+  CHECK(status_of(f).entry_count() == 0);
+}
+
+TEST_CASE("CN objects an MN's configuration manager writes: store, restore, DLL counters") {
+  sim::CnObjectDictionary od;
+  const std::array<uint8_t, 4> save{'s', 'a', 'v', 'e'};
+  const std::array<uint8_t, 4> load{'l', 'o', 'a', 'd'};
+  const std::array<uint8_t, 4> date{0x24, 0x31, 0, 0};
+  const std::array<uint8_t, 4> threshold{0x50, 0, 0, 0};
+  CHECK(od.write(0x1020, 1, date) == 0);
+  CHECK(od.write(0x1C0B, 3, threshold) == 0);
+  CHECK(od.write(0x1C0D, 3, threshold) == 0);
+  CHECK(od.write(0x1C0B, 2, threshold) == 0x06010002);  // threshold counter: read-only
+  CHECK(od.write(0x1C0B, 4, threshold) == 0x06090011);
+  CHECK(od.write(0x1010, 1, load) == 0x08000020);  // wrong signature
+  CHECK(od.write(0x6000, 1, threshold) == 0x06020000);
+  std::array<uint8_t, 8> out{};
+  std::size_t size = 0;
+  CHECK(od.read(0x1C0D, 3, out, size) == 0);
+  CHECK(size == 4);
+  CHECK(out[0] == 0x50);
+  // NMTResetConfiguration keeps the values (the caller does not reset), a reset of the
+  // communication goes back to the stored ones, else the defaults.
+  od.reset_communication();
+  CHECK(od.configuration_date() == 0);
+  CHECK(od.write(0x1020, 1, date) == 0);
+  CHECK(od.write(0x1010, 1, save) == 0);
+  od.reset_communication();
+  CHECK(od.configuration_date() == 0x3124);
+  CHECK(od.write(0x1011, 1, load) == 0);
+  CHECK(od.configuration_date() == 0x3124);  // still in use until the next reset
+  od.reset_communication();
+  CHECK(od.configuration_date() == 0);
 }

@@ -159,7 +159,7 @@ TEST_CASE("The simulated CN's communication objects: typed access, mapping rules
   CHECK(od.write(0x1F22, 9, std::vector<uint8_t>{1, 2, 3}) == 0);
   CHECK(od.read(0x1F22, 9, out, size) == 0);
   CHECK(size == 3);
-  od.reset();
+  od.reset_communication();  // nothing stored (0x1010): the defaults
   CHECK(od.pres_size(23) == 23);
   CHECK(od.cycle_length_us() == 0);
   CHECK(sim::CnObjectDictionary::handles(0x1400));

@@ -1,6 +1,7 @@
 // The MN as a configuration manager for third-party CNs: object writes in the boot step
 // "configure" with per-object abort reports, the identity read back by SDO, the cycle objects,
 // READY_TO_OPERATE before OPERATIONAL/RD, and exception signalling (EN/EA/ER). In-memory CN rig.
+#include <algorithm>
 #include <catch2/catch.hpp>
 
 #include "mn_rig.hpp"
@@ -162,4 +163,47 @@ TEST_CASE(
   REQUIRE(rig.run_until([&] { return !cn.last_preq_ea; }, 50));
   CHECK(cn.status_requests == requests + 2);
   CHECK(rig.st(1).boot == CnBootState::kOperational);
+}
+
+TEST_CASE("Error signalling handshake: ER=1 until EC=1, then ER=0 until EC=0",
+          "[powerlink][mn][exception]") {
+  Rig rig({1});
+  REQUIRE(rig.run_until([&] { return operational(rig); }));
+  const TestCn& cn = *rig.cns[0];
+  REQUIRE(cn.er_seen.size() >= 2);
+  // ER=1 first, then ER=0 (no ER=1 after the first ER=0: the handshake completed once).
+  CHECK(cn.er_seen.front());
+  const auto first_zero = std::find(cn.er_seen.begin(), cn.er_seen.end(), false);
+  REQUIRE(first_zero != cn.er_seen.end());
+  CHECK(std::find(first_zero, cn.er_seen.end(), true) == cn.er_seen.end());
+  CHECK(rig.st(1).errsig == ErrSigState::kReady);
+  CHECK(rig.st(1).errsig_handshakes == 1);
+  CHECK(rig.st(1).errsig_gave_up == 0);
+  CHECK(rig.st(1).resets == 0);
+}
+
+TEST_CASE("A CN that never answers EC=1 still boots, the MN gives up on the handshake once",
+          "[powerlink][mn][exception]") {
+  Rig rig({1});
+  rig.cns[0]->follow_er = false;
+  REQUIRE(rig.run_until([&] { return operational(rig); }));
+  REQUIRE(rig.run_until([&] { return rig.st(1).errsig == ErrSigState::kGaveUp; }, 2000));
+  CHECK(rig.st(1).errsig_gave_up == 1);
+  CHECK(rig.st(1).errsig_handshakes == 0);
+  const int requests = rig.cns[0]->status_requests;
+  CHECK(requests <= static_cast<int>(MnErrorSignalling::kMaxAttempts) + 12);  // bounded
+  for (int i = 0; i < 200; ++i) rig.step();
+  CHECK(rig.cns[0]->status_requests == requests);  // no further handshake requests
+  CHECK(rig.st(1).boot == CnBootState::kOperational);
+  CHECK(rig.st(1).resets == 0);
+  // Its EN toggles are still fetched.
+  ErrorEntry entry;
+  entry.type = 0x7001;
+  entry.code = 0x4242;
+  rig.cns[0]->status_errors = {entry};
+  rig.cns[0]->exception_new = true;
+  REQUIRE(rig.run_until([&] { return rig.cns[0]->last_preq_ea; }, 100));
+  CHECK(rig.st(1).last_error_code == 0x4242);
+  REQUIRE(rig.st(1).error_entry_count == 1);
+  CHECK(rig.st(1).error_entries[0].code == 0x4242);
 }

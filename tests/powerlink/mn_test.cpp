@@ -408,7 +408,8 @@ TEST_CASE("A power-cycled CN is detected and booted again", "[powerlink][mn]") {
 
 TEST_CASE("StatusResponses with error entries are tolerated and counted", "[powerlink][mn]") {
   Rig rig({1}, 1);
-  rig.cns[0]->status_errors = {{0x1000, 0x8235, 7, {}}, {0x1000, 0x8611, 8, {}}};
+  rig.cns[0]->status_errors = {{0x7001, 0x8235, 7, {}}, {0x7001, 0x8611, 8, {}}};
+  rig.cns[0]->exception_new = true;  // signalled: fetched once the handshake is done
   REQUIRE(rig.run_until([&] { return rig.bus->state() == BusState::Operational; }));
   CHECK(rig.cns[0]->status_requests > 0);
   CHECK(rig.st(1).status_error_entries >= 2);

@@ -203,3 +203,31 @@ TEST_CASE("an SDO abort without its 4-byte code is a protocol error, not a code 
     CHECK(b.result == make_error_code(SdoError::kProtocol));
   }
 }
+
+TEST_CASE(
+    "SDO server: a client's close and a bare acknowledgement without connection go "
+    "unanswered",
+    "[powerlink][sdo]") {
+  // openPOWERLINK's MN closes its connection after a transfer and acknowledges a node it just
+  // reset; an answer to either reaches it in a later async slot and ends its next connection.
+  Bench b;
+  const std::vector<uint8_t> one{1};
+  REQUIRE_FALSE(b.client.write(0x2001, 0x07, one, 0));
+  b.pump();
+  REQUIRE(b.completions == 1);
+  b.server.reset();  // the node was reset (NMTResetNode): its server has no connection
+  Sdo close;
+  close.sequence = {1, SdoRecvCon::kNone, 1, SdoSendCon::kNone};
+  b.server.receive(close, 0);
+  CHECK(b.to_client.empty());
+  Sdo ack;
+  ack.sequence = {1, SdoRecvCon::kValid, 1, SdoSendCon::kValid};
+  b.server.receive(ack, 0);
+  CHECK(b.to_client.empty());
+  // A request with a command still learns there is no connection (and the client reopens).
+  Sdo request = ack;
+  request.has_command = true;
+  request.command.command_id = static_cast<uint8_t>(SdoCommandId::kReadByIndex);
+  b.server.receive(request, 0);
+  CHECK(b.to_client.size() == 1);
+}

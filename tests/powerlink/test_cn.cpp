@@ -104,10 +104,14 @@ void TestCn::on_frame(std::span<const uint8_t> bytes, std::deque<std::vector<uin
       case RequestedService::kStatusRequest: {
         ++status_requests;
         if (soa->exception_reset) ++exception_resets;
+        er_seen.push_back(soa->exception_reset);
         if (ignore_status_requests) break;
+        if (follow_er && soa->exception_reset != last_er) exception_clear = soa->exception_reset;
+        last_er = soa->exception_reset;
         StatusResponse r;
         r.nmt_state = state;
         r.exception_new = exception_new;
+        r.exception_clear = follow_er && exception_clear;
         emit(build_status_response(buf, ah, r, status_errors));
         break;
       }

@@ -57,6 +57,12 @@ class TestCn : public SdoObjectAccess {
   bool exception_new = false;
   bool last_preq_ea = false;
   int exception_resets = 0;  // StatusRequests with ER set
+  // Error signalling handshake: EC follows the ER of the StatusRequest (set after power-up);
+  // false = a CN that never answers EC=1.
+  bool follow_er = true;
+  bool exception_clear = true;
+  bool last_er = false;
+  std::vector<bool> er_seen;  // ER of every StatusRequest, in order
   // Stays in PRE_OPERATIONAL_2 on NMTEnableReadyToOperate while set.
   bool hold_ready_to_operate = false;
   // Object writes: refused with this abort code (else communication objects 0x1000..0x1FFF and

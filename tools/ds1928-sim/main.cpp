@@ -4,7 +4,9 @@
 //                        [--power-cycle-after S] [--config FILE] ...
 // runs POWERLINK Controlled Node(s) with simulated X20DS1928 modules on a raw socket and prints
 // every NMT state change. SIGUSR1 power-cycles the node(s); SIGUSR2 makes them ask the MN for
-// their own reset (NMTRequest); SIGINT/SIGTERM stop.
+// their own reset (NMTRequest); SIGRTMIN makes them raise an error entry (code --error-code,
+// signalled to the MN by EN, fetched by StatusRequest; also once by --raise-error-after S);
+// SIGINT/SIGTERM stop.
 //   ds1928-sim canio (--iface IF | --virtual NAME) [--node N] [--modules K] [--config FILE]
 //                    [--drop P] [--wrong-length-every N] [--unexpected-id ID] [--no-sdo] ...
 // runs a CAN-I/O bus controller with simulated X20DS1928 modules (function model 254) on
@@ -35,6 +37,10 @@ namespace {
 std::atomic<bool> g_stop{false};
 std::atomic<bool> g_power_cycle{false};
 std::atomic<bool> g_request_reset{false};
+std::atomic<bool> g_raise_error{false};
+void on_rtmin(int) {
+  g_raise_error.store(true);
+}
 void on_stop(int) {
   g_stop.store(true);
 }
@@ -55,6 +61,8 @@ struct PowerlinkOptions {
   double delay_pres_prob = 1.0;
   int wrong_pres_size = 0;
   double power_cycle_after_s = 0.0;
+  double raise_error_after_s = 0.0;
+  uint16_t error_code = 0x1928;
   uint32_t power_off_ms = 300;
   std::string config_file;
   std::string rx_mode = "ring";
@@ -233,6 +241,10 @@ int run_powerlink(const PowerlinkOptions& o) {
   const int64_t power_cycle_at =
       o.power_cycle_after_s > 0 ? start + static_cast<int64_t>(o.power_cycle_after_s * 1e9) : 0;
   bool power_cycled = false;
+  const int64_t raise_error_at =
+      o.raise_error_after_s > 0 ? start + static_cast<int64_t>(o.raise_error_after_s * 1e9) : 0;
+  bool error_raised = false;
+  uint64_t errors_raised = 0;
   const int64_t stop_at = o.duration_s > 0 ? start + static_cast<int64_t>(o.duration_s * 1e9) : 0;
   bool link_was_up = link.link_up();
   while (!g_stop.load(std::memory_order_relaxed)) {
@@ -248,6 +260,19 @@ int run_powerlink(const PowerlinkOptions& o) {
       std::printf("%10.6f power cycle\n", static_cast<double>(now - start) / 1e9);
       std::fflush(stdout);
       for (auto* n : node_ptrs) n->power_cycle(now);
+    }
+    if ((raise_error_at != 0 && !error_raised && now >= raise_error_at) ||
+        g_raise_error.exchange(false)) {
+      error_raised = true;
+      ++errors_raised;
+      std::printf("%10.6f error entry 0x%04X raised (%llu)\n",
+                  static_cast<double>(now - start) / 1e9, o.error_code,
+                  static_cast<unsigned long long>(errors_raised));
+      std::fflush(stdout);
+      // Additional information: which raise this was, so a test can tell entries apart.
+      std::array<uint8_t, 8> info{};
+      for (int b = 0; b < 8; ++b) info[b] = static_cast<uint8_t>(errors_raised >> (8 * b));
+      for (auto* n : node_ptrs) n->raise_error(o.error_code, info, now);
     }
     if (g_request_reset.exchange(false)) {
       std::printf("%10.6f NMTRequest: reset of own node queued\n",
@@ -309,6 +334,9 @@ int main(int argc, char** argv) {
                   "PRes payload this many bytes longer (negative: shorter)");
   plk->add_option("--power-cycle-after", o.power_cycle_after_s,
                   "power-cycle the node(s) once after S seconds (SIGUSR1: now)");
+  plk->add_option("--raise-error-after", o.raise_error_after_s,
+                  "raise an error entry once after S seconds (SIGRTMIN: now)");
+  plk->add_option("--error-code", o.error_code, "code of the raised error entries");
   plk->add_option("--power-off-ms", o.power_off_ms, "how long a power cycle keeps the node off");
   plk->add_option("--config", o.config_file,
                   "daemon YAML: modules (axes on this node), identity, SDO overrides");
@@ -377,6 +405,7 @@ int main(int argc, char** argv) {
   std::signal(SIGTERM, on_stop);
   std::signal(SIGUSR1, on_usr1);
   std::signal(SIGUSR2, on_usr2);
+  std::signal(SIGRTMIN, on_rtmin);
   setvbuf(stdout, nullptr, _IOLBF, 0);
   if (plk->parsed()) {
     std::vector<std::string> given;

@@ -99,6 +99,15 @@ void print_status(const json& r) {
       std::cout << " (last: " << why << ")";
     std::cout << ", PRes losses "
               << get<uint64_t>(n.value("loss_of_pres", json::object()), "events", 0) << "\n";
+    // Error signalling: the handshake's state and the error entries fetched from the CN.
+    const json x = n.value("exception", json::object());
+    if (x.contains("signalling")) {
+      std::cout << "      error signalling " << get<std::string>(x, "signalling", "?")
+                << ", error register " << hex(get<uint64_t>(x, "error_register", 0), 2)
+                << ", entries " << get<uint64_t>(x, "entries_total", 0) << "\n";
+      for (const auto& e : x.value("entries", json::array()))
+        std::cout << "        " << get<std::string>(e, "text", "?") << "\n";
+    }
   }
   print_cycle(r.value("cycle", json()));
   const json axes = r.value("axes", json::array());

@@ -1,0 +1,93 @@
+// ManagingNode's per-CN state (private to the managing_node*.cpp files, which split the MN by
+// concern: NMT and cycle, SDO, asynchronous slot and error signalling).
+#pragma once
+
+#include <array>
+#include <cstring>
+#include <memory>
+#include <vector>
+
+#include "powerlink/error_signalling.hpp"
+#include "powerlink/managing_node.hpp"
+
+namespace ds1928::powerlink {
+
+namespace mn_detail {
+inline constexpr std::size_t kOutboxDepth = 4;
+inline constexpr std::size_t kOpQueueDepth = 32;
+
+// What an SDO transfer of a CN is for.
+enum class OpKind : uint8_t {
+  kRegister,      // a module register (boot configuration or a client's request)
+  kIdentityRead,  // 0x1000 / 0x1018 read back and compared
+  kObjectWrite,   // an object of the CN's configuration (concise DCF, sdo_writes, cycle objects)
+};
+// Where an object write's value comes from: fixed bytes, or what is known only at boot.
+enum class ValueSource : uint8_t { kData, kCycleUs, kPreqSize, kPresSize };
+struct ObjectOp {
+  OpKind kind = OpKind::kObjectWrite;
+  uint16_t index = 0;
+  uint8_t subindex = 0;
+  ValueSource source = ValueSource::kData;
+  uint32_t expected = 0;  // identity read
+  std::size_t data_offset = 0;
+  std::size_t data_size = 0;
+};
+}  // namespace mn_detail
+using namespace mn_detail;
+
+struct ManagingNode::Cn {
+  PowerlinkNodeConfig cfg;
+  CnStatus* st = nullptr;
+  NodeImageLayout layout;
+  std::array<uint8_t, kMaxIsoPayload> preq{};
+  std::array<uint8_t, kMaxIsoPayload> pres{};
+  bool polled = false;          // PReq sent this cycle
+  uint32_t loss_threshold = 0;  // DLL_MNCNLossPResThreshold (0x1C09) in effect
+  bool pres_seen = false;       // its PRes arrived this cycle
+  bool pres_usable = false;     // ... with a payload the layout fits in
+  bool timed_out = false;       // the driver gave up waiting for it this cycle
+  bool late = false;            // a PRes came after its timeout
+  int64_t state_since_ns = 0;
+  uint64_t last_status_request = 0;
+  uint8_t rs = 0;  // CN's pending async requests (RS) and their priority (PR)
+  uint8_t pr = 0;
+  bool sdo_wait_answer = false;
+  // Frames the MN sends to this CN in the async phase (NMT commands, SDO).
+  std::array<std::array<uint8_t, kMaxFrameSize>, kOutboxDepth> outbox{};
+  std::array<std::size_t, kOutboxDepth> outbox_len{};
+  std::size_t outbox_head = 0;
+  std::size_t outbox_count = 0;
+  uint32_t outbox_overflows = 0;
+  std::unique_ptr<SdoClient> sdo;
+  // Boot step "configure", built once: identity reads and object writes first, then the module
+  // registers. Object values live in object_data.
+  std::vector<ObjectOp> object_ops;
+  std::vector<uint8_t> object_data;
+  std::size_t object_next = 0;
+  std::vector<SdoRegisterOp> boot_ops;  // module configuration
+  std::size_t boot_next = 0;
+  OpKind op_kind = OpKind::kRegister;
+  std::array<uint8_t, 4> op_value{};  // value of a ValueSource other than kData
+  MnErrorSignalling errsig;
+  bool configuring = false;
+  std::array<SdoRegisterOp, kOpQueueDepth> ops{};
+  std::size_t ops_head = 0;
+  std::size_t ops_count = 0;
+  bool op_active = false;
+  bool op_internal = false;
+  SdoRegisterOp current{};
+
+  void push_outbox(std::span<const uint8_t> frame) noexcept {
+    if (outbox_count == kOutboxDepth || frame.size() > kMaxFrameSize) {
+      ++outbox_overflows;
+      return;
+    }
+    const std::size_t i = (outbox_head + outbox_count) % kOutboxDepth;
+    std::memcpy(outbox[i].data(), frame.data(), frame.size());
+    outbox_len[i] = frame.size();
+    ++outbox_count;
+  }
+};
+
+}  // namespace ds1928::powerlink

@@ -1,0 +1,147 @@
+#!/bin/bash
+# openPOWERLINK's demo MN (an independent stack, V2.7.2, with its own Demo_3CN configuration
+# mnobd.cdc) boots ds1928-sim (node 1, no modules) to OPERATIONAL and holds it.
+#
+# Two network namespaces joined by a veth pair; the demo MN runs in one with a private IPC
+# namespace and /dev/shm (tests/peers/opl_run.sh), ds1928-sim in the other. The MN runs the
+# error signalling handshake (ER/EC), downloads node 1's objects from its CDC (restore 0x1011,
+# 0x1006, 0x1020, 0x1C0B/0x1C0D, 0x1C14, 0x1F98, PDO mapping, store 0x1010), resets the node's
+# configuration and starts it. Checked:
+#  1. node 1 reaches OPERATIONAL (time measured from the MN's start, limit 40 s: the MN
+#     downloads one object per async slot of its 50 ms cycle);
+#  2. it stays there for HOLD seconds (OPL_MN_HOLD_SECONDS, default 20; 600 for the long run):
+#     no NMT state change of the sim out of OPERATIONAL, no E_NMT error / NMTResetNode of node 1
+#     in the MN's log after OPERATIONAL;
+#  3. tshark decodes the capture (MN side of the veth) without a malformed frame or an expert
+#     warning/error.
+# The openPOWERLINK archive (../shared/peers) is built once into a cache (tests/peers/
+# openpowerlink.sh); a missing archive FAILS this test, it never passes silently.
+# Usage: powerlink_opl_mn_test.sh BUILD_DIR SOURCE_DIR   (root; 77 = skipped)
+set -u
+build=${1:?build dir}
+src=${2:?source dir}
+sim=$build/tools/ds1928-sim/ds1928-sim
+hold=${OPL_MN_HOLD_SECONDS:-20}
+boot_limit=40
+
+if [ "$(id -u)" != 0 ]; then
+  echo "SKIP: needs root (network namespaces, veth, raw sockets)"
+  exit 77
+fi
+[ -x "$sim" ] || { echo "FAIL: $sim not built"; exit 1; }
+command -v tshark >/dev/null || { echo "FAIL: tshark missing (Debian package tshark)"; exit 1; }
+if ! peer_env=$("$src/tests/peers/openpowerlink.sh"); then
+  echo "FAIL: the openPOWERLINK test peer cannot be built (see above)"
+  exit 1
+fi
+eval "$peer_env"
+
+tag=$$
+ns_mn=ploplmn_m_$tag
+ns_cn=ploplmn_c_$tag
+if_mn=plom$tag
+if_cn=ploc$tag
+tmp=$(mktemp -d /tmp/powerlink_opl_mn.XXXXXX)
+pids=()
+cleanup() {
+  for p in "${pids[@]}"; do kill "$p" 2>/dev/null; done
+  for p in "${pids[@]}"; do wait "$p" 2>/dev/null; done
+  ip netns del "$ns_mn" 2>/dev/null
+  ip netns del "$ns_cn" 2>/dev/null
+  if [ "${failed:-0}" = 0 ] && [ -z "${KEEP_LOGS:-}" ]; then rm -rf "$tmp"; else echo "logs kept in $tmp"; fi
+}
+trap cleanup EXIT
+trap 'exit 1' INT TERM
+failed=0
+fail() {
+  echo "FAIL: $*"
+  failed=1
+  for f in "$tmp"/*.log; do echo "---- $f"; tail -n 25 "$f"; done
+  exit 1
+}
+pass() { echo "ok: $*"; }
+wait_for() {  # FILE REGEX SECONDS (wall clock: a loaded machine slows the polling, not the limit)
+  local file=$1 regex=$2 end=$((SECONDS + $3))
+  while ((SECONDS < end)); do
+    grep -qE "$regex" "$file" 2>/dev/null && return 0
+    sleep 0.05
+  done
+  grep -qE "$regex" "$file" 2>/dev/null
+}
+
+ip netns add "$ns_mn" && ip netns add "$ns_cn" || fail "cannot create network namespaces"
+ip link add "$if_mn" netns "$ns_mn" type veth peer name "$if_cn" netns "$ns_cn" || fail "veth"
+ip -n "$ns_mn" link set "$if_mn" up
+ip -n "$ns_cn" link set "$if_cn" up
+for ((i = 0; i < 100; i++)); do
+  [ "$(ip netns exec "$ns_cn" cat /sys/class/net/"$if_cn"/carrier 2>/dev/null)" = 1 ] && break
+  sleep 0.05
+done
+
+# The captures start first: the whole boot is in them. Each end of the veth sees what arrives
+# there (ds1928-sim sends past the qdisc, where a capture on its own end cannot see it).
+ip netns exec "$ns_mn" tshark -q -i "$if_mn" -w "$tmp/at_mn.pcapng" >"$tmp/tshark_mn.log" 2>&1 &
+cap_mn=$!
+ip netns exec "$ns_cn" tshark -q -i "$if_cn" -w "$tmp/at_cn.pcapng" >"$tmp/tshark_cn.log" 2>&1 &
+cap_cn=$!
+pids+=($cap_mn $cap_cn)
+wait_for "$tmp/tshark_mn.log" "Capturing on" 60 || fail "tshark did not start capturing"
+wait_for "$tmp/tshark_cn.log" "Capturing on" 60 || fail "tshark did not start capturing"
+
+# No modules: openPOWERLINK's CDC maps its own objects, not an X20DS1928's. SCHED_FIFO on CPU 0
+# (the demo MN pins its threads to CPU 1): in its reduced cycle the MN waits only its async slot
+# timeout (0x1F8A/2: 500 µs) for an IdentResponse or StatusResponse.
+ip netns exec "$ns_cn" "$sim" powerlink --iface "$if_cn" --node 1 --modules 0 \
+  --cpu 0 >"$tmp/sim.log" 2>&1 &
+pids+=($!)
+wait_for "$tmp/sim.log" "node 1: 0 module" 10 || fail "ds1928-sim did not start"
+
+start=$(date +%s.%N)
+"$src/tests/peers/opl_run.sh" "$ns_mn" -- "$OPL_DEMO_MN" -d "$if_mn" -c "$OPL_MNOBD_CDC" \
+  >"$tmp/opl_mn.log" 2>&1 &
+mn_pid=$!
+pids+=($mn_pid)
+
+wait_for "$tmp/sim.log" "READY_TO_OPERATE -> OPERATIONAL" "$boot_limit" ||
+  fail "node 1 not OPERATIONAL within $boot_limit s of the MN's start"
+boot_s=$(awk -v s="$start" -v e="$(date +%s.%N)" 'BEGIN { printf "%.1f", e - s }')
+pass "openPOWERLINK's MN booted ds1928-sim to OPERATIONAL in ${boot_s} s"
+lines_at_op=$(wc -l <"$tmp/opl_mn.log")
+sim_lines_at_op=$(wc -l <"$tmp/sim.log")
+
+# The hold: a sleep is the test's duration here, not a wait for an event.
+sleep "$hold"
+kill -0 "$mn_pid" 2>/dev/null || fail "the openPOWERLINK MN exited during the hold"
+
+sim_changes=$(tail -n +"$((sim_lines_at_op + 1))" "$tmp/sim.log" | grep -c -- " -> ")
+resets=$(tail -n +"$((lines_at_op + 1))" "$tmp/opl_mn.log" | grep -cE "E_NMT|NMTResetNode")
+resets_total=$(grep -cE "NMTResetNode" "$tmp/opl_mn.log")
+[ "$sim_changes" = 0 ] ||
+  fail "node 1 left OPERATIONAL $sim_changes time(s) during the ${hold} s hold: $(tail -n +"$((sim_lines_at_op + 1))" "$tmp/sim.log" | grep -- " -> " | head -3)"
+[ "$resets" = 0 ] || fail "the MN logged $resets E_NMT/NMTResetNode line(s) during the hold"
+pass "held OPERATIONAL for ${hold} s: 0 state changes, 0 resets (NMTResetNode lines before OPERATIONAL: $resets_total)"
+
+kill "$mn_pid" 2>/dev/null
+wait "$mn_pid" 2>/dev/null
+kill "$cap_mn" "$cap_cn" 2>/dev/null
+wait "$cap_mn" "$cap_cn" 2>/dev/null
+mergecap -w "$tmp/mn.pcapng" "$tmp/at_mn.pcapng" "$tmp/at_cn.pcapng" || fail "mergecap"
+frames=$(tshark -r "$tmp/mn.pcapng" -Y epl 2>/dev/null | wc -l)
+[ "$frames" -gt 100 ] || fail "capture has only $frames POWERLINK frames"
+tshark -r "$tmp/mn.pcapng" -Y "_ws.malformed || _ws.expert.severity >= 0x00600000" \
+  -T fields -e frame.number -e epl.src -e epl.mtyp -e _ws.expert.message >"$tmp/expert.txt" 2>/dev/null
+if [ -s "$tmp/expert.txt" ]; then
+  head -5 "$tmp/expert.txt"
+  fail "tshark: $(wc -l <"$tmp/expert.txt") malformed frame(s) or expert warning(s)"
+fi
+statuses=$(tshark -r "$tmp/mn.pcapng" -Y "epl.asnd.svid == 2 && epl.src == 1" 2>/dev/null | wc -l)
+pass "tshark: $frames POWERLINK frames ($statuses StatusResponses of node 1), none malformed, no expert warning"
+# The whole run, boot included: resets of node 1 for an error (the MN names the reason in its
+# NMTResetNode) and the MN's node error events. The one plain NMTResetNode after restoring the
+# defaults (0x1011) is the configuration manager's normal path.
+tshark -r "$tmp/mn.pcapng" -Y "epl.asnd.svid == 4" 2>/dev/null | grep "240->  1 " >"$tmp/nmt.txt"
+error_resets=$(grep -c "NMTResetNode (E_" "$tmp/nmt.txt")
+node_errors=$(grep -c "Node=  1, NmtNodeEventError" "$tmp/opl_mn.log")
+echo "whole run: NMT commands to node 1: $(sed 's/.*(NMT_COMMAND) //' "$tmp/nmt.txt" | tr '\n' ';')"
+echo "whole run: resets of node 1 for an error: $error_resets, MN node error events: $node_errors"
+exit 0
