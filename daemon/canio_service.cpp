@@ -128,7 +128,10 @@ std::unique_ptr<BusService> make_canio_service(const DaemonConfig& config, std::
   std::unique_ptr<canio::CanPort> sdo_port;
   std::shared_ptr<canio::VirtualCanBus> vbus;
   if (!config.canio.virtual_bus.empty()) {
-    auto bus = canio::VirtualCanBus::open_shared(config.canio.virtual_bus);
+    // The timed virtual bus at the configured bit rate (the simulator opens it the same way).
+    canio::VirtualBusOptions vo;
+    vo.bitrate = config.canio.bitrate;
+    auto bus = canio::VirtualCanBus::open_shared(config.canio.virtual_bus, vo);
     if (!bus) {
       why_not = fmt::format("canio: virtual bus '{}': {}", config.canio.virtual_bus,
                             bus.error().message());

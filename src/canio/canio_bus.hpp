@@ -86,7 +86,7 @@ struct CanioAxisCounters {
   std::atomic<uint32_t> generation{0};      // SDO worker: bumped by every (re)configuration
   std::atomic<bool> configured{false};      // SDO worker writes, cycle thread reads
   std::atomic<CanioAxisState> state{CanioAxisState::Configuring};  // cycle thread
-  std::atomic<bool> silent{true};           // no complete sample for input_timeout_ms
+  std::atomic<bool> silent{true};  // no complete sample for input_timeout_ms
   std::atomic<int64_t> last_sample_ns{0};
 };
 

@@ -148,10 +148,24 @@ std::error_code CanioBus::sdo_write(std::size_t axis, uint16_t reg, uint8_t size
 
 std::error_code CanioBus::configure_axis(std::size_t axis) {
   const ModuleSettings& module = options_.axes[axis].module;
+  // A read-back that differs does not stop the configuration: the write was acknowledged, the
+  // remaining registers (EnDatMode last) are written all the same, and the attempt counts as a
+  // definitive answer at the end. A write that is not acknowledged stops it.
+  std::error_code mismatch;
+  std::string mismatch_text;
   for (const RegisterWrite& w : startup_writes(module)) {
-    if (auto ec = sdo_write(axis, w.reg, w.size, w.value, true)) {
-      set_last_error(axis, "configuring the module: register " + register_name(w.reg) + " = " +
-                               std::to_string(w.value) + ": " + ec.message());
+    const auto ec = sdo_write(axis, w.reg, w.size, w.value, true);
+    const std::string what = "configuring the module: register " + register_name(w.reg) + " = " +
+                             std::to_string(w.value) + ": " + ec.message();
+    if (ec == CanioBusError::kReadBackMismatch || ec == CanioBusError::kReadBackSize) {
+      if (!mismatch) {
+        mismatch = ec;
+        mismatch_text = what;
+      }
+      continue;
+    }
+    if (ec) {
+      set_last_error(axis, what);
       return ec;
     }
   }
@@ -166,8 +180,8 @@ std::error_code CanioBus::configure_axis(std::size_t axis) {
     }
     bump(axis_counters_[axis].rescans);
   }
-  set_last_error(axis, {});
-  return {};
+  set_last_error(axis, mismatch_text);
+  return mismatch;
 }
 
 CanioBus::ConfigurationCheck CanioBus::check_configuration(std::size_t axis) {

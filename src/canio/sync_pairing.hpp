@@ -37,10 +37,10 @@
 namespace ds1928::canio {
 
 enum class PairingVerdict : uint8_t {
-  Whole = 0,    // a sample of this SYNC: both objects, unambiguous
-  Missing,      // neither object in the window
-  Half,         // one object (or object 2 only before object 1): no sample
-  Ambiguous,    // objects there, but which SYNC they answer is not certain: no sample
+  Whole = 0,  // a sample of this SYNC: both objects, unambiguous
+  Missing,    // neither object in the window
+  Half,       // one object (or object 2 only before object 1): no sample
+  Ambiguous,  // objects there, but which SYNC they answer is not certain: no sample
 };
 
 class SyncPairing {
@@ -76,10 +76,10 @@ class SyncPairing {
   void reset() noexcept { *this = SyncPairing{}; }
 
  private:
-  bool owed1_ = false;  // an object 1 of an earlier SYNC may still arrive in this window
-  uint8_t n1_ = 0;        // objects 1 in the window
-  uint8_t n2_ = 0;        // objects 2 in the window (all)
-  uint8_t n2_after_ = 0;  // objects 2 after the last object 1
+  bool owed1_ = false;     // an object 1 of an earlier SYNC may still arrive in this window
+  uint8_t n1_ = 0;         // objects 1 in the window
+  uint8_t n2_ = 0;         // objects 2 in the window (all)
+  uint8_t n2_after_ = 0;   // objects 2 after the last object 1
   uint8_t n2_before_ = 0;  // objects 2 in the window before the last object 1
   bool owed1_at_open_ = false;
   bool surplus_ = false;

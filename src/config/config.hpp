@@ -195,16 +195,16 @@ struct CanioBusConfig {
 // The CAN-I/O cycle's time on the wire (config_canio.cpp): what the response window and the
 // bus-load check are made of. `modules` = axes on the bus.
 struct CanioTiming {
-  int64_t wire_ns = 0;            // SYNC + every object + one 8-byte frame already on the wire,
-                                  // worst-case stuffing: the earliest the last answer can be in
-  int64_t reaction_ns = 0;        // node_reaction_us
-  uint32_t window_us = 0;         // the response window in use (configured or derived)
+  int64_t wire_ns = 0;             // SYNC + every object + one 8-byte frame already on the wire,
+                                   // worst-case stuffing: the earliest the last answer can be in
+  int64_t reaction_ns = 0;         // node_reaction_us
+  uint32_t window_us = 0;          // the response window in use (configured or derived)
   uint32_t derived_window_us = 0;  // wire + reaction, rounded up to µs
   uint32_t min_window_us = 0;      // wire time rounded up: a shorter window can never be whole
-  int64_t cyclic_ns = 0;          // the cycle's own frames (SYNC + objects), worst case
-  int64_t acyclic_ns = 0;         // the SDO worker's share a cycle: one transfer (2 frames) per
-                                  // max(period, sdo_interval_us), averaged over the period
-  double load = 0.0;              // (cyclic + acyclic) / period
+  int64_t cyclic_ns = 0;           // the cycle's own frames (SYNC + objects), worst case
+  int64_t acyclic_ns = 0;          // the SDO worker's share a cycle: one transfer (2 frames) per
+                                   // max(period, sdo_interval_us), averaged over the period
+  double load = 0.0;               // (cyclic + acyclic) / period
 };
 [[nodiscard]] CanioTiming canio_timing(const CanioBusConfig& canio, std::size_t modules,
                                        uint32_t period_us);

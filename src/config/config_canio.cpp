@@ -6,8 +6,8 @@
 
 #include <algorithm>
 #include <iomanip>
-#include <sstream>
 #include <set>
+#include <sstream>
 
 #include "canio/bit_budget.hpp"
 #include "core/register_catalogue.hpp"
@@ -203,14 +203,13 @@ void check_canio(Diagnostics& diag, const DaemonConfig& c, const YAML::Node& doc
   const CanioTiming timing = canio_timing(k, c.axes.size(), c.cycle.period_us);
   if (k.bitrate > 0 && k.response_timeout_us != 0 && k.response_timeout_us < timing.min_window_us) {
     diag.error(locate(doc, {"canio", "response_timeout_us"}), "canio.response_timeout_us",
-               std::to_string(k.response_timeout_us) + " µs is shorter than the cycle's frames take " +
-                   "on the wire at " + std::to_string(k.bitrate) +
-                   " bit/s (SYNC + " + std::to_string(c.axes.size()) +
+               std::to_string(k.response_timeout_us) +
+                   " µs is shorter than the cycle's frames take " + "on the wire at " +
+                   std::to_string(k.bitrate) + " bit/s (SYNC + " + std::to_string(c.axes.size()) +
                    " module(s) × 3 objects + one frame already on the wire, worst-case " +
                    "stuffing): the minimum is " + std::to_string(timing.min_window_us) +
                    " µs; leave it out (0) to use " + std::to_string(timing.derived_window_us) +
-                   " µs (wire time + node_reaction_us " + std::to_string(k.node_reaction_us) +
-                   ")");
+                   " µs (wire time + node_reaction_us " + std::to_string(k.node_reaction_us) + ")");
   } else if (k.bitrate > 0 && timing.window_us >= c.cycle.period_us &&
              timing.load <= k.max_bus_load) {  // else the bus-load error below says it
     diag.error(locate(doc, {k.response_timeout_us != 0 ? "canio" : "cycle",
@@ -298,21 +297,20 @@ void check_canio(Diagnostics& diag, const DaemonConfig& c, const YAML::Node& doc
     pct << std::fixed << std::setprecision(0) << timing.load * 100.0;
     std::ostringstream max_pct;
     max_pct << std::fixed << std::setprecision(0) << k.max_bus_load * 100.0;
-    const uint32_t frames =
-        static_cast<uint32_t>(3 * c.axes.size()) + (k.sync_enabled ? 1u : 0u);
-    diag.error(locate(doc, {"cycle", "period_us"}), "cycle.period_us",
-               std::to_string(c.cycle.period_us) + " µs loads the CAN-I/O bus to " + pct.str() +
-                   " %, above canio.max_bus_load " + max_pct.str() + " %: " +
-                   std::to_string(frames) + " frames a cycle (" + std::to_string(c.axes.size()) +
-                   " module(s) × 3" + (k.sync_enabled ? " + SYNC" : "") + ") take " +
-                   std::to_string((timing.cyclic_ns + 999) / 1000) +
-                   " µs with worst-case stuffing at " + std::to_string(k.bitrate) + " bit/s" +
-                   (timing.acyclic_ns > 0 ? ", the SDO worker's share " +
-                                                std::to_string((timing.acyclic_ns + 999) / 1000) +
-                                                " µs"
-                                          : std::string()) +
-                   "; use period_us ≥ " + std::to_string(need_us) +
-                   ", fewer modules or a higher bit rate");
+    const uint32_t frames = static_cast<uint32_t>(3 * c.axes.size()) + (k.sync_enabled ? 1u : 0u);
+    diag.error(
+        locate(doc, {"cycle", "period_us"}), "cycle.period_us",
+        std::to_string(c.cycle.period_us) + " µs loads the CAN-I/O bus to " + pct.str() +
+            " %, above canio.max_bus_load " + max_pct.str() + " %: " + std::to_string(frames) +
+            " frames a cycle (" + std::to_string(c.axes.size()) + " module(s) × 3" +
+            (k.sync_enabled ? " + SYNC" : "") + ") take " +
+            std::to_string((timing.cyclic_ns + 999) / 1000) + " µs with worst-case stuffing at " +
+            std::to_string(k.bitrate) + " bit/s" +
+            (timing.acyclic_ns > 0 ? ", the SDO worker's share " +
+                                         std::to_string((timing.acyclic_ns + 999) / 1000) + " µs"
+                                   : std::string()) +
+            "; use period_us ≥ " + std::to_string(need_us) +
+            ", fewer modules or a higher bit rate");
   }
 }
 

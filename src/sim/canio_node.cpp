@@ -178,8 +178,7 @@ void CanioNode::serve_sdo(const canio::CanFrame& f) {
   } else if (request->command == SdoCommand::UploadRequest) {
     uint32_t value = 0;
     const RegisterInfo* info = find_register(where->reg);
-    if (config_.faults.config_write_only && info &&
-        info->direction == RegisterDirection::Config) {
+    if (config_.faults.config_write_only && info && info->direction == RegisterDirection::Config) {
       abort(kAbortWriteOnly);
     } else if (auto ec = module->read_register(where->reg, size, value)) {
       abort(abort_for(ec));

@@ -3,8 +3,8 @@
 // module's two input objects (without SYNC: a module's output object triggers its answer), takes
 // the output objects, and serves expedited SDO (0x600 + node → 0x580 + node) on the register →
 // index/subindex scheme the daemon uses. Single-threaded: the owner calls service() in a loop.
-// Faults for tests: random loss of its frames, wrong lengths, foreign identifiers, silence, object 2
-// sent late. The answers to a SYNC go out `sync_reaction_ns` after it (the bus controller's
+// Faults for tests: random loss of its frames, wrong lengths, foreign identifiers, silence, object
+// 2 sent late. The answers to a SYNC go out `sync_reaction_ns` after it (the bus controller's
 // reaction); like a real controller the node sends its answers in order and never sends an answer
 // to an older SYNC after it has queued the answers to a newer one (an object 2 still waiting when
 // the next SYNC's answers are due is sent first).

@@ -24,7 +24,9 @@ namespace {
 
 struct SimulatedNodeThread {
   SimulatedNodeThread(const DaemonConfig& config, const std::string& bus_name) {
-    auto b = canio::VirtualCanBus::open_shared(bus_name);
+    canio::VirtualBusOptions vo;
+    vo.bitrate = config.canio.bitrate;  // the timed bus, as the daemon opens it
+    auto b = canio::VirtualCanBus::open_shared(bus_name, vo);
     if (!b) throw std::runtime_error("virtual bus: " + b.error().message());
     bus = b.value();
     auto p = bus->open_port({});

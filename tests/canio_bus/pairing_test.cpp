@@ -40,13 +40,13 @@ std::string shipped_canio_yaml(uint32_t bitrate) {
 struct RunFigures {
   uint64_t cycles = 0;
   uint64_t fresh = 0;
-  uint64_t torn = 0;          // published, but not what the node sent for this SYNC
-  uint64_t lost_fresh = 0;    // published although the node's answer to this SYNC was incomplete
+  uint64_t torn = 0;        // published, but not what the node sent for this SYNC
+  uint64_t lost_fresh = 0;  // published although the node's answer to this SYNC was incomplete
   uint64_t half = 0;
   uint64_t unpaired = 0;
   uint64_t missing = 0;
   uint64_t late = 0;
-  uint64_t late_sent = 0;     // objects 2 the node sent late
+  uint64_t late_sent = 0;      // objects 2 the node sent late
   uint64_t complete_sent = 0;  // cycles the node answered with both objects, none late
   int64_t window_us = 0;
 };
@@ -109,12 +109,11 @@ RunFigures run_shipped(uint32_t bitrate, uint64_t cycles, double late_p, int64_t
       "canio pairing: %u bit/s, window %lld µs, %llu cycles, late object 2 p=%.2f by %lld µs, "
       "loss %.2f: fresh %llu, torn %llu, half %llu, unpaired %llu, missing %llu, late frames "
       "%llu (node sent %llu late)\n",
-      bitrate, static_cast<long long>(f.window_us), static_cast<unsigned long long>(cycles),
-      late_p, static_cast<long long>(late_ns / 1000), loss,
-      static_cast<unsigned long long>(f.fresh), static_cast<unsigned long long>(f.torn),
-      static_cast<unsigned long long>(f.half), static_cast<unsigned long long>(f.unpaired),
-      static_cast<unsigned long long>(f.missing), static_cast<unsigned long long>(f.late),
-      static_cast<unsigned long long>(f.late_sent));
+      bitrate, static_cast<long long>(f.window_us), static_cast<unsigned long long>(cycles), late_p,
+      static_cast<long long>(late_ns / 1000), loss, static_cast<unsigned long long>(f.fresh),
+      static_cast<unsigned long long>(f.torn), static_cast<unsigned long long>(f.half),
+      static_cast<unsigned long long>(f.unpaired), static_cast<unsigned long long>(f.missing),
+      static_cast<unsigned long long>(f.late), static_cast<unsigned long long>(f.late_sent));
   return f;
 }
 
@@ -124,8 +123,9 @@ TEST_CASE("SYNC pairing: object 1 then object 2 in the window make a sample", "[
   SyncPairing p;
   p.open();
   p.in_window(ObjectKind::Position, obj(1), 10);
-  REQUIRE(p.ready());
+  REQUIRE_FALSE(p.ready());
   p.in_window(ObjectKind::Status, obj(2), 11);
+  REQUIRE(p.ready());
   CHECK(p.close() == PairingVerdict::Whole);
   CHECK(p.position()[0] == 1);
   CHECK(p.status()[0] == 2);

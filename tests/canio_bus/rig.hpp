@@ -1,5 +1,6 @@
 // A CAN-I/O bus in one process for the driver tests: the daemon's CanioBus and simulated CAN-I/O
-// nodes on one virtual bus. Two ways to run it:
+// nodes on one TIMED virtual bus (frames take their stuffed bit time at the configured bit rate,
+// arbitration, RX stamps at end of frame). Two ways to run it:
 //  - stepped (fake clock, one thread): the driver's port is wrapped so that every frame the
 //    driver sends is served by the nodes at once; 10^5 cycles take seconds and every run is the
 //    same run (seeded losses);
@@ -7,8 +8,8 @@
 //    process does, and the driver configures the modules over SDO.
 #pragma once
 
-#include <atomic>
 #include <algorithm>
+#include <atomic>
 #include <functional>
 #include <limits>
 #include <memory>
@@ -101,6 +102,8 @@ struct Rig {
       : config(config), stepped(stepped) {
     canio::VirtualBusOptions bo;
     if (stepped) bo.clock = [] { return fake_now(); };
+    // The timed bus: frames take their stuffed bit time, arbitration, RX stamps at end of frame.
+    bo.bitrate = config.canio.bitrate;
     bus = canio::VirtualCanBus::create_local(bo);
     driver_port = open_port("daemon");
     for (const AxisConfig& a : config.axes) {
@@ -122,7 +125,10 @@ struct Rig {
     std::unique_ptr<canio::CanPort> cycle;
     if (stepped) {
       cycle = std::make_unique<SteppedPort>(
-          *driver_port, [this] { for (auto& n : nodes) (void)n->service(0); },
+          *driver_port,
+          [this] {
+            for (auto& n : nodes) (void)n->service(0);
+          },
           [this](int64_t deadline) { return advance(deadline); });
     } else {
       cycle = std::make_unique<SteppedPort>(*driver_port, [] {});
@@ -149,14 +155,19 @@ struct Rig {
   // Stepped: nodes send what is due; with a deadline ahead, the fake clock jumps to the next
   // queued answer (true) or to the deadline (false: nothing more before it).
   bool advance(int64_t deadline) {
-    for (auto& n : nodes) n->send_due();
+    for (auto& n : nodes) (void)n->service(0);  // what reached them, what is due
     const int64_t now = fake_now();
     if (deadline <= now) return false;
     int64_t next = std::numeric_limits<int64_t>::max();
     for (auto& n : nodes) next = std::min(next, n->next_due_ns());
+    // The frame on the wire ends (and the next one in the queues may start).
+    if (bus->timed()) {
+      const int64_t free_at = bus->wire_totals().bus_free_ns;
+      if (free_at > now) next = std::min(next, free_at);
+    }
     if (next <= deadline) {
       g_fake_ns.store(std::max(now, next));
-      for (auto& n : nodes) n->send_due();
+      for (auto& n : nodes) (void)n->service(0);
       return true;
     }
     g_fake_ns.store(deadline);
@@ -180,7 +191,14 @@ struct Rig {
 
   // One cycle; stepped: at fake time `t0 + cycle × period`.
   ExchangeResult cycle(uint64_t index) {
-    if (stepped) g_fake_ns.store(kT0 + static_cast<int64_t>(index) * config.cycle.period_us * 1000);
+    if (stepped) {
+      // Between cycles the nodes and the bus go on: late answers go out when they are due.
+      const int64_t start = kT0 + static_cast<int64_t>(index) * config.cycle.period_us * 1000;
+      if (start > fake_now() && index > 0)
+        while (advance(start)) {
+        }
+      g_fake_ns.store(start);
+    }
     return canio->exchange(io, stepped ? fake_now() : monotonic(), index);
   }
 

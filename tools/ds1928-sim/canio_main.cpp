@@ -77,7 +77,9 @@ int run_canio(const CanioOptions& o, const std::atomic<bool>& stop) {
   std::shared_ptr<canio::VirtualCanBus> vbus;
   std::unique_ptr<canio::CanPort> port;
   if (!o.virtual_bus.empty()) {
-    auto bus = canio::VirtualCanBus::open_shared(o.virtual_bus);
+    canio::VirtualBusOptions vo;
+    vo.bitrate = bitrate == 0 ? 500'000 : bitrate;  // the timed bus, as the daemon opens it
+    auto bus = canio::VirtualCanBus::open_shared(o.virtual_bus, vo);
     if (!bus) {
       std::fprintf(stderr, "ds1928-sim: virtual bus '%s': %s\n", o.virtual_bus.c_str(),
                    bus.error().message().c_str());
@@ -119,12 +121,13 @@ int run_canio(const CanioOptions& o, const std::atomic<bool>& stop) {
     setvbuf(answer_log, nullptr, _IOLBF, 0);  // readable while the node runs
     // What the node sent for each SYNC it answered: the reference a test compares published
     // samples with (a sample is whole only if position and PosCycle come from one line).
-    n.on_answer = [answer_log, &node](uint64_t sync, std::size_t m, const ds1928::ModuleInputs& in) {
-      std::fprintf(answer_log, "%llu %u %llu %d\n", static_cast<unsigned long long>(sync),
-                   node.modules[m].slot,
-                   static_cast<unsigned long long>((uint64_t{in.position_hw} << 32) |
-                                                   in.position_lw),
-                   static_cast<int>(in.pos_cycle));
+    n.on_answer = [answer_log, &node](uint64_t sync, std::size_t m,
+                                      const ds1928::ModuleInputs& in) {
+      std::fprintf(
+          answer_log, "%llu %u %llu %d\n", static_cast<unsigned long long>(sync),
+          node.modules[m].slot,
+          static_cast<unsigned long long>((uint64_t{in.position_hw} << 32) | in.position_lw),
+          static_cast<int>(in.pos_cycle));
     };
   }
   if (auto ec = n.open()) {
