@@ -120,7 +120,8 @@ std::unique_ptr<BusService> make_canio_service(const DaemonConfig& config, std::
   std::unique_ptr<canio::CanPort> sdo_port;
   std::shared_ptr<canio::VirtualCanBus> vbus;
   if (!config.canio.virtual_bus.empty()) {
-    auto bus = canio::VirtualCanBus::open_shared(config.canio.virtual_bus);
+    auto bus = canio::VirtualCanBus::open_shared(config.canio.virtual_bus,
+                                                 canio::virtual_bus_options(config.canio.bitrate));
     if (!bus) {
       why_not = fmt::format("canio: virtual bus '{}': {}", config.canio.virtual_bus,
                             bus.error().message());
