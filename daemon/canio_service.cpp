@@ -128,10 +128,8 @@ std::unique_ptr<BusService> make_canio_service(const DaemonConfig& config, std::
   std::unique_ptr<canio::CanPort> sdo_port;
   std::shared_ptr<canio::VirtualCanBus> vbus;
   if (!config.canio.virtual_bus.empty()) {
-    // The timed virtual bus at the configured bit rate (the simulator opens it the same way).
-    canio::VirtualBusOptions vo;
-    vo.bitrate = config.canio.bitrate;
-    auto bus = canio::VirtualCanBus::open_shared(config.canio.virtual_bus, vo);
+    auto bus = canio::VirtualCanBus::open_shared(config.canio.virtual_bus,
+                                                 canio::virtual_bus_options(config.canio.bitrate));
     if (!bus) {
       why_not = fmt::format("canio: virtual bus '{}': {}", config.canio.virtual_bus,
                             bus.error().message());

@@ -7,6 +7,7 @@
 #include <array>
 #include <cerrno>
 #include <climits>
+#include <cstdlib>
 #include <cstring>
 #include <new>
 #include <string>
@@ -168,6 +169,13 @@ int64_t advance(Ring& ring, int64_t now) noexcept {
 }
 
 }  // namespace vbus
+
+VirtualBusOptions virtual_bus_options(uint32_t bitrate) {
+  VirtualBusOptions o;
+  const char* instant = std::getenv("DS1928_VIRTUAL_BUS_INSTANT");
+  o.bitrate = instant != nullptr && std::string_view(instant) == "1" ? 0 : bitrate;
+  return o;
+}
 
 int64_t VirtualCanBus::now_ns() const noexcept {
   return options_.clock ? options_.clock() : monotonic_ns();

@@ -52,7 +52,17 @@ struct VirtualBusOptions {
   // Bit rate of the timed bus (bit/s); 0: instant bus (no bit timing, no arbitration). A shared
   // bus keeps the creator's: opening it at another bit rate is an error naming both.
   uint32_t bitrate = 0;
+  // Virtual time: called instead of sleeping when receive() would wait for the bus clock to reach
+  // `until_ns` (the next end of frame, the next frame's start, a delayed frame, or the caller's
+  // deadline). The fake clock's owner moves its clock (up to until_ns) and may run peers there;
+  // receive() goes on from the new time and returns empty if the clock did not move. Empty: sleep.
+  std::function<void(int64_t until_ns)> wait_until = {};
 };
+
+// The options the daemon and the simulator open their shared bus with: timed at `bitrate`, or
+// instant (bitrate 0) when the environment has DS1928_VIRTUAL_BUS_INSTANT=1 — for a test that
+// needs the old instant delivery across processes. Both sides must agree (checked on open).
+[[nodiscard]] VirtualBusOptions virtual_bus_options(uint32_t bitrate);
 
 // Bus time of frames on a timed bus: totals since the bus was created.
 struct WireTotals {

@@ -420,6 +420,12 @@ ReceiveResult VirtualCanPort::receive(std::span<CanFrame> out, int64_t deadline_
     if (next_start < until) until = next_start;
     const int64_t wait = until - now;
     if (wait <= 0) continue;
+    if (bus_->options_.wait_until) {
+      bus_->options_.wait_until(until);
+      if (bus_->now_ns() == now && ring.published.load(std::memory_order_seq_cst) == seen)
+        return {0, {}};
+      continue;
+    }
     timespec ts{static_cast<time_t>(wait / 1'000'000'000), static_cast<long>(wait % 1'000'000'000)};
     ring.sleepers.fetch_add(1, std::memory_order_seq_cst);
     if (ring.published.load(std::memory_order_seq_cst) == seen)

@@ -369,7 +369,7 @@ TEST_CASE("a full TX queue and a down interface are reported, never retried", "[
 }
 
 TEST_CASE("a reader lapped by the writers counts the lost frames and resumes", "[canio][vbus]") {
-  auto bus = VirtualCanBus::create_local(VirtualBusOptions{16, {}, 0});
+  auto bus = VirtualCanBus::create_local(VirtualBusOptions{16, {}});
   auto tx = port(bus), rx = port(bus);
   for (int i = 0; i < 40; ++i) REQUIRE(tx->send(data_frame(0x181, static_cast<uint8_t>(i))).sent());
   auto got = drain(*rx);
@@ -447,7 +447,7 @@ TEST_CASE("two processes talk over a shared virtual bus", "[canio][vbus][process
   CHECK(WIFEXITED(status));
   CHECK(WEXITSTATUS(status) == 0);
   // A bus of another ring size under the same name is refused.
-  auto other = VirtualCanBus::open_shared(name, VirtualBusOptions{64, {}, 0});
+  auto other = VirtualCanBus::open_shared(name, VirtualBusOptions{64, {}});
   CHECK(other.error() == CanError::kVirtualBusMismatch);
   CHECK(VirtualCanBus::open_shared("bad/name").error() == CanError::kInterfaceNameInvalid);
 }

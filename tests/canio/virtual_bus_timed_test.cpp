@@ -368,3 +368,40 @@ TEST_CASE("timed bus: send and receive allocate nothing and take no lock",
   CHECK(counts.allocations() == 0);
   CHECK(counts.mutex_locks == 0);
 }
+
+TEST_CASE("timed bus in virtual time: a waiting receive moves the fake clock to the next event",
+          "[canio][vbus][timed]") {
+  FakeClock clock;
+  std::unique_ptr<VirtualCanPort> node;
+  std::vector<int64_t> waits;
+  VirtualBusOptions o = clock.options();
+  o.wait_until = [&](int64_t until) {
+    waits.push_back(until);
+    clock.set(until);
+    // The peer serves its port at the new time: answers 0x080 with 0x181.
+    std::array<CanFrame, 4> buf;
+    const auto r = node->receive(buf, 0);
+    for (std::size_t i = 0; i < r.count; ++i)
+      if (buf[i].id == 0x080) REQUIRE(node->send(frame(0x181, buf[i].data[0])).sent());
+  };
+  auto bus = VirtualCanBus::create_local(o);
+  auto master = port(bus);
+  node = port(bus);
+  const CanFrame sync = frame(0x080, 9, 0);
+  REQUIRE(master->send(sync).sent());
+  std::array<CanFrame, 4> buf;
+  const auto r = master->receive(buf, kT0 + 10'000'000);
+  REQUIRE(r.count == 1);
+  CHECK(buf[0].id == 0x181);
+  // SYNC ends, the node answers right then, its frame waits for the intermission and ends.
+  const CanFrame answer = frame(0x181, 9);
+  const int64_t answer_start = kT0 + bits_ns(sync);
+  CHECK(buf[0].rx_time_ns == eof(answer, answer_start));
+  CHECK(clock.get() == buf[0].rx_time_ns);
+  REQUIRE(waits.size() >= 2);
+  CHECK(waits.front() == eof(sync, kT0));
+  // Nothing more on the bus: a receive waits until its deadline and returns empty.
+  CHECK(master->receive(buf, clock.get() + 1'000'000).count == 0);
+  CHECK(waits.back() == eof(answer, answer_start) + 1'000'000);
+  node.reset();
+}

@@ -253,7 +253,7 @@ TEST_CASE("CAN-I/O: interface down and bit-rate mismatch are start-up errors nam
 
 TEST_CASE("CAN-I/O: modules configured over SDO with read-back, checked again after silence",
           "[canio][bus][sdo]") {
-  Rig rig(canio_config(1), false, false);
+  Rig rig(canio_config(1), false, false);  // timed bus, window from the bit budget
   REQUIRE_FALSE(rig.canio->start());
   uint64_t c = 0;
   // Cycles back to back (each waits up to the response timeout), bounded.

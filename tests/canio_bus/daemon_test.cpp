@@ -24,9 +24,8 @@ namespace {
 
 struct SimulatedNodeThread {
   SimulatedNodeThread(const DaemonConfig& config, const std::string& bus_name) {
-    canio::VirtualBusOptions vo;
-    vo.bitrate = config.canio.bitrate;  // the timed bus, as the daemon opens it
-    auto b = canio::VirtualCanBus::open_shared(bus_name, vo);
+    auto b = canio::VirtualCanBus::open_shared(bus_name,
+                                               canio::virtual_bus_options(config.canio.bitrate));
     if (!b) throw std::runtime_error("virtual bus: " + b.error().message());
     bus = b.value();
     auto p = bus->open_port({});

@@ -95,15 +95,22 @@ inline DaemonConfig canio_config(int nodes, uint32_t period_us = 2000) {
   return c;
 }
 
+// Timed (default): the timed virtual bus at canio.bitrate. Instant: frames arrive at once (tests
+// whose configuration deliberately does not fit the wire, e.g. the allocation proof's 1 ms cycle).
+enum class BusMode { Default, Timed, Instant };
+
 struct Rig {
   // stepped: fake clock and synchronous nodes; else real clock and a node thread.
   using NodeTweak = std::function<void(sim::CanioNodeConfig&)>;
-  Rig(const DaemonConfig& config, bool stepped, bool assume_configured, NodeTweak tweak = {})
+  Rig(const DaemonConfig& config, bool stepped, bool assume_configured, BusMode mode)
+      : Rig(config, stepped, assume_configured, NodeTweak{}, mode) {}
+  Rig(const DaemonConfig& config, bool stepped, bool assume_configured, NodeTweak tweak = {},
+      BusMode mode = BusMode::Default)
       : config(config), stepped(stepped) {
     canio::VirtualBusOptions bo;
     if (stepped) bo.clock = [] { return fake_now(); };
     // The timed bus: frames take their stuffed bit time, arbitration, RX stamps at end of frame.
-    bo.bitrate = config.canio.bitrate;
+    bo.bitrate = mode == BusMode::Instant ? 0 : config.canio.bitrate;
     bus = canio::VirtualCanBus::create_local(bo);
     driver_port = open_port("daemon");
     for (const AxisConfig& a : config.axes) {

@@ -77,9 +77,8 @@ int run_canio(const CanioOptions& o, const std::atomic<bool>& stop) {
   std::shared_ptr<canio::VirtualCanBus> vbus;
   std::unique_ptr<canio::CanPort> port;
   if (!o.virtual_bus.empty()) {
-    canio::VirtualBusOptions vo;
-    vo.bitrate = bitrate == 0 ? 500'000 : bitrate;  // the timed bus, as the daemon opens it
-    auto bus = canio::VirtualCanBus::open_shared(o.virtual_bus, vo);
+    auto bus = canio::VirtualCanBus::open_shared(
+        o.virtual_bus, canio::virtual_bus_options(bitrate == 0 ? 500'000 : bitrate));
     if (!bus) {
       std::fprintf(stderr, "ds1928-sim: virtual bus '%s': %s\n", o.virtual_bus.c_str(),
                    bus.error().message().c_str());
