@@ -107,6 +107,7 @@ struct Rig {
   Rig(const DaemonConfig& config, bool stepped, bool assume_configured, NodeTweak tweak = {},
       BusMode mode = BusMode::Default)
       : config(config), stepped(stepped) {
+    if (stepped) g_fake_ns.store(kT0);  // every rig starts at the same fake time
     canio::VirtualBusOptions bo;
     if (stepped) bo.clock = [] { return fake_now(); };
     // The timed bus: frames take their stuffed bit time, arbitration, RX stamps at end of frame.
