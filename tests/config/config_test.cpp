@@ -36,7 +36,7 @@ const Expected kBadFiles[] = {
     {"output_mtu_fm0.yaml", 6, 19, "axes[0].module.output_mtu",
      "16 is out of range 1..15 for function model 0"},
     {"input_mtu_fm254.yaml", 8, 18, "axes[0].module.input_mtu",
-     "6 is out of range 1..5 for function model 254"},
+     "6 is out of range 3..5 for function model 254"},
     {"forward.yaml", 3, 16, "axes[0].module.forward", "0 is out of range 1..7"},
     {"prescaler.yaml", 4, 25, "axes[1].module.prescaler", "1 is out of range 2..65535"},
     {"rt_priority.yaml", 2, 16, "cycle.rt_priority", "100 is out of range 1..99"},
