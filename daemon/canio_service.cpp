@@ -74,6 +74,8 @@ class CanioService final : public BusService {
     j["can_state"] = std::string(canio::to_string(bus_->can_state()));
     j["bitrate"] = info.bitrate;
     j["restart_ms"] = info.restart_ms;
+    j["response_window_us"] = bus_->options().response_window_us;
+    j["last_window_us"] = static_cast<double>(c.last_window_ns.load()) / 1000.0;
     j["counters"] = {{"cycles", c.cycles.load()},
                      {"sync_sent", c.sync_sent.load()},
                      {"tx_queue_full", c.tx_queue_full.load()},
@@ -96,6 +98,12 @@ class CanioService final : public BusService {
                       {"input_ids", {a.ids.input[0], a.ids.input[1]}},
                       {"output_id", a.ids.output},
                       {"configured", ac.configured.load()},
+                      {"state", std::string(canio::to_string(ac.state.load()))},
+                      {"reason", std::string(canio::reason(ac.state.load()))},
+                      {"unpaired", ac.unpaired.load()},
+                      {"gated", ac.gated.load()},
+                      {"unverified_writes", ac.unverified.load()},
+                      {"rescans", ac.rescans.load()},
                       {"silent", ac.silent.load()},
                       {"samples", ac.samples.load()},
                       {"half_samples", ac.half_samples.load()},
@@ -127,7 +135,8 @@ std::unique_ptr<BusService> make_canio_service(const DaemonConfig& config, std::
   std::unique_ptr<canio::CanPort> sdo_port;
   std::shared_ptr<canio::VirtualCanBus> vbus;
   if (!config.canio.virtual_bus.empty()) {
-    auto bus = canio::VirtualCanBus::open_shared(config.canio.virtual_bus);
+    auto bus = canio::VirtualCanBus::open_shared(config.canio.virtual_bus,
+                                                 canio::virtual_bus_options(config.canio.bitrate));
     if (!bus) {
       why_not = fmt::format("canio: virtual bus '{}': {}", config.canio.virtual_bus,
                             bus.error().message());

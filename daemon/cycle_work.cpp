@@ -72,7 +72,7 @@ void CycleWork::run_cycle(const CycleContext& ctx) noexcept {
     st.sample = sample;
     st.endat_error = c.endat_error.load(std::memory_order_relaxed);
     st.endat_warning = c.endat_warning.load(std::memory_order_relaxed);
-    st.validity = shm::classify(sample, result.bus_up);
+    st.validity = shm::classify(sample, result.bus_up && io_[i].axis_up);
     // A position that breaks the format is never published as valid.
     if (st.validity == shm::AxisValidity::Valid && !sample.fraction_valid)
       st.validity = shm::AxisValidity::ModuleError;

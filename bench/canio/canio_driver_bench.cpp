@@ -1,8 +1,13 @@
-// What the CAN-I/O bus driver sustains on the virtual bus, next to the bus' physical limit:
-//  1. shortest cycle: CanioBus (daemon side) and a simulated CAN-I/O node on its own thread over
-//     the in-process virtual bus, real clock, absolute-time pacing; for each period, the cycles
-//     whose exchange overran the period and the samples that were not whole (half/missing). The
-//     physical limit of a real 500 kbit/s bus (bit_budget) is printed beside it.
+// What the CAN-I/O bus driver sustains on the timed virtual bus, next to the bus' bit-time bound:
+//  1. shortest period: CanioBus (daemon side) and simulated CAN-I/O nodes (one module each) on
+//     the timed virtual bus at 500 kbit/s and 1 Mbit/s, in virtual time (fake clock moved by
+//     the bus: a receive that waits jumps to the next end of frame, where the nodes answer), so
+//     every run is the same run and the figures are the bus', not this machine's scheduling.
+//     For 1, 2, 4, 8 modules the shortest period (µs) with no overrun (the cycle's last input
+//     object later than the next cycle's start) and no half sample in --cycles cycles, found by
+//     bisection, beside the bit-time bound of the cycle (SYNC + 3 objects per module, worst-case
+//     stuffing) and the ratio. The response timeout is the period (the driver's own default is
+//     not what is measured here); the node's SYNC reaction delay is 0.
 //  2. EnDat read-parameter latency in bus cycles through Flatstream at MTU 3, 4, 5 (stepped, fake
 //     clock: cycles, not time), next to the lower bound of the MTU: the request's and the reply's
 //     sequences, one per cycle each way.
@@ -22,34 +27,35 @@ using namespace ds1928;
 
 namespace {
 
-int64_t mono() {
-  return test::Rig::monotonic();
-}
-
-void sleep_until(int64_t t) {
-  timespec ts{static_cast<time_t>(t / 1'000'000'000), static_cast<long>(t % 1'000'000'000)};
-  clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr);
-}
-
 struct Sustained {
   uint64_t cycles = 0, overruns = 0, not_whole = 0;
+  double load = 0.0;  // bus time of all frames / run time
+  [[nodiscard]] bool ok() const { return overruns == 0 && not_whole == 0; }
 };
 
-Sustained run_period(uint32_t period_us, uint64_t cycles) {
-  DaemonConfig c = test::canio_config(1, period_us);
-  c.canio.response_timeout_us = period_us / 2;
-  test::Rig rig(c, false, true);
+Sustained run_period(int modules, uint32_t bitrate, uint32_t period_us, uint64_t cycles) {
+  DaemonConfig c = test::canio_config(modules, period_us);
+  c.canio.bitrate = bitrate;
+  c.canio.response_timeout_us = period_us;
+  test::Rig rig(c, true, true, test::BusMode::Timed);
   (void)rig.canio->start();
   Sustained s;
-  int64_t next = mono() + 1'000'000;
+  const int64_t period_ns = int64_t{period_us} * 1000;
   for (uint64_t i = 0; i < cycles; ++i) {
-    sleep_until(next);
+    const int64_t start = test::Rig::kT0 + static_cast<int64_t>(i) * period_ns;
     (void)rig.cycle(i);
-    if (mono() > next + static_cast<int64_t>(period_us) * 1000) ++s.overruns;
-    next += static_cast<int64_t>(period_us) * 1000;
-    if (i >= 10 && !rig.io[0].inputs_fresh) ++s.not_whole;  // first cycles: node thread starting
+    if (test::fake_now() > start + period_ns) ++s.overruns;
+    if (i < 10) continue;  // first cycles: the nodes' first answers
+    for (const AxisIo& io : rig.io)
+      if (!io.inputs_fresh) {
+        ++s.not_whole;
+        break;
+      }
   }
   s.cycles = cycles;
+  const canio::WireTotals wire = rig.bus->wire_totals();
+  s.load = static_cast<double>(wire.busy_ns) /
+           static_cast<double>(static_cast<int64_t>(cycles) * period_ns);
   return s;
 }
 
@@ -86,35 +92,45 @@ uint64_t read_param_cycles(uint8_t mtu) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  uint64_t cycles = 5000;
+  uint64_t cycles = 2000;
   for (int i = 1; i + 1 < argc; ++i)
     if (std::strcmp(argv[i], "--cycles") == 0) cycles = std::stoull(argv[i + 1]);
 
-  canio::CycleLoad load;
-  load.modules = 1;
-  load.sync = true;
-  load.bitrate = 500'000;
-  const auto limit500 = canio::cycle_budget(load);
-  load.bitrate = 1'000'000;
-  const auto limit1m = canio::cycle_budget(load);
   std::printf(
-      "1 module + SYNC, physical limit (worst-case stuffing): %lld µs at 500 kbit/s, "
-      "%lld µs at 1 Mbit/s\n",
-      static_cast<long long>(limit500.time_worst_case_ns / 1000),
-      static_cast<long long>(limit1m.time_worst_case_ns / 1000));
-  std::printf("| period µs | cycles | overruns | samples not whole |\n|---|---|---|---|\n");
-  uint32_t shortest = 0;
-  for (uint32_t p : {2000u, 1000u, 500u, 250u, 200u, 100u}) {
-    const Sustained s = run_period(p, cycles);
-    std::printf("| %u | %llu | %llu | %llu |\n", p, static_cast<unsigned long long>(s.cycles),
-                static_cast<unsigned long long>(s.overruns),
-                static_cast<unsigned long long>(s.not_whole));
-    if (s.overruns == 0 && s.not_whole == 0) shortest = p;
+      "Shortest sustained period on the timed virtual bus (virtual time, %llu cycles, no overrun "
+      "and no half sample), beside the bit-time bound (SYNC + 2 inputs + 1 output per module):\n",
+      static_cast<unsigned long long>(cycles));
+  std::printf(
+      "| bit rate | modules | bound nominal µs | bound worst case µs | shortest period µs | ratio "
+      "to worst case | bus load |\n|---|---|---|---|---|---|---|\n");
+  for (uint32_t bitrate : {500'000u, 1'000'000u}) {
+    for (int modules : {1, 2, 4, 8}) {
+      canio::CycleLoad load;
+      load.modules = static_cast<uint32_t>(modules);
+      load.sync = true;
+      load.bitrate = bitrate;
+      const auto bound = canio::cycle_budget(load);
+      // Bisection on µs: below the nominal bound nothing can hold; twice the worst case must.
+      auto lo = static_cast<uint32_t>(bound.time_nominal_ns / 1000 / 2);
+      auto hi = static_cast<uint32_t>(2 * bound.time_worst_case_ns / 1000);
+      if (!run_period(modules, bitrate, hi, cycles).ok()) {
+        std::printf("| %u | %d | not sustained at %u µs |\n", bitrate, modules, hi);
+        continue;
+      }
+      while (hi - lo > 1) {
+        const uint32_t mid = lo + (hi - lo) / 2;
+        (run_period(modules, bitrate, mid, cycles).ok() ? hi : lo) = mid;
+      }
+      const Sustained s = run_period(modules, bitrate, hi, cycles);
+      std::printf("| %s | %d | %lld | %lld | %u | %.3f | %.1f %% |\n",
+                  bitrate == 500'000 ? "500 kbit/s" : "1 Mbit/s", modules,
+                  static_cast<long long>(bound.time_nominal_ns / 1000),
+                  static_cast<long long>(bound.time_worst_case_ns / 1000), hi,
+                  static_cast<double>(hi) * 1000.0 / static_cast<double>(bound.time_worst_case_ns),
+                  s.load * 100.0);
+    }
   }
-  std::printf(
-      "shortest period sustained on the virtual bus without overrun or half sample: %u "
-      "µs\n\n",
-      shortest);
+  std::printf("\n");
   // Request 3 bytes (04 MRS P), reply 5 bytes (04 MRS P VL VH); at MTU m one sequence carries
   // m − 1 bytes (the control byte takes one), so the bound is ceil(3/(m−1)) + ceil(5/(m−1))
   // cycles plus one cycle for the module to answer.

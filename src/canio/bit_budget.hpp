@@ -14,6 +14,8 @@
 
 #include <cstdint>
 
+#include "canio/can_frame.hpp"
+
 namespace ds1928::canio {
 
 struct FrameBits {
@@ -30,6 +32,27 @@ struct FrameBits {
   const uint32_t fixed = 13u;  // CRC delimiter, ACK slot + delimiter, EOF, intermission
   return {stuffable + fixed, stuffable + fixed + (stuffable - 1u) / 4u};
 }
+
+// The bits one particular frame puts on the wire, from its real bit sequence: SOF, identifier
+// (2.0A: 11 bits, RTR, IDE, r0; 2.0B: 11 base bits, SRR, IDE, 18 extension bits, RTR, r1, r0),
+// DLC, the data bytes (none in a remote frame), the CRC-15 over all of these (polynomial 0x4599,
+// CAN 2.0 part A §3.1.1.6), and the stuff bits a transmitter inserts into them (after five equal
+// bits a complementary bit, which counts towards the next run), then the 13 bits never stuffed
+// (CRC delimiter, ACK slot, ACK delimiter, EOF 7, intermission 3). Pure.
+struct FrameWire {
+  uint32_t stuffable = 0;  // SOF .. last CRC bit, before stuffing
+  uint32_t stuff = 0;      // stuff bits inserted into them
+  uint32_t total = 0;      // stuffable + stuff + 13: the bus time of the frame in bits
+  uint16_t crc = 0;        // the frame's CRC-15
+};
+inline constexpr uint32_t kUnstuffedTailBits = 13;  // CRC delim, ACK, ACK delim, EOF 7, IFS 3
+inline constexpr uint32_t kIntermissionBits = 3;
+
+[[nodiscard]] FrameWire frame_wire(const CanFrame& frame) noexcept;
+// frame_wire(frame).total.
+[[nodiscard]] uint32_t frame_wire_bits(const CanFrame& frame) noexcept;
+// Bits at a bit rate in ns, rounded up (bitrate 0: 0).
+[[nodiscard]] int64_t bits_to_ns(uint64_t bits, uint32_t bitrate) noexcept;
 
 // The frames of one CAN-I/O cycle: per module two 8-byte input objects and one output object
 // (X20DS1928 function model 254, spec §2.2), and optionally one SYNC frame for the whole bus.

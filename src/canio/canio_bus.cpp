@@ -44,14 +44,42 @@ class CanioBusCategory final : public std::error_category {
         return "the SDO request could not be sent";
       case CanioBusError::kNoSuchAxis:
         return "no such axis";
+      case CanioBusError::kReadBackSize:
+        return "the register reads back with another size than it has";
     }
     return "unknown CAN-I/O bus error";
   }
 };
 
-constexpr auto kRetryConfigure = std::chrono::milliseconds(500);
-
 }  // namespace
+
+std::string_view to_string(CanioAxisState s) noexcept {
+  switch (s) {
+    case CanioAxisState::Configuring:
+      return "configuring";
+    case CanioAxisState::AwaitingPosCycle:
+      return "awaiting_pos_cycle";
+    case CanioAxisState::Operational:
+      return "operational";
+    case CanioAxisState::Silent:
+      return "silent";
+  }
+  return "?";
+}
+
+std::string_view reason(CanioAxisState s) noexcept {
+  switch (s) {
+    case CanioAxisState::Configuring:
+      return "its node is being configured over SDO (EnDatMode, MTUs, Rescan): axis BusDown";
+    case CanioAxisState::AwaitingPosCycle:
+      return "configured, but PosCycle has not changed since: no new position yet (Stale)";
+    case CanioAxisState::Operational:
+      return "";
+    case CanioAxisState::Silent:
+      return "no complete sample within input_timeout_ms (Stale)";
+  }
+  return "";
+}
 
 const std::error_category& canio_bus_category() noexcept {
   static const CanioBusCategory category;
@@ -73,6 +101,7 @@ CanioBusOptions make_canio_options(const DaemonConfig& config) {
   CanioBusOptions o;
   o.bus = config.canio;
   o.period_us = config.cycle.period_us;
+  o.response_window_us = canio_timing(config.canio, config.axes.size(), o.period_us).window_us;
   for (std::size_t i = 0; i < config.axes.size(); ++i) {
     const AxisConfig& a = config.axes[i];
     CanioAxisPlan p;
@@ -93,7 +122,7 @@ CanioBus::CanioBus(CanioBusOptions options, std::unique_ptr<CanPort> cycle_port,
       sdo_port_(std::move(sdo_port)),
       sdo_mapping_(options_.bus.sdo_overrides),
       order_(options_.bus.little_endian ? ByteOrder::Little : ByteOrder::Big),
-      pending_(options_.axes.size()),
+      track_(options_.axes.size()),
       axis_counters_(std::make_unique<CanioAxisCounters[]>(options_.axes.size())),
       clock_(&monotonic_ns),
       last_error_(options_.axes.size()) {
@@ -103,7 +132,10 @@ CanioBus::CanioBus(CanioBusOptions options, std::unique_ptr<CanPort> cycle_port,
     const auto axis = static_cast<uint16_t>(i);
     routes_.push_back({options_.axes[i].ids.input[0], axis, ObjectKind::Position});
     routes_.push_back({options_.axes[i].ids.input[1], axis, ObjectKind::Status});
-    if (options_.assume_configured) axis_counters_[i].configured.store(true);
+    if (options_.assume_configured) {
+      axis_counters_[i].configured.store(true);
+      axis_counters_[i].state.store(CanioAxisState::Operational);
+    }
   }
   std::sort(routes_.begin(), routes_.end(),
             [](const ObjectRoute& a, const ObjectRoute& b) { return a.id < b.id; });
@@ -193,7 +225,7 @@ void CanioBus::count_send(SendResult r) noexcept {
     bump(counters_.tx_failed);
 }
 
-void CanioBus::handle_frame(const CanFrame& f) noexcept {
+void CanioBus::handle_frame(const CanFrame& f, Stamp where) noexcept {
   if (f.error) {
     bump(counters_.error_frames);  // the port has applied the state change
     return;
@@ -204,49 +236,50 @@ void CanioBus::handle_frame(const CanFrame& f) noexcept {
     return;
   }
   CanioAxisCounters& c = axis_counters_[r->axis];
+  SyncPairing& p = track_[r->axis].pairing;
   if (f.rtr || f.dlc != kObjectBytes) {
     bump(c.wrong_length);
+    if (where == Stamp::Window) p.seen(r->kind);
     return;
   }
-  Pending& p = pending_[r->axis];
-  bool& have = r->kind == ObjectKind::Position ? p.have_position : p.have_status;
-  if (have) {
-    p.ambiguous = true;  // two answers in one cycle: which belongs to this cycle is unknown
-    bump(c.duplicates);
+  if (where == Stamp::Before) {
+    bump(c.late_frames);
+    p.late_before(r->kind);
     return;
   }
-  have = true;
-  CanObject& dst = r->kind == ObjectKind::Position ? p.position : p.status;
-  std::copy_n(f.data.begin(), kObjectBytes, dst.begin());
-  if (r->kind == ObjectKind::Position) p.position_rx_ns = f.rx_time_ns;
+  if (where == Stamp::After) {
+    bump(c.late_frames);
+    p.late_after(r->kind);
+    return;
+  }
+  CanObject bytes{};
+  std::copy_n(f.data.begin(), kObjectBytes, bytes.begin());
+  const uint8_t before = p.late_in_window();
+  p.in_window(r->kind, bytes, f.rx_time_ns);
+  if (p.late_in_window() != before) bump(c.late_frames);  // object 2 before object 1
+}
+
+bool CanioBus::window_complete(std::size_t n) const noexcept {
+  for (std::size_t i = 0; i < n; ++i)
+    if (!track_[i].pairing.ready()) return false;
+  return true;
 }
 
 ExchangeResult CanioBus::exchange(std::span<AxisIo> axes, int64_t, uint64_t) noexcept {
   ExchangeResult result;
   bump(counters_.cycles);
-  const std::size_t n = std::min(axes.size(), pending_.size());
+  const std::size_t n = std::min(axes.size(), track_.size());
   for (std::size_t i = 0; i < n; ++i) axes[i].inputs_fresh = false;
 
-  // Whatever is queued now arrived after the last cycle's deadline: late, never used. Error
-  // frames among them move the port's state (bus-off, restarted).
+  // Whatever is queued now arrived after the last cycle's deadline: late, never used (it settles
+  // what the pairing still owes). Error frames among them move the port's state.
   for (;;) {
     const ReceiveResult rr = cycle_port_->receive(rx_, 0);
     if (rr.error) {
       bump(counters_.receive_errors);
       break;
     }
-    for (std::size_t k = 0; k < rr.count; ++k) {
-      const CanFrame& f = rx_[k];
-      if (f.error) {
-        bump(counters_.error_frames);
-        continue;
-      }
-      const ObjectRoute* r = f.extended ? nullptr : route(f.id);
-      if (r)
-        bump(axis_counters_[r->axis].late_frames);
-      else
-        bump(counters_.unexpected_ids);
-    }
+    for (std::size_t k = 0; k < rr.count; ++k) handle_frame(rx_[k], Stamp::Before);
     if (rr.count < rx_.size()) break;
   }
 
@@ -261,7 +294,12 @@ ExchangeResult CanioBus::exchange(std::span<AxisIo> axes, int64_t, uint64_t) noe
     return result;
   }
 
-  for (Pending& p : pending_) p = Pending{};
+  for (std::size_t i = 0; i < n; ++i) track_[i].pairing.open();
+  // The window opens before the SYNC is handed to the port: every answer to it is stamped later
+  // (its end of frame follows the SYNC's on the wire).
+  sync_tx_ns_ = clock_();
+  deadline_ns_ = sync_tx_ns_ + static_cast<int64_t>(options_.response_window_us) * 1000;
+  bool sync_sent = true;  // without SYNC the output objects trigger the answers
   if (options_.bus.sync_enabled) {
     CanFrame sync;
     sync.id = options_.bus.sync_id;
@@ -269,6 +307,7 @@ ExchangeResult CanioBus::exchange(std::span<AxisIo> axes, int64_t, uint64_t) noe
     const SendResult r = cycle_port_->send(sync);
     count_send(r);
     if (r.sent()) bump(counters_.sync_sent);
+    sync_sent = r.sent();
   }
   for (std::size_t i = 0; i < n; ++i) {
     CanFrame out;
@@ -280,232 +319,107 @@ ExchangeResult CanioBus::exchange(std::span<AxisIo> axes, int64_t, uint64_t) noe
     count_send(cycle_port_->send(out));
   }
 
-  // This cycle's input objects, until all are in or the response timeout ends. A receive that
+  // This cycle's input objects, until every axis has its pair or the window ends. A receive that
   // returns nothing means the deadline has passed (or a test's clock stands still).
-  const int64_t deadline = clock_() + static_cast<int64_t>(options_.bus.response_timeout_us) * 1000;
-  auto complete = [&] {
-    for (std::size_t i = 0; i < n; ++i)
-      if (!pending_[i].have_position || !pending_[i].have_status) return false;
-    return true;
-  };
-  while (!complete()) {
-    const ReceiveResult rr = cycle_port_->receive(rx_, deadline);
-    for (std::size_t k = 0; k < rr.count; ++k) handle_frame(rx_[k]);
+  int64_t last_rx = sync_tx_ns_;
+  while (!window_complete(n)) {
+    const ReceiveResult rr = cycle_port_->receive(rx_, deadline_ns_);
+    for (std::size_t k = 0; k < rr.count; ++k) {
+      const CanFrame& f = rx_[k];
+      const int64_t t = f.rx_time_ns != 0 ? f.rx_time_ns : clock_();
+      const Stamp where = t < sync_tx_ns_    ? Stamp::Before
+                          : t > deadline_ns_ ? Stamp::After
+                                             : Stamp::Window;
+      if (where == Stamp::Window && !f.error) last_rx = std::max(last_rx, t);
+      handle_frame(f, where);
+    }
     if (rr.error) {
       bump(counters_.receive_errors);
       break;
     }
     if (rr.count == 0) break;
   }
+  counters_.last_window_ns.store(last_rx - sync_tx_ns_, std::memory_order_relaxed);
 
   const int64_t now = clock_();
   const int64_t input_timeout_ns = static_cast<int64_t>(options_.bus.input_timeout_ms) * 1'000'000;
-  bool all_configured = true;
   for (std::size_t i = 0; i < n; ++i) {
-    Pending& p = pending_[i];
+    Track& t = track_[i];
     CanioAxisCounters& c = axis_counters_[i];
-    const bool configured = c.configured.load(std::memory_order_acquire);
-    all_configured &= configured;
-    if (p.have_position && p.have_status && !p.ambiguous) {
+    const PairingVerdict verdict = t.pairing.close(sync_sent);
+    if (t.pairing.surplus()) bump(c.duplicates);
+    const bool whole = verdict == PairingVerdict::Whole;
+    if (whole) {
       if (c.silent.load(std::memory_order_relaxed) &&
           c.last_sample_ns.load(std::memory_order_relaxed) != 0 && !options_.assume_configured) {
         // Back after silence: the node may have been power-cycled and lost its configuration
-        // (EnDat disabled again). Nothing is published until the worker configured it anew.
+        // (EnDat disabled again). This axis publishes nothing until the worker has checked it.
         c.configured.store(false, std::memory_order_release);
         reconfigure_[i].store(true, std::memory_order_release);
       }
       c.silent.store(false, std::memory_order_relaxed);
       c.last_sample_ns.store(now, std::memory_order_relaxed);
       bump(c.samples);
-      if (!c.configured.load(std::memory_order_acquire)) continue;
-      ModuleInputs& in = axes[i].inputs;
-      (void)unpack_position_object(p.position, order_, in);
-      (void)unpack_status_object(p.status, in);
-      axes[i].inputs_fresh = true;
-      axes[i].rx_time_ns = p.position_rx_ns;
+    } else {
+      result.frames_lost += 2;
+      if (verdict == PairingVerdict::Half)
+        bump(c.half_samples);
+      else if (verdict == PairingVerdict::Missing)
+        bump(c.missing);
+      else
+        bump(c.unpaired);
+      if (now - c.last_sample_ns.load(std::memory_order_relaxed) > input_timeout_ns)
+        c.silent.store(true, std::memory_order_relaxed);
+    }
+
+    // Per-axis availability: only this axis is down while its module is being configured.
+    if (!c.configured.load(std::memory_order_acquire)) {
+      axes[i].axis_up = false;
+      c.state.store(CanioAxisState::Configuring, std::memory_order_relaxed);
       continue;
     }
-    result.frames_lost += static_cast<uint32_t>(!p.have_position) + !p.have_status;
-    if (p.have_position != p.have_status)
-      bump(c.half_samples);
-    else if (!p.have_position)
-      bump(c.missing);
-    if (now - c.last_sample_ns.load(std::memory_order_relaxed) > input_timeout_ns)
-      c.silent.store(true, std::memory_order_relaxed);
+    axes[i].axis_up = true;
+    // PosCycle gate: after every (re)configuration a sample is new only once PosCycle moved
+    // (under function model 254 the module boots with EnDat disabled: position 0, PosCycle
+    // still).
+    const uint32_t gen = c.generation.load(std::memory_order_acquire);
+    if (gen != t.generation && !options_.assume_configured) {
+      t.generation = gen;
+      t.gated = true;
+      t.gate_have = false;
+    }
+    ModuleInputs in = axes[i].inputs;
+    if (whole) {
+      (void)unpack_position_object(t.pairing.position(), order_, in);
+      (void)unpack_status_object(t.pairing.status(), in);
+    }
+    if (whole && t.gated) {
+      if (!t.gate_have) {
+        t.gate_have = true;
+        t.gate_pos_cycle = in.pos_cycle;
+      } else if (in.pos_cycle != t.gate_pos_cycle) {
+        t.gated = false;
+      }
+    }
+    if (t.gated) {
+      if (whole) bump(c.gated);
+      c.state.store(CanioAxisState::AwaitingPosCycle, std::memory_order_relaxed);
+      continue;
+    }
+    if (!whole) {
+      if (c.silent.load(std::memory_order_relaxed))
+        c.state.store(CanioAxisState::Silent, std::memory_order_relaxed);
+      continue;
+    }
+    c.state.store(CanioAxisState::Operational, std::memory_order_relaxed);
+    axes[i].inputs = in;
+    axes[i].inputs_fresh = true;
+    axes[i].rx_time_ns = t.pairing.position_rx_ns();
   }
-  const BusState st = all_configured ? BusState::Operational : BusState::Booting;
-  state_.store(st, std::memory_order_relaxed);
-  result.bus_up = st == BusState::Operational;
+  // The bus cycles; which axis is usable is per axis (AxisIo::axis_up).
+  state_.store(BusState::Operational, std::memory_order_relaxed);
+  result.bus_up = true;
   return result;
-}
-
-bool CanioBus::submit(const RegisterRequest& request) noexcept {
-  if (!requests_.try_push(request)) return false;
-  wake_.notify_one();
-  return true;
-}
-
-bool CanioBus::poll(RegisterResult& out) noexcept {
-  auto r = results_.try_pop();
-  if (!r) return false;
-  out = *r;
-  return true;
-}
-
-// ---- SDO worker (normal priority) -----------------------------------------------------------
-
-std::error_code CanioBus::sdo_transfer(uint8_t node, const SdoMessage& request,
-                                       uint8_t expected_size, uint32_t& value) {
-  if (!sdo_port_) return make_error_code(CanioBusError::kNoAcyclicTransport);
-  auto frame = build_sdo_request(node, request);
-  if (!frame) return frame.error();
-  // Answers to an earlier, timed-out request must not be taken for this one's.
-  std::array<CanFrame, 16> rx{};
-  while (sdo_port_->receive(rx, 0).count == rx.size()) {
-  }
-  if (!sdo_port_->send(*frame).sent()) return make_error_code(CanioBusError::kSdoSendFailed);
-  const int64_t deadline = clock_() + static_cast<int64_t>(options_.bus.sdo_timeout_ms) * 1'000'000;
-  for (;;) {
-    const ReceiveResult rr = sdo_port_->receive(rx, deadline);
-    if (rr.error) return rr.error;
-    for (std::size_t k = 0; k < rr.count; ++k) {
-      if (rx[k].error || rx[k].id != kSdoResponseBase + node) continue;
-      auto m = match_sdo_response(node, request, rx[k], expected_size);
-      if (!m) return m.error();
-      value = m->value;
-      return {};
-    }
-    if (rr.count == 0 || stop_.load()) return make_error_code(CanioBusError::kSdoTimeout);
-  }
-}
-
-std::error_code CanioBus::sdo_read(std::size_t axis, uint16_t reg, uint8_t size, uint32_t& value) {
-  const CanioAxisPlan& a = options_.axes[axis];
-  const auto obj = sdo_mapping_.object_for(a.slot, reg);
-  if (!obj) return make_error_code(CanioBusError::kNoSdoObject);
-  SdoMessage m;
-  m.command = SdoCommand::UploadRequest;
-  m.index = obj->index;
-  m.subindex = obj->subindex;
-  bump(axis_counters_[axis].sdo_transfers);
-  return sdo_transfer(a.node, m, size, value);
-}
-
-std::error_code CanioBus::sdo_write(std::size_t axis, uint16_t reg, uint8_t size, uint32_t value,
-                                    bool verify) {
-  const CanioAxisPlan& a = options_.axes[axis];
-  const auto obj = sdo_mapping_.object_for(a.slot, reg);
-  if (!obj) return make_error_code(CanioBusError::kNoSdoObject);
-  SdoMessage m;
-  m.command = SdoCommand::DownloadRequest;
-  m.index = obj->index;
-  m.subindex = obj->subindex;
-  m.size = size;
-  m.value = value;
-  uint32_t ignored = 0;
-  bump(axis_counters_[axis].sdo_transfers);
-  if (auto ec = sdo_transfer(a.node, m, 0, ignored)) return ec;
-  if (!verify) return {};
-  uint32_t back = 0;
-  if (auto ec = sdo_read(axis, reg, size, back)) return ec;
-  if (back != value) return make_error_code(CanioBusError::kReadBackMismatch);
-  return {};
-}
-
-std::error_code CanioBus::configure_axis(std::size_t axis) {
-  for (const RegisterWrite& w : startup_writes(options_.axes[axis].module)) {
-    if (auto ec = sdo_write(axis, w.reg, w.size, w.value, true)) {
-      const RegisterInfo* info = find_register(w.reg);
-      set_last_error(axis, "configuring the module: register " + std::to_string(w.reg) + " (" +
-                               std::string(info ? info->name : "?") +
-                               ") = " + std::to_string(w.value) + ": " + ec.message());
-      return ec;
-    }
-  }
-  set_last_error(axis, {});
-  return {};
-}
-
-CanioBus::ConfigurationCheck CanioBus::check_configuration(std::size_t axis) {
-  const ModuleSettings& m = options_.axes[axis].module;
-  const std::array<RegisterWrite, 3> checks{{{reg::kEnDatMode, 1, m.endat_mode()},
-                                             {reg::kOutputMtu, 1, m.output_mtu},
-                                             {reg::kInputMtu, 1, m.input_mtu}}};
-  for (const RegisterWrite& c : checks) {
-    uint32_t v = 0;
-    if (auto ec = sdo_read(axis, c.reg, c.size, v)) {
-      const RegisterInfo* info = find_register(c.reg);
-      set_last_error(axis, "checking the configuration after silence: register " +
-                               std::to_string(c.reg) + " (" + std::string(info ? info->name : "?") +
-                               "): " + ec.message());
-      return ConfigurationCheck::Unknown;
-    }
-    if (v != c.value) return ConfigurationCheck::Changed;
-  }
-  set_last_error(axis, {});
-  return ConfigurationCheck::Intact;
-}
-
-void CanioBus::worker() noexcept {
-  const std::size_t n = options_.axes.size();
-  std::vector<std::chrono::steady_clock::time_point> retry_at(n);
-  if (!options_.assume_configured)
-    for (std::size_t i = 0; i < n; ++i) reconfigure_[i].store(true);
-  while (!stop_.load()) {
-    bool busy = false;
-    const auto now = std::chrono::steady_clock::now();
-    for (std::size_t i = 0; i < n && !stop_.load(); ++i) {
-      if (!reconfigure_[i].load(std::memory_order_acquire) || now < retry_at[i]) continue;
-      busy = true;
-      // Back after silence: a module that kept its configuration (the node was only late or
-      // disconnected) needs three reads; one that was power-cycled is configured anew. A read
-      // that fails (the node's SDO server not answering yet, a loaded bus) proves neither:
-      // the check is repeated, and nothing is published meanwhile.
-      if (axis_counters_[i].configurations.load() > 0) {
-        const ConfigurationCheck check = check_configuration(i);
-        if (check == ConfigurationCheck::Unknown) {
-          bump(axis_counters_[i].sdo_errors);
-          retry_at[i] = now + kRetryConfigure;
-          continue;
-        }
-        if (check == ConfigurationCheck::Intact) {
-          reconfigure_[i].store(false, std::memory_order_release);
-          axis_counters_[i].configured.store(true, std::memory_order_release);
-          continue;
-        }
-      }
-      if (configure_axis(i)) {
-        bump(axis_counters_[i].sdo_errors);
-        retry_at[i] = now + kRetryConfigure;
-        continue;
-      }
-      reconfigure_[i].store(false, std::memory_order_release);
-      bump(axis_counters_[i].configurations);
-      axis_counters_[i].configured.store(true, std::memory_order_release);
-    }
-    while (auto req = requests_.try_pop()) {
-      busy = true;
-      RegisterResult res;
-      res.tag = req->tag;
-      if (req->axis >= n) {
-        res.error = make_error_code(CanioBusError::kNoSuchAxis);
-      } else if (req->write) {
-        const RegisterInfo* info = find_register(req->reg);
-        // Self-clearing command registers (EnDatAck) read back 0: not verified.
-        const bool verify = !(info && info->direction == RegisterDirection::Command);
-        res.error = sdo_write(req->axis, req->reg, req->size, req->value, verify);
-      } else {
-        res.error = sdo_read(req->axis, req->reg, req->size, res.value);
-      }
-      if (res.error && req->axis < n) bump(axis_counters_[req->axis].sdo_errors);
-      while (!results_.try_push(res) && !stop_.load())
-        std::this_thread::sleep_for(std::chrono::milliseconds(1));
-    }
-    if (!busy) {
-      std::unique_lock lock(wake_mutex_);
-      wake_.wait_for(lock, std::chrono::milliseconds(20));
-    }
-  }
 }
 
 }  // namespace ds1928::canio

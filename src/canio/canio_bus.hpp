@@ -1,24 +1,25 @@
 // BusDriver for `bus: canio`: X20DS1928 modules in function model 254 behind CAN-I/O bus
 // controllers, over a CanPort (SocketCAN or the virtual test bus).
 //
-// One cycle (exchange(), cycle thread): drain what arrived since the last cycle (late frames are
-// counted, never used), optional SYNC, every axis' output object, then input objects until every
-// axis has both or the response timeout ends. A sample is fresh only when both input objects of
-// this cycle arrived, exactly once each, with the right length; its time stamp is the kernel's
-// reception time of the object holding PositionLW (function model 254 has no PosTime). Anything
-// else — half a sample, a duplicate, a wrong length, an unknown identifier — is counted and the
-// axis is stale for this cycle: a position is never assembled from two cycles.
+// One cycle (exchange(), cycle thread): drain what arrived since the last deadline (late: counted,
+// never used), SYNC, every axis' output object, then input objects until every axis has its pair
+// or the response window (canio_timing(): bit budget + node reaction) ends. Which objects make a
+// sample is decided by SyncPairing (sync_pairing.hpp): only objects stamped between this SYNC and
+// the deadline, object 2 only after object 1, exactly one each — a sample never combines two
+// SYNCs. Its time stamp is the RX stamp of object 1 (function model 254 has no PosTime).
 //
-// Acyclic registers (configuration at start, identification, EnDatAck) go through expedited
-// CANopen SDO on a second port owned by a normal-priority worker thread; the cycle thread never
-// sees them. Writes are verified by read-back. The worker configures each module at start
-// (start-up writes of the register catalogue); when its node comes back after being silent it
-// checks the configuration by read-back and writes it again if the module lost it (power
-// cycle). Until then the axis publishes nothing.
+// Per axis (CanioAxisState): Configuring (its node is being configured: only this axis is
+// BusDown), AwaitingPosCycle (configured, but PosCycle has not changed since: Stale), Operational,
+// Silent (no complete sample for input_timeout_ms: Stale). Other axes are not affected.
+//
+// Acyclic registers (configuration, Rescan, identification, EnDatError/EnDatWarning) go through
+// expedited CANopen SDO on a second port owned by a normal-priority worker (canio_sdo_worker.cpp),
+// paced to one transfer a cycle so that the bus-load budget holds.
 #pragma once
 
 #include <array>
 #include <atomic>
+#include <chrono>
 #include <condition_variable>
 #include <cstdint>
 #include <memory>
@@ -31,6 +32,7 @@
 #include "canio/can_port.hpp"
 #include "canio/object_codec.hpp"
 #include "canio/sdo_expedited.hpp"
+#include "canio/sync_pairing.hpp"
 #include "config/config.hpp"
 #include "core/bus.hpp"
 #include "core/spsc_queue.hpp"
@@ -46,6 +48,7 @@ enum class CanioBusError : int {
   kNotConfigured,           // the axis' module is not configured (yet)
   kSdoSendFailed,           // the SDO request could not be sent (bus-off, queue full, down)
   kNoSuchAxis,
+  kReadBackSize,  // a register reads back with another size than it has
 };
 [[nodiscard]] const std::error_category& canio_bus_category() noexcept;
 [[nodiscard]] inline std::error_code make_error_code(CanioBusError e) noexcept {
@@ -54,19 +57,36 @@ enum class CanioBusError : int {
 
 inline constexpr std::size_t kMaxCanioAxes = 64;
 
+// Where an axis stands (cycle thread writes, any thread reads).
+enum class CanioAxisState : uint8_t {
+  Configuring = 0,       // the worker configures its module: the axis is BusDown (only it)
+  AwaitingPosCycle = 1,  // configured; Stale until PosCycle changes (a real new position)
+  Operational = 2,       // fresh samples are published
+  Silent = 3,            // configured, but no complete sample for input_timeout_ms: Stale
+};
+[[nodiscard]] std::string_view to_string(CanioAxisState s) noexcept;
+// Why an axis in this state is not Valid, for status (empty when Operational).
+[[nodiscard]] std::string_view reason(CanioAxisState s) noexcept;
+
 // Per-axis figures (single writer: the cycle thread, or the SDO worker where noted).
 struct CanioAxisCounters {
   std::atomic<uint64_t> samples{0};         // both objects of a cycle: fresh
   std::atomic<uint64_t> half_samples{0};    // only one of the two input objects arrived
   std::atomic<uint64_t> missing{0};         // neither arrived
-  std::atomic<uint64_t> duplicates{0};      // an object twice in one cycle: sample dropped
+  std::atomic<uint64_t> duplicates{0};      // more objects than one SYNC explains: dropped
+  std::atomic<uint64_t> unpaired{0};        // both objects there, SYNC not certain: dropped
   std::atomic<uint64_t> wrong_length{0};    // an object with dlc ≠ 8: ignored
-  std::atomic<uint64_t> late_frames{0};     // arrived after its cycle: ignored
+  std::atomic<uint64_t> late_frames{0};     // answer to an earlier SYNC: ignored
+  std::atomic<uint64_t> gated{0};           // whole samples held back until PosCycle changed
   std::atomic<uint64_t> sdo_transfers{0};   // SDO worker
   std::atomic<uint64_t> sdo_errors{0};      // SDO worker
   std::atomic<uint64_t> configurations{0};  // SDO worker: completed start-up configurations
+  std::atomic<uint64_t> unverified{0};      // SDO worker: writes whose read-back was refused
+  std::atomic<uint64_t> rescans{0};         // SDO worker: EnDatAck bit 1 written
+  std::atomic<uint32_t> generation{0};      // SDO worker: bumped by every (re)configuration
   std::atomic<bool> configured{false};      // SDO worker writes, cycle thread reads
-  std::atomic<bool> silent{true};           // no complete sample for input_timeout_ms
+  std::atomic<CanioAxisState> state{CanioAxisState::Configuring};  // cycle thread
+  std::atomic<bool> silent{true};  // no complete sample for input_timeout_ms
   std::atomic<int64_t> last_sample_ns{0};
 };
 
@@ -80,6 +100,7 @@ struct CanioBusCounters {
   std::atomic<uint64_t> error_frames{0};
   std::atomic<uint64_t> receive_errors{0};  // port receive failures (interface down)
   std::atomic<uint64_t> bus_off_cycles{0};  // cycles skipped while bus-off / down
+  std::atomic<int64_t> last_window_ns{0};   // last SYNC → last object of the cycle
 };
 
 struct CanioAxisPlan {
@@ -94,6 +115,7 @@ struct CanioBusOptions {
   CanioBusConfig bus;
   std::vector<CanioAxisPlan> axes;
   uint32_t period_us = 2000;
+  uint32_t response_window_us = 0;  // canio_timing(): configured or derived
   // Tests that drive exchange() without a module to configure (the position-integrity test):
   // every axis counts as configured from the start.
   bool assume_configured = false;
@@ -157,16 +179,17 @@ class CanioBus final : public BusDriver {
     uint16_t axis = 0;
     ObjectKind kind = ObjectKind::Position;
   };
-  // One axis' objects in the current cycle (cycle thread).
-  struct Pending {
-    bool have_position = false;
-    bool have_status = false;
-    bool ambiguous = false;
-    int64_t position_rx_ns = 0;
-    CanObject position{};
-    CanObject status{};
+  // One axis on the cycle thread: the pairing and the PosCycle gate.
+  struct Track {
+    SyncPairing pairing;
+    uint32_t generation = 0;  // the configuration the gate refers to
+    bool gated = false;       // since (re)configuration PosCycle has not changed
+    bool gate_have = false;   // gate_pos_cycle holds the first sample's PosCycle
+    int8_t gate_pos_cycle = 0;
   };
-  void handle_frame(const CanFrame& f) noexcept;
+  enum class Stamp { Before, Window, After };
+  void handle_frame(const CanFrame& f, Stamp where) noexcept;
+  [[nodiscard]] bool window_complete(std::size_t n) const noexcept;
   [[nodiscard]] const ObjectRoute* route(uint32_t id) const noexcept;
   void count_send(SendResult r) noexcept;
 
@@ -177,12 +200,15 @@ class CanioBus final : public BusDriver {
   // abort), which says nothing about the module's configuration.
   enum class ConfigurationCheck { Intact, Changed, Unknown };
   [[nodiscard]] ConfigurationCheck check_configuration(std::size_t axis);
+  // `answered_size` gets the size of the answer (0: none); `expected` 0 accepts any size.
   [[nodiscard]] std::error_code sdo_read(std::size_t axis, uint16_t reg, uint8_t size,
-                                         uint32_t& value);
+                                         uint32_t& value, uint8_t* answered_size = nullptr);
   [[nodiscard]] std::error_code sdo_write(std::size_t axis, uint16_t reg, uint8_t size,
                                           uint32_t value, bool verify);
   [[nodiscard]] std::error_code sdo_transfer(uint8_t node, const SdoMessage& request,
-                                             uint8_t expected_size, uint32_t& value);
+                                             uint8_t expected_size, uint32_t& value,
+                                             uint8_t* answered_size);
+  void pace_sdo() noexcept;
   void set_last_error(std::size_t axis, const std::string& text);
 
   CanioBusOptions options_;
@@ -191,10 +217,12 @@ class CanioBus final : public BusDriver {
   powerlink::SdoMapping sdo_mapping_;
   ByteOrder order_ = ByteOrder::Little;
   std::vector<ObjectRoute> routes_;  // sorted by id; fixed after construction
-  std::vector<Pending> pending_;
+  std::vector<Track> track_;
   std::unique_ptr<CanioAxisCounters[]> axis_counters_;
   CanioBusCounters counters_;
   std::array<CanFrame, 64> rx_{};
+  int64_t sync_tx_ns_ = 0;  // this cycle's window
+  int64_t deadline_ns_ = 0;
   std::atomic<BusState> state_{BusState::Down};
   std::atomic<bool> reconfigure_[kMaxCanioAxes]{};
   Clock clock_;
@@ -203,6 +231,7 @@ class CanioBus final : public BusDriver {
   SpscQueue<RegisterRequest, 64> requests_;
   SpscQueue<RegisterResult, 64> results_;
   std::thread worker_;
+  std::chrono::steady_clock::time_point last_sdo_{};  // worker: pacing
   std::atomic<bool> stop_{false};
   std::mutex wake_mutex_;  // worker wake-up only (normal threads)
   std::condition_variable wake_;

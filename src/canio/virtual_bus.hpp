@@ -1,6 +1,14 @@
 // The virtual CAN bus: a TEST TRANSPORT standing in for a CAN network where the kernel has no
-// CAN (unit tests, the simulator, fault injection). It is not a CAN implementation: no
-// arbitration, no bit timing, no ACK. What it keeps from CAN is what the drivers depend on:
+// CAN (unit tests, the simulator, fault injection). Two modes:
+//  - timed (VirtualBusOptions::bitrate > 0, the default of the daemon and the simulator): a
+//    frame occupies the bus for its real stuffed length at the bit rate (frame_wire_bits), one
+//    frame at a time; frames waiting in several ports' TX queues go out by arbitration (lowest
+//    identifier first, standard before extended with the same base); each port's queue is FIFO
+//    (one controller TX buffer); receivers get a frame at its end of frame, stamped with it.
+//    Not modelled: ACK and bit errors (no error frames from the wire), the bit-level collision of
+//    two ports sending the same identifier (they go one after the other).
+//  - instant (bitrate 0): a sent frame is on the bus at once, stamped with the send time.
+// What it keeps from CAN in both modes is what the drivers depend on:
 // a broadcast medium (every port sees every other port's frames, not its own), per-port
 // identifier filters and error-frame subscription, RX time stamps, and the controller states
 // with bus-off and restart behaving as the kernel reports them.
@@ -41,11 +49,40 @@ struct VirtualBusOptions {
   // Clock for RX stamps, delays and bus-off restart (CLOCK_MONOTONIC ns). Empty: the real
   // CLOCK_MONOTONIC. Tests pass a fake clock; receive() deadlines are read on the same clock.
   std::function<int64_t()> clock;
+  // Bit rate of the timed bus (bit/s); 0: instant bus (no bit timing, no arbitration). A shared
+  // bus keeps the creator's: opening it at another bit rate is an error naming both.
+  uint32_t bitrate = 0;
+  // Virtual time: called instead of sleeping when receive() would wait for the bus clock to reach
+  // `until_ns` (the next end of frame, the next frame's start, a delayed frame, or the caller's
+  // deadline). The fake clock's owner moves its clock (up to until_ns) and may run peers there;
+  // receive() goes on from the new time and returns empty if the clock did not move. Empty: sleep.
+  std::function<void(int64_t until_ns)> wait_until = {};
+};
+
+// The options the daemon and the simulator open their shared bus with: timed at `bitrate`, or
+// instant (bitrate 0) when the environment has DS1928_VIRTUAL_BUS_INSTANT=1 — for a test that
+// needs the old instant delivery across processes. Both sides must agree (checked on open).
+[[nodiscard]] VirtualBusOptions virtual_bus_options(uint32_t bitrate);
+
+// Bus time of frames on a timed bus: totals since the bus was created.
+struct WireTotals {
+  uint64_t frames = 0;      // frames that went on the wire
+  int64_t busy_ns = 0;      // their bus time (stuffed bits, intermission included)
+  int64_t bus_free_ns = 0;  // bus clock at which the last frame's intermission ends
+};
+
+// Bus load over a window of the bus clock.
+struct BusLoad {
+  int64_t from_ns = 0, to_ns = 0;
+  int64_t busy_ns = 0;  // bus time of frames inside the window
+  uint64_t frames = 0;  // frames with bus time inside the window
+  double load = 0.0;    // busy_ns / (to_ns - from_ns)
 };
 
 struct VirtualPortOptions {
-  std::string name = "vcan";   // for messages and query_interface()
-  uint32_t bitrate = 500'000;  // reported by query_interface() (the bus has no timing)
+  std::string name = "vcan";  // for messages and query_interface()
+  // Reported by query_interface() on an instant bus; a timed bus reports its own bit rate.
+  uint32_t bitrate = 500'000;
   // After an injected bus-off, the port restarts by itself this long after (bus clock), as the
   // kernel does with `restart-ms`; 0: stays bus-off until restart().
   uint32_t restart_ms = 100;
@@ -124,6 +161,7 @@ class VirtualCanPort final : public CanPort {
   std::shared_ptr<VirtualCanBus> bus_;
   VirtualPortOptions options_;
   std::unique_ptr<Impl> impl_;  // allocated once at open; the hot path only uses it
+  int tx_queue_ = -1;           // timed bus: this port's TX queue in the ring
 };
 
 class VirtualCanBus : public std::enable_shared_from_this<VirtualCanBus> {
@@ -131,7 +169,8 @@ class VirtualCanBus : public std::enable_shared_from_this<VirtualCanBus> {
   // A bus in this process' memory.
   [[nodiscard]] static std::shared_ptr<VirtualCanBus> create_local(VirtualBusOptions options = {});
   // A bus in POSIX shared memory "/ds1928-vcan.<name>", created by whichever process opens it
-  // first (same ring size required: kVirtualBusMismatch otherwise). With unlink_on_close the
+  // first (same ring size required: kVirtualBusMismatch otherwise; same bit rate: otherwise an
+  // error whose message names both). With unlink_on_close the
   // name is removed when this object goes (the mapping stays valid in other processes).
   [[nodiscard]] static Result<std::shared_ptr<VirtualCanBus>> open_shared(
       std::string_view name, VirtualBusOptions options = {}, bool unlink_on_close = false);
@@ -142,10 +181,21 @@ class VirtualCanBus : public std::enable_shared_from_this<VirtualCanBus> {
   VirtualCanBus(const VirtualCanBus&) = delete;
   VirtualCanBus& operator=(const VirtualCanBus&) = delete;
 
-  // A new port on this bus; it sees frames sent from now on (by any other port).
+  // A new port on this bus; it sees frames sent from now on (by any other port). A timed bus
+  // holds at most 32 ports' TX queues at once (all processes): beyond, ENOBUFS.
   [[nodiscard]] Result<std::unique_ptr<VirtualCanPort>> open_port(VirtualPortOptions options = {});
 
   [[nodiscard]] int64_t now_ns() const noexcept;
+
+  // ---- timed bus (figures for tests and benches; not for the cycle thread) --------------------
+  [[nodiscard]] uint32_t bitrate() const noexcept;  // 0: instant bus
+  [[nodiscard]] bool timed() const noexcept { return bitrate() != 0; }
+  // Bus time of this frame at the bus' bit rate (its stuffed bits, intermission included).
+  [[nodiscard]] int64_t wire_time_ns(const CanFrame& frame) const noexcept;
+  // Both bring the bus timeline up to now_ns() first (frames whose turn came go on the wire).
+  [[nodiscard]] WireTotals wire_totals() noexcept;
+  // Over the frames still in the ring (the last ring_frames).
+  [[nodiscard]] BusLoad load(int64_t from_ns, int64_t to_ns) noexcept;
 
   struct Ring;  // shared layout (virtual_bus.cpp)
 

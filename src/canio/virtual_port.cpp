@@ -5,6 +5,7 @@
 #include <climits>
 #include <cstring>
 
+#include "canio/bit_budget.hpp"
 #include "canio/virtual_bus.hpp"
 #include "canio/virtual_bus_ring.hpp"
 #include "core/spsc_queue.hpp"
@@ -176,7 +177,11 @@ VirtualCanPort::VirtualCanPort(std::shared_ptr<VirtualCanBus> bus, uint16_t inde
   impl_->read_pos = impl_->ring->head.load(std::memory_order_acquire);
 }
 
-VirtualCanPort::~VirtualCanPort() = default;
+VirtualCanPort::~VirtualCanPort() {
+  // Frames still queued go out (as a controller finishes its TX buffer); the queue is taken by
+  // another port only once drained.
+  if (tx_queue_ >= 0) impl_->ring->tx[tx_queue_].owner.store(0, std::memory_order_release);
+}
 
 SendResult VirtualCanPort::send(const CanFrame& frame) noexcept {
   Impl& p = *impl_;
@@ -212,12 +217,36 @@ SendResult VirtualCanPort::send(const CanFrame& frame) noexcept {
       }
     }
   }
-  bump(p.counters.tx_frames);
-  if (p.tx_loss.should_drop(frame.id)) {
-    bump(p.counters.tx_lost);  // the sender cannot know: a real controller would retry or not
+  if (tx_queue_ < 0) {
+    bump(p.counters.tx_frames);
+    if (p.tx_loss.should_drop(frame.id)) {
+      bump(p.counters.tx_lost);  // the sender cannot know: a real controller would retry or not
+      return {};
+    }
+    publish(*p.ring, frame, p.sender, now);
     return {};
   }
-  publish(*p.ring, frame, p.sender, now);
+  // Timed bus: into this port's TX queue; the frame goes on the wire when the bus is free and
+  // it wins arbitration. Never waits: a full queue is ENOBUFS, as from a SocketCAN socket.
+  Ring& ring = *p.ring;
+  vbus::TxQueue& q = ring.tx[tx_queue_];
+  (void)vbus::advance(ring, now);  // frames whose turn came free their TX slots first
+  const uint64_t head = q.head.load(std::memory_order_relaxed);
+  if (head - q.tail.load(std::memory_order_acquire) >= vbus::kTxDepth) {
+    bump(p.counters.tx_queue_full);
+    return {SendStatus::QueueFull, ENOBUFS};
+  }
+  bump(p.counters.tx_frames);
+  if (p.tx_loss.should_drop(frame.id)) {
+    bump(p.counters.tx_lost);  // lost before the wire: takes no bus time
+    return {};
+  }
+  vbus::TxEntry& e = q.entries[head % vbus::kTxDepth];
+  e.header.store(vbus::pack_header(frame, p.sender), std::memory_order_relaxed);
+  e.data.store(vbus::pack_data(frame), std::memory_order_relaxed);
+  e.ready_ns.store(now, std::memory_order_relaxed);
+  q.head.store(head + 1, std::memory_order_release);
+  (void)vbus::advance(ring, now);  // an idle bus starts it at once
   return {};
 }
 
@@ -230,6 +259,9 @@ ReceiveResult VirtualCanPort::receive(std::span<CanFrame> out, int64_t deadline_
   for (;;) {
     const uint32_t seen = ring.published.load(std::memory_order_seq_cst);
     const int64_t now = bus_->now_ns();
+    // Timed bus: frames whose turn has come go on the wire (any port may advance the timeline).
+    const int64_t next_start = vbus::advance(ring, now);
+    int64_t next_due = INT64_MAX;  // end of frame of the first frame still on the wire
     std::size_t count = 0;
     const uint32_t error_mask = p.error_mask.load(std::memory_order_relaxed);
 
@@ -291,6 +323,12 @@ ReceiveResult VirtualCanPort::receive(std::span<CanFrame> out, int64_t deadline_
         std::atomic_thread_fence(std::memory_order_acquire);
         torn = s.seq.load(std::memory_order_relaxed) != s1;
       }
+      if (!torn && wire > now) {
+        // Timed bus: still on the wire; receivers get it at its end of frame. Frames are on
+        // the ring in bus order, so nothing behind it is due either.
+        next_due = wire;
+        break;
+      }
       if (torn) {
         // Lapped by the writers: the frames between here and the oldest slot still intact are
         // gone, as with a full socket receive queue.
@@ -325,12 +363,7 @@ ReceiveResult VirtualCanPort::receive(std::span<CanFrame> out, int64_t deadline_
         bump(p.counters.missed_off_bus);
         continue;
       }
-      CanFrame f;
-      f.id = static_cast<uint32_t>(header & kMaxExtendedId);
-      f.extended = ((header >> 29) & 1) != 0;
-      f.rtr = ((header >> 30) & 1) != 0;
-      f.dlc = static_cast<uint8_t>((header >> 32) & 0xF);
-      std::memcpy(f.data.data(), &data, 8);
+      CanFrame f = vbus::unpack(header, data);
       f.rx_time_ns = wire;
       f.rx_clock = RxClock::VirtualBus;
       if (!p.passes_filter(f)) continue;
@@ -379,11 +412,20 @@ ReceiveResult VirtualCanPort::receive(std::span<CanFrame> out, int64_t deadline_
     }
     if (count != 0 || now >= deadline_ns) return {count, {}};
 
-    // Sleep until a frame is published, a delayed frame is due, or the deadline.
+    // Sleep until a frame is published, a delayed frame is due, a frame on the wire ends, the
+    // next queued frame can start, or the deadline.
     int64_t until = deadline_ns;
     if (next_release != 0 && next_release < until) until = next_release;
+    if (next_due < until) until = next_due;
+    if (next_start < until) until = next_start;
     const int64_t wait = until - now;
     if (wait <= 0) continue;
+    if (bus_->options_.wait_until) {
+      bus_->options_.wait_until(until);
+      if (bus_->now_ns() == now && ring.published.load(std::memory_order_seq_cst) == seen)
+        return {0, {}};
+      continue;
+    }
     timespec ts{static_cast<time_t>(wait / 1'000'000'000), static_cast<long>(wait % 1'000'000'000)};
     ring.sleepers.fetch_add(1, std::memory_order_seq_cst);
     if (ring.published.load(std::memory_order_seq_cst) == seen)
@@ -460,7 +502,7 @@ Result<CanInterfaceInfo> VirtualCanPort::query_interface() noexcept {
   info.up = impl_->up.load(std::memory_order_acquire);
   info.running = info.up;
   info.state = state();
-  info.bitrate = options_.bitrate;
+  info.bitrate = bus_->timed() ? bus_->bitrate() : options_.bitrate;
   info.sample_point = 875;
   info.restart_ms = options_.restart_ms;
   return info;

@@ -89,9 +89,14 @@ void parse_module(Section s, ModuleSettings& m, FunctionModel fm) {
   s.integer("quit_time_us", m.quit_time_us, 0, 20000000, "µs");
   const bool standard = fm == FunctionModel::Standard;
   const int64_t max_mtu = standard ? 15 : 5;
-  const char* note = standard ? "for function model 0" : "for function model 254";
-  s.integer("output_mtu", m.output_mtu, 1, max_mtu, note);
-  s.integer("input_mtu", m.input_mtu, 1, max_mtu, note);
+  // Function model 254: Tx/RxByte1..5 (datasheet §11.3) and a sequence needs at least 3 bytes
+  // (§11.9.4.1.1, "theoretisch: 3 bis 27").
+  const int64_t min_mtu = standard ? 1 : 3;
+  const char* note = standard ? "for function model 0"
+                              : "for function model 254 (datasheet §11.3: Tx/RxByte1..5; "
+                                "§11.9.4.1.1: an MTU holds at least 3 bytes)";
+  s.integer("output_mtu", m.output_mtu, min_mtu, max_mtu, note);
+  s.integer("input_mtu", m.input_mtu, min_mtu, max_mtu, note);
   // The struct defaults fit function model 0; under 254 only 5 Tx/Rx bytes exist.
   if (!standard && !s.has("output_mtu")) m.output_mtu = std::min<uint8_t>(m.output_mtu, 5);
   if (!standard && !s.has("input_mtu")) m.input_mtu = std::min<uint8_t>(m.input_mtu, 5);
@@ -265,6 +270,9 @@ DaemonConfig parse_document(Diagnostics& diag, const YAML::Node& doc, const std:
                {"error", std::string("error")},
                {"critical", std::string("critical")},
                {"off", std::string("off")}});
+  // CAN-I/O: SYNC + 3 objects of one module take 920 µs of a 500 kbit/s wire (worst case): the
+  // 1 ms default period cannot hold them within canio.max_bus_load; 2 ms can (docs/canio.md).
+  if (c.bus == BusKind::Canio) c.cycle.period_us = 2000;
   parse_cycle(root.section("cycle"), c.cycle);
 
   PowerlinkSites pl_sites;

@@ -1,10 +1,13 @@
 // The `canio` section: interface and bit rate, SYNC, identifiers (CANopen predefined connection
 // set or an explicit table), acyclic transport, timeouts; and the checks that need the axes and
-// the cycle (node numbers 1..127, MTU 3..5, identifier collisions, the cycle's bits on the wire).
+// the cycle (node numbers 1..127, identifier collisions, the response window against the wire time,
+// the bus load against max_bus_load).
 #include "config/config_canio.hpp"
 
+#include <algorithm>
 #include <iomanip>
 #include <set>
+#include <sstream>
 
 #include "canio/bit_budget.hpp"
 #include "core/register_catalogue.hpp"
@@ -31,6 +34,38 @@ CanioAxisIds canio_axis_ids(const CanioBusConfig& canio, const AxisConfig& axis,
   ids.input[1] = 0x180 + 0x100 * (s + 1) + axis.node;
   ids.output = 0x200 + 0x100 * s + axis.node;
   return ids;
+}
+
+CanioTiming canio_timing(const CanioBusConfig& canio, std::size_t modules, uint32_t period_us) {
+  CanioTiming t;
+  canio::CycleLoad load;
+  load.modules = static_cast<uint32_t>(modules);
+  load.bitrate = canio.bitrate;
+  load.sync = canio.sync_enabled;
+  const canio::CycleBudget cyclic = canio::cycle_budget(load);
+  // One 8-byte frame (an SDO request or answer, or another node's object) may have started just
+  // before the SYNC was queued: CAN does not preempt, so it delays everything by its length.
+  canio::CycleLoad one;
+  one.modules = 1;
+  one.bitrate = canio.bitrate;
+  one.input_frames_per_module = 1;
+  one.output_frames_per_module = 0;
+  const int64_t blocking_ns = canio::cycle_budget(one).time_worst_case_ns;
+  t.cyclic_ns = cyclic.time_worst_case_ns;
+  t.wire_ns = cyclic.time_worst_case_ns + blocking_ns;
+  t.reaction_ns = int64_t{canio.node_reaction_us} * 1000;
+  t.min_window_us = static_cast<uint32_t>((t.wire_ns + 999) / 1000);
+  t.derived_window_us = static_cast<uint32_t>((t.wire_ns + t.reaction_ns + 999) / 1000);
+  t.window_us = canio.response_timeout_us != 0 ? canio.response_timeout_us : t.derived_window_us;
+  // The SDO worker starts at most one transfer per max(period, sdo_interval_us) and the node
+  // answers it: two 8-byte frames, averaged over the cycle.
+  if (canio.acyclic == CanAcyclicTransport::CanopenSdo && period_us > 0) {
+    const int64_t interval_us = std::max<int64_t>(period_us, canio.sdo_interval_us);
+    t.acyclic_ns = (2 * blocking_ns * period_us + interval_us - 1) / interval_us;
+  }
+  if (period_us > 0)
+    t.load = static_cast<double>(t.cyclic_ns + t.acyclic_ns) / (double(period_us) * 1000.0);
+  return t;
 }
 
 namespace config_detail {
@@ -86,7 +121,11 @@ void parse_canio(Section s, CanioBusConfig& c) {
                              "125000, 250000, 500000, 800000, 1000000");
     }
   }
-  s.integer("response_timeout_us", c.response_timeout_us, 1, 100000, "µs");
+  s.integer("response_timeout_us", c.response_timeout_us, 0, 100000,
+            "µs (0: derived from the bit budget)");
+  s.integer("node_reaction_us", c.node_reaction_us, 0, 100000, "µs");
+  s.real("max_bus_load", c.max_bus_load, 0.05, 1.0);
+  s.choice("verify", c.verify, {{"readback", CanVerify::Readback}, {"none", CanVerify::None}});
   s.integer("input_timeout_ms", c.input_timeout_ms, 1, 60000, "ms");
   s.choice("byte_order", c.little_endian, {{"little", true}, {"big", false}});
   {
@@ -109,6 +148,7 @@ void parse_canio(Section s, CanioBusConfig& c) {
         "transport", c.acyclic,
         {{"canopen_sdo", CanAcyclicTransport::CanopenSdo}, {"none", CanAcyclicTransport::None}});
     acyclic.integer("sdo_timeout_ms", c.sdo_timeout_ms, 1, 10000, "ms");
+    acyclic.integer("sdo_interval_us", c.sdo_interval_us, 0, 10'000'000, "µs");
     std::map<uint16_t, Loc> seen;
     for (auto& item : acyclic.list("sdo_objects")) {
       Section o(s.diag(), item.node, item.path, item.at);
@@ -160,11 +200,25 @@ void check_canio(Diagnostics& diag, const DaemonConfig& c, const YAML::Node& doc
                    std::to_string(c.axes.size()) +
                    " axes are configured (canio.axes[i] describes axes[i])");
   }
-  if (k.response_timeout_us >= c.cycle.period_us) {
+  const CanioTiming timing = canio_timing(k, c.axes.size(), c.cycle.period_us);
+  if (k.bitrate > 0 && k.response_timeout_us != 0 && k.response_timeout_us < timing.min_window_us) {
     diag.error(locate(doc, {"canio", "response_timeout_us"}), "canio.response_timeout_us",
-               "response_timeout_us (" + std::to_string(k.response_timeout_us) +
-                   ") must be less than cycle.period_us (" + std::to_string(c.cycle.period_us) +
-                   ")");
+               std::to_string(k.response_timeout_us) +
+                   " µs is shorter than the cycle's frames take " + "on the wire at " +
+                   std::to_string(k.bitrate) + " bit/s (SYNC + " + std::to_string(c.axes.size()) +
+                   " module(s) × 3 objects + one frame already on the wire, worst-case " +
+                   "stuffing): the minimum is " + std::to_string(timing.min_window_us) +
+                   " µs; leave it out (0) to use " + std::to_string(timing.derived_window_us) +
+                   " µs (wire time + node_reaction_us " + std::to_string(k.node_reaction_us) + ")");
+  } else if (k.bitrate > 0 && timing.window_us >= c.cycle.period_us &&
+             timing.load <= k.max_bus_load) {  // else the bus-load error below says it
+    diag.error(locate(doc, {k.response_timeout_us != 0 ? "canio" : "cycle",
+                            k.response_timeout_us != 0 ? "response_timeout_us" : "period_us"}),
+               k.response_timeout_us != 0 ? "canio.response_timeout_us" : "cycle.period_us",
+               "the response window (" + std::to_string(timing.window_us) +
+                   " µs) must be shorter than cycle.period_us (" +
+                   std::to_string(c.cycle.period_us) + "): use period_us > " +
+                   std::to_string(timing.window_us) + ", fewer modules or a higher bit rate");
   }
 
   // Every identifier on the bus, with who uses it, to name both ends of a collision.
@@ -189,15 +243,6 @@ void check_canio(Diagnostics& diag, const DaemonConfig& c, const YAML::Node& doc
                      " is out of range 1..127 (CAN-I/O / CANopen node number of the bus "
                      "controller)");
       continue;
-    }
-    for (auto [key, mtu] : {std::pair{"input_mtu", a.module.input_mtu},
-                            std::pair{"output_mtu", a.module.output_mtu}}) {
-      if (mtu < 3) {
-        diag.error(axis_loc(i, {"module", key}), path + ".module." + key,
-                   std::to_string(mtu) +
-                       " is below 3: the module's Flatstream MTU is 3..27 bytes (datasheet "
-                       "§11.9.4.1), and function model 254 carries at most 5");
-      }
     }
     const std::string who = path + " (" + a.name + ")";
     if (k.identifiers == CanIdScheme::Explicit) {
@@ -237,25 +282,35 @@ void check_canio(Diagnostics& diag, const DaemonConfig& c, const YAML::Node& doc
     }
   }
 
-  // Bits on the wire per cycle (worst-case stuffing) against the period.
-  canio::CycleLoad load;
-  load.modules = static_cast<uint32_t>(c.axes.size());
-  load.bitrate = k.bitrate;
-  load.sync = k.sync_enabled;
-  const canio::CycleFit fit =
-      canio::check_cycle(load, static_cast<int64_t>(c.cycle.period_us) * 1000);
-  if (!fit.fits && k.bitrate > 0) {
-    const int64_t need_us = (fit.budget.time_worst_case_ns + 999) / 1000;
-    diag.error(locate(doc, {"cycle", "period_us"}), "cycle.period_us",
-               std::to_string(c.cycle.period_us) +
-                   " µs is too short for the CAN-I/O bus: " + std::to_string(fit.budget.frames) +
-                   " frames a cycle (" + std::to_string(c.axes.size()) + " module(s) × 3" +
-                   (k.sync_enabled ? " + SYNC" : "") + ") are " +
-                   std::to_string(fit.budget.bits_worst_case) +
-                   " bits with worst-case stuffing = " + std::to_string(need_us) + " µs at " +
-                   std::to_string(k.bitrate) + " bit/s, " + std::to_string(-fit.margin_ns / 1000) +
-                   " µs more than the period; use period_us ≥ " + std::to_string(need_us) +
-                   ", fewer modules or a higher bit rate");
+  // Bits on the wire per cycle (worst-case stuffing) plus the daemon's own acyclic traffic
+  // against the share of the period the bus may carry.
+  if (k.bitrate > 0 && timing.load > k.max_bus_load) {
+    // The shortest period within the budget (the load falls with the period; the SDO share is
+    // per max(period, sdo_interval_us)).
+    uint32_t lo = c.cycle.period_us, hi = 100'000'000;
+    while (lo + 1 < hi) {
+      const uint32_t mid = lo + (hi - lo) / 2;
+      (canio_timing(k, c.axes.size(), mid).load <= k.max_bus_load ? hi : lo) = mid;
+    }
+    const uint32_t need_us = hi;
+    std::ostringstream pct;
+    pct << std::fixed << std::setprecision(0) << timing.load * 100.0;
+    std::ostringstream max_pct;
+    max_pct << std::fixed << std::setprecision(0) << k.max_bus_load * 100.0;
+    const uint32_t frames = static_cast<uint32_t>(3 * c.axes.size()) + (k.sync_enabled ? 1u : 0u);
+    diag.error(
+        locate(doc, {"cycle", "period_us"}), "cycle.period_us",
+        std::to_string(c.cycle.period_us) + " µs loads the CAN-I/O bus to " + pct.str() +
+            " %, above canio.max_bus_load " + max_pct.str() + " %: " + std::to_string(frames) +
+            " frames a cycle (" + std::to_string(c.axes.size()) + " module(s) × 3" +
+            (k.sync_enabled ? " + SYNC" : "") + ") take " +
+            std::to_string((timing.cyclic_ns + 999) / 1000) + " µs with worst-case stuffing at " +
+            std::to_string(k.bitrate) + " bit/s" +
+            (timing.acyclic_ns > 0 ? ", the SDO worker's share " +
+                                         std::to_string((timing.acyclic_ns + 999) / 1000) + " µs"
+                                   : std::string()) +
+            "; use period_us ≥ " + std::to_string(need_us) +
+            ", fewer modules or a higher bit rate");
   }
 }
 
@@ -263,7 +318,11 @@ void dump_canio(std::ostream& o, const CanioBusConfig& c) {
   o << "canio:\n"
     << "  interface: \"" << c.interface << "\"\n"
     << "  bitrate: " << c.bitrate << "\n"
-    << "  response_timeout_us: " << c.response_timeout_us << "\n"
+    << "  response_timeout_us: " << c.response_timeout_us
+    << (c.response_timeout_us == 0 ? "  # derived from the bit budget\n" : "\n")
+    << "  node_reaction_us: " << c.node_reaction_us << "\n"
+    << "  max_bus_load: " << c.max_bus_load << "\n"
+    << "  verify: " << (c.verify == CanVerify::None ? "none" : "readback") << "\n"
     << "  input_timeout_ms: " << c.input_timeout_ms << "\n"
     << "  byte_order: " << (c.little_endian ? "little" : "big") << "\n"
     << "  sync:\n"
@@ -284,7 +343,8 @@ void dump_canio(std::ostream& o, const CanioBusConfig& c) {
   o << "  acyclic:\n"
     << "    transport: " << (c.acyclic == CanAcyclicTransport::None ? "none" : "canopen_sdo")
     << "\n"
-    << "    sdo_timeout_ms: " << c.sdo_timeout_ms << "\n";
+    << "    sdo_timeout_ms: " << c.sdo_timeout_ms << "\n"
+    << "    sdo_interval_us: " << c.sdo_interval_us << "\n";
   if (!c.sdo_overrides.empty()) {
     o << "    sdo_objects:\n";
     for (const auto& [reg, obj] : c.sdo_overrides)

@@ -24,6 +24,9 @@ struct AxisIo {
   ModuleInputs inputs;        // valid when inputs_fresh
   bool inputs_fresh = false;  // this cycle's exchange delivered the module's inputs
   int64_t rx_time_ns = 0;     // CLOCK_MONOTONIC reception time of the inputs
+  // The axis' own part of the bus is up (its node answers and is configured). False makes only
+  // this axis BusDown while the others keep cycling (CAN-I/O: one node being configured).
+  bool axis_up = true;
 };
 
 // The bus' NetTime at a reference instant. A module's 32-bit PosTime is unwrapped against it:

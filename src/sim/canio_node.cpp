@@ -1,6 +1,10 @@
 #include "sim/canio_node.hpp"
 
+#include <time.h>
+
+#include <algorithm>
 #include <array>
+#include <limits>
 
 #include "canio/object_codec.hpp"
 #include "canio/sdo_expedited.hpp"
@@ -13,6 +17,7 @@ namespace {
 // CiA 301 abort codes.
 constexpr uint32_t kAbortNoObject = 0x0602'0000;
 constexpr uint32_t kAbortReadOnly = 0x0601'0002;
+constexpr uint32_t kAbortWriteOnly = 0x0601'0001;
 constexpr uint32_t kAbortTypeLength = 0x0607'0010;
 constexpr uint32_t kAbortOutOfRange = 0x0609'0030;
 constexpr uint32_t kAbortGeneral = 0x0800'0000;
@@ -78,11 +83,47 @@ void CanioNode::send(const canio::CanFrame& f) {
   if (!port_.send(f).sent()) ++counters_.send_failures;
 }
 
+int64_t CanioNode::now() const {
+  if (config_.clock) return config_.clock();
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
+
+void CanioNode::queue(const canio::CanFrame& f, int64_t due_ns) {
+  if (tx_count_ == tx_.size()) {
+    ++counters_.send_failures;  // the controller's TX buffer is full
+    return;
+  }
+  // In order: a frame is never sent before one queued earlier (FIFO transmitter); a late object
+  // 2 therefore holds back the answers to the next SYNC until it has gone (docs/canio.md, W2).
+  if (tx_count_ > 0) {
+    const Queued& last = tx_[(tx_head_ + tx_count_ - 1) % tx_.size()];
+    due_ns = std::max(due_ns, last.due_ns);
+  }
+  tx_[(tx_head_ + tx_count_) % tx_.size()] = {f, due_ns};
+  ++tx_count_;
+}
+
+int64_t CanioNode::next_due_ns() const noexcept {
+  return tx_count_ == 0 ? std::numeric_limits<int64_t>::max() : tx_[tx_head_].due_ns;
+}
+
+void CanioNode::send_due() {
+  const int64_t t = now();
+  while (tx_count_ > 0 && tx_[tx_head_].due_ns <= t) {
+    if (!silent_) send(tx_[tx_head_].frame);
+    tx_head_ = (tx_head_ + 1) % tx_.size();
+    --tx_count_;
+  }
+}
+
 void CanioNode::answer(std::size_t i, int64_t time_ns) {
   Ds1928Module& m = *modules_[i];
   m.tick(time_ns, static_cast<uint64_t>(time_ns / 1000));
   const ModuleInputs in = m.inputs();
   if (on_inputs) on_inputs(i, time_ns, in);
+  if (on_answer) on_answer(counters_.syncs, i, in);
   const CanioNodeModule& cfg = config_.modules[i];
   canio::CanObject pos{};
   canio::CanObject status{};
@@ -90,6 +131,8 @@ void CanioNode::answer(std::size_t i, int64_t time_ns) {
       in, config_.little_endian ? canio::ByteOrder::Little : canio::ByteOrder::Big, pos);
   canio::pack_status_object(in, status);
   std::bernoulli_distribution drop(config_.faults.drop);
+  std::bernoulli_distribution late(config_.faults.late_object2);
+  const int64_t due = time_ns + config_.sync_reaction_ns;
   for (int k = 0; k < 2; ++k) {
     canio::CanFrame f = canio::make_standard_frame(cfg.ids.input[k], k == 0 ? pos : status);
     if (k == 0 && config_.faults.wrong_length_every != 0 &&
@@ -99,7 +142,12 @@ void CanioNode::answer(std::size_t i, int64_t time_ns) {
       ++counters_.inputs_dropped;
       continue;
     }
-    send(f);
+    int64_t at = due;
+    if (k == 1 && config_.faults.late_object2 > 0 && late(rng_)) {
+      at += config_.faults.late_object2_ns;
+      ++counters_.inputs_late;
+    }
+    queue(f, at);
     ++counters_.inputs_sent;
   }
 }
@@ -129,11 +177,14 @@ void CanioNode::serve_sdo(const canio::CanFrame& f) {
     abort(kAbortNoObject);
   } else if (request->command == SdoCommand::UploadRequest) {
     uint32_t value = 0;
-    if (auto ec = module->read_register(where->reg, size, value)) {
+    const RegisterInfo* info = find_register(where->reg);
+    if (config_.faults.config_write_only && info && info->direction == RegisterDirection::Config) {
+      abort(kAbortWriteOnly);
+    } else if (auto ec = module->read_register(where->reg, size, value)) {
       abort(abort_for(ec));
     } else {
       reply.command = SdoCommand::UploadResponse;
-      reply.size = size;
+      reply.size = config_.faults.widen_sdo_reads && size == 1 ? uint8_t{4} : size;
       reply.value = value;
     }
   } else if (request->command == SdoCommand::DownloadRequest) {
@@ -151,8 +202,9 @@ void CanioNode::serve_sdo(const canio::CanFrame& f) {
 }
 
 std::size_t CanioNode::service(int64_t deadline_ns) {
+  send_due();
   std::array<canio::CanFrame, 32> rx{};
-  const canio::ReceiveResult r = port_.receive(rx, deadline_ns);
+  const canio::ReceiveResult r = port_.receive(rx, std::min(deadline_ns, next_due_ns()));
   for (std::size_t k = 0; k < r.count; ++k) {
     const canio::CanFrame& f = rx[k];
     if (f.error || f.extended || silent_) continue;
@@ -182,6 +234,7 @@ std::size_t CanioNode::service(int64_t deadline_ns) {
       break;
     }
   }
+  send_due();
   return r.count;
 }
 

@@ -3,9 +3,14 @@
 // module's two input objects (without SYNC: a module's output object triggers its answer), takes
 // the output objects, and serves expedited SDO (0x600 + node → 0x580 + node) on the register →
 // index/subindex scheme the daemon uses. Single-threaded: the owner calls service() in a loop.
-// Faults for tests: random loss of its frames, wrong lengths, foreign identifiers, silence.
+// Faults for tests: random loss of its frames, wrong lengths, foreign identifiers, silence, object
+// 2 sent late. The answers to a SYNC go out `sync_reaction_ns` after it (the bus controller's
+// reaction); like a real controller the node sends its answers in order and never sends an answer
+// to an older SYNC after it has queued the answers to a newer one (an object 2 still waiting when
+// the next SYNC's answers are due is sent first).
 #pragma once
 
+#include <array>
 #include <atomic>
 #include <cstdint>
 #include <functional>
@@ -33,6 +38,13 @@ struct CanioNodeFaults {
   uint32_t wrong_length_every = 0;  // every n-th position object with 7 bytes (0: off)
   uint32_t unexpected_id = 0;       // also send a frame with this id per SYNC (0: off)
   bool answer_sdo = true;           // false: SDO requests are ignored (no acyclic access)
+  double late_object2 = 0.0;        // probability that object 2 goes out late_object2_ns late
+  int64_t late_object2_ns = 0;      // how late (after the node's reaction)
+  // SDO: answer a 1-byte register read with 4 bytes (a peer that widens small registers).
+  bool widen_sdo_reads = false;
+  // SDO: configuration registers answer reads with 0x06010001 "write only" (what the register
+  // table's single access mark may mean).
+  bool config_write_only = false;
   uint64_t seed = 1;
 };
 
@@ -44,6 +56,12 @@ struct CanioNodeConfig {
   uint32_t sync_id = 0x080;
   std::map<uint16_t, std::pair<uint16_t, uint8_t>> sdo_overrides;
   CanioNodeFaults faults;
+  // ASSUMPTION (docs/canio.md): the bus controller queues its answers this long after the SYNC's
+  // end of frame (the stamp it received it with).
+  int64_t sync_reaction_ns = 0;
+  // The node's clock (CLOCK_MONOTONIC ns; tests pass the virtual bus' fake clock). Empty: the
+  // real CLOCK_MONOTONIC.
+  std::function<int64_t()> clock;
 };
 
 // The node behind `node` of a daemon configuration: the axes on that node become its modules.
@@ -54,6 +72,7 @@ struct CanioNodeCounters {
   uint64_t outputs = 0;
   uint64_t inputs_sent = 0;  // input objects sent
   uint64_t inputs_dropped = 0;
+  uint64_t inputs_late = 0;  // objects 2 sent late (fault)
   uint64_t send_failures = 0;
   uint64_t sdo_requests = 0;
   uint64_t sdo_aborts = 0;
@@ -68,9 +87,13 @@ class CanioNode {
 
   // Filters on the port (SYNC, output objects, SDO requests).
   [[nodiscard]] std::error_code open();
-  // Handles what arrives until `deadline_ns` (one receive call; a deadline in the past polls).
-  // Returns the frames handled.
+  // Sends the answers that are due, then handles what arrives until `deadline_ns` or the next
+  // answer is due (one receive call; a deadline in the past polls). Returns the frames handled.
   std::size_t service(int64_t deadline_ns);
+  // Sends the answers due by now (without receiving).
+  void send_due();
+  // When the next queued answer is due (INT64_MAX: none).
+  [[nodiscard]] int64_t next_due_ns() const noexcept;
 
   // Power-cycle: every module back to its bus-controller defaults (EnDat disabled).
   void power_up();
@@ -87,11 +110,15 @@ class CanioNode {
 
   // Test hook: module i's inputs as sent in answer to the SYNC received at `sync_time_ns`.
   std::function<void(std::size_t module, int64_t sync_time_ns, const ModuleInputs&)> on_inputs;
+  // Log hook: the SYNC count (1, 2, ... as received) → module i's position and PosCycle sent.
+  std::function<void(uint64_t sync_count, std::size_t module, const ModuleInputs&)> on_answer;
 
  private:
   void answer(std::size_t module, int64_t time_ns);
   void serve_sdo(const canio::CanFrame& f);
   void send(const canio::CanFrame& f);
+  void queue(const canio::CanFrame& f, int64_t due_ns);
+  [[nodiscard]] int64_t now() const;
 
   CanioNodeConfig config_;
   canio::CanPort& port_;
@@ -102,6 +129,14 @@ class CanioNode {
   std::atomic<bool> silent_{false};  // set from another thread (tests, the simulator main)
   std::atomic<uint32_t> sdo_drops_{0};
   uint64_t position_objects_ = 0;
+  // Answers waiting for their time, in the order they go out (fixed size: no allocation).
+  struct Queued {
+    canio::CanFrame frame;
+    int64_t due_ns = 0;
+  };
+  std::array<Queued, 64> tx_{};
+  std::size_t tx_head_ = 0;
+  std::size_t tx_count_ = 0;
 };
 
 }  // namespace ds1928::sim

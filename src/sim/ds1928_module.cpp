@@ -23,7 +23,10 @@ struct Registers {
   uint16_t vss_max_mv = 0;
   uint32_t quit_time_us = 0;
   uint8_t endat_mode = 0;
-  uint8_t output_mtu = 7;  // no datasheet default: the simulator starts with 7
+  // No datasheet default: function model 0 starts with 7 here; under function model 254 they
+  // power up unset (0) — "bei der Minimalkonfiguration müssen InputMTU und OutputMTU eingestellt
+  // werden" (§11.9.4.1) — and the Flatstream is idle until both are written (3..5).
+  uint8_t output_mtu = 7;
   uint8_t input_mtu = 7;
   uint8_t flatstream_mode = 0;
   uint8_t forward = 0;
@@ -51,13 +54,20 @@ struct Registers {
 [[nodiscard]] uint8_t max_mtu(FunctionModel model) noexcept {
   return model == FunctionModel::Standard ? 15 : 5;
 }
+// Function model 254: Tx/RxByte1..5 (§11.3); an MTU holds a sequence of at least 3 bytes
+// (§11.9.4.1.1). Function model 0 keeps its historic lower bound.
+[[nodiscard]] uint8_t min_mtu(FunctionModel model) noexcept {
+  return model == FunctionModel::Standard ? 2 : 3;
+}
 
 }  // namespace
 
 [[nodiscard]] flatstream::ModuleConfig channel_config(const Registers& r) noexcept {
   flatstream::ModuleConfig c;
-  c.output_mtu = r.output_mtu;
-  c.input_mtu = r.input_mtu;
+  // An unset MTU (0, function model 254 at power-up) idles the Flatstream (run_flatstream); the
+  // channel itself keeps the smallest valid size meanwhile.
+  c.output_mtu = r.output_mtu == 0 ? uint8_t{3} : r.output_mtu;
+  c.input_mtu = r.input_mtu == 0 ? uint8_t{3} : r.input_mtu;
   c.flatstream_mode = r.flatstream_mode;
   c.forward = r.forward;
   c.forward_delay_us = r.forward_delay_us;
@@ -112,6 +122,7 @@ FunctionModel Ds1928Module::function_model() const noexcept {
 void Ds1928Module::power_up() noexcept {
   State& s = *state_;
   s.regs = power_up_registers();
+  if (s.model == FunctionModel::BusController) s.regs.output_mtu = s.regs.input_mtu = 0;
   s.in = ModuleInputs{};
   s.out = ModuleOutputs{};
   s.latched_errors = s.sim.inject_error_info;
@@ -122,7 +133,10 @@ void Ds1928Module::power_up() noexcept {
   s.channel.reset();
   s.outputs_pending = false;
   s.command.reset();
-  (void)s.bridge.power_up(s.now_ns);  // a failed identification shows as EnDatParSetError
+  if ((s.regs.endat_mode & endat_mode::kEnable) == 0 && s.model == FunctionModel::BusController)
+    s.bridge.power_up_unread();  // EnDat disabled: the encoder is not read until a Rescan
+  else
+    (void)s.bridge.power_up(s.now_ns);  // a failed identification shows as EnDatParSetError
 }
 
 const flatstream::ModuleChannel& Ds1928Module::flatstream() const noexcept {
@@ -228,6 +242,7 @@ void Ds1928Module::run_flatstream(int64_t now_ns) noexcept {
   if (s.command && s.bridge.submit(s.command->payload(), now_ns)) s.command.reset();
   if (!s.outputs_pending) return;
   s.outputs_pending = false;
+  if (s.regs.output_mtu == 0 || s.regs.input_mtu == 0) return;  // MTUs not set yet
   const auto frame =
       s.channel.step(flatstream::output_frame(s.out), static_cast<uint64_t>(now_ns / 1000));
   flatstream::apply(frame, s.in);
@@ -298,7 +313,8 @@ std::error_code Ds1928Module::write_register(uint16_t r, uint8_t size, uint32_t 
     case reg::kOutputMtu:
     case reg::kInputMtu:
       if (!want(1)) return make_error_code(SimErrc::wrong_size);
-      if (!in_range(2, max_mtu(state_->model))) return make_error_code(SimErrc::out_of_range);
+      if (!in_range(min_mtu(state_->model), max_mtu(state_->model)))
+        return make_error_code(SimErrc::out_of_range);
       (r == reg::kOutputMtu ? g.output_mtu : g.input_mtu) = static_cast<uint8_t>(v);
       state_->channel.configure(channel_config(g));
       return {};
@@ -370,6 +386,10 @@ std::error_code configure_module(Ds1928Module& m, const ModuleSettings& s) {
   for (const RegisterWrite& w : startup_writes(s)) {
     if (auto ec = m.write_register(w.reg, w.size, w.value)) return ec;
   }
+  // Function model 254 boots with EnDat disabled and the identification unread: after enabling
+  // it, Rescan (EnDatAck bit 1) as the CAN-I/O driver does.
+  if (m.function_model() == FunctionModel::BusController && s.endat_enable)
+    return m.write_register(reg::kEnDatAck, 1, 0x02);
   return {};
 }
 

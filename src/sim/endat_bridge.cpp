@@ -340,6 +340,12 @@ std::error_code EnDatBridge::power_up(int64_t now_ns) {
   return ec;
 }
 
+void EnDatBridge::power_up_unread() noexcept {
+  ident_ = IdentRegisters{};
+  identification_.reset();
+  position_bits_ = 0;
+}
+
 bool EnDatBridge::submit(std::span<const uint8_t> message, int64_t now_ns) {
   if (pending_ || in_flight_) return false;
   Pending p;

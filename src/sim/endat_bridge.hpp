@@ -69,6 +69,10 @@ class EnDatBridge {
   // Module power-up: reads the identification now; the channel stays busy as long as that takes.
   // Error: the first wire failure, or invalid_identification (EnDatParSetError is then set).
   std::error_code power_up(int64_t now_ns);
+  // Module power-up with the EnDat interface disabled (function model 254's default): the
+  // encoder is not read, the identification registers stay empty and no position can be read
+  // until a Rescan (EnDatAck bit 1) reads them.
+  void power_up_unread() noexcept;
 
   // One complete Flatstream message. False while another message is queued or its reply has
   // not been collected (one command at a time, as the module handles them).

@@ -67,32 +67,40 @@ TEST_CASE("CAN-I/O: 5 % frame loss for 10^5 cycles publishes no wrong position",
         ++wrong;
         continue;
       }
-      // The stamp is the reception time of the position object of this very cycle.
-      if (io.rx_time_ns != fake_now()) ++stamped_wrong;
+      // The stamp is the end of frame of this very cycle's position object: after its SYNC,
+      // within the response window.
+      const int64_t sync_ns = Rig::kT0 + static_cast<int64_t>(c) * 2'000'000;
+      if (io.rx_time_ns <= sync_ns ||
+          io.rx_time_ns > sync_ns + int64_t{rig.canio->options().response_window_us} * 1000)
+        ++stamped_wrong;
     }
     // Keep the records small: only this cycle can still be matched.
     for (auto& r : records) r.sent.erase(c);
   }
-  uint64_t half = 0, missing = 0;
+  uint64_t half = 0, missing = 0, unpaired = 0;
   for (std::size_t a = 0; a < rig.io.size(); ++a) {
     half += rig.canio->axis_counters(a).half_samples.load();
     missing += rig.canio->axis_counters(a).missing.load();
+    unpaired += rig.canio->axis_counters(a).unpaired.load();
   }
   std::printf(
       "canio loss test: %llu cycles x %zu axes, fresh %llu, stale %llu (half samples %llu, "
-      "missing %llu), wrong 0 expected: %llu\n",
+      "missing %llu, unpaired %llu), wrong 0 expected: %llu\n",
       static_cast<unsigned long long>(kCycles), rig.io.size(),
       static_cast<unsigned long long>(fresh), static_cast<unsigned long long>(stale),
       static_cast<unsigned long long>(half), static_cast<unsigned long long>(missing),
-      static_cast<unsigned long long>(wrong));
+      static_cast<unsigned long long>(unpaired), static_cast<unsigned long long>(wrong));
   CHECK(wrong == 0);
   CHECK(stamped_wrong == 0);
   CHECK(fresh + stale == kCycles * rig.io.size());
-  // With 5 % loss on each of SYNC, output and two inputs, about 81 % of the samples are whole.
-  CHECK(fresh > kCycles * rig.io.size() * 3 / 4);
+  // With 5 % loss on each of SYNC, output and two inputs, about 81 % of the samples are whole;
+  // after a cycle without object 1 the next one is published only if two objects 1 arrive (the
+  // first may be the late answer to the previous SYNC): about 73 % are published.
+  CHECK(fresh > kCycles * rig.io.size() * 2 / 3);
   CHECK(fresh < kCycles * rig.io.size() * 9 / 10);
   CHECK(half > 0);
-  CHECK(half + missing == stale);
+  CHECK(unpaired > 0);
+  CHECK(half + missing + unpaired == stale);
 }
 
 TEST_CASE("CAN-I/O: answers that come after their cycle are counted and never used",
@@ -203,7 +211,11 @@ TEST_CASE("CAN-I/O: a silent node makes its axis stale, never a wrong position",
   CHECK(rig.canio->axis_counters(1).silent.load());  // 40 ms > input_timeout_ms 20
   CHECK(position_of(rig.io[1].inputs) == position_of(last));
   rig.nodes[1]->set_silent(false);
+  // The first answer after a silence could be a late answer to the SYNC before (assumption W3
+  // allows one cycle): it is not used; the next one is.
   (void)rig.cycle(30);
+  CHECK_FALSE(rig.io[1].inputs_fresh);
+  (void)rig.cycle(31);
   CHECK(rig.io[1].inputs_fresh);
   CHECK_FALSE(rig.canio->axis_counters(1).silent.load());
 }
@@ -241,7 +253,7 @@ TEST_CASE("CAN-I/O: interface down and bit-rate mismatch are start-up errors nam
 
 TEST_CASE("CAN-I/O: modules configured over SDO with read-back, checked again after silence",
           "[canio][bus][sdo]") {
-  Rig rig(canio_config(1), false, false);
+  Rig rig(canio_config(1), false, false);  // timed bus, window from the bit budget
   REQUIRE_FALSE(rig.canio->start());
   uint64_t c = 0;
   // Cycles back to back (each waits up to the response timeout), bounded.

@@ -24,7 +24,8 @@ namespace {
 
 struct SimulatedNodeThread {
   SimulatedNodeThread(const DaemonConfig& config, const std::string& bus_name) {
-    auto b = canio::VirtualCanBus::open_shared(bus_name);
+    auto b = canio::VirtualCanBus::open_shared(bus_name,
+                                               canio::virtual_bus_options(config.canio.bitrate));
     if (!b) throw std::runtime_error("virtual bus: " + b.error().message());
     bus = b.value();
     auto p = bus->open_port({});
@@ -99,7 +100,9 @@ TEST_CASE("ds1928d on bus canio: configured at start, positions, status, EnDat c
   json status;
   (void)test::wait_until([&] {
     status = request(c.socket.path, {{"cmd", "status"}});
+    // The bus cycles at once; the axis is operational once configured and PosCycle moved.
     return status.value("ok", false) && status["bus"]["state"] == "operational" &&
+           status["bus"]["nodes"][0]["state"] == "operational" &&
            status["bus"]["nodes"][0]["samples"].get<uint64_t>() > 50;
   });
   INFO(status.dump(2));

@@ -36,7 +36,7 @@ const Expected kBadFiles[] = {
     {"output_mtu_fm0.yaml", 6, 19, "axes[0].module.output_mtu",
      "16 is out of range 1..15 for function model 0"},
     {"input_mtu_fm254.yaml", 8, 18, "axes[0].module.input_mtu",
-     "6 is out of range 1..5 for function model 254"},
+     "6 is out of range 3..5 for function model 254"},
     {"forward.yaml", 3, 16, "axes[0].module.forward", "0 is out of range 1..7"},
     {"prescaler.yaml", 4, 25, "axes[1].module.prescaler", "1 is out of range 2..65535"},
     {"rt_priority.yaml", 2, 16, "cycle.rt_priority", "100 is out of range 1..99"},
@@ -85,13 +85,14 @@ const Expected kBadFiles[] = {
     {"billion_laughs.yaml", 4, 3, "log_level", "a list is not allowed"},
     {"canio_node.yaml", 6, 11, "axes[0].node", "200 is out of range 1..127"},
     {"canio_mtu.yaml", 7, 18, "axes[0].module.input_mtu",
-     "2 is below 3: the module's Flatstream MTU is 3..27 bytes"},
+     "2 is out of range 3..5 for function model 254 (datasheet §11.3: Tx/RxByte1..5"},
     {"canio_id_collision.yaml", 10, 18, "canio.axes[1]",
      "CAN identifier 0x181 of axes[1] (b) input object 2 is already used by axes[0] (a) input "
      "object 1"},
     {"canio_bus_load.yaml", 3, 14, "cycle.period_us",
-     "2000 µs is too short for the CAN-I/O bus: 10 frames a cycle (3 module(s) × 3 + SYNC) are "
-     "1270 bits with worst-case stuffing = 2540 µs at 500000 bit/s, 540 µs more than the period"},
+     "2000 µs loads the CAN-I/O bus to 138 %, above canio.max_bus_load 70 %: 10 frames a cycle "
+     "(3 module(s) × 3 + SYNC) take 2540 µs with worst-case stuffing at 500000 bit/s, the SDO "
+     "worker's share 216 µs; use period_us ≥ 4291"},
     {"canio_analog_slot.yaml", 5, 26, "canio.axes[0].first_analog_slot",
      "analog slots 3 and 4 need TPDO4 and TPDO5"},
     {"canio_transport.yaml", 5, 16, "canio.acyclic.transport",

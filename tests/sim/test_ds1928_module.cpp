@@ -174,3 +174,24 @@ TEST_CASE("the simulated bus configures modules at start and answers acyclic req
   CHECK_FALSE(bus.poll(res));
   CHECK(io[0].inputs_fresh);
 }
+
+TEST_CASE("function model 254: MTUs power up unset and take 3..5 only; identification after Rescan",
+          "[sim][fm254]") {
+  Ds1928Module m(FunctionModel::BusController, constant(100));
+  uint32_t v = 99;
+  REQUIRE_FALSE(m.read_register(reg::kOutputMtu, 1, v));
+  CHECK(v == 0);  // no datasheet default: the master must set it (§11.9.4.1)
+  CHECK(m.write_register(reg::kOutputMtu, 1, 2) == sim::SimErrc::out_of_range);
+  CHECK_FALSE(m.write_register(reg::kOutputMtu, 1, 3));
+  // EnDat disabled at power-up: the encoder was not read; enabling alone reads nothing.
+  CHECK_FALSE(m.endat().identification().has_value());
+  REQUIRE_FALSE(m.write_register(reg::kEnDatMode, 1, endat_mode::kEnable));
+  m.tick(1'000'000, 1000);
+  CHECK_FALSE(m.endat().identification().has_value());
+  CHECK(m.inputs().pos_cycle == 0);
+  // Rescan (EnDatAck bit 1) reads the identification; positions follow.
+  REQUIRE_FALSE(m.write_register(reg::kEnDatAck, 1, 0x02));
+  m.tick(50'000'000, 50'000);
+  CHECK(m.endat().identification().has_value());
+  CHECK(m.inputs().pos_cycle != 0);
+}

@@ -30,6 +30,7 @@ namespace {
 int run_canio(const CanioOptions& o, const std::atomic<bool>& stop) {
   sim::CanioNodeConfig node;
   uint32_t bitrate = o.bitrate;
+  uint32_t period_us = 2000;
   if (!o.config_file.empty()) {
     auto loaded = ds1928::load_config(o.config_file);
     if (!loaded) {
@@ -43,6 +44,7 @@ int run_canio(const CanioOptions& o, const std::atomic<bool>& stop) {
       return 1;
     }
     if (bitrate == 0) bitrate = loaded.config().canio.bitrate;
+    period_us = loaded.config().cycle.period_us;
   } else {
     ds1928::DaemonConfig c;
     c.bus = ds1928::BusKind::Canio;
@@ -67,11 +69,16 @@ int run_canio(const CanioOptions& o, const std::atomic<bool>& stop) {
   node.faults.unexpected_id = o.unexpected_id;
   node.faults.answer_sdo = !o.no_sdo;
   node.faults.seed = o.seed;
+  node.faults.late_object2 = o.late_object2;
+  node.faults.late_object2_ns =
+      int64_t{o.late_object2_us != 0 ? o.late_object2_us : period_us} * 1000;
+  node.sync_reaction_ns = int64_t{o.sync_reaction_us} * 1000;
 
   std::shared_ptr<canio::VirtualCanBus> vbus;
   std::unique_ptr<canio::CanPort> port;
   if (!o.virtual_bus.empty()) {
-    auto bus = canio::VirtualCanBus::open_shared(o.virtual_bus);
+    auto bus = canio::VirtualCanBus::open_shared(
+        o.virtual_bus, canio::virtual_bus_options(bitrate == 0 ? 500'000 : bitrate));
     if (!bus) {
       std::fprintf(stderr, "ds1928-sim: virtual bus '%s': %s\n", o.virtual_bus.c_str(),
                    bus.error().message().c_str());
@@ -103,6 +110,25 @@ int run_canio(const CanioOptions& o, const std::atomic<bool>& stop) {
   }
 
   sim::CanioNode n(node, *port);
+  std::FILE* answer_log = nullptr;
+  if (!o.answer_log.empty()) {
+    answer_log = std::fopen(o.answer_log.c_str(), "w");
+    if (answer_log == nullptr) {
+      std::fprintf(stderr, "ds1928-sim: --answer-log %s: cannot open\n", o.answer_log.c_str());
+      return 2;
+    }
+    setvbuf(answer_log, nullptr, _IOLBF, 0);  // readable while the node runs
+    // What the node sent for each SYNC it answered: the reference a test compares published
+    // samples with (a sample is whole only if position and PosCycle come from one line).
+    n.on_answer = [answer_log, &node](uint64_t sync, std::size_t m,
+                                      const ds1928::ModuleInputs& in) {
+      std::fprintf(
+          answer_log, "%llu %u %llu %d\n", static_cast<unsigned long long>(sync),
+          node.modules[m].slot,
+          static_cast<unsigned long long>((uint64_t{in.position_hw} << 32) | in.position_lw),
+          static_cast<int>(in.pos_cycle));
+    };
+  }
   if (auto ec = n.open()) {
     std::fprintf(stderr, "ds1928-sim: CAN filters on %s: %s\n", std::string(port->name()).c_str(),
                  ec.message().c_str());
@@ -139,15 +165,17 @@ int run_canio(const CanioOptions& o, const std::atomic<bool>& stop) {
     }
     if (stop_at != 0 && now >= stop_at) break;
   }
+  if (answer_log) std::fclose(answer_log);
   const auto& c = n.counters();
   std::printf(
       "canio node %d stats: sync=%llu outputs=%llu inputs_sent=%llu dropped=%llu sdo=%llu "
-      "sdo_aborts=%llu send_failures=%llu\n",
+      "sdo_aborts=%llu send_failures=%llu late_object2=%llu\n",
       o.node, static_cast<unsigned long long>(c.syncs), static_cast<unsigned long long>(c.outputs),
       static_cast<unsigned long long>(c.inputs_sent),
       static_cast<unsigned long long>(c.inputs_dropped),
       static_cast<unsigned long long>(c.sdo_requests),
       static_cast<unsigned long long>(c.sdo_aborts),
-      static_cast<unsigned long long>(c.send_failures));
+      static_cast<unsigned long long>(c.send_failures),
+      static_cast<unsigned long long>(c.inputs_late));
   return 0;
 }

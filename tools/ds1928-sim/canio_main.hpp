@@ -19,6 +19,10 @@ struct CanioOptions {
   uint32_t wrong_length_every = 0;
   uint32_t unexpected_id = 0;
   bool no_sdo = false;
+  uint32_t sync_reaction_us = 50;  // ASSUMPTION: bus-controller reaction to SYNC
+  double late_object2 = 0.0;
+  uint32_t late_object2_us = 0;  // 0: one cycle (the config's period) or 2000
+  std::string answer_log;        // file: "sync slot position pos_cycle" per answer
   double silent_after_s = 0.0;
   uint32_t silent_for_ms = 0;
   bool power_cycle_when_back = false;

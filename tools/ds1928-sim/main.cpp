@@ -8,7 +8,8 @@
 // signalled to the MN by EN, fetched by StatusRequest; also once by --raise-error-after S);
 // SIGINT/SIGTERM stop.
 //   ds1928-sim canio (--iface IF | --virtual NAME) [--node N] [--modules K] [--config FILE]
-//                    [--drop P] [--wrong-length-every N] [--unexpected-id ID] [--no-sdo] ...
+//                    [--drop P] [--wrong-length-every N] [--unexpected-id ID] [--no-sdo]
+//                    [--sync-reaction-us US] [--late-object2 P [--late-object2-us US]] ...
 // runs a CAN-I/O bus controller with simulated X20DS1928 modules (function model 254) on
 // SocketCAN or on the cross-process virtual test bus (docs/canio.md).
 #include <sched.h>
@@ -389,6 +390,18 @@ int main(int argc, char** argv) {
   can->add_option("--unexpected-id", co.unexpected_id,
                   "also send a frame with this identifier after every SYNC");
   can->add_flag("--no-sdo", co.no_sdo, "ignore SDO requests (no acyclic access)");
+  can->add_option("--sync-reaction-us", co.sync_reaction_us,
+                  "answer a SYNC this long after its reception (bus-controller reaction; "
+                  "default 50, an assumption)")
+      ->check(CLI::Range(0, 100000));
+  can->add_option("--late-object2", co.late_object2,
+                  "probability that input object 2 goes out --late-object2-us late")
+      ->check(CLI::Range(0.0, 1.0));
+  can->add_option("--late-object2-us", co.late_object2_us,
+                  "how late object 2 goes out (default: one cycle of the config, else 2000)")
+      ->check(CLI::Range(0, 1000000));
+  can->add_option("--answer-log", co.answer_log,
+                  "write one line per answer: SYNC count, slot, position, PosCycle");
   can->add_option("--silent-after", co.silent_after_s, "stop answering after S seconds");
   can->add_option("--silent-for-ms", co.silent_for_ms, "... for this long (0: for good)");
   can->add_flag("--power-cycle-when-back", co.power_cycle_when_back,

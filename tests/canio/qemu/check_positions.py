@@ -10,6 +10,10 @@ per publication) and checks what must hold on every sample whatever the machine'
   - positions move (the simulated encoder turns at constant velocity), never backwards;
   - at least --min-fresh samples are fresh.
 
+With --answer-log FILE (ds1928-sim canio --answer-log: "sync slot position pos_cycle" per
+answer) every fresh sample must be one the node sent as a whole: its position and its PosCycle
+from the same answer — a sample combining two SYNCs ("torn") fails.
+
 Nothing about timing is asserted (the QEMU guest is TCG-emulated). Exit 0 when everything held,
 1 otherwise, with one line per problem. --expect-no-fresh inverts the purpose: the daemon was
 given a wrong identifier, so no sample may be fresh or valid (exit 0 when none is; the positive
@@ -26,6 +30,7 @@ def main() -> int:
     ap.add_argument("--since-ns", type=int, default=0,
                     help="CLOCK_MONOTONIC before the daemon started: no stamp may be earlier")
     ap.add_argument("--expect-no-fresh", action="store_true")
+    ap.add_argument("--answer-log", help="the node's answers: no fresh sample may be torn")
     args = ap.parse_args()
 
     samples = []
@@ -90,6 +95,25 @@ def main() -> int:
             elif step:
                 moves += 1
         last_raw = raw
+    torn = 0
+    if args.answer_log:
+        sent = {}
+        with open(args.answer_log) as f:
+            for line in f:
+                parts = line.split()
+                if len(parts) == 4:
+                    # The simulated encoder moves at constant velocity: a position is sent once.
+                    sent.setdefault(int(parts[2]), set()).add(int(parts[3]))
+        for s in fresh:
+            pcs = sent.get(s["position_raw"])
+            if pcs is None:
+                problems.append(f"cycle {s['cycle']}: position {s['position_raw']:#x} "
+                                f"was never sent by the node")
+            elif s["pos_cycle"] not in pcs:
+                torn += 1
+                problems.append(f"cycle {s['cycle']}: TORN: position {s['position_raw']:#x} "
+                                f"with PosCycle {s['pos_cycle']}, the node sent it with {sorted(pcs)}")
+        summary += f", {len(sent)} answers logged, torn {torn}"
     if len(fresh) < args.min_fresh:
         problems.append(f"only {len(fresh)} fresh samples, expected at least {args.min_fresh}")
     if fresh and moves == 0:

@@ -119,7 +119,9 @@ status() {
   [ "$line" = "#end" ] || fail "status_vars.py does not answer"
   eval "$vars"
 }
-operational() { status "$1" && [ "$bus_state" = operational ]; }
+# The bus cycles as soon as the controller can send; the axis is usable once its node is
+# configured (per-axis availability).
+operational() { status "$1" && [ "$bus_state" = operational ] && [ "$configured" = 1 ]; }
 stop_daemon() {
   kill -TERM "$daemon_pid" 2> /dev/null
   wait "$daemon_pid" 2> /dev/null
@@ -219,5 +221,29 @@ cat "$tmp/check_wrong.txt"
 [ $rc = 0 ] || fail "fresh positions with a wrong identifier"
 status wrong
 pass "wrong identifier 0x3F1: no fresh sample, the position check fails; status: samples ${n_samples:-?}, half samples ${n_half_samples:-?}, silent $silent"
+stop_daemon
+
+# ---- 8. object 2 late in 30 % of the cycles: no torn sample ----------------------------------------
+# The node sends object 2 of SYNC n 10.2 ms late — after SYNC n+1 (period 10 ms), before its answers
+# to it, which wait behind it (FIFO) — and logs what it sent for every SYNC. Every fresh sample
+# must carry a position and a PosCycle the node sent together (check_positions.py --answer-log).
+kill "$sim_pid" 2> /dev/null
+wait "$sim_pid" 2> /dev/null
+"$sim" canio --iface can1 --node 1 --config "$sim_config" --late-object2 0.3 \
+  --late-object2-us 10200 --answer-log "$tmp/answers.txt" --seed 17 > "$tmp/sim_late.log" 2>&1 &
+sim_pid=$!
+pids+=($sim_pid)
+until_true 60 sim_filters || fail "ds1928-sim canio (late object 2) registered no receive filter"
+start_daemon late "$daemon_config"
+late_fresh() { status late && [ "$configured" = 1 ] && [ "${n_samples:-0}" -gt 20 ]; }
+until_true 120 late_fresh || fail "daemon against a node with late objects 2: no samples (state '${bus_state:-?}', $(tail -n 3 "$tmp/late.log"))"
+positions "$tmp/positions_late.txt" 300 || fail "ds1928ctl position --follow (late object 2)"
+python3 "$here/check_positions.py" --min-fresh 20 --since-ns "$((t_start - 20000000))" \
+  --answer-log "$tmp/answers.txt" < "$tmp/positions_late.txt" > "$tmp/check_late.txt"
+rc=$?
+cat "$tmp/check_late.txt"
+[ $rc = 0 ] || fail "torn or wrong samples with late objects 2"
+status late
+pass "object 2 late in 30 % of the cycles: 0 torn; status: samples ${n_samples:-?}, half ${n_half_samples:-?}, unpaired ${n_unpaired:-?}, late frames ${n_late_frames:-?}"
 stop_daemon
 exit 0
