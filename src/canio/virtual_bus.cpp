@@ -151,6 +151,7 @@ int64_t advance(Ring& ring, int64_t now) noexcept {
         winner = &q;
       }
     }
+    if (winner == nullptr) break;  // cannot happen: the earliest head is ready by `start`
     const uint64_t tail = winner->tail.load(std::memory_order_relaxed);
     const CanFrame f = unpack(
         winner_header, winner->entries[tail % kTxDepth].data.load(std::memory_order_relaxed));

@@ -308,6 +308,7 @@ ReceiveResult VirtualCanPort::receive(std::span<CanFrame> out, int64_t deadline_
 
     // Frames from the ring.
     const uint64_t head = ring.head.load(std::memory_order_acquire);
+    const bool timed = ring.bitrate != 0;
     while (p.read_pos < head && (delaying || count < out.size())) {
       Slot& s = ring.slots()[p.read_pos & mask];
       const uint64_t want = 2 * p.read_pos + 2;
@@ -323,7 +324,7 @@ ReceiveResult VirtualCanPort::receive(std::span<CanFrame> out, int64_t deadline_
         std::atomic_thread_fence(std::memory_order_acquire);
         torn = s.seq.load(std::memory_order_relaxed) != s1;
       }
-      if (!torn && wire > now) {
+      if (!torn && timed && wire > now) {
         // Timed bus: still on the wire; receivers get it at its end of frame. Frames are on
         // the ring in bus order, so nothing behind it is due either.
         next_due = wire;
