@@ -88,6 +88,18 @@ void append_canio_metrics(metrics::Exposition& out, const canio::CanioBus& bus) 
   per_node("ds1928_canio_duplicate_frames",
            "Input objects seen twice in one cycle (sample dropped).",
            &canio::CanioAxisCounters::duplicates);
+  per_node("ds1928_canio_unpaired_samples",
+           "Both input objects there but not certainly answers to the same SYNC (sample dropped: "
+           "a torn sample is never published).",
+           &canio::CanioAxisCounters::unpaired);
+  per_node("ds1928_canio_gated_samples",
+           "Complete samples held back after a (re)configuration until PosCycle changed.",
+           &canio::CanioAxisCounters::gated);
+  per_node("ds1928_canio_unverified_writes",
+           "Configuration writes whose read-back the module refused (left unverified).",
+           &canio::CanioAxisCounters::unverified);
+  per_node("ds1928_canio_rescans", "EnDatAck bit 1 (Rescan) written after enabling EnDat.",
+           &canio::CanioAxisCounters::rescans);
   per_node("ds1928_canio_sdo_transfers", "Expedited SDO transfers to the node.",
            &canio::CanioAxisCounters::sdo_transfers);
   per_node("ds1928_canio_sdo_errors", "SDO transfers that failed (abort, timeout, mismatch).",
