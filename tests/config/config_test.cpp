@@ -525,7 +525,7 @@ TEST_CASE("mutated files never crash the loader and every error is located", "[c
   CHECK(rejected > 500);  // the mutations must actually exercise the error paths
 }
 
-TEST_CASE("a file is read up to 1 MiB; devices and unreadable files say why", "[config]") {
+TEST_CASE("a file is read up to 1 MiB, devices and unreadable files say why", "[config]") {
   for (const char* endless : {"/dev/zero", "/dev/urandom"}) {
     const ConfigResult r = load_config(endless);
     REQUIRE(r.errors().size() == 1);
