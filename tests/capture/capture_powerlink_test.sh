@@ -35,24 +35,11 @@ for tool in jq tshark python3; do
   command -v $tool >/dev/null || { echo "SKIP: $tool not installed"; exit 77; }
 done
 
-tag=$$
+. "$src/tests/lib/netns.sh"
+test_init capture_powerlink
 ns_mn=capmn_$tag
 ns_cn=capcn_$tag
-tmp=$(mktemp -d /tmp/capture_powerlink.XXXXXX)
-pids=()
-failed=0
-cleanup() {
-  for p in "${pids[@]}"; do kill "$p" 2>/dev/null; done
-  for p in "${pids[@]}"; do wait "$p" 2>/dev/null; done
-  ip netns del "$ns_mn" 2>/dev/null
-  ip netns del "$ns_cn" 2>/dev/null
-  rm -f "/dev/shm/ds1928d_cap_$tag" "/dev/shm/ds1928d_cap_$tag.wait"
-  if [ "$failed" = 0 ] && [ -z "${KEEP_TMP:-}" ]; then rm -rf "$tmp"; else echo "logs kept in $tmp"; fi
-}
-trap cleanup EXIT
-trap 'exit 1' INT TERM
-fail() { echo "FAIL: $*"; failed=1; for f in "$tmp"/*.log; do echo "---- $f"; tail -n 25 "$f"; done; exit 1; }
-pass() { echo "ok: $*"; }
+on_cleanup 'rm -f "/dev/shm/ds1928d_cap_$tag" "/dev/shm/ds1928d_cap_$tag.wait"'
 mn() { ip netns exec "$ns_mn" "$@"; }
 ctl() { mn "$ctl" -s "$tmp/ctl.sock" "$@"; }
 status() { ctl --json status 2>/dev/null; }
@@ -82,14 +69,14 @@ capture:
 YAML
 "$daemon" --check-config "$tmp/cap.yaml" >"$tmp/check.log" 2>&1 || fail "check-config refused it"
 
-ip netns add "$ns_mn" && ip netns add "$ns_cn" || fail "cannot create network namespaces"
-ip link add capmn netns "$ns_mn" type veth peer name capcn netns "$ns_cn" || fail "veth"
-ip -n "$ns_mn" link set capmn up
-ip -n "$ns_cn" link set capcn up
+netns_add "$ns_mn" "$ns_cn"
+veth_pair "$ns_mn" capmn "$ns_cn" capcn
 ip netns exec "$ns_cn" "$sim" powerlink --iface capcn --node 1 --config "$tmp/cap.yaml" \
     --profile software-cn --cpu "$cpu" >"$tmp/sim.log" 2>&1 &
 pids+=($!)
-mn "$daemon" --config "$tmp/cap.yaml" >"$tmp/daemon.log" 2>&1 &
+# Started directly, not through mn(): $! must be the daemon (ip netns exec execs it), not a
+# subshell whose end would leave the daemon running.
+ip netns exec "$ns_mn" "$daemon" --config "$tmp/cap.yaml" >"$tmp/daemon.log" 2>&1 &
 daemon_pid=$!
 pids+=($daemon_pid)
 
@@ -149,7 +136,8 @@ cycles=$(( $(jq '.cycle.count' <<<"$s1") - c0 ))
 pass "5 s capture: $total frames (tx $tx_file, rx $rx_file; $kinds) all decoded as POWERLINK, none malformed; window $window = captured $captured + dropped $dropped; ISB ifrecv $ifrecv ifdrop $ifdrop; daemon cycled $cycles times meanwhile"
 
 # ---- 3: one capture at a time ----------------------------------------------------------------
-ctl capture -w "$tmp/long.pcapng" --duration 30 >"$tmp/long.log" 2>&1 &
+ip netns exec "$ns_mn" "$ctl" -s "$tmp/ctl.sock" capture -w "$tmp/long.pcapng" --duration 30 \
+    >"$tmp/long.log" 2>&1 &
 long_pid=$!
 pids+=($long_pid)
 for ((i = 0; i < 200; i++)); do

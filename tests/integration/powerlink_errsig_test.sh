@@ -28,26 +28,13 @@ done
 command -v jq >/dev/null || { echo "FAIL: jq not installed"; exit 1; }
 command -v tshark >/dev/null || { echo "FAIL: tshark not installed"; exit 1; }
 
-tag=$$
+. "$src/tests/lib/netns.sh"
+test_init powerlink_errsig
 ns_mn=ples_mn_$tag
 ns_cn=ples_cn_$tag
 if_mn=ples_mn
 if_cn=ples_cn
-tmp=$(mktemp -d /tmp/powerlink_errsig.XXXXXX)
-pids=()
-failed=0
-cleanup() {
-  for p in "${pids[@]}"; do kill "$p" 2>/dev/null; done
-  for p in "${pids[@]}"; do wait "$p" 2>/dev/null; done
-  ip netns del "$ns_mn" 2>/dev/null
-  ip netns del "$ns_cn" 2>/dev/null
-  rm -f "/dev/shm/ds1928d_ples_$tag" "/dev/shm/ds1928d_ples_$tag.wait"
-  if [ "$failed" = 0 ] && [ -z "${KEEP_TMP:-}" ]; then rm -rf "$tmp"; else echo "logs kept in $tmp"; fi
-}
-trap cleanup EXIT
-trap 'exit 1' INT TERM
-fail() { echo "FAIL: $*"; failed=1; for f in "$tmp"/*.log; do echo "---- $f"; tail -n 25 "$f"; done; exit 1; }
-pass() { echo "ok: $*"; }
+on_cleanup 'rm -f "/dev/shm/ds1928d_ples_$tag" "/dev/shm/ds1928d_ples_$tag.wait"'
 ctlj() { ip netns exec "$ns_mn" "$ctl" -s "$tmp/ctl.sock" --json "$@"; }
 node9() { ctlj status 2>/dev/null | jq -c '.bus.nodes[] | select(.node == 9)' 2>/dev/null; }
 until_true() {  # SECONDS COMMAND... (wall clock)
@@ -79,10 +66,8 @@ socket:
   privileged_group: ""
 YAML
 
-ip netns add "$ns_mn" && ip netns add "$ns_cn" || fail "cannot create network namespaces"
-ip link add "$if_mn" netns "$ns_mn" type veth peer name "$if_cn" netns "$ns_cn" || fail "veth"
-ip -n "$ns_mn" link set "$if_mn" up
-ip -n "$ns_cn" link set "$if_cn" up
+netns_add "$ns_mn" "$ns_cn"
+veth_pair "$ns_mn" "$if_mn" "$ns_cn" "$if_cn"
 
 # The CN's frames are seen at the MN's end (it sends past the qdisc).
 ip netns exec "$ns_mn" tshark -i "$if_mn" -f "ether proto 0x88ab" -w "$tmp/cn_frames.pcapng" \

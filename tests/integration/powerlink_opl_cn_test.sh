@@ -53,27 +53,13 @@ peer_env=$("$src/tests/peers/openpowerlink.sh") || {
 }
 eval "$peer_env"
 
-tag=$$
+. "$src/tests/lib/netns.sh"
+test_init powerlink_opl_cn
 ns_mn=plo_mn_$tag
 ns_cn=plo_cn_$tag
 if_mn=plo_mn
 if_cn=plo_cn
-tmp=$(mktemp -d /tmp/powerlink_opl_cn.XXXXXX)
-pids=()
-failed=0
-cleanup() {
-  # opl_run.sh stops the demo with SIGTERM (its stack shuts down) and waits for it.
-  for p in "${pids[@]}"; do kill "$p" 2>/dev/null; done
-  for p in "${pids[@]}"; do wait "$p" 2>/dev/null; done
-  ip netns del "$ns_mn" 2>/dev/null
-  ip netns del "$ns_cn" 2>/dev/null
-  rm -f "/dev/shm/ds1928d_plo_$tag" "/dev/shm/ds1928d_plo_$tag.wait"
-  if [ "$failed" = 0 ] && [ -z "${KEEP_TMP:-}" ]; then rm -rf "$tmp"; else echo "logs kept in $tmp"; fi
-}
-trap cleanup EXIT
-trap 'exit 1' INT TERM
-fail() { echo "FAIL: $*"; failed=1; for f in "$tmp"/*.log; do echo "---- $f"; tail -n 25 "$f"; done; exit 1; }
-pass() { echo "ok: $*"; }
+on_cleanup 'rm -f "/dev/shm/ds1928d_plo_$tag" "/dev/shm/ds1928d_plo_$tag.wait"'
 scale=${DS1928_WAIT_SCALE:-3}
 wait_for() {  # FILE REGEX SECONDS
   local i
@@ -112,10 +98,8 @@ socket:
 YAML
 "$daemon" --check-config "$tmp/opl.yaml" >"$tmp/check.log" 2>&1 || fail "check-config refused it"
 
-ip netns add "$ns_mn" && ip netns add "$ns_cn" || fail "cannot create network namespaces"
-ip link add "$if_mn" netns "$ns_mn" type veth peer name "$if_cn" netns "$ns_cn" || fail "veth"
-ip -n "$ns_mn" link set "$if_mn" up
-ip -n "$ns_cn" link set "$if_cn" up
+netns_add "$ns_mn" "$ns_cn"
+veth_pair "$ns_mn" "$if_mn" "$ns_cn" "$if_cn"
 
 # The CN's frames as the MN receives them.
 ip netns exec "$ns_mn" tshark -i "$if_mn" -f "ether proto 0x88ab" -w "$tmp/cn_frames.pcapng" \

@@ -6,7 +6,7 @@
 #   require_root WHY                  exit 77 (ctest: skipped) unless root
 #   require_programs FILE...          FAIL unless each is an executable file (built)
 #   test_init NAME                    tag=$$, tmp=/tmp/NAME.XXXXXX, pids=(), failed=0, traps
-#   on_cleanup 'COMMAND'              one more step for the cleanup (runs first, in order)
+#   on_cleanup 'COMMAND'              one more step for the cleanup (after the programs stopped)
 #   track PID                         a background program to stop at cleanup
 #   netns_add NS...                   network namespaces, deleted at cleanup
 #   veth_pair NS_A IF_A NS_B IF_B     a veth pair between two namespaces, both ends up and with
@@ -44,9 +44,9 @@ track() { pids+=("$1"); }
 
 _test_cleanup() {
   local step p ns
-  for step in "${_cleanup_steps[@]}"; do eval "$step"; done
   for p in "${pids[@]}"; do kill "$p" 2>/dev/null; done
   for p in "${pids[@]}"; do wait "$p" 2>/dev/null; done
+  for step in "${_cleanup_steps[@]}"; do eval "$step"; done
   for ns in "${_namespaces[@]}"; do ip netns del "$ns" 2>/dev/null; done
   if [ "${failed:-0}" = 0 ] && [ -z "${KEEP_TMP:-}" ]; then rm -rf "$tmp"; else echo "logs kept in $tmp"; fi
 }
