@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <cstring>
 #include <iostream>
+#include <optional>
 
 namespace ds1928::ctl {
 namespace {
@@ -95,6 +96,26 @@ void take_reply(const std::string& text, Outcome& out) {
 
 }  // namespace
 
+// One recv() into `buffer` once poll() said the socket is readable: empty when bytes (or an
+// EINTR) came, else the failure (closed, error, a line longer than kMaxReplyBytes). Shared by
+// the single-reply and the streaming request.
+std::optional<Outcome> receive_into(const Fd& fd, std::string& buffer) {
+  char chunk[65536];
+  const ssize_t n = ::recv(fd.get(), chunk, sizeof(chunk), 0);
+  if (n < 0) {
+    if (errno == EINTR) return std::nullopt;
+    return Outcome{kUnavailable, nullptr, "receive: " + errno_text()};
+  }
+  if (n == 0)
+    return Outcome{kUnavailable, nullptr, "the daemon closed the connection without a reply"};
+  buffer.append(chunk, static_cast<std::size_t>(n));
+  if (buffer.size() > kMaxReplyBytes && buffer.find('\n') == std::string::npos)
+    return Outcome{
+        kBadReply, nullptr,
+        "line longer than " + std::to_string(kMaxReplyBytes) + " bytes without a newline"};
+  return std::nullopt;
+}
+
 Outcome send_request(const Context& ctx, const nlohmann::json& request) {
   Outcome out;
   const int raw = connect_and_send(ctx, request, out);
@@ -119,17 +140,7 @@ Outcome send_request(const Context& ctx, const nlohmann::json& request) {
     if (r < 0 && errno == EINTR) continue;
     if (r < 0) return {kUnavailable, nullptr, "poll: " + errno_text()};
     if (r == 0) continue;
-    char chunk[4096];
-    const ssize_t n = ::recv(fd.get(), chunk, sizeof(chunk), 0);
-    if (n < 0) {
-      if (errno == EINTR) continue;
-      return {kUnavailable, nullptr, "receive: " + errno_text()};
-    }
-    if (n == 0) return {kUnavailable, nullptr, "the daemon closed the connection without a reply"};
-    buffer.append(chunk, static_cast<std::size_t>(n));
-    if (buffer.size() > kMaxReplyBytes && buffer.find('\n') == std::string::npos)
-      return {kBadReply, nullptr,
-              "reply longer than " + std::to_string(kMaxReplyBytes) + " bytes without a newline"};
+    if (auto failed = receive_into(fd, buffer)) return *failed;
   }
   take_reply(buffer, out);
   return out;
@@ -170,17 +181,7 @@ StreamOutcome stream_request(const Context& ctx, const nlohmann::json& request,
     if (r < 0 && errno == EINTR) continue;
     if (r < 0) return {kUnavailable, nullptr, "poll: " + errno_text()};
     if (r == 0) continue;
-    char chunk[65536];
-    const ssize_t n = ::recv(fd.get(), chunk, sizeof(chunk), 0);
-    if (n < 0) {
-      if (errno == EINTR) continue;
-      return {kUnavailable, nullptr, "receive: " + errno_text()};
-    }
-    if (n == 0) return {kUnavailable, nullptr, "the daemon closed the connection without a reply"};
-    buffer.append(chunk, static_cast<std::size_t>(n));
-    if (buffer.size() > kMaxReplyBytes && buffer.find('\n') == std::string::npos)
-      return {kBadReply, nullptr,
-              "line longer than " + std::to_string(kMaxReplyBytes) + " bytes without a newline"};
+    if (auto failed = receive_into(fd, buffer)) return *failed;
   }
 }
 
