@@ -25,6 +25,7 @@ CycleWork::CycleWork(const DaemonConfig& config, BusDriver& bus, shm::Publisher&
     tunnels_.push_back(std::make_unique<Tunnel>(fc));
     params_[i].signed_format = config.axes[i].module.position_signed;
     params_[i].has_pos_time = config.axes[i].function_model == FunctionModel::Standard;
+    params_[i].max_stamp_age_ns = default_max_stamp_age_ns(int64_t{config.cycle.period_us} * 1000);
   }
 }
 
@@ -64,6 +65,7 @@ void CycleWork::run_cycle(const CycleContext& ctx) noexcept {
     };
     bump(sample.fresh ? c.fresh_cycles : c.stale_cycles);
     if (sample.new_position) bump(c.new_positions);
+    if (sample.stamp_too_old) bump(c.old_stamps);
     if (sample.fresh && !sample.fraction_valid) bump(c.format_violations);
     c.error_info.store(sample.error_info, std::memory_order_relaxed);
     any_fresh |= sample.fresh;

@@ -147,6 +147,12 @@ std::string Daemon::metrics_text(metrics::Format format) const {
   for (std::size_t i = 0; i < axes; ++i)
     out.sample({{"axis", index[i]}, {"name", config_.axes[i].name}},
                work_->counters(i).format_violations.load(std::memory_order_relaxed));
+  out.family("ds1928_axis_old_stamps", Type::Counter,
+             "New positions stamped too long before their cycle: a late answer to an earlier "
+             "cycle's request, published as stale.");
+  for (std::size_t i = 0; i < axes; ++i)
+    out.sample({{"axis", index[i]}, {"name", config_.axes[i].name}},
+               work_->counters(i).old_stamps.load(std::memory_order_relaxed));
   if (endat_) {
     std::vector<EnDatService::Counters> ec(axes);
     for (std::size_t i = 0; i < axes; ++i) ec[i] = endat_->counters(i);

@@ -308,6 +308,9 @@ int main(int argc, char** argv) {
                              ? sim.velocity_periods_per_s
                              : std::nan("");
     checks[i].params.signed_format = config.axes[i].module.position_signed;
+    // As the daemon decodes: a late PRes taken for a later cycle shows as too old a stamp.
+    checks[i].params.max_stamp_age_ns =
+        ds1928::default_max_stamp_age_ns(int64_t{config.cycle.period_us} * 1000);
   }
 
   // cpu_dma_latency 0 for the run: deep C-states add tens of µs to each wake-up.
@@ -333,6 +336,7 @@ int main(int argc, char** argv) {
   std::vector<pl::CnBootState> last_boot(config.powerlink.nodes.size(), pl::CnBootState::kIdentify);
   std::vector<uint32_t> boots_at_measure(config.powerlink.nodes.size(), 0);
   uint64_t fresh = 0, wrong = 0, bad_stamp = 0, moving = 0, overruns = 0, cycles = 0;
+  uint64_t old_stamps = 0;
   uint64_t measured_cycles = 0;
   uint32_t fired_at_start = 0, events_at_start = 0;
   bool all_op = false, measuring = false, readback_done = false, readback_sent = false;
@@ -466,6 +470,7 @@ int main(int argc, char** argv) {
     for (std::size_t i = 0; i < axes.size(); ++i) {
       AxisCheck& c = checks[i];
       const ds1928::AxisSample s = ds1928::decode_axis(axes[i], c.params, ref, c.decode);
+      if (s.stamp_too_old) ++old_stamps;
       if (!s.fresh) {
         if (!res.bus_up) c.have_prev = false;
         continue;
@@ -530,7 +535,7 @@ int main(int argc, char** argv) {
       "cycle_time_exceeded=%u invalid_frames=%u short_frames=%u unexpected_frames=%u "
       "async_timeouts=%u "
       "async_invites_unused=%u stale_pres_dropped=%u "
-      "fresh=%llu moving=%llu wrong_positions=%llu bad_stamps=%llu\n",
+      "fresh=%llu moving=%llu wrong_positions=%llu bad_stamps=%llu old_stamps=%llu\n",
       config.cycle.period_us, config.powerlink.nodes.size(),
       static_cast<unsigned long long>(cycles), static_cast<unsigned long long>(measured_cycles),
       all_op ? 1 : 0, boots, resets, events, fired, measuring ? events - events_at_start : 0,
@@ -538,7 +543,7 @@ int main(int argc, char** argv) {
       mc.cycle_time_exceeded.events, mc.invalid_frames, mc.short_frames, mc.unexpected_frames,
       mc.async_timeouts, mc.async_invites_unused, stale, static_cast<unsigned long long>(fresh),
       static_cast<unsigned long long>(moving), static_cast<unsigned long long>(wrong),
-      static_cast<unsigned long long>(bad_stamp));
+      static_cast<unsigned long long>(bad_stamp), static_cast<unsigned long long>(old_stamps));
   std::printf(
       "STALLS mn_wake_later_than_pres_timeout=%llu losses_after_stall=%llu "
       "losses_other=%llu late_pres=%llu fired_after_stall=%llu fired_other=%llu\n",

@@ -29,6 +29,15 @@ AxisSample decode_axis(const AxisIo& io, const AxisDecodeParams& params, const N
     s.time_source = TimeSource::RxTimestamp;
   }
   s.new_position = !state.have_last || state.last_pos_cycle != in.pos_cycle;
+  if (s.new_position && s.time_source == TimeSource::NetTime && params.max_stamp_age_ns > 0 &&
+      net_time.monotonic_ns - s.pos_time_ns > params.max_stamp_age_ns) {
+    // Not this cycle's position: the decoder keeps its PosCycle, so the next on-time sample
+    // counts as new again.
+    s.fresh = false;
+    s.new_position = false;
+    s.stamp_too_old = true;
+    return s;
+  }
   state.last_pos_cycle = in.pos_cycle;
   state.have_last = true;
   return s;

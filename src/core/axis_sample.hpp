@@ -21,6 +21,10 @@ struct AxisSample {
   bool new_position = false;  // PosCycle changed since the previous fresh sample
   uint8_t error_info = 0;
   bool fresh = false;  // inputs arrived this cycle
+  // A new position whose NetTime stamp is older than AxisDecodeParams::max_stamp_age_ns before the
+  // cycle's reference: the late answer to an earlier cycle's request, taken for this one. Not
+  // fresh (published as stale), counted apart.
+  bool stamp_too_old = false;
 };
 
 // What the decoder remembers between cycles for one axis.
@@ -32,7 +36,19 @@ struct AxisDecodeState {
 struct AxisDecodeParams {
   bool signed_format = false;  // EnDatMode bit 1
   bool has_pos_time = true;    // function model 0 carries PosTime; 254 does not
+  // > 0: a new position (PosCycle changed) stamped more than this before the cycle's NetTime
+  // reference is not taken as this cycle's (AxisSample::stamp_too_old). A POWERLINK PRes carries
+  // no cycle number, so a PRes delayed past the next PReq is indistinguishable from the answer to
+  // it; its PosTime tells. A module that stopped acquiring (same PosCycle) is not affected.
+  int64_t max_stamp_age_ns = 0;
 };
+
+// The stamp age beyond which a new position cannot be this cycle's: the module's acquisition lies
+// within the previous bus cycle plus one EnDat cycle (at most 1.6 ms, prescaler 8), so twice the
+// cycle plus 2 ms leaves room for both and for a late SoC.
+[[nodiscard]] constexpr int64_t default_max_stamp_age_ns(int64_t period_ns) noexcept {
+  return 2 * period_ns + 2'000'000;
+}
 
 // Pure: image + previous state + the bus' NetTime reference → sample. Updates `state`.
 [[nodiscard]] AxisSample decode_axis(const AxisIo& io, const AxisDecodeParams& params,

@@ -225,6 +225,10 @@ class PowerlinkCn {
   int64_t period_ns_ = 0;
   uint64_t soc_relative_us_ = 0;
   bool have_soc_ = false;
+  // The module's NetTime: CLOCK_MONOTONIC minus this offset (RelativeTime of the SoC against its
+  // arrival, filtered by its minimum; see note_soc_timing).
+  int64_t net_offset_ns_ = 0;
+  bool have_net_offset_ = false;
   // Loss of PReq: cycles since the last PReq vs. the learned multiplex interval.
   uint32_t cycles_since_preq_ = 0;
   uint32_t preq_interval_ = 0;  // 0 = not polled yet

@@ -119,3 +119,46 @@ TEST_CASE("randomized: decoding inverts the register split for every bit pattern
     REQUIRE(s.fraction_valid == ((x & 7) == 0));
   }
 }
+
+TEST_CASE("a new position stamped too long before its cycle is a late answer: stale, not news",
+          "[decode][nettime]") {
+  // 1 ms cycle: the bound is 2 cycles + 2 ms = 4 ms before the reference (SoC at 1'000'000 µs).
+  AxisDecodeParams p;
+  p.max_stamp_age_ns = default_max_stamp_age_ns(1'000'000);
+  REQUIRE(p.max_stamp_age_ns == 4'000'000);
+  AxisDecodeState st;
+  // An on-time sample: PosCycle 5, stamped 300 µs before the SoC.
+  auto s = decode_axis(image(0x10000, 5, 999'700), p, kRef, st);
+  CHECK(s.fresh);
+  CHECK(s.new_position);
+  CHECK_FALSE(s.stamp_too_old);
+  // The late answer to an earlier request: an older PosCycle, stamped 12 ms before this SoC.
+  s = decode_axis(image(0x0F000, 4, 988'000), p, kRef, st);
+  CHECK_FALSE(s.fresh);
+  CHECK_FALSE(s.new_position);
+  CHECK(s.stamp_too_old);
+  CHECK(s.pos_time_ns == 5'000'000'000 - 12'000'000);
+  // Exactly at the bound is still this cycle's; 1 µs beyond is not.
+  AxisDecodeState edge;
+  CHECK(decode_axis(image(0x10000, 6, 996'000), p, kRef, edge).fresh);
+  AxisDecodeState beyond;
+  CHECK(decode_axis(image(0x10000, 6, 995'999), p, kRef, beyond).stamp_too_old);
+  // The decoder kept PosCycle 5 across the late one: the next on-time PosCycle 6 is new.
+  s = decode_axis(image(0x11000, 6, 1'000'000), p, kRef, st);
+  CHECK(s.fresh);
+  CHECK(s.new_position);
+  // A module that stopped acquiring repeats PosCycle and stamp: old, but not a late answer; the
+  // sample stays fresh (its ErrorInfo, not the bus, says what is wrong).
+  for (int k = 0; k < 3; ++k) {
+    s = decode_axis(image(0x11000, 6, 1'000'000), p, NetTimeRef{1'050'000, 5'050'000'000, true},
+                    st);
+    CHECK(s.fresh);
+    CHECK_FALSE(s.new_position);
+    CHECK_FALSE(s.stamp_too_old);
+  }
+  // Without a bound (0) or without NetTime nothing is judged by age.
+  AxisDecodeState none;
+  CHECK(decode_axis(image(0x10000, 7, 900'000), {}, kRef, none).fresh);
+  AxisDecodeState invalid_ref;
+  CHECK(decode_axis(image(0x10000, 7, 900'000), p, NetTimeRef{}, invalid_ref).fresh);
+}
