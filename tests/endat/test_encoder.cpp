@@ -4,6 +4,7 @@
 
 #include "endat/ident.hpp"
 #include "endat/wire.hpp"
+#include "sim/encoder_description_yaml.hpp"
 #include "sim/endat_encoder.hpp"
 
 using namespace ds1928;
