@@ -2,7 +2,6 @@
 
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
-#include <time.h>
 
 #include <algorithm>
 #include <boost/asio/steady_timer.hpp>
@@ -11,6 +10,7 @@
 #include "capture/base64.hpp"
 #include "capture/can_record.hpp"
 #include "capture/pcapng.hpp"
+#include "core/clock.hpp"
 #include "endat_service.hpp"
 
 namespace ds1928 {
@@ -25,12 +25,6 @@ using capture::Tap;
 constexpr auto kDrainPeriod = std::chrono::milliseconds(20);
 // Bytes of capture data per line on the socket (before base64).
 constexpr std::size_t kChunkBytes = 48 * 1024;
-
-int64_t clock_ns(clockid_t id) noexcept {
-  timespec ts{};
-  clock_gettime(id, &ts);
-  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
-}
 
 enum class Format { Pcapng, Candump };
 
@@ -82,8 +76,8 @@ struct CaptureService::Run : std::enable_shared_from_this<Run> {
       : service(s), reply(std::move(r)), timer(io) {}
 
   void start() {
-    const int64_t mono = clock_ns(CLOCK_MONOTONIC);
-    start_real = clock_ns(CLOCK_REALTIME);
+    const int64_t mono = rt::now_ns();
+    start_real = rt::realtime_ns();
     mono_to_real = start_real - mono;
     started = std::chrono::steady_clock::now();
     if (format == Format::Pcapng) {
@@ -221,7 +215,7 @@ struct CaptureService::Run : std::enable_shared_from_this<Run> {
 
   void finish_file() {
     if (format != Format::Pcapng) return;
-    const auto now_real = static_cast<uint64_t>(clock_ns(CLOCK_REALTIME));
+    const auto now_real = static_cast<uint64_t>(rt::realtime_ns());
     for (std::size_t i = 0; i < points.size(); ++i) {
       const Point& p = points[i];
       capture::InterfaceStatistics isb;
@@ -328,7 +322,7 @@ void CaptureService::register_commands(control::Server& server) {
   using control::Request;
   const std::string group = config_.socket.privileged_group;
   auto denied = [group](const Request& req, const Reply& reply) {
-    if (peer_is_privileged(req.peer(), group)) return false;
+    if (control::peer_is_privileged(req.peer(), group)) return false;
     reply.error(
         "permission_denied",
         "'" + req.command() + "' records the bus traffic: needs uid 0 or group '" + group + "'");

@@ -346,7 +346,7 @@ void Daemon::register_commands() {
       return;
     }
     // Clearing a module error hides it from every other client: a reader may not.
-    if (!peer_is_privileged(req.peer(), config_.socket.privileged_group)) {
+    if (!control::peer_is_privileged(req.peer(), config_.socket.privileged_group)) {
       reply.error("permission_denied", "'ack-errors' clears module errors: needs uid 0 or group '" +
                                            config_.socket.privileged_group + "'");
       return;

@@ -28,6 +28,7 @@
 
 #include "config/config.hpp"
 #include "control/control_server.hpp"
+#include "control/peer_privilege.hpp"
 #include "core/bucket_histogram.hpp"
 #include "cycle_work.hpp"
 #include "endat/command.hpp"
@@ -65,11 +66,6 @@ enum class EnDatServiceErrc : int {
 
 // Identification as JSON (raw words are added by the caller where wanted).
 [[nodiscard]] nlohmann::json identification_json(const endat::Identification& ident);
-
-// Whether a socket peer may send commands that change the encoder: uid 0, or a member (primary
-// or supplementary) of `privileged_group`.
-[[nodiscard]] bool peer_is_privileged(const control::PeerCredentials& peer,
-                                      const std::string& privileged_group);
 
 class EnDatService {
  public:

@@ -1,11 +1,10 @@
 #include "powerlink_commands.hpp"
 
-#include <time.h>
-
 #include <array>
 #include <nlohmann/json.hpp>
 #include <vector>
 
+#include "core/clock.hpp"
 #include "endat_service.hpp"
 #include "powerlink/powerlink_bus.hpp"
 
@@ -14,12 +13,6 @@ namespace {
 
 using powerlink::MnError;
 using powerlink::PowerlinkBus;
-
-int64_t monotonic_ns() noexcept {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
-}
 
 std::string to_hex(std::span<const uint8_t> bytes) {
   static constexpr char kDigits[] = "0123456789abcdef";
@@ -77,7 +70,7 @@ void register_powerlink_commands(control::Server& server, PowerlinkBus& bus,
                                    " is not a configured POWERLINK CN");
     nlohmann::json j{{"node", node}, {"size", snap->size}, {"fresh", snap->fresh}};
     if (snap->received) {
-      j["age_us"] = (monotonic_ns() - snap->rx_time_ns) / 1000;
+      j["age_us"] = (rt::now_ns() - snap->rx_time_ns) / 1000;
       j["cycle"] = snap->cycle;
     } else {
       j["age_us"] = nullptr;  // no PRes yet
@@ -88,7 +81,7 @@ void register_powerlink_commands(control::Server& server, PowerlinkBus& bus,
 
   server.add_command("pl-preq-set", [pl, group = std::move(privileged_group)](const Request& req,
                                                                               Reply reply) {
-    if (!peer_is_privileged(req.peer(), group))
+    if (!control::peer_is_privileged(req.peer(), group))
       return reply.error(
           "permission_denied",
           "'pl-preq-set' changes the process outputs: needs uid 0 or group '" + group + "'");

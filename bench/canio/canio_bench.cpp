@@ -170,7 +170,9 @@ class SocketPairPort final : public CanPort {
   CanPortCounters counters() const noexcept override { return {}; }
   std::error_code set_filters(std::span<const CanIdFilter>) noexcept override { return {}; }
   std::error_code set_error_mask(uint32_t) noexcept override { return {}; }
-  Result<CanInterfaceInfo> query_interface() noexcept override { return CanInterfaceInfo{}; }
+  ds1928::Result<CanInterfaceInfo> query_interface() noexcept override {
+    return CanInterfaceInfo{};
+  }
   std::string_view name() const noexcept override { return "socketpair"; }
 
  private:

@@ -22,6 +22,7 @@
 
 #include "config/config_loader.hpp"
 #include "core/axis_sample.hpp"
+#include "core/clock.hpp"
 #include "powerlink/cycle_budget.hpp"
 #include "powerlink/powerlink_bus.hpp"
 #include "powerlink/raw_link.hpp"
@@ -75,7 +76,7 @@ class MeasuringLink final : public pl::Link {
       : inner_(inner), period_ns_(period_ns), soc_jitter_(20'000'000), latency_(20'000'000) {}
 
   std::error_code send(std::span<const uint8_t> frame) noexcept override {
-    const int64_t t = pl::monotonic_now_ns();
+    const int64_t t = ds1928::rt::now_ns();
     if (frame.size() > 16) {
       const uint8_t type = frame[14] & 0x7F;
       if (type == 0x01) {
@@ -90,7 +91,7 @@ class MeasuringLink final : public pl::Link {
       }
     }
     const std::error_code ec = inner_.send(frame);
-    if (frame.size() > 16 && (frame[14] & 0x7F) == 0x01) soc_send_done_ns = pl::monotonic_now_ns();
+    if (frame.size() > 16 && (frame[14] & 0x7F) == 0x01) soc_send_done_ns = ds1928::rt::now_ns();
     return ec;
   }
   pl::Received receive(std::span<uint8_t> buffer, int64_t deadline_ns) noexcept override {
@@ -341,7 +342,7 @@ int main(int argc, char** argv) {
   uint32_t fired_at_start = 0, events_at_start = 0;
   bool all_op = false, measuring = false, readback_done = false, readback_sent = false;
   int readback_failures = 0;
-  const int64_t start = pl::monotonic_now_ns();
+  const int64_t start = ds1928::rt::now_ns();
   int64_t all_op_at = 0, measure_from = 0, measure_until = 0;
   int exit_code = 0;
 
@@ -354,19 +355,19 @@ int main(int argc, char** argv) {
     }
   };
 
-  int64_t next = (pl::monotonic_now_ns() / period_ns + 10) * period_ns;
+  int64_t next = (ds1928::rt::now_ns() / period_ns + 10) * period_ns;
   uint64_t index = 0;
   while (!g_stop.load(std::memory_order_relaxed)) {
     const timespec ts = to_ts(next);
     clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr);
-    const int64_t woke = pl::monotonic_now_ns();
+    const int64_t woke = ds1928::rt::now_ns();
     if (measuring) wake.add(woke - next);
     const ds1928::ExchangeResult res = bus->exchange(axes, next, index);
-    const int64_t exchanged = pl::monotonic_now_ns();
+    const int64_t exchanged = ds1928::rt::now_ns();
     // Stall attribution: a cycle thread that wakes later than the shortest PRes timeout, or a
     // cycle that overran, cannot keep the CNs' PRes in time whatever the protocol code does.
     // Losses and threshold events within a few cycles after such a stall are counted apart.
-    if (woke - next > stall_ns || pl::monotonic_now_ns() - next > period_ns) last_stall = index;
+    if (woke - next > stall_ns || ds1928::rt::now_ns() - next > period_ns) last_stall = index;
     if (measuring) {
       uint32_t f = 0, e = 0;
       loss_totals(f, e);
@@ -509,7 +510,7 @@ int main(int argc, char** argv) {
 
     ++index;
     next += period_ns;
-    const int64_t after = pl::monotonic_now_ns();
+    const int64_t after = ds1928::rt::now_ns();
     if (after > next) {
       // Overrun: skip the missed cycles instead of bursting to catch up.
       const int64_t missed = (after - next) / period_ns + 1;

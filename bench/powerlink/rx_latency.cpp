@@ -17,6 +17,7 @@
 #include <cstring>
 #include <vector>
 
+#include "core/clock.hpp"
 #include "powerlink/raw_link.hpp"
 
 namespace pl = ds1928::powerlink;
@@ -91,7 +92,7 @@ int run_echo(pl::RawLink& link, uint8_t node, uint32_t period_us, uint32_t guard
   int64_t last_request = 0;
   const bool predictive = link.rx_mode() != pl::RxMode::Blocking && guard_us < period_us;
   while (!g_stop.load(std::memory_order_relaxed)) {
-    int64_t now = pl::monotonic_now_ns();
+    int64_t now = ds1928::rt::now_ns();
     if (predictive) {
       const int64_t wake = last_request + (static_cast<int64_t>(period_us) - guard_us) * 1000;
       if (wake > now) {
@@ -102,7 +103,7 @@ int run_echo(pl::RawLink& link, uint8_t node, uint32_t period_us, uint32_t guard
         // Lost the rhythm (start, pause): block until the next request arrives.
         if (!link.wait_readable(now + 100'000'000)) continue;
       }
-      now = pl::monotonic_now_ns();
+      now = ds1928::rt::now_ns();
     }
     const auto r = link.receive(rx, now + (predictive ? 2LL * guard_us * 1000 : 100'000'000));
     if (r.error) {
@@ -112,7 +113,7 @@ int run_echo(pl::RawLink& link, uint8_t node, uint32_t period_us, uint32_t guard
     const std::size_t n = r.length;
     if (n == 0) continue;
     if (n < 24 || rx[14] != 0x03 || rx[15] != node) continue;
-    last_request = pl::monotonic_now_ns();
+    last_request = ds1928::rt::now_ns();
     const std::size_t payload = pl::load_le16(rx.data() + 22);
     const uint32_t seq = payload >= 4 ? pl::load_le32(rx.data() + 24) : 0;
     const std::size_t len = make_frame(tx.data(), link.mac(), false, node, payload, seq);
@@ -143,7 +144,7 @@ int run_ping(pl::RawLink& link, uint8_t node, uint32_t count, uint32_t period_us
     }
     clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &next, nullptr);
     const std::size_t len = make_frame(tx.data(), link.mac(), true, node, payload, i);
-    const int64_t t0 = pl::monotonic_now_ns();
+    const int64_t t0 = ds1928::rt::now_ns();
     if (auto ec = link.send({tx.data(), len})) {
       std::fprintf(stderr, "ping: send: %s\n", ec.message().c_str());
       ++lost;

@@ -1,23 +1,16 @@
 #include "canio/canio_bus.hpp"
 
-#include <time.h>
-
 #include <algorithm>
 #include <chrono>
 
 #include "canio/can_error_frame.hpp"
 #include "canio/can_netlink.hpp"
 #include "canio/sdo_expedited.hpp"
+#include "core/clock.hpp"
 #include "core/register_catalogue.hpp"
 
 namespace ds1928::canio {
 namespace {
-
-int64_t monotonic_ns() noexcept {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
-}
 
 template <class T>
 void bump(std::atomic<T>& a, T n = 1) noexcept {
@@ -124,7 +117,7 @@ CanioBus::CanioBus(CanioBusOptions options, std::unique_ptr<CanPort> cycle_port,
       order_(options_.bus.little_endian ? ByteOrder::Little : ByteOrder::Big),
       track_(options_.axes.size()),
       axis_counters_(std::make_unique<CanioAxisCounters[]>(options_.axes.size())),
-      clock_(&monotonic_ns),
+      clock_(&rt::now_ns),
       last_error_(options_.axes.size()) {
   if (options_.axes.size() > kMaxCanioAxes)
     throw std::invalid_argument("canio: at most 64 axes per bus");

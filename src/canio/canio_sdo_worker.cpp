@@ -27,11 +27,10 @@ constexpr unsigned kDefinitiveAttempts = 3;
 constexpr auto kDeferLimit = std::chrono::seconds(2);
 
 // CiA 301 aborts that say "this object cannot be read" — the write stands, it just cannot be
-// verified: 0x06010000 unsupported access, 0x06010001 attempt to read a write-only object.
+// verified: unsupported access, attempt to read a write-only object.
 [[nodiscard]] bool cannot_be_read(std::error_code ec) noexcept {
-  if (ec.category() != sdo_abort_category()) return false;
-  const auto code = static_cast<uint32_t>(ec.value());
-  return code == 0x0601'0000 || code == 0x0601'0001;
+  const auto code = sdo_abort_code(ec);
+  return code == sdo_abort::kUnsupportedAccess || code == sdo_abort::kWriteOnly;
 }
 
 // No answer at all: says nothing about the module (retried).

@@ -1,12 +1,12 @@
-// Error codes of the CAN-I/O port layer (own std::error_category) and a small expected-like
-// result type: codecs and ports return a value or a named error, never throw.
+// Error codes of the CAN-I/O port layer (own std::error_category): codecs and ports return a
+// Result (core/result.hpp), a value or a named error, never throw.
 #pragma once
 
 #include <cstdint>
-#include <optional>
 #include <system_error>
 #include <type_traits>
-#include <utility>
+
+#include "core/result.hpp"
 
 namespace ds1928::canio {
 
@@ -34,29 +34,6 @@ enum class CanError : int {
 [[nodiscard]] inline std::error_code make_error_code(CanError e) noexcept {
   return {static_cast<int>(e), can_category()};
 }
-
-// Expected-like result: a value or an error_code, no exceptions.
-template <class T>
-class [[nodiscard]] Result {
- public:
-  Result(T value) : value_(std::move(value)) {}     // NOLINT(google-explicit-constructor)
-  Result(std::error_code error) : error_(error) {}  // NOLINT(google-explicit-constructor)
-  template <class E, std::enable_if_t<std::is_error_code_enum_v<E>, int> = 0>
-  Result(E error) : error_(make_error_code(error)) {}  // NOLINT(google-explicit-constructor)
-
-  [[nodiscard]] bool has_value() const noexcept { return value_.has_value(); }
-  explicit operator bool() const noexcept { return has_value(); }
-  // Precondition: has_value().
-  [[nodiscard]] const T& value() const& noexcept { return *value_; }
-  [[nodiscard]] T& value() & noexcept { return *value_; }
-  [[nodiscard]] const T& operator*() const noexcept { return *value_; }
-  [[nodiscard]] const T* operator->() const noexcept { return &*value_; }
-  [[nodiscard]] std::error_code error() const noexcept { return error_; }
-
- private:
-  std::optional<T> value_;
-  std::error_code error_;
-};
 
 }  // namespace ds1928::canio
 

@@ -1,6 +1,5 @@
 #include "canio/sdo_expedited.hpp"
 
-#include <cstdio>
 #include <string>
 
 namespace ds1928::canio {
@@ -96,98 +95,11 @@ class SdoFrameCategory final : public std::error_category {
   }
 };
 
-class SdoAbortCategory final : public std::error_category {
- public:
-  const char* name() const noexcept override { return "canopen.sdo-abort"; }
-  std::string message(int ev) const override {
-    char buf[160];
-    std::snprintf(buf, sizeof buf, "SDO abort 0x%08X: %s", static_cast<unsigned>(ev),
-                  sdo_abort_text(static_cast<uint32_t>(ev)));
-    return buf;
-  }
-};
-
 }  // namespace
 
 const std::error_category& sdo_frame_category() noexcept {
   static const SdoFrameCategory category;
   return category;
-}
-
-const std::error_category& sdo_abort_category() noexcept {
-  static const SdoAbortCategory category;
-  return category;
-}
-
-const char* sdo_abort_text(uint32_t code) noexcept {
-  // CiA 301 §7.2.4.3.17, table "SDO abort codes".
-  switch (code) {
-    case 0x0503'0000:
-      return "toggle bit not alternated";
-    case 0x0504'0000:
-      return "SDO protocol timed out";
-    case 0x0504'0001:
-      return "client/server command specifier not valid or unknown";
-    case 0x0504'0002:
-      return "invalid block size";
-    case 0x0504'0003:
-      return "invalid sequence number";
-    case 0x0504'0004:
-      return "CRC error";
-    case 0x0504'0005:
-      return "out of memory";
-    case 0x0601'0000:
-      return "unsupported access to an object";
-    case 0x0601'0001:
-      return "attempt to read a write only object";
-    case 0x0601'0002:
-      return "attempt to write a read only object";
-    case 0x0602'0000:
-      return "object does not exist in the object dictionary";
-    case 0x0604'0041:
-      return "object cannot be mapped to the PDO";
-    case 0x0604'0042:
-      return "the number and length of the objects to be mapped would exceed PDO length";
-    case 0x0604'0043:
-      return "general parameter incompatibility";
-    case 0x0604'0047:
-      return "general internal incompatibility in the device";
-    case 0x0606'0000:
-      return "access failed due to a hardware error";
-    case 0x0607'0010:
-      return "data type does not match, length of service parameter does not match";
-    case 0x0607'0012:
-      return "data type does not match, length of service parameter too high";
-    case 0x0607'0013:
-      return "data type does not match, length of service parameter too low";
-    case 0x0609'0011:
-      return "sub-index does not exist";
-    case 0x0609'0030:
-      return "invalid value for parameter";
-    case 0x0609'0031:
-      return "value of parameter written too high";
-    case 0x0609'0032:
-      return "value of parameter written too low";
-    case 0x0609'0036:
-      return "maximum value is less than minimum value";
-    case 0x060A'0023:
-      return "resource not available: SDO connection";
-    case 0x0800'0000:
-      return "general error";
-    case 0x0800'0020:
-      return "data cannot be transferred or stored to the application";
-    case 0x0800'0021:
-      return "data cannot be transferred or stored to the application because of local control";
-    case 0x0800'0022:
-      return "data cannot be transferred or stored to the application because of the present "
-             "device state";
-    case 0x0800'0023:
-      return "object dictionary dynamic generation fails or no object dictionary is present";
-    case 0x0800'0024:
-      return "no data available";
-    default:
-      return "unknown abort code";
-  }
 }
 
 Result<CanFrame> build_sdo_request(uint8_t node, const SdoMessage& message) noexcept {

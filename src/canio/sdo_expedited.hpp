@@ -16,6 +16,7 @@
 
 #include "canio/can_frame.hpp"
 #include "canio/errors.hpp"
+#include "core/sdo_abort.hpp"
 
 namespace ds1928::canio {
 
@@ -58,14 +59,6 @@ enum class SdoFrameError : int {
 [[nodiscard]] inline std::error_code make_error_code(SdoFrameError e) noexcept {
   return {static_cast<int>(e), sdo_frame_category()};
 }
-// A CiA 301 abort code (0x0602'0000 ...) as an error: value() is the code's bit pattern, the
-// message is the standard's text.
-[[nodiscard]] const std::error_category& sdo_abort_category() noexcept;
-[[nodiscard]] inline std::error_code make_sdo_abort_error(uint32_t abort_code) noexcept {
-  return {static_cast<int>(abort_code), sdo_abort_category()};
-}
-// The standard's text for an abort code, or "unknown abort code".
-[[nodiscard]] const char* sdo_abort_text(uint32_t abort_code) noexcept;
 
 // Frames. node 1..127; size 1..4 (value's low bytes are sent, little endian).
 [[nodiscard]] Result<CanFrame> build_sdo_request(uint8_t node, const SdoMessage& message) noexcept;
@@ -77,7 +70,7 @@ enum class SdoFrameError : int {
 
 // The client's view: is `response` the answer to `request` (sent to `node`)? On success the
 // response message (UploadResponse with the value, or DownloadResponse). An abort from the
-// server for the same index/subindex is the abort code as error (sdo_abort_category); anything
+// server for the same index/subindex is the abort code as error (core/sdo_abort.hpp); anything
 // else that does not match is an SdoFrameError naming why. expected_size 0: any 1..4 accepted.
 [[nodiscard]] Result<SdoMessage> match_sdo_response(uint8_t node, const SdoMessage& request,
                                                     const CanFrame& response,

@@ -13,6 +13,8 @@
 #include <cerrno>
 #include <cstring>
 
+#include "core/clock.hpp"
+
 namespace ds1928::canio {
 namespace {
 
@@ -24,12 +26,6 @@ constexpr std::size_t kControlBytes =
 
 int64_t ns_of(const timespec& ts) noexcept {
   return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
-}
-
-int64_t clock_ns(clockid_t id) noexcept {
-  timespec ts{};
-  clock_gettime(id, &ts);
-  return ns_of(ts);
 }
 
 std::error_code errno_code(int e) noexcept {
@@ -209,8 +205,8 @@ ReceiveResult SocketCanPort::receive(std::span<CanFrame> out, int64_t deadline_n
       // REALTIME is read first: a delay between the two reads then moves a stamp later, never
       // earlier, and never past `mono` — so a stamp stays between the send and this read. (The
       // other order put a stamp before its own send when the thread was preempted in between.)
-      const int64_t realtime = clock_ns(CLOCK_REALTIME);
-      const int64_t mono = clock_ns(CLOCK_MONOTONIC);
+      const int64_t realtime = rt::realtime_ns();
+      const int64_t mono = rt::now_ns();
       const int64_t offset = realtime - mono;
       std::size_t count = 0;
       for (int i = 0; i < n; ++i) {
@@ -287,7 +283,7 @@ ReceiveResult SocketCanPort::receive(std::span<CanFrame> out, int64_t deadline_n
       }
       return {0, errno_code(e)};
     }
-    const int64_t now = clock_ns(CLOCK_MONOTONIC);
+    const int64_t now = rt::now_ns();
     if (now >= deadline_ns) return {};
     const int64_t wait = deadline_ns - now;
     const timespec ts{static_cast<time_t>(wait / 1'000'000'000),

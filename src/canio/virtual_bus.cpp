@@ -14,6 +14,7 @@
 
 #include "canio/bit_budget.hpp"
 #include "canio/virtual_bus_ring.hpp"
+#include "core/clock.hpp"
 
 namespace ds1928::canio {
 
@@ -22,12 +23,6 @@ namespace {
 using vbus::kLayoutVersion;
 using vbus::kMagic;
 using Ring = VirtualCanBus::Ring;
-
-int64_t monotonic_ns() noexcept {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
-}
 
 std::string shm_object_name(std::string_view name) {
   return "/ds1928-vcan." + std::string(name);
@@ -179,7 +174,7 @@ VirtualBusOptions virtual_bus_options(uint32_t bitrate) {
 }
 
 int64_t VirtualCanBus::now_ns() const noexcept {
-  return options_.clock ? options_.clock() : monotonic_ns();
+  return options_.clock ? options_.clock() : rt::now_ns();
 }
 
 std::shared_ptr<VirtualCanBus> VirtualCanBus::create_local(VirtualBusOptions options) {

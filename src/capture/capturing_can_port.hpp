@@ -42,7 +42,7 @@ class CapturingCanPort final : public canio::CanPort {
   [[nodiscard]] std::error_code set_error_mask(uint32_t classes) noexcept override {
     return inner_->set_error_mask(classes);
   }
-  [[nodiscard]] canio::Result<canio::CanInterfaceInfo> query_interface() noexcept override {
+  [[nodiscard]] Result<canio::CanInterfaceInfo> query_interface() noexcept override {
     return inner_->query_interface();
   }
   [[nodiscard]] std::string_view name() const noexcept override { return inner_->name(); }

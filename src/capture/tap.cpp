@@ -1,20 +1,15 @@
 #include "capture/tap.hpp"
 
 #include <sched.h>
-#include <time.h>
 
 #include <algorithm>
 #include <cstring>
 #include <stdexcept>
 
+#include "core/clock.hpp"
+
 namespace ds1928::capture {
 namespace {
-
-int64_t monotonic_ns() noexcept {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
-}
 
 // The single writer of a counter updates it without a read-modify-write.
 void bump(std::atomic<uint64_t>& c) noexcept {
@@ -49,7 +44,7 @@ void Tap::record(Direction direction, int64_t time_ns, std::span<const uint8_t> 
     } else {
       uint8_t* slot = slot_at(head);
       const std::size_t length = std::min(bytes.size(), max_frame_);
-      const Header h{seq, time_ns != 0 ? time_ns : monotonic_ns(), static_cast<uint16_t>(length),
+      const Header h{seq, time_ns != 0 ? time_ns : rt::now_ns(), static_cast<uint16_t>(length),
                      static_cast<uint8_t>(direction)};
       std::memcpy(slot, &h, sizeof h);
       if (length != 0) std::memcpy(slot + sizeof h, bytes.data(), length);

@@ -12,32 +12,6 @@
 
 namespace ds1928::rt {
 
-int64_t now_ns() noexcept {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return static_cast<int64_t>(ts.tv_sec) * kNsPerSec + ts.tv_nsec;
-}
-
-namespace {
-timespec to_timespec(int64_t ns) noexcept {
-  timespec ts{};
-  ts.tv_sec = static_cast<time_t>(ns / kNsPerSec);
-  ts.tv_nsec = static_cast<long>(ns % kNsPerSec);
-  return ts;
-}
-}  // namespace
-
-int64_t sleep_until(int64_t deadline_ns, int64_t spin_ns) noexcept {
-  const int64_t wake_ns = spin_ns > 0 ? deadline_ns - spin_ns : deadline_ns;
-  const timespec ts = to_timespec(wake_ns);
-  // EINTR: a signal handler ran; the deadline is absolute, so just go back to sleep.
-  while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
-  }
-  int64_t now = now_ns();
-  while (now < deadline_ns) now = now_ns();
-  return now;
-}
-
 SetupStep set_fifo_priority(int priority) noexcept {
   sched_param param{};
   param.sched_priority = priority;

@@ -1,24 +1,16 @@
-// The pieces of real-time setup the cycle engine is made of: clock, absolute sleep, scheduling,
-// CPU affinity, memory locking, stack pre-faulting and the /dev/cpu_dma_latency request. Each
-// is a small function so tests and the benchmark can use the same calls the engine uses.
+// The pieces of real-time setup the cycle engine is made of (beside the clock, core/clock.hpp):
+// scheduling, CPU affinity, memory locking, stack pre-faulting and the /dev/cpu_dma_latency
+// request. Each is a small function so tests and the benchmark can use the same calls the engine
+// uses.
 #pragma once
 
 #include <cstddef>
 #include <cstdint>
 #include <string>
 
+#include "core/clock.hpp"  // now_ns, sleep_until: the clock the engine runs on
+
 namespace ds1928::rt {
-
-inline constexpr int64_t kNsPerSec = 1'000'000'000;
-
-// CLOCK_MONOTONIC in ns (vDSO: no system call).
-[[nodiscard]] int64_t now_ns() noexcept;
-
-// Sleeps until the absolute CLOCK_MONOTONIC instant `deadline_ns` (TIMER_ABSTIME, restarted
-// after signals). With spin_ns > 0 it sleeps until deadline − spin_ns and busy-waits on the
-// clock for the rest, trading CPU time for the kernel's wake-up latency. Returns the instant
-// it observed when it stopped waiting.
-int64_t sleep_until(int64_t deadline_ns, int64_t spin_ns = 0) noexcept;
 
 // Result of one setup step: 0 or the errno of the failing call.
 struct SetupStep {

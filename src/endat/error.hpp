@@ -1,12 +1,13 @@
 // Errors of the EnDat layer: the Flatstream command codec, the EnDat wire frames, identification
 // decoding and number parsing. One std::error_category ("endat"); related codes are grouped by
 // std::error_condition so callers can ask "was it an echo mismatch?" without listing every field.
+// Calls return a Result (core/result.hpp) holding one of these codes.
 #pragma once
 
-#include <optional>
 #include <system_error>
 #include <type_traits>
-#include <utility>
+
+#include "core/result.hpp"
 
 namespace ds1928::endat {
 
@@ -65,28 +66,6 @@ enum class Condition : int {
 [[nodiscard]] inline std::error_condition make_error_condition(Condition c) noexcept {
   return {static_cast<int>(c), condition_category()};
 }
-
-// Either a value or an error code (std::expected is C++23). No exceptions: value() on an error
-// is a precondition violation (asserted in debug builds).
-template <class T>
-class [[nodiscard]] Result {
- public:
-  Result(T value) : value_(std::move(value)) {}           // NOLINT: implicit like std::expected
-  Result(std::error_code error) : error_(error) {}        // NOLINT
-  Result(Errc error) : error_(make_error_code(error)) {}  // NOLINT
-
-  [[nodiscard]] bool has_value() const noexcept { return value_.has_value(); }
-  explicit operator bool() const noexcept { return has_value(); }
-  [[nodiscard]] const T& value() const& noexcept { return *value_; }
-  [[nodiscard]] T& value() & noexcept { return *value_; }
-  [[nodiscard]] const T& operator*() const& noexcept { return *value_; }
-  [[nodiscard]] const T* operator->() const noexcept { return &*value_; }
-  [[nodiscard]] std::error_code error() const noexcept { return error_; }
-
- private:
-  std::optional<T> value_;
-  std::error_code error_;
-};
 
 }  // namespace ds1928::endat
 

@@ -1,7 +1,5 @@
 #include "powerlink/errors.hpp"
 
-#include <cstdio>
-
 namespace ds1928::powerlink {
 namespace {
 
@@ -79,65 +77,6 @@ class SdoCategory final : public std::error_category {
   }
 };
 
-class SdoAbortCategory final : public std::error_category {
- public:
-  const char* name() const noexcept override { return "powerlink.sdo_abort"; }
-  std::string message(int ev) const override {
-    const auto code = static_cast<uint32_t>(ev);
-    const char* text = nullptr;
-    switch (code) {
-      case 0x05040000:
-        text = "SDO protocol timed out";
-        break;
-      case 0x05040001:
-        text = "command specifier unknown";
-        break;
-      case 0x05040003:
-        text = "invalid sequence number";
-        break;
-      case 0x05040005:
-        text = "out of memory";
-        break;
-      case 0x06010000:
-        text = "unsupported access to an object";
-        break;
-      case 0x06010001:
-        text = "attempt to read a write-only object";
-        break;
-      case 0x06010002:
-        text = "attempt to write a read-only object";
-        break;
-      case 0x06020000:
-        text = "object does not exist";
-        break;
-      case 0x06070010:
-        text = "data type does not match, length does not match";
-        break;
-      case 0x06090011:
-        text = "subindex does not exist";
-        break;
-      case 0x06090030:
-        text = "value range exceeded";
-        break;
-      case 0x08000000:
-        text = "general error";
-        break;
-      case 0x08000020:
-        text = "data cannot be transferred or stored";
-        break;
-      case 0x08000022:
-        text = "not possible in the present device state";
-        break;
-      default:
-        break;
-    }
-    char buf[96];
-    std::snprintf(buf, sizeof buf, "SDO abort 0x%08X%s%s", code, text ? ": " : "",
-                  text ? text : "");
-    return buf;
-  }
-};
-
 class MnCategory final : public std::error_category {
  public:
   const char* name() const noexcept override { return "powerlink.mn"; }
@@ -193,20 +132,16 @@ const std::error_category& sdo_category() noexcept {
   static const SdoCategory c;
   return c;
 }
-const std::error_category& sdo_abort_category() noexcept {
-  static const SdoAbortCategory c;
-  return c;
-}
 const std::error_category& mn_category() noexcept {
   static const MnCategory c;
   return c;
 }
 
 uint32_t to_sdo_abort_code(std::error_code ec) noexcept {
-  if (ec.category() == sdo_abort_category()) return static_cast<uint32_t>(ec.value());
-  if (ec == SdoError::kTimeout) return 0x05040000;
-  if (ec == SdoError::kDataTooLarge) return 0x05040005;
-  return 0x08000000;
+  if (const auto code = sdo_abort_code(ec)) return *code;
+  if (ec == SdoError::kTimeout) return sdo_abort::kTimeout;
+  if (ec == SdoError::kDataTooLarge) return sdo_abort::kOutOfMemory;
+  return sdo_abort::kGeneral;
 }
 
 }  // namespace ds1928::powerlink

@@ -1,13 +1,13 @@
-// Error codes of the POWERLINK layer (own std::error_category, Lely style) and a small
-// expected-like result type: parse and build calls return a value or a named error, never throw.
+// Error codes of the POWERLINK layer (own std::error_category, Lely style): parse and build calls
+// return a Result (core/result.hpp), a value or a named error, never throw.
 #pragma once
 
 #include <cstdint>
-#include <optional>
-#include <string>
 #include <system_error>
 #include <type_traits>
-#include <utility>
+
+#include "core/result.hpp"
+#include "core/sdo_abort.hpp"
 
 namespace ds1928::powerlink {
 
@@ -72,7 +72,6 @@ enum class MnError : int {
 
 [[nodiscard]] const std::error_category& frame_category() noexcept;
 [[nodiscard]] const std::error_category& sdo_category() noexcept;
-[[nodiscard]] const std::error_category& sdo_abort_category() noexcept;
 [[nodiscard]] const std::error_category& mn_category() noexcept;
 
 [[nodiscard]] inline std::error_code make_error_code(FrameError e) noexcept {
@@ -84,35 +83,9 @@ enum class MnError : int {
 [[nodiscard]] inline std::error_code make_error_code(MnError e) noexcept {
   return {static_cast<int>(e), mn_category()};
 }
-// An SDO abort code (0x0504'0000 ...) as an error: value() is the code bit pattern.
-[[nodiscard]] inline std::error_code make_sdo_abort_error(uint32_t abort_code) noexcept {
-  return {static_cast<int>(abort_code), sdo_abort_category()};
-}
-// The abort code to send for an error (its own code for an abort error, else general error).
+// The abort code to send for an error: its own code for an abort error (core/sdo_abort.hpp,
+// make_sdo_abort_error), timeout and out of memory for those SdoErrors, else general error.
 [[nodiscard]] uint32_t to_sdo_abort_code(std::error_code ec) noexcept;
-
-// Expected-like result: a value or an error_code, no exceptions.
-template <class T>
-class [[nodiscard]] Result {
- public:
-  Result(T value) : value_(std::move(value)) {}     // NOLINT(google-explicit-constructor)
-  Result(std::error_code error) : error_(error) {}  // NOLINT(google-explicit-constructor)
-  template <class E, std::enable_if_t<std::is_error_code_enum_v<E>, int> = 0>
-  Result(E error) : error_(make_error_code(error)) {}  // NOLINT(google-explicit-constructor)
-
-  [[nodiscard]] bool has_value() const noexcept { return value_.has_value(); }
-  explicit operator bool() const noexcept { return has_value(); }
-  // Precondition: has_value().
-  [[nodiscard]] const T& value() const& noexcept { return *value_; }
-  [[nodiscard]] T& value() & noexcept { return *value_; }
-  [[nodiscard]] const T& operator*() const noexcept { return *value_; }
-  [[nodiscard]] const T* operator->() const noexcept { return &*value_; }
-  [[nodiscard]] std::error_code error() const noexcept { return error_; }
-
- private:
-  std::optional<T> value_;
-  std::error_code error_;
-};
 
 }  // namespace ds1928::powerlink
 

@@ -1,23 +1,16 @@
 #include "powerlink/powerlink_bus.hpp"
 
-#include <time.h>
-
 #include <algorithm>
 #include <cstring>
+
+#include "core/clock.hpp"
 
 namespace ds1928::powerlink {
 namespace {
 
-int64_t monotonic_ns() noexcept {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
-}
-
 NetTime wall_clock() noexcept {
-  timespec ts{};
-  clock_gettime(CLOCK_REALTIME, &ts);
-  return {static_cast<uint32_t>(ts.tv_sec), static_cast<uint32_t>(ts.tv_nsec)};
+  const int64_t ns = rt::realtime_ns();
+  return {static_cast<uint32_t>(ns / rt::kNsPerSec), static_cast<uint32_t>(ns % rt::kNsPerSec)};
 }
 
 }  // namespace
@@ -28,7 +21,7 @@ PowerlinkBus::PowerlinkBus(const MnConfig& config, std::unique_ptr<Link> link)
 }
 
 PowerlinkBus::PowerlinkBus(const MnConfig& config, Link& link)
-    : config_(config), link_(link), mn_(config), clock_(&monotonic_ns) {
+    : config_(config), link_(link), mn_(config), clock_(&rt::now_ns) {
   axis_map_.resize(config_.axes.size());
   rx_time_.resize(config_.axes.size());
   for (std::size_t i = 0; i < config_.axes.size(); ++i) {

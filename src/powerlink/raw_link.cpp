@@ -16,6 +16,8 @@
 #include <cstring>
 #include <utility>
 
+#include "core/clock.hpp"
+
 namespace ds1928::powerlink {
 
 namespace {
@@ -74,12 +76,6 @@ inline void cpu_relax() noexcept {
 const std::error_category& raw_link_category() noexcept {
   static const RawLinkCategory category;
   return category;
-}
-
-int64_t monotonic_now_ns() noexcept {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
 }
 
 RawLink::~RawLink() {
@@ -224,7 +220,7 @@ std::error_code RawLink::open(const RawLinkOptions& options) {
   guard.armed = false;
   stats_ = RawLinkStats{};
   refresh_link_state();
-  next_carrier_check_ns_ = monotonic_now_ns() + options_.carrier_check_interval_ns;
+  next_carrier_check_ns_ = rt::now_ns() + options_.carrier_check_interval_ns;
   return {};
 }
 
@@ -235,7 +231,7 @@ void RawLink::set_up(bool up) const noexcept {
 
 bool RawLink::link_up() const noexcept {
   if (up_.load(std::memory_order_relaxed)) return true;
-  const int64_t now = monotonic_now_ns();
+  const int64_t now = rt::now_ns();
   if (fd_ >= 0 && now >= next_carrier_check_ns_) {
     refresh_link_state();
     next_carrier_check_ns_ = now + options_.carrier_check_interval_ns;
@@ -266,7 +262,7 @@ std::error_code RawLink::send(std::span<const uint8_t> frame) noexcept {
   // A veth or NIC without carrier swallows frames without an error, so the interface flags are
   // the only witness of a lost carrier. They are not a reason to refuse sending: the kernel
   // publishes carrier changes late (linkwatch, up to 1 s), frames may flow before IFF_RUNNING.
-  const int64_t now = monotonic_now_ns();
+  const int64_t now = rt::now_ns();
   if (now >= next_carrier_check_ns_) {
     refresh_link_state();
     next_carrier_check_ns_ = now + options_.carrier_check_interval_ns;
@@ -328,18 +324,17 @@ Received RawLink::receive_ring(std::span<uint8_t> buffer, int64_t deadline_ns) n
   if (!ready()) {
     const int64_t spin_ns = options_.ring_spin_ns;
     int64_t spin_until = deadline_ns;
-    if (spin_ns >= 0)
-      spin_until = spin_ns == 0 ? 0 : std::min(deadline_ns, monotonic_now_ns() + spin_ns);
+    if (spin_ns >= 0) spin_until = spin_ns == 0 ? 0 : std::min(deadline_ns, rt::now_ns() + spin_ns);
     uint32_t spins = 0;
     while (!ready()) {
       // Reading the clock every poll would dominate the loop; every 16th is fine-grained enough.
-      if (spin_until != 0 && ((++spins & 15u) != 0 || monotonic_now_ns() < spin_until)) {
+      if (spin_until != 0 && ((++spins & 15u) != 0 || rt::now_ns() < spin_until)) {
         cpu_relax();
         continue;
       }
       // Spin budget spent: the rest of the wait sleeps in the kernel, which wakes this thread
       // when the frame lands (poll on a ring socket reports the head slot's status).
-      const int64_t now = monotonic_now_ns();
+      const int64_t now = rt::now_ns();
       if (now >= deadline_ns) {
         if (ready()) break;
         return Received{};
@@ -362,10 +357,8 @@ Received RawLink::receive_ring(std::span<uint8_t> buffer, int64_t deadline_ns) n
   }
   // The kernel stamped the frame when it arrived (CLOCK_REALTIME); moved to CLOCK_MONOTONIC it
   // is the arrival instant even when this thread was late to look.
-  timespec real{};
-  clock_gettime(CLOCK_REALTIME, &real);
-  const int64_t mono = monotonic_now_ns();
-  const int64_t real_ns = static_cast<int64_t>(real.tv_sec) * 1'000'000'000 + real.tv_nsec;
+  const int64_t real_ns = rt::realtime_ns();
+  const int64_t mono = rt::now_ns();
   const int64_t stamp_ns = static_cast<int64_t>(hdr->tp_sec) * 1'000'000'000 + hdr->tp_nsec;
   int64_t rx_time = stamp_ns != 0 ? stamp_ns - (real_ns - mono) : mono;
   if (rx_time > mono || rx_time < mono - 1'000'000'000) rx_time = mono;  // clock step
@@ -391,10 +384,9 @@ Received RawLink::receive_socket(std::span<uint8_t> buffer, int64_t deadline_ns,
       ++stats_.rx_frames;
       if (static_cast<std::size_t>(n) > buffer.size()) {
         ++stats_.rx_truncated;
-        return Received{buffer.size(), monotonic_now_ns(),
-                        make_error_code(RawLinkErrc::kBufferTooSmall)};
+        return Received{buffer.size(), rt::now_ns(), make_error_code(RawLinkErrc::kBufferTooSmall)};
       }
-      return Received{static_cast<std::size_t>(n), monotonic_now_ns(), {}};
+      return Received{static_cast<std::size_t>(n), rt::now_ns(), {}};
     }
     const int e = errno;
     if (e == EINTR) continue;
@@ -402,7 +394,7 @@ Received RawLink::receive_socket(std::span<uint8_t> buffer, int64_t deadline_ns,
       if (is_link_loss(e)) set_up(false);
       return Received{0, 0, errno_code(e)};
     }
-    const int64_t now = monotonic_now_ns();
+    const int64_t now = rt::now_ns();
     if (now >= deadline_ns) return Received{};
     if (block) {
       pollfd pfd{fd_, POLLIN, 0};
@@ -428,7 +420,7 @@ bool RawLink::wait_readable(int64_t deadline_ns) noexcept {
   if (fd_ < 0) return false;
   for (;;) {
     if (ring_ != nullptr && ring_ready()) return true;
-    const int64_t now = monotonic_now_ns();
+    const int64_t now = rt::now_ns();
     if (now >= deadline_ns) return false;
     pollfd pfd{fd_, POLLIN, 0};
     const timespec timeout = to_timespec(deadline_ns - now);

@@ -135,8 +135,6 @@ class RawLink final : public Link {
   mutable RawLinkStats stats_;
 };
 
-[[nodiscard]] int64_t monotonic_now_ns() noexcept;
-
 }  // namespace ds1928::powerlink
 
 template <>

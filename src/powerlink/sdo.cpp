@@ -10,12 +10,6 @@
 namespace ds1928::powerlink {
 namespace {
 
-constexpr uint32_t kAbortTimeout = 0x05040000;
-constexpr uint32_t kAbortUnknownCommand = 0x05040001;
-constexpr uint32_t kAbortInvalidSequence = 0x05040003;
-constexpr uint32_t kAbortOutOfMemory = 0x05040005;
-constexpr uint32_t kAbortGeneral = 0x08000000;
-constexpr uint32_t kAbortLength = 0x06070010;
 constexpr std::size_t kIndexHeader = 4;  // index u16, subindex u8, reserved u8
 
 [[nodiscard]] constexpr uint8_t next_seq(uint8_t s) noexcept {
@@ -197,7 +191,7 @@ void SdoClient::receive(const Sdo& sdo, int64_t now_ns) noexcept {
   }
   if (seq.send_seq == recv_seq_) return;  // repeated frame
   if (seq.send_seq != next_seq(recv_seq_)) {
-    abort(make_sdo_abort_error(kAbortInvalidSequence), now_ns);
+    abort(make_sdo_abort_error(sdo_abort::kInvalidSequence), now_ns);
     connected_ = false;
     return;
   }
@@ -342,7 +336,7 @@ void SdoServer::receive(const Sdo& sdo, int64_t now_ns) noexcept {
   if (seq.send_seq == recv_seq_) return;  // repeated frame
   if (seq.send_seq != next_seq(recv_seq_)) {
     recv_seq_ = seq.send_seq;
-    send_abort(sdo.command.transaction_id, sdo.command.command_id, kAbortInvalidSequence);
+    send_abort(sdo.command.transaction_id, sdo.command.command_id, sdo_abort::kInvalidSequence);
     return;
   }
   recv_seq_ = seq.send_seq;
@@ -363,7 +357,7 @@ void SdoServer::handle_command(const SdoCommand& c, int64_t now_ns) noexcept {
 
   if (c.command_id == static_cast<uint8_t>(SdoCommandId::kReadByIndex)) {
     if (c.segmentation != SdoSegmentation::kExpedited || c.payload.size() < kIndexHeader) {
-      send_abort(c.transaction_id, c.command_id, kAbortLength);
+      send_abort(c.transaction_id, c.command_id, sdo_abort::kTypeLength);
       return;
     }
     const uint16_t index = load_le16(c.payload.data());
@@ -390,7 +384,7 @@ void SdoServer::handle_command(const SdoCommand& c, int64_t now_ns) noexcept {
   }
 
   if (c.command_id != static_cast<uint8_t>(SdoCommandId::kWriteByIndex)) {
-    send_abort(c.transaction_id, c.command_id, kAbortUnknownCommand);
+    send_abort(c.transaction_id, c.command_id, sdo_abort::kUnknownCommand);
     return;
   }
   switch (c.segmentation) {
@@ -401,7 +395,7 @@ void SdoServer::handle_command(const SdoCommand& c, int64_t now_ns) noexcept {
       break;
     case SdoSegmentation::kInitiate:
       if (c.total_size > buffer_.size()) {
-        send_abort(c.transaction_id, c.command_id, kAbortOutOfMemory);
+        send_abort(c.transaction_id, c.command_id, sdo_abort::kOutOfMemory);
         return;
       }
       in_write_ = true;
@@ -412,13 +406,13 @@ void SdoServer::handle_command(const SdoCommand& c, int64_t now_ns) noexcept {
     case SdoSegmentation::kSegment:
     case SdoSegmentation::kComplete:
       if (!in_write_ || c.transaction_id != transaction_) {
-        send_abort(c.transaction_id, c.command_id, kAbortGeneral);
+        send_abort(c.transaction_id, c.command_id, sdo_abort::kGeneral);
         return;
       }
       break;
   }
   if (size_ + c.payload.size() > expected_) {
-    send_abort(c.transaction_id, c.command_id, kAbortLength);
+    send_abort(c.transaction_id, c.command_id, sdo_abort::kTypeLength);
     return;
   }
   std::copy(c.payload.begin(), c.payload.end(), buffer_.begin() + size_);
@@ -429,7 +423,7 @@ void SdoServer::handle_command(const SdoCommand& c, int64_t now_ns) noexcept {
   }
   in_write_ = false;
   if (size_ != expected_ || size_ < kIndexHeader) {
-    send_abort(c.transaction_id, c.command_id, kAbortLength);
+    send_abort(c.transaction_id, c.command_id, sdo_abort::kTypeLength);
     return;
   }
   const uint16_t index = load_le16(buffer_.data());

@@ -8,6 +8,7 @@
 #include <cstring>
 #include <vector>
 
+#include "core/clock.hpp"
 #include "shm/shm_error.hpp"
 
 namespace ds1928::shm {
@@ -33,9 +34,8 @@ bool name_held_by_live_daemon(const std::string& name) {
   if (ds1928_shm_reader_open(&reader, name.c_str()) != 0) return false;
   const auto* h = reader.header;
   if (h == nullptr) return false;  // (open succeeded; tells GCC 12's flow analysis so)
-  const bool alive = ds1928_shm_daemon_alive(h, ds1928_shm_now_ns(), 10) != 0 &&
-                     h->daemon_pid > 0 && h->daemon_pid != getpid() &&
-                     (kill(h->daemon_pid, 0) == 0 || errno == EPERM);
+  const bool alive = ds1928_shm_daemon_alive(h, rt::now_ns(), 10) != 0 && h->daemon_pid > 0 &&
+                     h->daemon_pid != getpid() && (kill(h->daemon_pid, 0) == 0 || errno == EPERM);
   ds1928_shm_reader_close(&reader);
   return alive;
 }
@@ -108,12 +108,6 @@ void unlink_if_ours(const std::string& name, int fd) noexcept {
   if (same) shm_unlink(name.c_str());
 }
 
-int64_t realtime_ns() noexcept {
-  timespec ts{};
-  clock_gettime(CLOCK_REALTIME, &ts);
-  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
-}
-
 ds1928_axis_data to_data(const AxisStatus& status, uint64_t cycle, int64_t now_ns) noexcept {
   const AxisSample& s = status.sample;
   ds1928_axis_data d{};
@@ -179,7 +173,7 @@ std::error_code Publisher::open(const ShmConfig& config, uint32_t axis_count,
       sizeof(ds1928_shm_header) + std::size_t{axis_count} * sizeof(ds1928_shm_axis);
   // Readers register in the wait area, so it is writable wherever the data is readable.
   const uint32_t wait_mode = config.mode | ((config.mode & 0444) >> 1);
-  const uint64_t generation = static_cast<uint64_t>(realtime_ns());
+  const uint64_t generation = static_cast<uint64_t>(rt::realtime_ns());
 
   // The wait area first: a reader that finds the data object complete finds its wait area too.
   void* wait_map = nullptr;
@@ -256,7 +250,7 @@ void Publisher::set_state(DaemonState state) noexcept {
 
 void Publisher::publish(uint64_t cycle, std::span<const AxisStatus> axes) noexcept {
   if (header_ == nullptr) return;
-  const int64_t now = ds1928_shm_now_ns();  // vDSO, no system call
+  const int64_t now = rt::now_ns();  // vDSO, no system call
   const std::size_t n = axes.size() < axis_count_ ? axes.size() : axis_count_;
   for (std::size_t i = 0; i < n; ++i) write_record(records_[i], to_data(axes[i], cycle, now));
 

@@ -1,36 +1,17 @@
 #include "sim/canio_node.hpp"
 
-#include <time.h>
-
 #include <algorithm>
 #include <array>
 #include <limits>
 
 #include "canio/object_codec.hpp"
 #include "canio/sdo_expedited.hpp"
+#include "core/clock.hpp"
 #include "core/register_catalogue.hpp"
+#include "core/sdo_abort.hpp"
 #include "sim/sim_error.hpp"
 
 namespace ds1928::sim {
-namespace {
-
-// CiA 301 abort codes.
-constexpr uint32_t kAbortNoObject = 0x0602'0000;
-constexpr uint32_t kAbortReadOnly = 0x0601'0002;
-constexpr uint32_t kAbortWriteOnly = 0x0601'0001;
-constexpr uint32_t kAbortTypeLength = 0x0607'0010;
-constexpr uint32_t kAbortOutOfRange = 0x0609'0030;
-constexpr uint32_t kAbortGeneral = 0x0800'0000;
-
-[[nodiscard]] uint32_t abort_for(std::error_code ec) noexcept {
-  if (ec == SimErrc::unknown_register) return kAbortNoObject;
-  if (ec == SimErrc::read_only) return kAbortReadOnly;
-  if (ec == SimErrc::wrong_size) return kAbortTypeLength;
-  if (ec == SimErrc::out_of_range) return kAbortOutOfRange;
-  return kAbortGeneral;
-}
-
-}  // namespace
 
 CanioNodeConfig canio_node_from_config(const DaemonConfig& config, uint8_t node) {
   CanioNodeConfig n;
@@ -84,10 +65,7 @@ void CanioNode::send(const canio::CanFrame& f) {
 }
 
 int64_t CanioNode::now() const {
-  if (config_.clock) return config_.clock();
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+  return config_.clock ? config_.clock() : rt::now_ns();
 }
 
 void CanioNode::queue(const canio::CanFrame& f, int64_t due_ns) {
@@ -174,14 +152,14 @@ void CanioNode::serve_sdo(const canio::CanFrame& f) {
   }
   const uint8_t size = where ? register_size(where->reg).value_or(0) : uint8_t{0};
   if (!module || size == 0) {
-    abort(kAbortNoObject);
+    abort(sdo_abort::kNoObject);
   } else if (request->command == SdoCommand::UploadRequest) {
     uint32_t value = 0;
     const RegisterInfo* info = find_register(where->reg);
     if (config_.faults.config_write_only && info && info->direction == RegisterDirection::Config) {
-      abort(kAbortWriteOnly);
+      abort(sdo_abort::kWriteOnly);
     } else if (auto ec = module->read_register(where->reg, size, value)) {
-      abort(abort_for(ec));
+      abort(sdo_abort_for(ec));
     } else {
       reply.command = SdoCommand::UploadResponse;
       reply.size = config_.faults.widen_sdo_reads && size == 1 ? uint8_t{4} : size;
@@ -189,14 +167,14 @@ void CanioNode::serve_sdo(const canio::CanFrame& f) {
     }
   } else if (request->command == SdoCommand::DownloadRequest) {
     if (request->size != size) {
-      abort(kAbortTypeLength);
+      abort(sdo_abort::kTypeLength);
     } else if (auto ec = module->write_register(where->reg, size, request->value)) {
-      abort(abort_for(ec));
+      abort(sdo_abort_for(ec));
     } else {
       reply.command = SdoCommand::DownloadResponse;
     }
   } else {
-    abort(kAbortGeneral);
+    abort(sdo_abort::kGeneral);
   }
   if (auto frame = canio::build_sdo_response(config_.node, reply)) send(*frame);
 }

@@ -10,6 +10,7 @@
 #include "config/config.hpp"
 #include "core/module_image.hpp"
 #include "flatstream/channel.hpp"
+#include "sim/encoder_description_yaml.hpp"
 #include "sim/endat_bridge.hpp"
 
 namespace ds1928::sim {

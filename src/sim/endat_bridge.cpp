@@ -69,8 +69,8 @@ void EnDatBridge::update_f1(bool f1, int64_t now_ns) noexcept {
   last_f1_ = f1;
 }
 
-endat::Result<endat::wire::PositionReply> EnDatBridge::decode_position(const BitFrame& f,
-                                                                       CommandSet set) const {
+Result<endat::wire::PositionReply> EnDatBridge::decode_position(const BitFrame& f,
+                                                                CommandSet set) const {
   endat::wire::PositionFormat fmt{set, position_bits_, false, false};
   if (set == CommandSet::EnDat22 && f.size() > fmt.frame_bits()) {
     // Additional information present: how many follows from the length; which is in each
@@ -159,7 +159,7 @@ std::error_code EnDatBridge::run_rescan(int64_t& t) {
   }
   if (!ec) ec = read_area(t, 0xA7, 0, fresh.operating_param);
   if (!ec) ec = read_area(t, kStatusMrs, 0, fresh.operating_status);
-  endat::Result<endat::Identification> id = Errc::invalid_identification;
+  Result<endat::Identification> id = Errc::invalid_identification;
   if (!ec) {
     id = endat::decode_identification(fresh.manufacturer);
     if (!id) ec = id.error();
@@ -252,8 +252,8 @@ endat::ReplyMessage EnDatBridge::run_message(const Pending& p, int64_t& t) {
   ++stats_.messages;
   const auto bytes = p.bytes.span();
   const uint8_t first = bytes.empty() ? 0 : bytes[0];
-  const auto request = p.too_long ? endat::Result<endat::Request>(Errc::oversized_request)
-                                  : endat::decode_request(bytes);
+  const auto request =
+      p.too_long ? Result<endat::Request>(Errc::oversized_request) : endat::decode_request(bytes);
   if (!request) {
     ++stats_.failed_messages;
     return endat::encode_failure_reply(first, FailureReason::MalformedRequest);

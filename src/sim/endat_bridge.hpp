@@ -133,8 +133,8 @@ class EnDatBridge {
   std::error_code position_tx(int64_t& t, endat::wire::Mode mode, uint8_t address,
                               uint16_t parameter, endat::wire::PositionReply* out);
   std::error_code read_area(int64_t& t, uint8_t mrs, unsigned first, std::span<uint16_t> out);
-  [[nodiscard]] endat::Result<endat::wire::PositionReply> decode_position(
-      const endat::wire::BitFrame& f, endat::CommandSet set) const;
+  [[nodiscard]] Result<endat::wire::PositionReply> decode_position(const endat::wire::BitFrame& f,
+                                                                   endat::CommandSet set) const;
   [[nodiscard]] int64_t wire_ns(std::size_t bits) const noexcept;
   void note_failure(std::error_code ec) noexcept;
   void update_f1(bool f1, int64_t now_ns) noexcept;

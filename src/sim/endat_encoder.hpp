@@ -73,14 +73,9 @@ struct EncoderDescription {
 // words they do not cover, and the checksum word 47 (16-bit sum of words 0..47 is zero).
 void apply_identification(EncoderDescription& d);
 
-struct EncoderLoadResult {
-  std::optional<EncoderDescription> description;
-  std::string error;  // "file:line:column: key: what" when description is empty
-};
-// YAML (docs/endat.md "Encoder description"); missing keys keep the defaults above.
-[[nodiscard]] EncoderLoadResult load_encoder_description(const std::string& path);
-[[nodiscard]] EncoderLoadResult parse_encoder_description(std::string_view yaml,
-                                                          std::string_view origin = "<string>");
+// An area of `blocks` × `words_per_block` zero words. (The YAML description file is read by
+// sim/encoder_description_yaml.hpp.)
+[[nodiscard]] EncoderArea make_encoder_area(uint8_t words_per_block, uint8_t blocks, bool writable);
 
 // What one transaction did: the reply on the wire and how long the encoder needs before the
 // next command (the module waits this long, as real firmware waits fixed delays).

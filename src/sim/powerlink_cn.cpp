@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstring>
 
+#include "core/sdo_abort.hpp"
 #include "sim/sim_error.hpp"
 
 namespace ds1928::sim {
@@ -17,14 +18,6 @@ using pl::NmtState;
 
 namespace {
 
-// SDO abort codes (powerlink.md §4).
-constexpr uint32_t kAbortNoObject = 0x06020000;
-constexpr uint32_t kAbortNoSubindex = 0x06090011;
-constexpr uint32_t kAbortReadOnly = 0x06010002;
-constexpr uint32_t kAbortTypeLength = 0x06070010;
-constexpr uint32_t kAbortOutOfRange = 0x06090030;
-constexpr uint32_t kAbortGeneral = 0x08000000;
-
 // Error codes logged in the StatusResponse history (DS 301 DLL error codes).
 constexpr uint16_t kErrorLossOfSoc = 0x8245;
 constexpr uint16_t kErrorLossOfPReq = 0x8242;
@@ -33,14 +26,6 @@ constexpr uint16_t kEntryVendor = pl::entry_type::kModeOccurred | pl::entry_type
 
 constexpr uint8_t kPriorityGeneric = 3;
 constexpr uint8_t kPriorityNmtRequest = 7;
-
-[[nodiscard]] uint32_t abort_for(std::error_code ec) noexcept {
-  if (ec == SimErrc::unknown_register) return kAbortNoObject;
-  if (ec == SimErrc::read_only) return kAbortReadOnly;
-  if (ec == SimErrc::wrong_size) return kAbortTypeLength;
-  if (ec == SimErrc::out_of_range) return kAbortOutOfRange;
-  return kAbortGeneral;
-}
 
 [[nodiscard]] bool is_cycling(NmtState s) noexcept {
   return s == NmtState::kPreOperational2 || s == NmtState::kReadyToOperate ||
@@ -61,11 +46,11 @@ class PowerlinkCn::Objects final : public pl::SdoObjectAccess {
     uint32_t value = 0;
     uint8_t width = 4;
     if (index == 0x1000) {
-      if (subindex != 0) return kAbortNoSubindex;
+      if (subindex != 0) return sdo_abort::kNoSubindex;
       value = cn_.config_.device_type;
     } else if (index == 0x1001) {
       // ERR_ErrorRegister_U8: byte 0 of the StatusResponse's static error bit field.
-      if (subindex != 0) return kAbortNoSubindex;
+      if (subindex != 0) return sdo_abort::kNoSubindex;
       value = static_cast<uint8_t>(cn_.errsig_.static_error_bits());
       width = 1;
     } else if (index == 0x1018) {
@@ -87,16 +72,16 @@ class PowerlinkCn::Objects final : public pl::SdoObjectAccess {
           value = cn_.config_.serial_no;
           break;
         default:
-          return kAbortNoSubindex;
+          return sdo_abort::kNoSubindex;
       }
     } else {
       Ds1928Module* module = nullptr;
       uint16_t reg = 0;
       if (const uint32_t abort = locate(index, subindex, module, reg)) return abort;
       width = ds1928::register_size(reg).value_or(4);
-      if (auto ec = module->read_register(reg, width, value)) return abort_for(ec);
+      if (auto ec = module->read_register(reg, width, value)) return sdo_abort_for(ec);
     }
-    if (out.size() < width) return kAbortGeneral;
+    if (out.size() < width) return sdo_abort::kGeneral;
     for (uint8_t i = 0; i < width; ++i) out[i] = static_cast<uint8_t>(value >> (8 * i));
     size = width;
     return 0;
@@ -104,17 +89,18 @@ class PowerlinkCn::Objects final : public pl::SdoObjectAccess {
 
   uint32_t write_object(uint16_t index, uint8_t subindex,
                         std::span<const uint8_t> data) noexcept override {
-    if (index == 0x1000 || index == 0x1001 || index == 0x1018) return kAbortReadOnly;
+    if (index == 0x1000 || index == 0x1001 || index == 0x1018) return sdo_abort::kReadOnly;
     if (CnObjectDictionary::handles(index)) return cn_.comm_.write(index, subindex, data);
     Ds1928Module* module = nullptr;
     uint16_t reg = 0;
     if (const uint32_t abort = locate(index, subindex, module, reg)) return abort;
     const uint8_t width = ds1928::register_size(reg).value_or(static_cast<uint8_t>(data.size()));
-    if (data.size() != width || (width != 1 && width != 2 && width != 4)) return kAbortTypeLength;
+    if (data.size() != width || (width != 1 && width != 2 && width != 4))
+      return sdo_abort::kTypeLength;
     uint32_t value = 0;
     for (std::size_t i = 0; i < data.size(); ++i)
       value |= static_cast<uint32_t>(data[i]) << (8 * i);
-    if (auto ec = module->write_register(reg, width, value)) return abort_for(ec);
+    if (auto ec = module->write_register(reg, width, value)) return sdo_abort_for(ec);
     return 0;
   }
 
@@ -122,7 +108,7 @@ class PowerlinkCn::Objects final : public pl::SdoObjectAccess {
   uint32_t locate(uint16_t index, uint8_t subindex, Ds1928Module*& module,
                   uint16_t& reg) const noexcept {
     const auto address = cn_.mapping_.register_for(pl::SdoObject{index, subindex});
-    if (!address) return kAbortNoObject;
+    if (!address) return sdo_abort::kNoObject;
     for (const HostedModule& m : cn_.modules_) {
       if (m.slot == address->slot) {
         module = m.module.get();
@@ -130,7 +116,7 @@ class PowerlinkCn::Objects final : public pl::SdoObjectAccess {
         return 0;
       }
     }
-    return kAbortNoObject;  // no module in that slot
+    return sdo_abort::kNoObject;  // no module in that slot
   }
 
   PowerlinkCn& cn_;

@@ -1,10 +1,9 @@
 // PowerlinkCnLoop: drives simulated CNs from one raw link (see powerlink_cn.hpp).
-#include <time.h>
-
 #include <algorithm>
 #include <cerrno>
 #include <climits>
 
+#include "core/clock.hpp"
 #include "sim/powerlink_cn.hpp"
 
 namespace ds1928::sim {
@@ -19,19 +18,6 @@ PowerlinkCnLoop::PowerlinkCnLoop(pl::Link& link, std::function<bool(int64_t)> wa
       wait_readable_(std::move(wait_readable)),
       nodes_(nodes.begin(), nodes.end()),
       options_(options) {}
-
-namespace {
-[[nodiscard]] int64_t now_monotonic_ns() noexcept {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
-}
-void sleep_until_ns(int64_t t) noexcept {
-  const timespec ts{static_cast<time_t>(t / 1'000'000'000), static_cast<long>(t % 1'000'000'000)};
-  while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
-  }
-}
-}  // namespace
 
 void PowerlinkCnLoop::Rhythm::note(int64_t t) noexcept {
   if (last != 0) {
@@ -56,7 +42,7 @@ int64_t PowerlinkCnLoop::next_cycle_start(int64_t now) const noexcept {
 }
 
 bool PowerlinkCnLoop::run_once() noexcept {
-  int64_t now = now_monotonic_ns();
+  int64_t now = rt::now_ns();
   int64_t node_deadline = INT64_MAX;
   for (PowerlinkCn* n : nodes_) node_deadline = std::min(node_deadline, n->next_deadline_ns());
 
@@ -66,12 +52,12 @@ bool PowerlinkCnLoop::run_once() noexcept {
     // after its SoA) wait in the ring until the wake-up.
     const int64_t wake =
         std::min({next_start - options_.guard_ns, node_deadline, now + options_.idle_wait_ns});
-    if (wake > now) sleep_until_ns(wake);
-    now = now_monotonic_ns();
+    if (wake > now) (void)rt::sleep_until(wake);
+    now = rt::now_ns();
   } else if (next_start == 0 && node_deadline > now) {
     // No rhythm known (MN silent or just starting): block until something comes.
     (void)wait_readable_(std::min(node_deadline, now + options_.idle_wait_ns));
-    now = now_monotonic_ns();
+    now = rt::now_ns();
   }
   cycle_done_ = false;
 
@@ -81,7 +67,7 @@ bool PowerlinkCnLoop::run_once() noexcept {
   bool ok = true;
   while (!cycle_done_ && now < end) {
     const pl::Received r = link_.receive(rx_, std::min(end, node_deadline));
-    now = r.rx_time_ns != 0 ? r.rx_time_ns : now_monotonic_ns();
+    now = r.rx_time_ns != 0 ? r.rx_time_ns : rt::now_ns();
     if (r.error && r.length == 0) {
       ok = false;
       break;

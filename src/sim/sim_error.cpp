@@ -2,6 +2,8 @@
 
 #include <string>
 
+#include "core/sdo_abort.hpp"
+
 namespace ds1928::sim {
 
 namespace {
@@ -27,6 +29,14 @@ class SimCategory final : public std::error_category {
 const std::error_category& sim_category() noexcept {
   static const SimCategory category;
   return category;
+}
+
+uint32_t sdo_abort_for(std::error_code ec) noexcept {
+  if (ec == SimErrc::unknown_register) return sdo_abort::kNoObject;
+  if (ec == SimErrc::read_only) return sdo_abort::kReadOnly;
+  if (ec == SimErrc::wrong_size) return sdo_abort::kTypeLength;
+  if (ec == SimErrc::out_of_range) return sdo_abort::kOutOfRange;
+  return sdo_abort::kGeneral;
 }
 
 }  // namespace ds1928::sim

@@ -2,6 +2,7 @@
 // SDO abort or a CAN-I/O error).
 #pragma once
 
+#include <cstdint>
 #include <system_error>
 
 namespace ds1928::sim {
@@ -18,6 +19,10 @@ enum class SimErrc {
 [[nodiscard]] inline std::error_code make_error_code(SimErrc e) noexcept {
   return {static_cast<int>(e), sim_category()};
 }
+
+// The SDO abort code (core/sdo_abort.hpp) a simulated bus controller answers a register access
+// with when the module refused it with `ec`; general error for anything not a SimErrc.
+[[nodiscard]] uint32_t sdo_abort_for(std::error_code ec) noexcept;
 
 }  // namespace ds1928::sim
 

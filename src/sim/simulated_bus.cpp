@@ -1,6 +1,6 @@
 #include "sim/simulated_bus.hpp"
 
-#include <ctime>
+#include "core/clock.hpp"
 
 namespace ds1928::sim {
 
@@ -43,9 +43,7 @@ void SimulatedBus::stop() noexcept {
 
 ExchangeResult SimulatedBus::exchange(std::span<AxisIo> axes, int64_t /*cycle_start_ns*/,
                                       uint64_t /*cycle_index*/) noexcept {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);  // vDSO: no kernel entry
-  const int64_t now_ns = int64_t{ts.tv_sec} * 1'000'000'000 + ts.tv_nsec;
+  const int64_t now_ns = rt::now_ns();  // vDSO: no kernel entry
   // The simulated node's NetTime is CLOCK_MONOTONIC in µs: the mapping back is exact.
   const uint64_t net_us = static_cast<uint64_t>(now_ns / 1000);
 

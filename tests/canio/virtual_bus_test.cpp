@@ -13,45 +13,16 @@
 #include <thread>
 
 #include "support/alloc_counter.hpp"
+#include "vbus_test_support.hpp"
 
 using namespace ds1928::canio;
+using namespace ds1928::canio::test;
 
 namespace {
-
-struct FakeClock {
-  std::shared_ptr<std::atomic<int64_t>> now = std::make_shared<std::atomic<int64_t>>(1'000'000'000);
-  VirtualBusOptions options(uint32_t ring = 1024) const {
-    VirtualBusOptions o;
-    o.ring_frames = ring;
-    auto n = now;
-    o.clock = [n] { return n->load(); };
-    return o;
-  }
-  void advance_ms(int64_t ms) { now->fetch_add(ms * 1'000'000); }
-};
-
-std::unique_ptr<VirtualCanPort> port(const std::shared_ptr<VirtualCanBus>& bus,
-                                     VirtualPortOptions o = {}) {
-  auto p = bus->open_port(std::move(o));
-  REQUIRE(p);
-  return std::move(p.value());
-}
 
 CanFrame data_frame(uint32_t id, uint8_t tag) {
   const uint8_t bytes[8] = {tag, 1, 2, 3, 4, 5, 6, 7};
   return make_standard_frame(id, bytes);
-}
-
-// Everything queued for `p` right now (non-blocking poll).
-std::vector<CanFrame> drain(CanPort& p) {
-  std::vector<CanFrame> all;
-  std::array<CanFrame, 16> buf;
-  for (;;) {
-    auto r = p.receive(buf, 0);
-    REQUIRE_FALSE(r.error);
-    if (r.count == 0) return all;
-    all.insert(all.end(), buf.begin(), buf.begin() + r.count);
-  }
 }
 
 }  // namespace
@@ -387,9 +358,7 @@ TEST_CASE("a blocking receive wakes for a frame from another thread", "[canio][v
     sync.arrive_and_wait();
     REQUIRE(tx->send(data_frame(0x181, 7)).sent());
   });
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  const int64_t deadline = (ts.tv_sec + 30) * 1'000'000'000LL + ts.tv_nsec;
+  const int64_t deadline = deadline_in(30);
   sync.arrive_and_wait();
   std::array<CanFrame, 4> buf;
   auto r = rx->receive(buf, deadline);
@@ -408,31 +377,19 @@ TEST_CASE("two processes talk over a shared virtual bus", "[canio][vbus][process
   REQUIRE(child >= 0);
   if (child == 0) {
     // The node: answers every 0x080 frame with 0x181 carrying the same first byte + 1.
-    auto b = VirtualCanBus::open_shared(name);
-    if (!b) _exit(2);
-    auto p = (*b)->open_port();
-    if (!p) _exit(3);
-    const CanIdFilter ids[] = {{0x080, false}};
-    if ((*p)->set_filters(ids)) _exit(4);
-    CanFrame ready = data_frame(0x700, 0);
-    if (!(*p)->send(ready).sent()) _exit(5);
+    auto p = node_port(name, {}, 0x080, data_frame(0x700, 0));
     std::array<CanFrame, 8> buf;
     for (int answered = 0; answered < 100;) {
-      auto r = (*p)->receive(buf, INT64_MAX);
+      auto r = p->receive(buf, INT64_MAX);
       if (r.error) _exit(6);
       for (std::size_t i = 0; i < r.count; ++i, ++answered)
-        if (!(*p)->send(data_frame(0x181, static_cast<uint8_t>(buf[i].data[0] + 1))).sent())
-          _exit(7);
+        if (!p->send(data_frame(0x181, static_cast<uint8_t>(buf[i].data[0] + 1))).sent()) _exit(7);
     }
     _exit(0);
   }
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  const int64_t deadline = (ts.tv_sec + 60) * 1'000'000'000LL + ts.tv_nsec;
+  const int64_t deadline = deadline_in(60);
+  expect_node_up(*me, 0x700, deadline);
   std::array<CanFrame, 8> buf;
-  auto r = me->receive(buf, deadline);  // the node is up
-  REQUIRE(r.count == 1);
-  CHECK(buf[0].id == 0x700);
   int answered = 0;
   for (int i = 0; i < 100; ++i) {
     REQUIRE(me->send(data_frame(0x080, static_cast<uint8_t>(i))).sent());
@@ -442,10 +399,7 @@ TEST_CASE("two processes talk over a shared virtual bus", "[canio][vbus][process
     answered += buf[0].data[0] == static_cast<uint8_t>(i + 1);
   }
   CHECK(answered == 100);
-  int status = 0;
-  REQUIRE(waitpid(child, &status, 0) == child);
-  CHECK(WIFEXITED(status));
-  CHECK(WEXITSTATUS(status) == 0);
+  expect_node_done(child);
   // A bus of another ring size under the same name is refused.
   auto other = VirtualCanBus::open_shared(name, VirtualBusOptions{64, {}});
   CHECK(other.error() == CanError::kVirtualBusMismatch);

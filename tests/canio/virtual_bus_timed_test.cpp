@@ -13,49 +13,27 @@
 #include "canio/bit_budget.hpp"
 #include "canio/virtual_bus.hpp"
 #include "support/alloc_counter.hpp"
+#include "vbus_test_support.hpp"
 
 using namespace ds1928::canio;
+using namespace ds1928::canio::test;
 
 namespace {
 
 constexpr uint32_t kBitrate = 500'000;  // 2 µs a bit
 constexpr int64_t kBit = 2'000;
-constexpr int64_t kT0 = 1'000'000'000;
+constexpr int64_t kT0 = kFakeClockStart;
 
-struct FakeClock {
-  std::shared_ptr<std::atomic<int64_t>> now = std::make_shared<std::atomic<int64_t>>(kT0);
-  VirtualBusOptions options(uint32_t bitrate = kBitrate) const {
-    VirtualBusOptions o;
-    auto n = now;
-    o.clock = [n] { return n->load(); };
-    o.bitrate = bitrate;
-    return o;
-  }
-  void set(int64_t t) { now->store(t); }
-  void advance(int64_t ns) { now->fetch_add(ns); }
-  int64_t get() const { return now->load(); }
-};
-
-std::unique_ptr<VirtualCanPort> port(const std::shared_ptr<VirtualCanBus>& bus) {
-  auto p = bus->open_port();
-  REQUIRE(p);
-  return std::move(p.value());
+// The timed bus at `bitrate` on the test's fake clock.
+VirtualBusOptions timed(const FakeClock& clock, uint32_t bitrate = kBitrate) {
+  VirtualBusOptions o;
+  o.bitrate = bitrate;
+  return clock.options(o);
 }
 
 CanFrame frame(uint32_t id, uint8_t tag, uint8_t dlc = 8) {
   const uint8_t bytes[8] = {tag, 0x55, 0xAA, 3, 4, 5, 6, 7};
   return make_standard_frame(id, std::span<const uint8_t>(bytes, dlc));
-}
-
-std::vector<CanFrame> drain(CanPort& p) {
-  std::vector<CanFrame> all;
-  std::array<CanFrame, 16> buf;
-  for (;;) {
-    auto r = p.receive(buf, 0);
-    REQUIRE_FALSE(r.error);
-    if (r.count == 0) return all;
-    all.insert(all.end(), buf.begin(), buf.begin() + r.count);
-  }
 }
 
 int64_t bits_ns(const CanFrame& f) {
@@ -71,7 +49,7 @@ int64_t eof(const CanFrame& f, int64_t start) {
 TEST_CASE("timed bus: wire time from the frame's real bits, stamped at end of frame",
           "[canio][vbus][timed]") {
   FakeClock clock;
-  auto bus = VirtualCanBus::create_local(clock.options());
+  auto bus = VirtualCanBus::create_local(timed(clock));
   REQUIRE(bus->timed());
   CHECK(bus->bitrate() == kBitrate);
   // SOF + 11 zero id bits + RTR, IDE, r0 + DLC 0000: 19 zeros, CRC-15 of zeros is 0: 34 zeros,
@@ -100,7 +78,7 @@ TEST_CASE("timed bus: wire time from the frame's real bits, stamped at end of fr
 TEST_CASE("timed bus: a sender waits for a busy bus, a frame on the wire is not preempted",
           "[canio][vbus][timed]") {
   FakeClock clock;
-  auto bus = VirtualCanBus::create_local(clock.options());
+  auto bus = VirtualCanBus::create_local(timed(clock));
   auto a = port(bus), b = port(bus), rx = port(bus);
   const CanFrame first = frame(0x400, 1), low = frame(0x010, 2);
   REQUIRE(a->send(first).sent());
@@ -119,7 +97,7 @@ TEST_CASE("timed bus: a sender waits for a busy bus, a frame on the wire is not 
 TEST_CASE("timed bus: frames queued on several ports go out by arbitration, lowest id first",
           "[canio][vbus][timed]") {
   FakeClock clock;
-  auto bus = VirtualCanBus::create_local(clock.options());
+  auto bus = VirtualCanBus::create_local(timed(clock));
   auto blocker = port(bus), p3 = port(bus), p1 = port(bus), p2 = port(bus), rx = port(bus);
   const CanFrame busy = frame(0x700, 0);
   REQUIRE(blocker->send(busy).sent());
@@ -148,7 +126,7 @@ TEST_CASE("timed bus: frames queued on several ports go out by arbitration, lowe
 TEST_CASE("timed bus: a port's own queue is FIFO, standard beats extended with the same base",
           "[canio][vbus][timed]") {
   FakeClock clock;
-  auto bus = VirtualCanBus::create_local(clock.options());
+  auto bus = VirtualCanBus::create_local(timed(clock));
   auto a = port(bus), b = port(bus), c = port(bus), rx = port(bus);
   REQUIRE(c->send(frame(0x7FF, 0)).sent());  // makes the bus busy
   REQUIRE(a->send(frame(0x300, 1)).sent());  // a: 0x300 then 0x050 (one TX buffer, in order)
@@ -173,7 +151,7 @@ TEST_CASE("timed bus: a port's own queue is FIFO, standard beats extended with t
 TEST_CASE("timed bus: a full TX queue answers QueueFull without blocking, then drains",
           "[canio][vbus][timed]") {
   FakeClock clock;
-  auto bus = VirtualCanBus::create_local(clock.options());
+  auto bus = VirtualCanBus::create_local(timed(clock));
   auto tx = port(bus), rx = port(bus);
   int sent = 0;
   SendResult r;
@@ -198,7 +176,7 @@ TEST_CASE("timed bus: a full TX queue answers QueueFull without blocking, then d
 TEST_CASE("timed bus: the timeline replays exactly when nobody looked for a while",
           "[canio][vbus][timed]") {
   FakeClock clock;
-  auto bus = VirtualCanBus::create_local(clock.options());
+  auto bus = VirtualCanBus::create_local(timed(clock));
   auto a = port(bus), b = port(bus), rx = port(bus);
   REQUIRE(a->send(frame(0x181, 1)).sent());  // t0
   clock.advance(1'000'000);
@@ -215,7 +193,7 @@ TEST_CASE("timed bus: the timeline replays exactly when nobody looked for a whil
 
 TEST_CASE("timed bus: bus load over a window and the totals", "[canio][vbus][timed]") {
   FakeClock clock;
-  auto bus = VirtualCanBus::create_local(clock.options());
+  auto bus = VirtualCanBus::create_local(timed(clock));
   auto tx = port(bus), rx = port(bus);
   int64_t busy = 0;
   // One frame every 1 ms for 10 ms.
@@ -245,9 +223,9 @@ TEST_CASE("timed bus: two mappings of one shared bus arbitrate as one bus",
   FakeClock clock;
   const std::string name = "timed-" + std::to_string(getpid());
   (void)VirtualCanBus::remove_shared(name);
-  auto one = VirtualCanBus::open_shared(name, clock.options(), true);
+  auto one = VirtualCanBus::open_shared(name, timed(clock), true);
   REQUIRE(one);
-  auto two = VirtualCanBus::open_shared(name, clock.options());
+  auto two = VirtualCanBus::open_shared(name, timed(clock));
   REQUIRE(two);
   auto blocker = port(*one), high = port(*one), low = port(*two), rx = port(*two);
   REQUIRE(blocker->send(frame(0x010, 0)).sent());
@@ -262,7 +240,7 @@ TEST_CASE("timed bus: two mappings of one shared bus arbitrate as one bus",
   CHECK((*one)->wire_totals().frames == 3);
 
   // Another bit rate (or the instant bus) under the same name is refused, naming both.
-  auto other = VirtualCanBus::open_shared(name, clock.options(1'000'000));
+  auto other = VirtualCanBus::open_shared(name, timed(clock, 1'000'000));
   REQUIRE_FALSE(other);
   const std::string why = other.error().message();
   INFO(why);
@@ -287,32 +265,21 @@ TEST_CASE("timed bus between two processes: ordered, end-of-frame stamps a frame
   if (child == 0) {
     // The node: answers every 0x080 with 0x181 and 0x281 (first byte + 1), as a CAN-I/O node
     // answers SYNC with its two input objects.
-    auto b = VirtualCanBus::open_shared(name, o);
-    if (!b) _exit(2);
-    auto p = (*b)->open_port();
-    if (!p) _exit(3);
-    const CanIdFilter ids[] = {{0x080, false}};
-    if ((*p)->set_filters(ids)) _exit(4);
-    if (!(*p)->send(frame(0x700, 0)).sent()) _exit(5);
+    auto p = node_port(name, o, 0x080, frame(0x700, 0));
     std::array<CanFrame, 8> buf;
     for (int answered = 0; answered < 50;) {
-      auto r = (*p)->receive(buf, INT64_MAX);
+      auto r = p->receive(buf, INT64_MAX);
       if (r.error) _exit(6);
       for (std::size_t i = 0; i < r.count; ++i, ++answered) {
         const auto tag = static_cast<uint8_t>(buf[i].data[0] + 1);
-        if (!(*p)->send(frame(0x281, tag)).sent() || !(*p)->send(frame(0x181, tag)).sent())
-          _exit(7);
+        if (!p->send(frame(0x281, tag)).sent() || !p->send(frame(0x181, tag)).sent()) _exit(7);
       }
     }
     _exit(0);
   }
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  const int64_t deadline = (ts.tv_sec + 60) * 1'000'000'000LL + ts.tv_nsec;
+  const int64_t deadline = deadline_in(60);
+  expect_node_up(*me, 0x700, deadline);
   std::array<CanFrame, 8> buf;
-  auto r = me->receive(buf, deadline);  // the node is up
-  REQUIRE(r.count == 1);
-  CHECK(buf[0].id == 0x700);
   int answered = 0;
   for (int i = 0; i < 50; ++i) {
     const CanFrame sync = frame(0x080, static_cast<uint8_t>(i), 1);
@@ -333,17 +300,14 @@ TEST_CASE("timed bus between two processes: ordered, end-of-frame stamps a frame
     answered += got[0].data[0] == static_cast<uint8_t>(i + 1);
   }
   CHECK(answered == 50);
-  int status = 0;
-  REQUIRE(waitpid(child, &status, 0) == child);
-  CHECK(WIFEXITED(status));
-  CHECK(WEXITSTATUS(status) == 0);
+  expect_node_done(child);
   CHECK((*bus)->wire_totals().frames == 1 + 50 * 3);
 }
 
 TEST_CASE("timed bus: send and receive allocate nothing and take no lock",
           "[canio][vbus][timed][alloc]") {
   FakeClock clock;
-  auto bus = VirtualCanBus::create_local(clock.options());
+  auto bus = VirtualCanBus::create_local(timed(clock));
   auto tx = port(bus), other = port(bus), rx = port(bus);
   const CanIdFilter ids[] = {{0x181, false}, {0x281, false}};
   REQUIRE_FALSE(rx->set_filters(ids));
@@ -374,7 +338,7 @@ TEST_CASE("timed bus in virtual time: a waiting receive moves the fake clock to 
   FakeClock clock;
   std::unique_ptr<VirtualCanPort> node;
   std::vector<int64_t> waits;
-  VirtualBusOptions o = clock.options();
+  VirtualBusOptions o = timed(clock);
   o.wait_until = [&](int64_t until) {
     waits.push_back(until);
     clock.set(until);

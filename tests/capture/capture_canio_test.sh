@@ -14,33 +14,16 @@
 #
 # Usage: capture_canio_test.sh BUILD_DIR SOURCE_DIR     (exit 77 = skipped)
 set -u
-build=${1:?build dir}
-src=${2:?source dir}
-sim=$build/tools/ds1928-sim/ds1928-sim
-daemon=$build/daemon/ds1928d
-ctl=$build/tools/ds1928ctl/ds1928ctl
+. "${2:?source dir}/tests/lib/netns.sh"
+use_trees "$1" "$2"
 here=$src/tests/capture
 
-for bin in "$sim" "$daemon" "$ctl"; do [ -x "$bin" ] || { echo "FAIL: $bin not built"; exit 1; }; done
-for tool in jq tshark python3; do
-  command -v $tool >/dev/null || { echo "SKIP: $tool not installed"; exit 77; }
-done
+require_programs "$sim" "$daemon" "$ctl"
+skip_unless_tools jq tshark python3
 
-tag=$$
+test_init capture_canio
 vbus=capcan-$tag
-tmp=$(mktemp -d /tmp/capture_canio.XXXXXX)
-pids=()
-failed=0
-cleanup() {
-  for p in "${pids[@]}"; do kill "$p" 2>/dev/null; done
-  for p in "${pids[@]}"; do wait "$p" 2>/dev/null; done
-  rm -f "/dev/shm/ds1928d_capcan_$tag" "/dev/shm/ds1928-vcan.$vbus"
-  if [ "$failed" = 0 ] && [ -z "${KEEP_TMP:-}" ]; then rm -rf "$tmp"; else echo "logs kept in $tmp"; fi
-}
-trap cleanup EXIT
-trap 'exit 1' INT TERM
-fail() { echo "FAIL: $*"; failed=1; for f in "$tmp"/*.log; do echo "---- $f"; tail -n 25 "$f"; done; exit 1; }
-pass() { echo "ok: $*"; }
+on_cleanup 'rm -f "/dev/shm/ds1928d_capcan_$tag" "/dev/shm/ds1928-vcan.$vbus"'
 ctl() { "$ctl" -s "$tmp/ctl.sock" "$@"; }
 status() { ctl --json status 2>/dev/null; }
 
@@ -57,9 +40,9 @@ grep -q "^cycle:" "$tmp/can.yaml" && sed -i "s/^cycle:/cycle:\n  hold_cpu_dma_la
 "$daemon" --check-config "$tmp/can.yaml" >"$tmp/check.log" 2>&1 || fail "check-config refused it"
 
 "$sim" canio --virtual "$vbus" --config "$tmp/can.yaml" >"$tmp/sim.log" 2>&1 &
-pids+=($!)
+track $!
 "$daemon" --config "$tmp/can.yaml" >"$tmp/daemon.log" 2>&1 &
-pids+=($!)
+track $!
 up=0
 for ((i = 0; i < 1200; i++)); do
   [ "$(status | jq -r '.axes[0].state')" = valid ] && { up=1; break; }

@@ -18,24 +18,15 @@
 #
 # Usage: capture_powerlink_test.sh BUILD_DIR SOURCE_DIR     (root; exit 77 = skipped)
 set -u
-build=${1:?build dir}
-src=${2:?source dir}
-sim=$build/tools/ds1928-sim/ds1928-sim
-daemon=$build/daemon/ds1928d
-ctl=$build/tools/ds1928ctl/ds1928ctl
+. "${2:?source dir}/tests/lib/netns.sh"
+use_trees "$1" "$2"
 here=$src/tests/capture
 cpu=$(( $(nproc) > 1 ? 1 : 0 ))
 
-if [ "$(id -u)" != 0 ]; then
-  echo "SKIP: needs root (network namespaces, veth, raw sockets)"
-  exit 77
-fi
-for bin in "$sim" "$daemon" "$ctl"; do [ -x "$bin" ] || { echo "FAIL: $bin not built"; exit 1; }; done
-for tool in jq tshark python3; do
-  command -v $tool >/dev/null || { echo "SKIP: $tool not installed"; exit 77; }
-done
+require_root "network namespaces, veth, raw sockets"
+require_programs "$sim" "$daemon" "$ctl"
+skip_unless_tools jq tshark python3
 
-. "$src/tests/lib/netns.sh"
 test_init capture_powerlink
 ns_mn=capmn_$tag
 ns_cn=capcn_$tag

@@ -54,7 +54,7 @@ struct Harness {
     return {};
   }
 
-  endat::Result<endat::Reply> run(const Request& r) {
+  Result<endat::Reply> run(const Request& r) {
     const auto msg = endat::encode_request(r, endat::CommandSet::EnDat22);
     REQUIRE(msg);
     const auto bytes = raw(msg->span());

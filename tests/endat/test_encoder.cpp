@@ -4,6 +4,7 @@
 
 #include "endat/ident.hpp"
 #include "endat/wire.hpp"
+#include "sim/encoder_description_yaml.hpp"
 #include "sim/endat_encoder.hpp"
 
 using namespace ds1928;
@@ -13,8 +14,8 @@ using endat::wire::Mode;
 
 namespace {
 
-endat::Result<endat::wire::ParameterReply> tx(EnDatEncoder& e, Mode m, uint8_t a, uint16_t p,
-                                              int64_t now = 0) {
+Result<endat::wire::ParameterReply> tx(EnDatEncoder& e, Mode m, uint8_t a, uint16_t p,
+                                       int64_t now = 0) {
   return endat::wire::decode_parameter_reply(
       e.transact(endat::wire::encode_master_frame({m, a, p}), now).reply);
 }

@@ -34,7 +34,7 @@ struct Harness {
         [this](NmtState from, NmtState to, int64_t) { transitions.emplace_back(from, to); });
   }
 
-  void deliver(pl::Result<std::size_t> len) {
+  void deliver(ds1928::Result<std::size_t> len) {
     REQUIRE(len.has_value());
     cn.receive(std::span<const uint8_t>(buf.data(), *len), now);
   }
@@ -279,7 +279,7 @@ TEST_CASE("CN SDO server maps objects onto the module registers") {
   REQUIRE_FALSE(client.read(missing->index, missing->subindex, h.now));
   run();
   REQUIRE(done);
-  CHECK(done_ec == pl::make_sdo_abort_error(0x06020000));
+  CHECK(done_ec == ds1928::make_sdo_abort_error(0x06020000));
 }
 
 TEST_CASE("CN loss of SoC falls back to PRE_OPERATIONAL_1 and logs it in the StatusResponse") {

@@ -12,23 +12,13 @@
 #  4. tshark reads the StatusResponse with EN and the entry code from the capture.
 # Usage: powerlink_errsig_test.sh BUILD_DIR SOURCE_DIR     (root; exit 77 = skipped)
 set -u
-build=${1:?build dir}
-src=${2:?source dir}
-sim=$build/tools/ds1928-sim/ds1928-sim
-daemon=$build/daemon/ds1928d
-ctl=$build/tools/ds1928ctl/ds1928ctl
+. "${2:?source dir}/tests/lib/netns.sh"
+use_trees "$1" "$2"
 
-if [ "$(id -u)" != 0 ]; then
-  echo "SKIP: needs root (network namespaces, veth, AF_PACKET raw sockets); run ctest as root"
-  exit 77
-fi
-for bin in "$sim" "$daemon" "$ctl"; do
-  [ -x "$bin" ] || { echo "FAIL: $bin not built"; exit 1; }
-done
-command -v jq >/dev/null || { echo "FAIL: jq not installed"; exit 1; }
-command -v tshark >/dev/null || { echo "FAIL: tshark not installed"; exit 1; }
+require_root "network namespaces, veth, AF_PACKET raw sockets"
+require_programs "$sim" "$daemon" "$ctl"
+require_tools jq tshark
 
-. "$src/tests/lib/netns.sh"
 test_init powerlink_errsig
 ns_mn=ples_mn_$tag
 ns_cn=ples_cn_$tag
@@ -37,13 +27,6 @@ if_cn=ples_cn
 on_cleanup 'rm -f "/dev/shm/ds1928d_ples_$tag" "/dev/shm/ds1928d_ples_$tag.wait"'
 ctlj() { ip netns exec "$ns_mn" "$ctl" -s "$tmp/ctl.sock" --json "$@"; }
 node9() { ctlj status 2>/dev/null | jq -c '.bus.nodes[] | select(.node == 9)' 2>/dev/null; }
-until_true() {  # SECONDS COMMAND... (wall clock)
-  local end=$((SECONDS + $1))
-  shift
-  while ((SECONDS < end)); do "$@" && return 0; sleep 0.1; done
-  "$@"
-}
-wait_for() { until_true "$3" grep -qE "$2" "$1"; }
 
 cat >"$tmp/errsig.yaml" <<YAML
 # 10 ms: the CN's loss-of-SoC timeout (5 periods) rides through the stalls of a busy machine,

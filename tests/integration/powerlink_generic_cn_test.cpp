@@ -119,7 +119,7 @@ TEST_CASE(
   CHECK(n.object_failures == 1);
   REQUIRE(n.last_failure_count == 1);
   CHECK(pl::describe(n.last_failures[0]) ==
-        "0x1234/0 write: " + pl::make_sdo_abort_error(0x06020000).message());
+        "0x1234/0 write: " + ds1928::make_sdo_abort_error(0x06020000).message());
   // The CN's PRes is what its mapping says (80 bits), its PReq the written limit.
   pl::PresSnapshot snap;
   REQUIRE(mn.pres_snapshot(9, snap));

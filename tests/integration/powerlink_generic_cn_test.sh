@@ -17,16 +17,12 @@
 #     error/warning.
 # Usage: powerlink_generic_cn_test.sh BUILD_DIR SOURCE_DIR     (root; exit 77 = skipped)
 set -u
-build=${1:?build dir}
-src=${2:?source dir}
-sim=$build/tools/ds1928-sim/ds1928-sim
-daemon=$build/daemon/ds1928d
-ctl=$build/tools/ds1928ctl/ds1928ctl
+. "${2:?source dir}/tests/lib/netns.sh"
+use_trees "$1" "$2"
 
-. "$src/tests/lib/netns.sh"
 require_root "network namespaces, veth, AF_PACKET raw sockets"
 require_programs "$sim" "$daemon" "$ctl"
-command -v jq >/dev/null || { echo "FAIL: jq not installed"; exit 1; }
+require_tools jq
 have_tshark=1
 command -v tshark >/dev/null || { have_tshark=0; echo "NOTE: tshark not installed, frame check skipped"; }
 

@@ -15,18 +15,14 @@
 # Run time ≈ HOLD_SECONDS + 20 s.
 # Usage: powerlink_hold_daemon_test.sh BUILD_DIR SOURCE_DIR   (root; 77 = skipped)
 set -u
-build=${1:?build dir}
-src=${2:?source dir}
-sim=$build/tools/ds1928-sim/ds1928-sim
-daemon=$build/daemon/ds1928d
-ctl=$build/tools/ds1928ctl/ds1928ctl
+. "${2:?source dir}/tests/lib/netns.sh"
+use_trees "$1" "$2"
 hold=${HOLD_SECONDS:-100}
 cpu=$(( $(nproc) > 1 ? 1 : 0 ))
 
-. "$src/tests/lib/netns.sh"
 require_root "network namespaces, veth, raw sockets, SCHED_FIFO"
 require_programs "$sim" "$daemon" "$ctl"
-command -v jq >/dev/null || { echo "FAIL: jq not installed"; exit 1; }
+require_tools jq
 
 test_init powerlink_hold_daemon
 ns_mn=plhd_mn_$tag

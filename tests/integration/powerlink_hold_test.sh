@@ -14,15 +14,12 @@
 # Run time ≈ HOLD_SECONDS + 15 s.
 # Usage: powerlink_hold_test.sh BUILD_DIR SOURCE_DIR   (root; 77 = skipped)
 set -u
-build=${1:?build dir}
-src=${2:?source dir}
-sim=$build/tools/ds1928-sim/ds1928-sim
-mn=$build/bench/powerlink/pl_mn_runner
+. "${2:?source dir}/tests/lib/netns.sh"
+use_trees "$1" "$2"
 config=$src/tests/integration/powerlink_hold.yaml
 hold=${HOLD_SECONDS:-100}
 cpu=$(( $(nproc) > 1 ? 1 : 0 ))
 
-. "$src/tests/lib/netns.sh"
 require_root "network namespaces, veth, raw sockets, SCHED_FIFO"
 require_programs "$sim" "$mn"
 

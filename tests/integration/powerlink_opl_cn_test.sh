@@ -27,45 +27,29 @@
 # Usage: powerlink_opl_cn_test.sh BUILD_DIR SOURCE_DIR PERIOD_US pinned|unpinned
 #        (root; exit 77 = skipped without root)
 set -u
-build=${1:?build dir}
-src=${2:?source dir}
+. "${2:?source dir}/tests/lib/netns.sh"
+use_trees "$1" "$2"
 period_us=${3:?period in us}
 placement=${4:?pinned or unpinned}
 hold=${HOLD_SECONDS:-20}
-daemon=$build/daemon/ds1928d
-ctl=$build/tools/ds1928ctl/ds1928ctl
 # The demo pins its threads to CPU 1 (on a 1-CPU machine there is only CPU 0 to share).
 cn_cpu=$(($(nproc) > 1 ? 1 : 0))
 
 case $placement in pinned | unpinned) ;; *) echo "FAIL: placement must be pinned or unpinned"; exit 1 ;; esac
-if [ "$(id -u)" != 0 ]; then
-  echo "SKIP: needs root (network namespaces, veth, AF_PACKET raw sockets, SCHED_FIFO)"
-  exit 77
-fi
-for bin in "$daemon" "$ctl"; do [ -x "$bin" ] || { echo "FAIL: $bin not built"; exit 1; }; done
-command -v jq >/dev/null || { echo "FAIL: jq not installed"; exit 1; }
-command -v tshark >/dev/null || { echo "FAIL: tshark not installed (make deps-test)"; exit 1; }
+require_root "network namespaces, veth, AF_PACKET raw sockets, SCHED_FIFO"
+require_programs "$daemon" "$ctl"
+require_tools jq tshark
 
 # The peer: built once into the shared cache (minutes the first time), FAIL when it cannot be.
-peer_env=$("$src/tests/peers/openpowerlink.sh") || {
-  echo "FAIL: the openPOWERLINK test peer is not available (see the message above)"
-  exit 1
-}
-eval "$peer_env"
+use_openpowerlink
 
-. "$src/tests/lib/netns.sh"
 test_init powerlink_opl_cn
 ns_mn=plo_mn_$tag
 ns_cn=plo_cn_$tag
 if_mn=plo_mn
 if_cn=plo_cn
 on_cleanup 'rm -f "/dev/shm/ds1928d_plo_$tag" "/dev/shm/ds1928d_plo_$tag.wait"'
-scale=${DS1928_WAIT_SCALE:-3}
-wait_for() {  # FILE REGEX SECONDS
-  local i
-  for ((i = 0; i < $3 * 20 * scale; i++)); do grep -qE "$2" "$1" 2>/dev/null && return 0; sleep 0.05; done
-  return 1
-}
+wait_scale=${DS1928_WAIT_SCALE:-3}
 status() { ip netns exec "$ns_mn" "$ctl" -s "$tmp/ctl.sock" --json status 2>/dev/null; }
 node1() { jq -c '.bus.nodes[] | select(.node == 1)' <<<"$1" 2>/dev/null; }
 
@@ -116,7 +100,7 @@ ip netns exec "$ns_mn" "$daemon" --config "$tmp/opl.yaml" >"$tmp/daemon.log" 2>&
 pids+=($!)
 
 up=0
-for ((i = 0; i < 300 * scale; i++)); do
+for ((i = 0; i < 300 * wait_scale; i++)); do
   [ "$(node1 "$(status)" | jq -r .boot)" = operational ] && { up=1; break; }
   sleep 0.1
 done

@@ -18,65 +18,23 @@
 # openpowerlink.sh); a missing archive FAILS this test, it never passes silently.
 # Usage: powerlink_opl_mn_test.sh BUILD_DIR SOURCE_DIR   (root; 77 = skipped)
 set -u
-build=${1:?build dir}
-src=${2:?source dir}
-sim=$build/tools/ds1928-sim/ds1928-sim
+. "${2:?source dir}/tests/lib/netns.sh"
+use_trees "$1" "$2"
 hold=${OPL_MN_HOLD_SECONDS:-20}
 boot_limit=40
 
-if [ "$(id -u)" != 0 ]; then
-  echo "SKIP: needs root (network namespaces, veth, raw sockets)"
-  exit 77
-fi
-[ -x "$sim" ] || { echo "FAIL: $sim not built"; exit 1; }
-command -v tshark >/dev/null || { echo "FAIL: tshark missing (Debian package tshark)"; exit 1; }
-if ! peer_env=$("$src/tests/peers/openpowerlink.sh"); then
-  echo "FAIL: the openPOWERLINK test peer cannot be built (see above)"
-  exit 1
-fi
-eval "$peer_env"
+require_root "network namespaces, veth, raw sockets"
+require_programs "$sim"
+require_tools tshark
+use_openpowerlink
 
-tag=$$
+test_init powerlink_opl_mn
 ns_mn=ploplmn_m_$tag
 ns_cn=ploplmn_c_$tag
 if_mn=plom$tag
 if_cn=ploc$tag
-tmp=$(mktemp -d /tmp/powerlink_opl_mn.XXXXXX)
-pids=()
-cleanup() {
-  for p in "${pids[@]}"; do kill "$p" 2>/dev/null; done
-  for p in "${pids[@]}"; do wait "$p" 2>/dev/null; done
-  ip netns del "$ns_mn" 2>/dev/null
-  ip netns del "$ns_cn" 2>/dev/null
-  if [ "${failed:-0}" = 0 ] && [ -z "${KEEP_LOGS:-}" ]; then rm -rf "$tmp"; else echo "logs kept in $tmp"; fi
-}
-trap cleanup EXIT
-trap 'exit 1' INT TERM
-failed=0
-fail() {
-  echo "FAIL: $*"
-  failed=1
-  for f in "$tmp"/*.log; do echo "---- $f"; tail -n 25 "$f"; done
-  exit 1
-}
-pass() { echo "ok: $*"; }
-wait_for() {  # FILE REGEX SECONDS (wall clock: a loaded machine slows the polling, not the limit)
-  local file=$1 regex=$2 end=$((SECONDS + $3))
-  while ((SECONDS < end)); do
-    grep -qE "$regex" "$file" 2>/dev/null && return 0
-    sleep 0.05
-  done
-  grep -qE "$regex" "$file" 2>/dev/null
-}
-
-ip netns add "$ns_mn" && ip netns add "$ns_cn" || fail "cannot create network namespaces"
-ip link add "$if_mn" netns "$ns_mn" type veth peer name "$if_cn" netns "$ns_cn" || fail "veth"
-ip -n "$ns_mn" link set "$if_mn" up
-ip -n "$ns_cn" link set "$if_cn" up
-for ((i = 0; i < 100; i++)); do
-  [ "$(ip netns exec "$ns_cn" cat /sys/class/net/"$if_cn"/carrier 2>/dev/null)" = 1 ] && break
-  sleep 0.05
-done
+netns_add "$ns_mn" "$ns_cn"
+veth_pair "$ns_mn" "$if_mn" "$ns_cn" "$if_cn"
 
 # The captures start first: the whole boot is in them. Each end of the veth sees what arrives
 # there (ds1928-sim sends past the qdisc, where a capture on its own end cannot see it).
@@ -102,7 +60,8 @@ start=$(date +%s.%N)
 mn_pid=$!
 pids+=($mn_pid)
 
-wait_for "$tmp/sim.log" "READY_TO_OPERATE -> OPERATIONAL" "$boot_limit" ||
+# The boot limit is measured: wall-clock time, however slowly the polling runs.
+until_true "$boot_limit" grep -qE "READY_TO_OPERATE -> OPERATIONAL" "$tmp/sim.log" ||
   fail "node 1 not OPERATIONAL within $boot_limit s of the MN's start"
 boot_s=$(awk -v s="$start" -v e="$(date +%s.%N)" 'BEGIN { printf "%.1f", e - s }')
 pass "openPOWERLINK's MN booted ds1928-sim to OPERATIONAL in ${boot_s} s"

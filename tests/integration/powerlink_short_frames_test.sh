@@ -9,13 +9,10 @@
 #     unexpected, PRes of a node not polled as stale; cut frames counted as invalid.
 # Run time ≈ 5 s.   Usage: powerlink_short_frames_test.sh BUILD_DIR SOURCE_DIR  (root; 77 = skip)
 set -u
-build=${1:?build dir}
-src=${2:?source dir}
-sim=$build/tools/ds1928-sim/ds1928-sim
-mn=$build/bench/powerlink/pl_mn_runner
+. "${2:?source dir}/tests/lib/netns.sh"
+use_trees "$1" "$2"
 sender=$src/tests/integration/pl_send_frames.py
 
-. "$src/tests/lib/netns.sh"
 require_root "network namespaces, veth, raw sockets"
 require_programs "$sim" "$mn"
 

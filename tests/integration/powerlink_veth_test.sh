@@ -26,65 +26,26 @@
 #
 # Usage: powerlink_veth_test.sh BUILD_DIR SOURCE_DIR     (root; exit 77 = skipped)
 set -u
-build=${1:?build dir}
-src=${2:?source dir}
-sim=$build/tools/ds1928-sim/ds1928-sim
-mn=$build/bench/powerlink/pl_mn_runner
-daemon=$build/daemon/ds1928d
-ctl=$build/tools/ds1928ctl/ds1928ctl
+. "${2:?source dir}/tests/lib/netns.sh"
+use_trees "$1" "$2"
 config=$src/tests/integration/powerlink_veth.yaml
 
-if [ "$(id -u)" != 0 ]; then
-  echo "SKIP: needs root (network namespaces, veth, AF_PACKET raw sockets); run ctest as root"
-  exit 77
-fi
-for bin in "$sim" "$mn"; do
-  [ -x "$bin" ] || { echo "FAIL: $bin not built"; exit 1; }
-done
+require_root "network namespaces, veth, AF_PACKET raw sockets"
+require_programs "$sim" "$mn"
 have_tshark=1
 command -v tshark >/dev/null || { have_tshark=0; echo "NOTE: tshark not installed, frame check skipped"; }
 
-tag=$$
+test_init powerlink_veth
 ns_mn=plt_mn_$tag
 ns_cn=plt_cn_$tag
 if_mn=plt_mn
 if_cn=plt_cn
-tmp=$(mktemp -d /tmp/powerlink_veth.XXXXXX)
-pids=()
-
-cleanup() {
-  for p in "${pids[@]}"; do kill "$p" 2>/dev/null; done
-  for p in "${pids[@]}"; do wait "$p" 2>/dev/null; done
-  ip netns del "$ns_mn" 2>/dev/null
-  ip netns del "$ns_cn" 2>/dev/null
-  if [ "${failed:-0}" = 0 ] && [ -z "${KEEP_TMP:-}" ]; then rm -rf "$tmp"; else echo "logs kept in $tmp"; fi
-}
-trap cleanup EXIT
-trap 'exit 1' INT TERM
-
-failed=0
-fail() { echo "FAIL: $*"; failed=1; for f in "$tmp"/*.log; do echo "---- $f"; tail -n 25 "$f"; done; exit 1; }
-pass() { echo "ok: $*"; }
-
 # Every bound on a wait is multiplied by this (default 3): the bounds stop a hung test, and a
 # loaded 2-core machine or a sanitizer build is several times slower than a quiet one.
-scale=${DS1928_WAIT_SCALE:-3}
-# wait_for FILE REGEX SECONDS [COUNT]: until FILE has COUNT lines matching REGEX.
-wait_for() {
-  local file=$1 regex=$2 secs=$3 count=${4:-1} i
-  for ((i = 0; i < secs * 20 * scale; i++)); do
-    [ "$(grep -cE "$regex" "$file" 2>/dev/null || true)" -ge "$count" ] 2>/dev/null && return 0
-    sleep 0.05
-  done
-  return 1
-}
-field() { sed -n "s/.*[ ]$2=\([-0-9.]*\).*/\1/p" "$1" | tail -n1; }
+wait_scale=${DS1928_WAIT_SCALE:-3}
 
-ip netns add "$ns_mn" || fail "cannot create network namespace"
-ip netns add "$ns_cn" || fail "cannot create network namespace"
-ip link add "$if_mn" netns "$ns_mn" type veth peer name "$if_cn" netns "$ns_cn" || fail "veth"
-ip -n "$ns_mn" link set "$if_mn" up
-ip -n "$ns_cn" link set "$if_cn" up
+netns_add "$ns_mn" "$ns_cn"
+veth_pair "$ns_mn" "$if_mn" "$ns_cn" "$if_cn"
 
 if [ $have_tshark = 1 ]; then
   # Capture each side's frames on the peer end: with PACKET_QDISC_BYPASS an interface does not
@@ -126,7 +87,7 @@ sleep 2  # positions flow
 mn_up() { [ "$(grep -cE "EVENT .* all-operational" "$tmp/mn1.log")" -gt \
             "$(grep -cE "EVENT .* not-all-operational" "$tmp/mn1.log")" ]; }
 # Once seen up, it counts: checking again could meet the next stall's reset (seen under stress-ng).
-mn_up_wait() { for ((i = 0; i < 600 * scale; i++)); do mn_up && return 0; sleep 0.05; done; return 1; }
+mn_up_wait() { for ((i = 0; i < 600 * wait_scale; i++)); do mn_up && return 0; sleep 0.05; done; return 1; }
 mn_up_wait || fail "CN not operational before the power cycle"
 up_before=$(grep -cE "EVENT .* all-operational" "$tmp/mn1.log")
 down_before=$(grep -cE "EVENT .* not-all-operational" "$tmp/mn1.log")
@@ -220,7 +181,7 @@ if [ -x "$daemon" ] && [ -x "$ctl" ]; then
   pids+=($daemon_pid)
   ctl_status() { ip netns exec "$ns_mn" "$ctl" -s "$sock" "$@" status >"$tmp/status.txt" 2>&1; }
   up=0
-  for ((i = 0; i < 150 * scale; i++)); do
+  for ((i = 0; i < 150 * wait_scale; i++)); do
     ctl_status && grep -qE "bus: +powerlink, operational" "$tmp/status.txt" && { up=1; break; }
     sleep 0.1
   done
@@ -238,7 +199,7 @@ if [ -x "$daemon" ] && [ -x "$ctl" ]; then
   gaps_stale=0
   sample=
   valid_sample() {
-    for ((w = 0; w < 100 * scale; w++)); do
+    for ((w = 0; w < 100 * wait_scale; w++)); do
       sample=$(pos)
       echo "$sample" >>"$tmp/position.log"
       case $sample in
@@ -249,7 +210,7 @@ if [ -x "$daemon" ] && [ -x "$ctl" ]; then
       esac
       sleep 0.1
     done
-    fail "axis 0 not valid in shared memory for $((10 * scale)) s: $sample"
+    fail "axis 0 not valid in shared memory for $((10 * wait_scale)) s: $sample"
   }
   # Every valid sample must be NetTime-stamped and never stamped after its publication; its age
   # at publication is timing (a stall of the cycle thread between receiving and publishing ages
@@ -282,7 +243,7 @@ if [ -x "$daemon" ] && [ -x "$ctl" ]; then
   b0=$(sed -n 's/.*"boots":\([0-9]*\).*/\1/p' "$tmp/status.json")
   kill -USR1 "$sim_pid"
   rebooted=0
-  for ((i = 0; i < 150 * scale; i++)); do
+  for ((i = 0; i < 150 * wait_scale; i++)); do
     ip netns exec "$ns_mn" "$ctl" --json -s "$sock" status >"$tmp/status.json" 2>/dev/null
     b=$(sed -n 's/.*"boots":\([0-9]*\).*/\1/p' "$tmp/status.json")
     [ "${b:-0}" -gt "${b0:-0}" ] && grep -q '"boot":"operational"' "$tmp/status.json" && { rebooted=1; break; }
@@ -318,7 +279,7 @@ if [ -x "$daemon" ] && [ -x "$ctl" ]; then
   for attempt in 1 2; do
     loss_before=$(daemon_loss_resets)
     kill -USR2 "$sim_pid"
-    for ((i = 0; i < 150 * scale; i++)); do
+    for ((i = 0; i < 150 * wait_scale; i++)); do
       grep -q "powerlink node 1: reset by the MN (reset requested by the node (NMTRequest);" \
           "$tmp/daemon.log" && { requested=1; break; }
       sleep 0.1
@@ -326,7 +287,7 @@ if [ -x "$daemon" ] && [ -x "$ctl" ]; then
     [ $requested = 1 ] && break
     [ "$(daemon_loss_resets)" -gt "$loss_before" ] || break
     echo "note: ds1928d reset the CN for loss of PRes (stall) before serving its NMTRequest; it asks again"
-    for ((i = 0; i < 150 * scale; i++)); do
+    for ((i = 0; i < 150 * wait_scale; i++)); do
       ip netns exec "$ns_mn" "$ctl" --json -s "$sock" status 2>/dev/null | grep -q '"boot":"operational"' && break
       sleep 0.1
     done

@@ -3,8 +3,15 @@
 # needs: the root check, a work directory, programs in the background, namespaces and veth pairs,
 # cleanup on every exit, the verdict lines and polling for a log line.
 #
+#   use_trees BUILD_DIR SOURCE_DIR    build=, src= and the programs of the build tree: sim
+#                                     (ds1928-sim), daemon (ds1928d), ctl (ds1928ctl), mn
+#                                     (bench's pl_mn_runner)
+#   use_openpowerlink                 the openPOWERLINK peer's variables (OPL_*), built once into
+#                                     its cache by tests/peers/openpowerlink.sh; FAIL without it
 #   require_root WHY                  exit 77 (ctest: skipped) unless root
 #   require_programs FILE...          FAIL unless each is an executable file (built)
+#   require_tools COMMAND...          FAIL unless each is installed (jq, tshark: make deps-test)
+#   skip_unless_tools COMMAND...      exit 77 (skipped) unless each is installed
 #   test_init NAME                    tag=$$, tmp=/tmp/NAME.XXXXXX, pids=(), failed=0, traps
 #   on_cleanup 'COMMAND'              one more step for the cleanup (after the programs stopped)
 #   track PID                         a background program to stop at cleanup
@@ -13,9 +20,37 @@
 #                                     carrier (a fresh veth has it only after the link watch ran)
 #   fail MESSAGE / pass MESSAGE       verdict lines; fail prints the last FAIL_LOG_LINES (25)
 #                                     lines of every $tmp/*.log and exits 1
-#   wait_for FILE REGEX SECONDS       until a line of FILE matches (0) or the time is up (1)
+#   wait_for FILE REGEX SECONDS [COUNT]
+#                                     until COUNT (1) lines of FILE match (0) or the time is up
+#                                     (1); the bound counts polls of 50 ms, SECONDS × 20 ×
+#                                     $wait_scale (1): a loaded machine stretches it
+#   until_true SECONDS COMMAND...     until COMMAND succeeds (0), polled every 100 ms; the bound
+#                                     is wall-clock time (for a limit the test measures), and
+#                                     COMMAND's last try after it decides
 #   field FILE NAME                   the last " NAME=value" number in FILE
-# The work directory stays when the test failed or KEEP_TMP is set.
+# The work directory stays when the test failed or KEEP_TMP is set. A test starts with
+#   set -u
+#   . "${2:?source dir}/tests/lib/netns.sh"
+#   use_trees "$1" "$2"
+
+use_trees() {
+  build=${1:?build dir}
+  src=${2:?source dir}
+  sim=$build/tools/ds1928-sim/ds1928-sim
+  daemon=$build/daemon/ds1928d
+  ctl=$build/tools/ds1928ctl/ds1928ctl
+  mn=$build/bench/powerlink/pl_mn_runner
+}
+
+use_openpowerlink() {
+  local env
+  # Minutes the first time (the build), then read from the cache.
+  env=$("$src/tests/peers/openpowerlink.sh") || {
+    echo "FAIL: the openPOWERLINK test peer is not available (see the message above)"
+    exit 1
+  }
+  eval "$env"
+}
 
 require_root() {
   [ "$(id -u)" = 0 ] && return 0
@@ -26,6 +61,16 @@ require_root() {
 require_programs() {
   local p
   for p in "$@"; do [ -x "$p" ] || { echo "FAIL: $p not built"; exit 1; }; done
+}
+
+require_tools() {
+  local t
+  for t in "$@"; do command -v "$t" >/dev/null || { echo "FAIL: $t not installed"; exit 1; }; done
+}
+
+skip_unless_tools() {
+  local t
+  for t in "$@"; do command -v "$t" >/dev/null || { echo "SKIP: $t not installed"; exit 77; }; done
 }
 
 test_init() {
@@ -86,12 +131,23 @@ fail() {
 pass() { echo "ok: $*"; }
 
 wait_for() {
-  local i
-  for ((i = 0; i < $3 * 20; i++)); do
-    grep -qE "$2" "$1" 2>/dev/null && return 0
+  local file=$1 regex=$2 count=${4:-1} i
+  for ((i = 0; i < $3 * 20 * ${wait_scale:-1}; i++)); do
+    if [ "$count" = 1 ]; then
+      grep -qE "$regex" "$file" 2>/dev/null && return 0
+    else
+      [ "$(grep -cE "$regex" "$file" 2>/dev/null)" -ge "$count" ] 2>/dev/null && return 0
+    fi
     sleep 0.05
   done
   return 1
+}
+
+until_true() {
+  local end=$((SECONDS + $1))
+  shift
+  while ((SECONDS < end)); do "$@" && return 0; sleep 0.1; done
+  "$@"
 }
 
 field() { sed -n "s/.*[ ]$2=\([-0-9.]*\).*/\1/p" "$1" | tail -n1; }

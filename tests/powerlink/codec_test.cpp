@@ -260,7 +260,7 @@ TEST_CASE("54-byte frames (unpadded software senders) are accepted when complete
   StatusResponse st;
   st.nmt_state = NmtState::kPreOperational2;
   std::vector<std::vector<uint8_t>> frames;
-  auto keep = [&](Result<std::size_t> len) {
+  auto keep = [&](ds1928::Result<std::size_t> len) {
     REQUIRE(len);
     frames.emplace_back(buf.begin(), buf.begin() + *len);
   };

@@ -6,6 +6,7 @@
 #include <vector>
 
 using namespace ds1928::powerlink;
+using ds1928::make_sdo_abort_error;
 
 namespace {
 

@@ -2,8 +2,6 @@
 // 254, on a SocketCAN interface (--iface) or on the cross-process virtual test bus (--virtual).
 #include "canio_main.hpp"
 
-#include <time.h>
-
 #include <atomic>
 #include <cstdio>
 #include <memory>
@@ -12,20 +10,11 @@
 #include "canio/socketcan_port.hpp"
 #include "canio/virtual_bus.hpp"
 #include "config/config_loader.hpp"
+#include "core/clock.hpp"
 #include "sim/canio_node.hpp"
 
 namespace sim = ds1928::sim;
 namespace canio = ds1928::canio;
-
-namespace {
-
-[[nodiscard]] int64_t now_ns() {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
-}
-
-}  // namespace
 
 int run_canio(const CanioOptions& o, const std::atomic<bool>& stop) {
   sim::CanioNodeConfig node;
@@ -144,15 +133,15 @@ int run_canio(const CanioOptions& o, const std::atomic<bool>& stop) {
   std::printf(", SDO 0x%03X/0x%03X\n", 0x600 + o.node, 0x580 + o.node);
   std::fflush(stdout);
 
-  const int64_t start = now_ns();
+  const int64_t start = ds1928::rt::now_ns();
   const int64_t stop_at = o.duration_s > 0 ? start + static_cast<int64_t>(o.duration_s * 1e9) : 0;
   const int64_t silent_at =
       o.silent_after_s > 0 ? start + static_cast<int64_t>(o.silent_after_s * 1e9) : 0;
   const int64_t silent_until = silent_at + static_cast<int64_t>(o.silent_for_ms) * 1'000'000;
   bool was_silent = false;
   while (!stop.load(std::memory_order_relaxed)) {
-    (void)n.service(now_ns() + 20'000'000);
-    const int64_t now = now_ns();
+    (void)n.service(ds1928::rt::now_ns() + 20'000'000);
+    const int64_t now = ds1928::rt::now_ns();
     const bool silent =
         silent_at != 0 && now >= silent_at && (o.silent_for_ms == 0 || now < silent_until);
     if (silent != was_silent) {

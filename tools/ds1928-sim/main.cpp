@@ -27,6 +27,7 @@
 
 #include "canio_main.hpp"
 #include "config/config_loader.hpp"
+#include "core/clock.hpp"
 #include "powerlink/raw_link.hpp"
 #include "sim/powerlink_cn.hpp"
 
@@ -105,12 +106,6 @@ void apply_profile(PowerlinkOptions& o, const std::vector<std::string>& given) {
   if (o.ready_after_soc_us < 0) o.ready_after_soc_us = 0;
 }
 
-[[nodiscard]] int64_t now_ns() {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
-}
-
 // SCHED_FIFO and locked memory when permitted; the simulator still runs (slower) without.
 void try_realtime(int priority, int cpu) {
   if (cpu >= 0) {
@@ -184,7 +179,7 @@ int run_powerlink(const PowerlinkOptions& o) {
 
   std::vector<std::unique_ptr<sim::PowerlinkCn>> nodes;
   std::vector<sim::PowerlinkCn*> node_ptrs;
-  const int64_t start = now_ns();
+  const int64_t start = ds1928::rt::now_ns();
   for (int k = 0; k < o.count; ++k) {
     const auto node_id = static_cast<uint8_t>(o.node + k);
     sim::PowerlinkCnConfig cn;
@@ -213,7 +208,7 @@ int run_powerlink(const PowerlinkOptions& o) {
     if (!o.quiet) {
       node->set_state_listener([node_id, start](pl::NmtState from, pl::NmtState to, int64_t t) {
         std::printf("%10.6f node %u: %s -> %s\n",
-                    static_cast<double>((t > 0 ? t : now_ns()) - start) / 1e9, node_id,
+                    static_cast<double>((t > 0 ? t : ds1928::rt::now_ns()) - start) / 1e9, node_id,
                     std::string(pl::to_string(from)).c_str(),
                     std::string(pl::to_string(to)).c_str());
         std::fflush(stdout);
@@ -254,7 +249,7 @@ int run_powerlink(const PowerlinkOptions& o) {
       timespec ts{0, 10'000'000};
       nanosleep(&ts, nullptr);
     }
-    const int64_t now = now_ns();
+    const int64_t now = ds1928::rt::now_ns();
     if ((power_cycle_at != 0 && !power_cycled && now >= power_cycle_at) ||
         g_power_cycle.exchange(false)) {
       power_cycled = true;
