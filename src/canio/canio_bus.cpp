@@ -1,7 +1,6 @@
 #include "canio/canio_bus.hpp"
 
 #include <algorithm>
-#include <chrono>
 
 #include "canio/can_error_frame.hpp"
 #include "canio/can_netlink.hpp"
@@ -118,7 +117,9 @@ CanioBus::CanioBus(CanioBusOptions options, std::unique_ptr<CanPort> cycle_port,
       track_(options_.axes.size()),
       axis_counters_(std::make_unique<CanioAxisCounters[]>(options_.axes.size())),
       clock_(&rt::now_ns),
-      last_error_(options_.axes.size()) {
+      sdo_client_(int64_t{options_.bus.sdo_timeout_ms} * 1'000'000),
+      axis_sdo_(options_.axes.size()),
+      notes_(std::make_unique<NoteCell[]>(options_.axes.size())) {
   if (options_.axes.size() > kMaxCanioAxes)
     throw std::invalid_argument("canio: at most 64 axes per bus");
   for (std::size_t i = 0; i < options_.axes.size(); ++i) {
@@ -141,16 +142,6 @@ CanioBus::~CanioBus() {
 CanInterfaceInfo CanioBus::interface_info() const {
   std::lock_guard lock(info_mutex_);
   return info_;
-}
-
-std::string CanioBus::axis_last_error(std::size_t axis) const {
-  std::lock_guard lock(info_mutex_);
-  return axis < last_error_.size() ? last_error_[axis] : std::string();
-}
-
-void CanioBus::set_last_error(std::size_t axis, const std::string& text) {
-  std::lock_guard lock(info_mutex_);
-  if (axis < last_error_.size()) last_error_[axis] = text;
 }
 
 std::error_code CanioBus::start() {
@@ -190,17 +181,15 @@ std::error_code CanioBus::start() {
     std::lock_guard lock(info_mutex_);
     info_ = info.value();
   }
+  // Every module is configured by the cycles that follow (step_sdo()); the cycle thread has not
+  // started yet.
+  if (!options_.assume_configured)
+    for (AxisSdo& a : axis_sdo_) a.reconfigure = true;
   state_.store(BusState::Booting, std::memory_order_relaxed);
-  stop_.store(false);
-  if (!options_.assume_configured || sdo_port_) worker_ = std::thread([this] { worker(); });
   return {};
 }
 
 void CanioBus::stop() noexcept {
-  stop_.store(true);
-  { std::lock_guard lock(wake_mutex_); }
-  wake_.notify_all();
-  if (worker_.joinable()) worker_.join();
   state_.store(BusState::Down, std::memory_order_relaxed);
 }
 
@@ -284,6 +273,7 @@ ExchangeResult CanioBus::exchange(std::span<AxisIo> axes, int64_t, uint64_t) noe
     state_.store(BusState::Error, std::memory_order_relaxed);
     result.bus_up = false;
     result.frames_lost = static_cast<uint32_t>(2 * n);
+    step_sdo(clock_());  // timeouts run on; a request that cannot be sent fails as before
     return result;
   }
 
@@ -346,9 +336,9 @@ ExchangeResult CanioBus::exchange(std::span<AxisIo> axes, int64_t, uint64_t) noe
       if (c.silent.load(std::memory_order_relaxed) &&
           c.last_sample_ns.load(std::memory_order_relaxed) != 0 && !options_.assume_configured) {
         // Back after silence: the node may have been power-cycled and lost its configuration
-        // (EnDat disabled again). This axis publishes nothing until the worker has checked it.
+        // (EnDat disabled again). This axis publishes nothing until step_sdo() has checked it.
         c.configured.store(false, std::memory_order_release);
-        reconfigure_[i].store(true, std::memory_order_release);
+        axis_sdo_[i].reconfigure = true;
       }
       c.silent.store(false, std::memory_order_relaxed);
       c.last_sample_ns.store(now, std::memory_order_relaxed);
@@ -409,6 +399,9 @@ ExchangeResult CanioBus::exchange(std::span<AxisIo> axes, int64_t, uint64_t) noe
     axes[i].inputs_fresh = true;
     axes[i].rx_time_ns = t.pairing.position_rx_ns();
   }
+  // Register access between the windows: the SDO frames stay off the wire while this cycle's
+  // objects are due (the bit budget counts one frame that may have started before a SYNC).
+  step_sdo(now);
   // The bus cycles; which axis is usable is per axis (AxisIo::axis_up).
   state_.store(BusState::Operational, std::memory_order_relaxed);
   result.bus_up = true;

@@ -13,28 +13,30 @@
 // Silent (no complete sample for input_timeout_ms: Stale). Other axes are not affected.
 //
 // Acyclic registers (configuration, Rescan, identification, EnDatError/EnDatWarning) go through
-// expedited CANopen SDO on a second port owned by a normal-priority worker (canio_sdo_worker.cpp),
-// paced to one transfer a cycle so that the bus-load budget holds.
+// expedited CANopen SDO on a second port, as a state machine stepped by the same cycle that owns
+// the bus (canio_sdo.cpp), like POWERLINK's SDO in the ManagingNode: after each response window
+// exchange() takes the SDO answers, checks the transfer's timeout on the cycle's clock and starts
+// the next transfer, at most one a cycle and one per max(period, sdo_interval_us) so that the
+// bus-load budget holds. No thread, no sleep, no allocation or lock on the cycle thread.
 #pragma once
 
 #include <array>
 #include <atomic>
-#include <chrono>
-#include <condition_variable>
 #include <cstdint>
 #include <memory>
 #include <mutex>
 #include <span>
 #include <string>
-#include <thread>
 #include <vector>
 
 #include "canio/can_port.hpp"
 #include "canio/object_codec.hpp"
+#include "canio/sdo_client.hpp"
 #include "canio/sdo_expedited.hpp"
 #include "canio/sync_pairing.hpp"
 #include "config/config.hpp"
 #include "core/bus.hpp"
+#include "core/register_catalogue.hpp"
 #include "core/spsc_queue.hpp"
 #include "powerlink/sdo_mapping.hpp"
 
@@ -56,10 +58,12 @@ enum class CanioBusError : int {
 }
 
 inline constexpr std::size_t kMaxCanioAxes = 64;
+// Register requests the driver holds: submitted, waiting for their axis, results not polled.
+inline constexpr std::size_t kSdoQueueDepth = 64;
 
 // Where an axis stands (cycle thread writes, any thread reads).
 enum class CanioAxisState : uint8_t {
-  Configuring = 0,       // the worker configures its module: the axis is BusDown (only it)
+  Configuring = 0,       // its module is being configured over SDO: the axis is BusDown (only it)
   AwaitingPosCycle = 1,  // configured; Stale until PosCycle changes (a real new position)
   Operational = 2,       // fresh samples are published
   Silent = 3,            // configured, but no complete sample for input_timeout_ms: Stale
@@ -68,7 +72,7 @@ enum class CanioAxisState : uint8_t {
 // Why an axis in this state is not Valid, for status (empty when Operational).
 [[nodiscard]] std::string_view reason(CanioAxisState s) noexcept;
 
-// Per-axis figures (single writer: the cycle thread, or the SDO worker where noted).
+// Per-axis figures (single writer: the cycle thread; "SDO": its register access).
 struct CanioAxisCounters {
   std::atomic<uint64_t> samples{0};         // both objects of a cycle: fresh
   std::atomic<uint64_t> half_samples{0};    // only one of the two input objects arrived
@@ -78,13 +82,13 @@ struct CanioAxisCounters {
   std::atomic<uint64_t> wrong_length{0};    // an object with dlc ≠ 8: ignored
   std::atomic<uint64_t> late_frames{0};     // answer to an earlier SYNC: ignored
   std::atomic<uint64_t> gated{0};           // whole samples held back until PosCycle changed
-  std::atomic<uint64_t> sdo_transfers{0};   // SDO worker
-  std::atomic<uint64_t> sdo_errors{0};      // SDO worker
-  std::atomic<uint64_t> configurations{0};  // SDO worker: completed start-up configurations
-  std::atomic<uint64_t> unverified{0};      // SDO worker: writes whose read-back was refused
-  std::atomic<uint64_t> rescans{0};         // SDO worker: EnDatAck bit 1 written
-  std::atomic<uint32_t> generation{0};      // SDO worker: bumped by every (re)configuration
-  std::atomic<bool> configured{false};      // SDO worker writes, cycle thread reads
+  std::atomic<uint64_t> sdo_transfers{0};   // SDO: transfers started
+  std::atomic<uint64_t> sdo_errors{0};      // SDO: failed transfers, configurations, checks
+  std::atomic<uint64_t> configurations{0};  // SDO: completed start-up configurations
+  std::atomic<uint64_t> unverified{0};      // SDO: writes whose read-back was refused
+  std::atomic<uint64_t> rescans{0};         // SDO: EnDatAck bit 1 written
+  std::atomic<uint32_t> generation{0};      // SDO: bumped by every (re)configuration
+  std::atomic<bool> configured{false};      // SDO: the module is configured (status reads it)
   std::atomic<CanioAxisState> state{CanioAxisState::Configuring};  // cycle thread
   std::atomic<bool> silent{true};  // no complete sample for input_timeout_ms
   std::atomic<int64_t> last_sample_ns{0};
@@ -130,8 +134,9 @@ struct CanioBusOptions {
 
 class CanioBus final : public BusDriver {
  public:
-  // `cycle_port` carries the cyclic objects (cycle thread), `sdo_port` the SDO transfers (worker
-  // thread); both may be the same kind of port on the same interface.
+  // `cycle_port` carries the cyclic objects, `sdo_port` the SDO transfers (both used by the cycle
+  // thread only: two sockets so that SDO answers never wake the response window's receive); both
+  // may be the same kind of port on the same interface.
   CanioBus(CanioBusOptions options, std::unique_ptr<CanPort> cycle_port,
            std::unique_ptr<CanPort> sdo_port);
   ~CanioBus() override;
@@ -140,8 +145,8 @@ class CanioBus final : public BusDriver {
 
   [[nodiscard]] std::string_view name() const noexcept override { return "canio"; }
   // Filters and error frames on both ports, the interface's state; refuses an axis whose module
-  // cannot be configured (acyclic transport none) with start_error() saying why; starts the SDO
-  // worker, which configures the modules.
+  // cannot be configured (acyclic transport none) with start_error() saying why; every module is
+  // then configured over SDO by the cycles that follow.
   [[nodiscard]] std::error_code start() override;
   void stop() noexcept override;
   ExchangeResult exchange(std::span<AxisIo> axes, int64_t cycle_start_ns,
@@ -165,11 +170,13 @@ class CanioBus final : public BusDriver {
   [[nodiscard]] std::string_view port_name() const noexcept { return cycle_port_->name(); }
   // Normal thread: the interface as netlink (or the virtual bus) last reported it.
   [[nodiscard]] CanInterfaceInfo interface_info() const;
-  // Last SDO worker error per axis (configuration or transfer), for status. Normal thread.
+  // Last SDO error per axis (configuration, check after silence), for status. Any thread: the
+  // cycle thread records what failed in fixed fields, the text is composed here.
   [[nodiscard]] std::string axis_last_error(std::size_t axis) const;
 
-  // Clock (CLOCK_MONOTONIC ns) of the response deadline and the node timeouts; tests replace it
-  // together with the virtual bus' clock.
+  // Clock (CLOCK_MONOTONIC ns) of the response deadline, the node timeouts and every SDO time
+  // (transfer timeout, pacing, retries, how long a request waits); tests replace it together with
+  // the virtual bus' clock.
   using Clock = int64_t (*)() noexcept;
   void set_clock(Clock clock) noexcept { clock_ = clock; }
 
@@ -193,23 +200,78 @@ class CanioBus final : public BusDriver {
   [[nodiscard]] const ObjectRoute* route(uint32_t id) const noexcept;
   void count_send(SendResult r) noexcept;
 
-  // SDO worker.
-  void worker() noexcept;
-  [[nodiscard]] std::error_code configure_axis(std::size_t axis);
-  // The module's read-back after a silence: Unknown when an SDO transfer failed (timeout,
-  // abort), which says nothing about the module's configuration.
-  enum class ConfigurationCheck { Intact, Changed, Unknown };
-  [[nodiscard]] ConfigurationCheck check_configuration(std::size_t axis);
-  // `answered_size` gets the size of the answer (0: none); `expected` 0 accepts any size.
-  [[nodiscard]] std::error_code sdo_read(std::size_t axis, uint16_t reg, uint8_t size,
-                                         uint32_t& value, uint8_t* answered_size = nullptr);
-  [[nodiscard]] std::error_code sdo_write(std::size_t axis, uint16_t reg, uint8_t size,
-                                          uint32_t value, bool verify);
-  [[nodiscard]] std::error_code sdo_transfer(uint8_t node, const SdoMessage& request,
-                                             uint8_t expected_size, uint32_t& value,
-                                             uint8_t* answered_size);
-  void pace_sdo() noexcept;
-  void set_last_error(std::size_t axis, const std::string& text);
+  // ---- Register access over SDO (canio_sdo.cpp): one job at a time — a module's configuration,
+  // its check after a silence, or one of the daemon's requests — made of expedited transfers.
+  enum class SdoJobKind : uint8_t { None, Configure, Check, Request };
+  enum class SdoStage : uint8_t { Write, ReadBack, Rescan, Read };
+  struct SdoJob {
+    SdoJobKind kind = SdoJobKind::None;
+    SdoStage stage = SdoStage::Write;
+    uint16_t axis = 0;
+    uint8_t step = 0;     // Configure: start-up write; Check: register read
+    bool verify = false;  // Request writes: read back
+    RegisterRequest request{};
+    std::array<RegisterWrite, kStartupWriteCount> writes{};  // Configure, in start-up order
+    // Configure: the first read-back that differed (it does not stop the configuration).
+    std::error_code mismatch;
+    uint16_t mismatch_reg = 0;
+    uint32_t mismatch_value = 0;
+  };
+  // The transfer a job needs next.
+  struct SdoOp {
+    uint16_t reg = 0;
+    uint8_t size = 1;
+    bool write = false;
+    uint32_t value = 0;
+  };
+  struct AxisSdo {             // cycle thread
+    bool reconfigure = false;  // configure the module (or check it after a silence)
+    int64_t retry_at_ns = 0;
+    unsigned definitive = 0;  // configurations in a row that got a definitive wrong answer
+  };
+  struct Deferred {  // a request for an axis being configured
+    RegisterRequest request{};
+    int64_t since_ns = 0;
+  };
+  // What status shows as an axis' last SDO error, written by the cycle thread in fixed fields
+  // (no string there) under a sequence counter, composed into words by axis_last_error().
+  enum class NoteKind : uint8_t { None, Configuring, Rescan, Checking };
+  struct SdoNote {
+    NoteKind kind = NoteKind::None;
+    uint8_t unverified_after = 0;  // > 0: the axis went up unverified after so many answers
+    uint16_t reg = 0;
+    uint32_t value = 0;
+    std::error_code error;
+  };
+  class NoteCell {
+   public:
+    void store(const SdoNote& note) noexcept;  // one writer
+    [[nodiscard]] SdoNote load() const noexcept;
+
+   private:
+    std::atomic<uint32_t> seq_{0};
+    std::atomic<uint8_t> kind_{0}, unverified_after_{0};
+    std::atomic<uint16_t> reg_{0};
+    std::atomic<uint32_t> value_{0};
+    std::atomic<int> code_{0};
+    std::atomic<const std::error_category*> category_{nullptr};
+  };
+
+  void step_sdo(int64_t now) noexcept;
+  [[nodiscard]] bool next_job(int64_t now) noexcept;
+  void start_configure(std::size_t axis) noexcept;
+  void start_request(const RegisterRequest& request) noexcept;
+  [[nodiscard]] SdoOp current_op() const noexcept;
+  // Starts the job's next transfer; false when it ended without one (no SDO object).
+  [[nodiscard]] bool issue(int64_t now) noexcept;
+  void transfer_done(int64_t now, std::error_code ec, uint32_t value, uint8_t size) noexcept;
+  void configure_step_done(int64_t now, std::error_code ec, uint32_t value) noexcept;
+  void check_step_done(int64_t now, std::error_code ec, uint32_t value, uint8_t size) noexcept;
+  void request_step_done(std::error_code ec, uint32_t value) noexcept;
+  void finish_configure(int64_t now, std::error_code ec, bool completed) noexcept;
+  void mark_configured(std::size_t axis) noexcept;
+  void answer(const RegisterRequest& request, std::error_code ec, uint32_t value) noexcept;
+  void note(std::size_t axis, const SdoNote& n) noexcept { notes_[axis].store(n); }
 
   CanioBusOptions options_;
   std::unique_ptr<CanPort> cycle_port_;
@@ -224,20 +286,26 @@ class CanioBus final : public BusDriver {
   int64_t sync_tx_ns_ = 0;  // this cycle's window
   int64_t deadline_ns_ = 0;
   std::atomic<BusState> state_{BusState::Down};
-  std::atomic<bool> reconfigure_[kMaxCanioAxes]{};
   Clock clock_;
   std::string start_error_;
 
-  SpscQueue<RegisterRequest, 64> requests_;
-  SpscQueue<RegisterResult, 64> results_;
-  std::thread worker_;
-  std::chrono::steady_clock::time_point last_sdo_{};  // worker: pacing
-  std::atomic<bool> stop_{false};
-  std::mutex wake_mutex_;  // worker wake-up only (normal threads)
-  std::condition_variable wake_;
+  // Register access (cycle thread, but for the two queues' other ends).
+  SpscQueue<RegisterRequest, kSdoQueueDepth> requests_;  // normal thread → cycle thread
+  SpscQueue<RegisterResult, kSdoQueueDepth> results_;    // cycle thread → normal thread
+  ExpeditedSdoClient sdo_client_;
+  std::array<CanFrame, 16> sdo_rx_{};
+  SdoJob job_;
+  std::vector<AxisSdo> axis_sdo_;
+  std::array<Deferred, kSdoQueueDepth> deferred_{};
+  std::size_t deferred_count_ = 0;
+  RegisterResult unsent_{};  // a result the full results_ queue did not take yet
+  bool have_unsent_ = false;
+  int64_t next_sdo_ns_ = 0;    // pacing: no transfer starts before
+  std::size_t next_axis_ = 0;  // round robin over the axes to configure
+  std::unique_ptr<NoteCell[]> notes_;
+
   mutable std::mutex info_mutex_;  // normal threads only
   CanInterfaceInfo info_;
-  std::vector<std::string> last_error_;
 };
 
 }  // namespace ds1928::canio

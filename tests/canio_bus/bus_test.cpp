@@ -270,7 +270,7 @@ TEST_CASE("CAN-I/O: modules configured over SDO with read-back, checked again af
   CHECK(rig.canio->state() == BusState::Operational);
   CHECK(rig.io[0].rx_time_ns > 0);
 
-  // Acyclic reads go through SDO on the worker: a manufacturer word of the encoder.
+  // Acyclic reads go through SDO, stepped by the cycles: a manufacturer word of the encoder.
   REQUIRE(rig.canio->submit({7, 0, 4356, 2, false, 0}));
   RegisterResult r;
   REQUIRE(run_until([&] { return rig.canio->poll(r); }));

@@ -1,8 +1,10 @@
 // The daemon's whole cycle on `bus: canio` — SYNC, output objects, input objects, decoding,
 // Flatstream tunnels with EnDat traffic, acknowledgements, shared memory — makes no heap
 // allocation and takes no mutex on the cycle thread, while the normal thread feeds it EnDat
-// commands and acyclic register reads (SDO on the driver's worker thread). The simulated node
-// answers from its own thread over the virtual bus.
+// commands and acyclic register reads. The register access over SDO runs on the cycle thread too
+// (stepped by the cycle): the counted cycles configure the modules (write, read-back, Rescan),
+// serve the reads and time out lost SDO requests. The simulated node answers from its own thread
+// over the virtual bus.
 #include <unistd.h>
 
 #include <catch2/catch.hpp>
@@ -35,6 +37,17 @@ TEST_CASE("bus canio: the cycle allocates nothing and locks no mutex", "[canio][
   auto started = engine->start();
   REQUIRE(started);
   REQUIRE(test::wait_until([&] { return rig.canio->state() == BusState::Operational; }));
+  auto sdo_totals = [&] {
+    std::pair<uint64_t, uint64_t> t{0, 0};
+    for (std::size_t i = 0; i < 2; ++i) {
+      t.first += rig.canio->axis_counters(i).sdo_transfers.load();
+      t.second += rig.canio->axis_counters(i).sdo_errors.load();
+    }
+    return t;
+  };
+  // Two requests to node 1 are lost: transfers in flight until sdo_timeout_ms, inside the count.
+  rig.nodes[0]->drop_sdo_requests(2);
+  const auto sdo_before = sdo_totals();
   task.arm();
 
   const auto read =
@@ -48,6 +61,7 @@ TEST_CASE("bus canio: the cycle allocates nothing and locks no mutex", "[canio][
     const uint64_t next = engine->cycle_count() + 5;
     REQUIRE(test::wait_until([&] { return task.done() || engine->cycle_count() >= next; }));
   }
+  const auto sdo_after = sdo_totals();
   engine->stop();
   const auto counts = task.result();
   INFO("new " << counts.new_calls << ", malloc " << counts.malloc_calls << " (first size "
@@ -55,18 +69,23 @@ TEST_CASE("bus canio: the cycle allocates nothing and locks no mutex", "[canio][
   INFO("traffic: " << traffic.sent << " messages, " << traffic.replies << " replies, "
                    << traffic.acks << " acks, " << traffic.registers << " register reads, "
                    << traffic.register_results << " results");
+  const uint64_t sdo_transfers = sdo_after.first - sdo_before.first;
+  const uint64_t sdo_errors = sdo_after.second - sdo_before.second;
   std::printf(
       "canio noalloc: %llu cycles counted: %llu allocations, %llu mutex locks; %llu "
-      "EnDat replies, %llu register results\n",
+      "EnDat replies, %llu register results; %llu SDO transfers, %llu SDO errors\n",
       static_cast<unsigned long long>(kCounted),
       static_cast<unsigned long long>(counts.allocations()),
       static_cast<unsigned long long>(counts.mutex_locks),
       static_cast<unsigned long long>(traffic.replies),
-      static_cast<unsigned long long>(traffic.register_results));
+      static_cast<unsigned long long>(traffic.register_results),
+      static_cast<unsigned long long>(sdo_transfers), static_cast<unsigned long long>(sdo_errors));
   CHECK(counts.allocations() == 0);
   CHECK(counts.deallocations() == 0);
   CHECK(counts.mutex_locks == 0);
   CHECK(traffic.replies > 20);
   CHECK(traffic.register_results > 20);
+  CHECK(sdo_transfers > 20);  // SDO in flight during the counted cycles
+  CHECK(sdo_errors >= 2);     // the two lost requests timed out on the cycle thread
   CHECK(rig.canio->axis_counters(0).samples.load() > kCounted / 2);
 }

@@ -1,6 +1,7 @@
-// Issue 17 items 4–6 against simulated nodes on the virtual bus (real clock, node thread, the SDO
-// worker configuring the modules): the read-back policy, PosCycle gating, per-axis availability
-// and Rescan. Each of these failed before the change (the comments say how).
+// Issue 17 items 4–6 against simulated nodes on the virtual bus (real clock and a node thread
+// unless noted; the driver's cycles configure the modules over SDO): the read-back policy,
+// PosCycle gating, per-axis availability and Rescan. Each of these failed before the change (the
+// comments say how).
 #include <catch2/catch.hpp>
 #include <chrono>
 
@@ -125,8 +126,10 @@ TEST_CASE("CAN-I/O: position 0 with a still PosCycle is never Valid", "[canio][s
 TEST_CASE("CAN-I/O: a node being configured affects only its own axes",
           "[canio][sdo][availability]") {
   // Node 2 has no SDO server: its module can never be configured. Before, the bus stayed
-  // `booting` and every axis — node 1's too — was published BusDown.
-  Rig rig(canio_config(2), false, false, [](sim::CanioNodeConfig& nc) {
+  // `booting` and every axis — node 1's too — was published BusDown. Stepped rig (virtual
+  // time): on the real clock a node thread starved for input_timeout_ms by a loaded machine made
+  // node 1 silent now and then, and its check after the silence took its axis down.
+  Rig rig(canio_config(2), true, false, [](sim::CanioNodeConfig& nc) {
     if (nc.node == 2) nc.faults.answer_sdo = false;
   });
   REQUIRE_FALSE(rig.canio->start());

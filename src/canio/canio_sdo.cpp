@@ -1,0 +1,490 @@
+// The CAN-I/O driver's register access: configures each module (start-up writes with read-back,
+// Rescan), checks the configuration when a node comes back after a silence, and serves the
+// daemon's register requests — as a state machine stepped once a cycle by exchange() on the
+// cycle thread, the loop that owns the bus (as POWERLINK's SDO is stepped by its cycle). One
+// expedited transfer at a time, at most one started a cycle and one per max(period,
+// sdo_interval_us): the bus-load budget counts exactly that. All time comes from the driver's
+// clock (clock_), so tests drive timeouts, retries and pacing with a fake one. Nothing here
+// sleeps, waits, allocates or locks.
+#include <algorithm>
+
+#include "canio/canio_bus.hpp"
+#include "canio/sdo_expedited.hpp"
+#include "core/register_catalogue.hpp"
+
+namespace ds1928::canio {
+namespace {
+
+template <class T>
+void bump(std::atomic<T>& a, T n = 1) noexcept {
+  a.store(a.load(std::memory_order_relaxed) + n, std::memory_order_relaxed);
+}
+
+constexpr int64_t kMs = 1'000'000;
+// A configuration (or check) that failed is tried again this much later.
+constexpr int64_t kRetryConfigureNs = 500 * kMs;
+// Definitive answers (aborts, read-backs that differ) before the axis goes up unverified: a node
+// that answers must never keep its axis down; the PosCycle gate then decides whether it delivers.
+constexpr unsigned kDefinitiveAttempts = 3;
+// A register request for an axis that is being configured waits this long, then is answered
+// kNotConfigured.
+constexpr int64_t kDeferLimitNs = 2000 * kMs;
+// Decisions one step may take without a transfer on the wire (answers from the queue, deferrals):
+// bounds the cycle's time in step_sdo().
+constexpr int kMaxDecisionsPerStep = 8;
+
+// CiA 301 aborts that say "this object cannot be read" — the write stands, it just cannot be
+// verified: 0x06010000 unsupported access, 0x06010001 attempt to read a write-only object.
+[[nodiscard]] bool cannot_be_read(std::error_code ec) noexcept {
+  const auto code = sdo_abort_code(ec);
+  return code == sdo_abort::kUnsupportedAccess || code == sdo_abort::kWriteOnly;
+}
+
+// No answer at all: says nothing about the module (retried).
+[[nodiscard]] bool transient(std::error_code ec) noexcept {
+  return ec == CanioBusError::kSdoTimeout || ec == CanioBusError::kSdoSendFailed;
+}
+
+[[nodiscard]] std::string register_name(uint16_t reg) {
+  const RegisterInfo* info = find_register(reg);
+  return std::to_string(reg) + " (" + std::string(info ? info->name : "?") + ")";
+}
+
+// The three registers read after a silence: enough to tell a module that kept its configuration
+// from one that was power cycled (EnDat disabled, MTUs unset).
+[[nodiscard]] std::array<RegisterWrite, 3> configuration_checks(const ModuleSettings& m) noexcept {
+  return {{{reg::kEnDatMode, 1, m.endat_mode()},
+           {reg::kOutputMtu, 1, m.output_mtu},
+           {reg::kInputMtu, 1, m.input_mtu}}};
+}
+
+}  // namespace
+
+// ---- Last error (status) -----------------------------------------------------------------------
+
+void CanioBus::NoteCell::store(const SdoNote& n) noexcept {
+  // Sequence counter: odd while the fields change. Release stores, so that a reader that sees a
+  // field of this note also sees the odd counter before it.
+  const uint32_t s = seq_.load(std::memory_order_relaxed);
+  seq_.store(s + 1, std::memory_order_relaxed);
+  std::atomic_thread_fence(std::memory_order_release);
+  kind_.store(static_cast<uint8_t>(n.kind), std::memory_order_release);
+  unverified_after_.store(n.unverified_after, std::memory_order_release);
+  reg_.store(n.reg, std::memory_order_release);
+  value_.store(n.value, std::memory_order_release);
+  code_.store(n.error.value(), std::memory_order_release);
+  category_.store(n.error ? &n.error.category() : nullptr, std::memory_order_release);
+  seq_.store(s + 2, std::memory_order_release);
+}
+
+CanioBus::SdoNote CanioBus::NoteCell::load() const noexcept {
+  for (;;) {
+    const uint32_t before = seq_.load(std::memory_order_acquire);
+    SdoNote n;
+    n.kind = static_cast<NoteKind>(kind_.load(std::memory_order_acquire));
+    n.unverified_after = unverified_after_.load(std::memory_order_acquire);
+    n.reg = reg_.load(std::memory_order_acquire);
+    n.value = value_.load(std::memory_order_acquire);
+    const int code = code_.load(std::memory_order_acquire);
+    const std::error_category* category = category_.load(std::memory_order_acquire);
+    if (category) n.error = std::error_code(code, *category);
+    if ((before & 1U) == 0 && seq_.load(std::memory_order_acquire) == before) return n;
+  }
+}
+
+std::string CanioBus::axis_last_error(std::size_t axis) const {
+  if (axis >= options_.axes.size()) return {};
+  const SdoNote n = notes_[axis].load();
+  const std::string why = n.error.message();
+  std::string text;
+  switch (n.kind) {
+    case NoteKind::None:
+      return {};
+    case NoteKind::Configuring:
+      text = "configuring the module: register " + register_name(n.reg) + " = " +
+             std::to_string(n.value) + ": " + why;
+      break;
+    case NoteKind::Rescan:
+      text = "Rescan (EnDatAck bit 1): " + why;
+      break;
+    case NoteKind::Checking:
+      text =
+          "checking the configuration after silence: register " + register_name(n.reg) + ": " + why;
+      break;
+  }
+  if (n.unverified_after > 0)
+    text = "configured UNVERIFIED after " + std::to_string(n.unverified_after) +
+           " definitive answers: " + text;
+  return text;
+}
+
+// ---- The normal thread's side -------------------------------------------------------------------
+
+bool CanioBus::submit(const RegisterRequest& request) noexcept {
+  return requests_.try_push(request);
+}
+
+bool CanioBus::poll(RegisterResult& out) noexcept {
+  auto r = results_.try_pop();
+  if (!r) return false;
+  out = *r;
+  return true;
+}
+
+// ---- The state machine (cycle thread) -----------------------------------------------------------
+
+void CanioBus::step_sdo(int64_t now) noexcept {
+  // The answer to the transfer in flight; anything else on the SDO port (a late answer to a
+  // transfer that timed out) is dropped here, before the next request goes out.
+  if (sdo_port_) {
+    for (;;) {
+      const ReceiveResult rr = sdo_port_->receive(sdo_rx_, 0);
+      for (std::size_t k = 0; k < rr.count; ++k)
+        if (auto o = sdo_client_.receive(sdo_rx_[k]))
+          transfer_done(now, o->error, o->value, o->size);
+      if (rr.error || rr.count < sdo_rx_.size()) break;
+    }
+  }
+  if (auto o = sdo_client_.tick(now))
+    transfer_done(now, make_error_code(CanioBusError::kSdoTimeout), 0, 0);
+
+  for (int d = 0; d < kMaxDecisionsPerStep && !sdo_client_.busy(); ++d) {
+    if (have_unsent_) {
+      if (!results_.try_push(unsent_)) return;  // the normal thread polls it later
+      have_unsent_ = false;
+    }
+    if (job_.kind == SdoJobKind::None && !next_job(now)) return;
+    if (job_.kind == SdoJobKind::None) continue;  // answered without a transfer
+    // The job's next transfer, paced: at most one a step and one per max(period,
+    // sdo_interval_us). A transfer that cannot start (no SDO object) ends at once.
+    if (now < next_sdo_ns_) return;
+    if (issue(now)) return;
+  }
+}
+
+bool CanioBus::next_job(int64_t now) noexcept {
+  const std::size_t n = options_.axes.size();
+  // A request that waited too long for its axis' configuration.
+  for (std::size_t k = 0; k < deferred_count_; ++k) {
+    const Deferred& d = deferred_[k];
+    if (!axis_sdo_[d.request.axis].reconfigure || now - d.since_ns <= kDeferLimitNs) continue;
+    const RegisterRequest r = d.request;
+    std::move(deferred_.begin() + static_cast<std::ptrdiff_t>(k) + 1,
+              deferred_.begin() + static_cast<std::ptrdiff_t>(deferred_count_),
+              deferred_.begin() + static_cast<std::ptrdiff_t>(k));
+    --deferred_count_;
+    answer(r, make_error_code(CanioBusError::kNotConfigured), 0);
+    return true;
+  }
+  // A module to configure (or to check after a silence), round robin over the axes.
+  for (std::size_t k = 0; k < n; ++k) {
+    const std::size_t i = (next_axis_ + k) % n;
+    AxisSdo& a = axis_sdo_[i];
+    if (!a.reconfigure || now < a.retry_at_ns) continue;
+    next_axis_ = (i + 1) % n;
+    // Back after silence: a module that kept its configuration (the node was only late or
+    // disconnected) needs three reads; one that was power-cycled is configured anew. With
+    // verify none nothing is read: the module is configured again.
+    if (axis_counters_[i].configurations.load(std::memory_order_relaxed) > 0 &&
+        options_.bus.verify != CanVerify::None) {
+      job_ = SdoJob{};
+      job_.kind = SdoJobKind::Check;
+      job_.stage = SdoStage::Read;
+      job_.axis = static_cast<uint16_t>(i);
+    } else {
+      start_configure(i);
+    }
+    return true;
+  }
+  // A request that waited for its axis, which is configured now (oldest first).
+  for (std::size_t k = 0; k < deferred_count_; ++k) {
+    if (axis_sdo_[deferred_[k].request.axis].reconfigure) continue;
+    const RegisterRequest r = deferred_[k].request;
+    std::move(deferred_.begin() + static_cast<std::ptrdiff_t>(k) + 1,
+              deferred_.begin() + static_cast<std::ptrdiff_t>(deferred_count_),
+              deferred_.begin() + static_cast<std::ptrdiff_t>(k));
+    --deferred_count_;
+    start_request(r);
+    return true;
+  }
+  // The daemon's next request. One for an axis being configured waits (its identification needs
+  // the Rescan first); while the waiting room is full it stays queued.
+  RegisterRequest* r = requests_.front();
+  if (r == nullptr) return false;
+  if (r->axis >= n) {
+    const RegisterRequest bad = *r;
+    requests_.drop_front();
+    answer(bad, make_error_code(CanioBusError::kNoSuchAxis), 0);
+    return true;
+  }
+  if (axis_sdo_[r->axis].reconfigure) {
+    if (deferred_count_ == deferred_.size()) return false;
+    deferred_[deferred_count_++] = {*r, now};
+    requests_.drop_front();
+    return true;
+  }
+  const RegisterRequest req = *r;
+  requests_.drop_front();
+  start_request(req);
+  return true;
+}
+
+void CanioBus::start_configure(std::size_t axis) noexcept {
+  job_ = SdoJob{};
+  job_.kind = SdoJobKind::Configure;
+  job_.stage = SdoStage::Write;
+  job_.axis = static_cast<uint16_t>(axis);
+  job_.writes = startup_writes(options_.axes[axis].module);
+}
+
+void CanioBus::start_request(const RegisterRequest& request) noexcept {
+  job_ = SdoJob{};
+  job_.kind = SdoJobKind::Request;
+  job_.axis = request.axis;
+  job_.request = request;
+  if (request.write) {
+    const RegisterInfo* info = find_register(request.reg);
+    // Self-clearing command registers (EnDatAck) read back 0: not verified.
+    job_.verify = !(info && info->direction == RegisterDirection::Command) &&
+                  options_.bus.verify != CanVerify::None;
+    job_.stage = SdoStage::Write;
+  } else {
+    job_.stage = SdoStage::Read;
+  }
+}
+
+CanioBus::SdoOp CanioBus::current_op() const noexcept {
+  switch (job_.kind) {
+    case SdoJobKind::Configure: {
+      if (job_.stage == SdoStage::Rescan) return {reg::kEnDatAck, 1, true, 0x02};
+      const RegisterWrite& w = job_.writes[job_.step];
+      return {w.reg, w.size, job_.stage == SdoStage::Write, w.value};
+    }
+    case SdoJobKind::Check: {
+      const RegisterWrite c = configuration_checks(options_.axes[job_.axis].module)[job_.step];
+      return {c.reg, c.size, false, 0};
+    }
+    case SdoJobKind::Request:
+      return {job_.request.reg, job_.request.size, job_.stage == SdoStage::Write,
+              job_.request.value};
+    case SdoJobKind::None:
+      break;
+  }
+  return {};
+}
+
+bool CanioBus::issue(int64_t now) noexcept {
+  const SdoOp op = current_op();
+  const CanioAxisPlan& a = options_.axes[job_.axis];
+  if (!sdo_port_) {
+    transfer_done(now, make_error_code(CanioBusError::kNoAcyclicTransport), 0, 0);
+    return false;
+  }
+  const auto obj = sdo_mapping_.object_for(a.slot, op.reg);
+  if (!obj) {
+    transfer_done(now, make_error_code(CanioBusError::kNoSdoObject), 0, 0);
+    return false;
+  }
+  bump(axis_counters_[job_.axis].sdo_transfers);
+  // The pacing counts every transfer started; a late step does not earn a burst (at most one
+  // period of slack is kept).
+  const int64_t interval =
+      int64_t{std::max(options_.period_us, options_.bus.sdo_interval_us)} * 1000;
+  next_sdo_ns_ = std::max(next_sdo_ns_, now - int64_t{options_.period_us} * 1000) +
+                 std::max<int64_t>(interval, 1);
+  auto frame = op.write
+                   ? sdo_client_.write(a.node, obj->index, obj->subindex, op.size, op.value, now)
+                   : sdo_client_.read(a.node, obj->index, obj->subindex, op.size, now);
+  if (!frame) {
+    transfer_done(now, frame.error(), 0, 0);
+    return true;
+  }
+  if (!sdo_port_->send(*frame).sent()) {
+    sdo_client_.cancel();
+    transfer_done(now, make_error_code(CanioBusError::kSdoSendFailed), 0, 0);
+  }
+  return true;
+}
+
+void CanioBus::transfer_done(int64_t now, std::error_code ec, uint32_t value,
+                             uint8_t size) noexcept {
+  switch (job_.kind) {
+    case SdoJobKind::Configure:
+      configure_step_done(now, ec, value);
+      return;
+    case SdoJobKind::Check:
+      check_step_done(now, ec, value, size);
+      return;
+    case SdoJobKind::Request:
+      request_step_done(ec, value);
+      return;
+    case SdoJobKind::None:
+      return;
+  }
+}
+
+void CanioBus::configure_step_done(int64_t now, std::error_code ec, uint32_t value) noexcept {
+  const std::size_t axis = job_.axis;
+  const ModuleSettings& module = options_.axes[axis].module;
+  if (job_.stage == SdoStage::Rescan) {
+    // Datasheet §11.6.2.3: EnDatAck bit 1 (Rescan) makes the module read the encoder's
+    // identification again. The module boots with EnDat disabled under function model 254, so
+    // the identification is read only now; the daemon's identification reads (requests held
+    // while the axis is configuring) follow.
+    if (ec) {
+      note(axis, {NoteKind::Rescan, 0, 0, 0, ec});
+      finish_configure(now, ec, false);
+      return;
+    }
+    bump(axis_counters_[axis].rescans);
+    finish_configure(now, job_.mismatch, true);
+    return;
+  }
+  const RegisterWrite& w = job_.writes[job_.step];
+  if (job_.stage == SdoStage::Write) {
+    if (ec) {
+      // A write that is not acknowledged stops the configuration.
+      note(axis, {NoteKind::Configuring, 0, w.reg, w.value, ec});
+      finish_configure(now, ec, false);
+      return;
+    }
+    if (options_.bus.verify != CanVerify::None) {
+      job_.stage = SdoStage::ReadBack;
+      return;
+    }
+  } else {  // ReadBack
+    std::error_code differs;
+    if (cannot_be_read(ec)) {
+      // The datasheet does not promise that configuration registers can be read: the write was
+      // acknowledged, it stays unverified.
+      bump(axis_counters_[axis].unverified);
+    } else if (ec == SdoFrameError::kSizeMismatch) {
+      differs = make_error_code(CanioBusError::kReadBackSize);
+    } else if (ec) {
+      note(axis, {NoteKind::Configuring, 0, w.reg, w.value, ec});
+      finish_configure(now, ec, false);
+      return;
+    } else if (value != w.value) {
+      differs = make_error_code(CanioBusError::kReadBackMismatch);
+    }
+    // A read-back that differs does not stop the configuration: the write was acknowledged, the
+    // remaining registers (EnDatMode last) are written all the same, and the attempt counts as a
+    // definitive answer at the end.
+    if (differs && !job_.mismatch) {
+      job_.mismatch = differs;
+      job_.mismatch_reg = w.reg;
+      job_.mismatch_value = w.value;
+    }
+  }
+  job_.stage = SdoStage::Write;
+  if (++job_.step < job_.writes.size()) return;
+  if (module.endat_enable) {
+    job_.stage = SdoStage::Rescan;
+    return;
+  }
+  finish_configure(now, job_.mismatch, true);
+}
+
+void CanioBus::finish_configure(int64_t now, std::error_code ec, bool completed) noexcept {
+  const std::size_t axis = job_.axis;
+  AxisSdo& a = axis_sdo_[axis];
+  // Completed: every register written, `ec` the first read-back that differed (or none); the
+  // note says so. Else the note already names the transfer that stopped it.
+  const bool mismatch = completed && ec;
+  if (completed)
+    note(axis, mismatch ? SdoNote{NoteKind::Configuring, 0, job_.mismatch_reg, job_.mismatch_value,
+                                  job_.mismatch}
+                        : SdoNote{});
+  job_.kind = SdoJobKind::None;
+  if (!ec) {
+    bump(axis_counters_[axis].configurations);
+    mark_configured(axis);
+    return;
+  }
+  bump(axis_counters_[axis].sdo_errors);
+  a.retry_at_ns = now + kRetryConfigureNs;
+  // The node answers, but not as written (abort, another value or size): after a few attempts
+  // the axis goes up with the configuration unverified (last_error says why); the PosCycle gate
+  // keeps it Stale unless the module really delivers positions.
+  if (!transient(ec) && ++a.definitive >= kDefinitiveAttempts) {
+    SdoNote n = notes_[axis].load();
+    n.unverified_after = static_cast<uint8_t>(std::min(a.definitive, 255U));
+    note(axis, n);
+    bump(axis_counters_[axis].configurations);
+    mark_configured(axis);
+  }
+}
+
+void CanioBus::check_step_done(int64_t now, std::error_code ec, uint32_t value,
+                               uint8_t size) noexcept {
+  const std::size_t axis = job_.axis;
+  const RegisterWrite c = configuration_checks(options_.axes[axis].module)[job_.step];
+  if (ec && transient(ec)) {
+    // No answer proves nothing about the configuration: asked again later; this axis publishes
+    // nothing meanwhile.
+    note(axis, {NoteKind::Checking, 0, c.reg, 0, ec});
+    bump(axis_counters_[axis].sdo_errors);
+    axis_sdo_[axis].retry_at_ns = now + kRetryConfigureNs;
+    job_.kind = SdoJobKind::None;
+    return;
+  }
+  // Any answer that is not this value of this size — another value, another size, an abort
+  // (also "cannot be read": then nothing can be proven) — configures the module again.
+  if (ec || size != c.size || value != c.value) {
+    start_configure(axis);
+    return;
+  }
+  if (++job_.step < 3) return;
+  note(axis, {});
+  job_.kind = SdoJobKind::None;
+  mark_configured(axis);
+}
+
+void CanioBus::request_step_done(std::error_code ec, uint32_t value) noexcept {
+  const RegisterRequest& r = job_.request;
+  if (job_.stage == SdoStage::Write && !ec && job_.verify) {
+    job_.stage = SdoStage::ReadBack;
+    return;
+  }
+  if (job_.stage == SdoStage::ReadBack) {
+    if (cannot_be_read(ec)) {
+      bump(axis_counters_[r.axis].unverified);
+      ec = {};
+    } else if (ec == SdoFrameError::kSizeMismatch) {
+      ec = make_error_code(CanioBusError::kReadBackSize);
+    } else if (!ec && value != r.value) {
+      ec = make_error_code(CanioBusError::kReadBackMismatch);
+    }
+    value = 0;
+  } else if (job_.stage == SdoStage::Write) {
+    value = 0;
+  }
+  job_.kind = SdoJobKind::None;
+  answer(r, ec, value);
+}
+
+void CanioBus::mark_configured(std::size_t axis) noexcept {
+  AxisSdo& a = axis_sdo_[axis];
+  a.definitive = 0;
+  a.reconfigure = false;
+  bump(axis_counters_[axis].generation);
+  axis_counters_[axis].configured.store(true, std::memory_order_release);
+}
+
+void CanioBus::answer(const RegisterRequest& request, std::error_code ec, uint32_t value) noexcept {
+  RegisterResult res;
+  res.tag = request.tag;
+  res.error = ec;
+  res.value = value;
+  if (ec && request.axis < options_.axes.size() && ec != CanioBusError::kNotConfigured)
+    bump(axis_counters_[request.axis].sdo_errors);
+  // step_sdo() decides nothing while a result is held, so this is the only one.
+  if (!results_.try_push(res)) {
+    // The normal thread has not polled for a while: held until the queue has room; no other
+    // job starts meanwhile.
+    unsent_ = res;
+    have_unsent_ = true;
+  }
+}
+
+}  // namespace ds1928::canio
