@@ -9,6 +9,7 @@
 #include "control/journal.hpp"
 #include "core/module_image.hpp"
 #include "endat/names.hpp"
+#include "x20ds1928/object_dictionary.hpp"
 
 namespace ds1928 {
 

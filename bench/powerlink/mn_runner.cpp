@@ -27,6 +27,7 @@
 #include "powerlink/powerlink_bus.hpp"
 #include "powerlink/raw_link.hpp"
 #include "powerlink/rx_wait.hpp"
+#include "x20ds1928/object_dictionary.hpp"
 
 namespace pl = ds1928::powerlink;
 

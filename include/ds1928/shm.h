@@ -84,12 +84,12 @@ struct ds1928_axis_data {
   uint64_t cycle;         /* daemon cycle index of the publication */
   int32_t position_sdc;   /* low 32 bits read signed ("SDC" view) */
   uint32_t pos_time_raw;  /* PosTime as sent (NetTime µs, 32 bit) */
-  uint32_t endat_error;   /* EnDat error word (register 4352) as last read by the daemon */
-  uint32_t endat_warning; /* EnDat warning word (register 4353) as last read by the daemon */
+  uint32_t endat_error;   /* EnDatError word (docs/registers.md) as last read by the daemon */
+  uint32_t endat_warning; /* EnDatWarning word (docs/registers.md) as last read by the daemon */
   uint16_t fraction;      /* fraction of one period (bits 15..0) */
   uint8_t time_source;    /* enum ds1928_time_source */
   int8_t pos_cycle;       /* PosCycle */
-  uint8_t error_info;     /* ErrorInfo bits (261) */
+  uint8_t error_info;     /* ErrorInfo bits */
   uint8_t validity;       /* enum ds1928_axis_validity */
   uint8_t flags;          /* DS1928_AXIS_* flags */
   uint8_t reserved;

@@ -6,7 +6,7 @@
 #include "canio/can_netlink.hpp"
 #include "canio/sdo_expedited.hpp"
 #include "core/clock.hpp"
-#include "core/register_catalogue.hpp"
+#include "x20ds1928/object_dictionary.hpp"
 
 namespace ds1928::canio {
 namespace {

@@ -36,9 +36,9 @@
 #include "canio/sync_pairing.hpp"
 #include "config/config.hpp"
 #include "core/bus.hpp"
-#include "core/register_catalogue.hpp"
+#include "x20ds1928/object_dictionary.hpp"
 #include "core/spsc_queue.hpp"
-#include "powerlink/sdo_mapping.hpp"
+#include "x20ds1928/sdo_mapping.hpp"
 
 namespace ds1928::canio {
 
@@ -276,7 +276,7 @@ class CanioBus final : public BusDriver {
   CanioBusOptions options_;
   std::unique_ptr<CanPort> cycle_port_;
   std::unique_ptr<CanPort> sdo_port_;
-  powerlink::SdoMapping sdo_mapping_;
+  SdoMapping sdo_mapping_;
   ByteOrder order_ = ByteOrder::Little;
   std::vector<ObjectRoute> routes_;  // sorted by id; fixed after construction
   std::vector<Track> track_;

@@ -10,7 +10,7 @@
 
 #include "canio/canio_bus.hpp"
 #include "canio/sdo_expedited.hpp"
-#include "core/register_catalogue.hpp"
+#include "x20ds1928/object_dictionary.hpp"
 
 namespace ds1928::canio {
 namespace {

@@ -2,12 +2,12 @@
 
 #include <algorithm>
 
-#include "core/register_catalogue.hpp"
+#include "x20ds1928/object_dictionary.hpp"
 
 namespace ds1928::canio {
 namespace {
 
-// Offsets inside each 8-byte object from the catalogue's offsets over the 16 input bytes.
+// Offsets inside each 8-byte object from the object dictionary's offsets over the 16 input bytes.
 constexpr std::size_t kHw = fm254::kPositionHw;
 constexpr std::size_t kLw = fm254::kPositionLw;
 constexpr std::size_t kSeq = fm254::kInputSequence - kObjectBytes;

@@ -1,5 +1,5 @@
 // The cyclic CAN objects of one X20DS1928 in function model 254 (datasheet §11.3.2, offsets from
-// the register catalogue): two 8-byte input objects (module → master) and one output object
+// the object dictionary): two 8-byte input objects (module → master) and one output object
 // (master → module).
 //   input object 1: PositionHW 0–3, PositionLW 4–7
 //   input object 2: InputSequence 0, RxByte1–5 1–5, ErrorInfo 6, PosCycle 7   (datasheet 8–15)

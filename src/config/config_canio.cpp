@@ -10,7 +10,7 @@
 #include <sstream>
 
 #include "canio/bit_budget.hpp"
-#include "core/register_catalogue.hpp"
+#include "x20ds1928/object_dictionary.hpp"
 
 namespace ds1928 {
 

@@ -13,52 +13,26 @@ inline constexpr std::size_t kMaxFlatstreamMtu = 27;
 
 enum class FunctionModel : uint8_t { Standard = 0, BusController = 254 };
 
-// Cyclic inputs (module → master), datasheet registers in brackets.
+// Cyclic inputs (module → master), named by their registers (x20ds1928/object_dictionary.hpp).
 struct ModuleInputs {
-  uint32_t position_hw = 0;    // PositionHW (4180)
-  uint32_t position_lw = 0;    // PositionLW (4188)
-  uint32_t pos_time_us = 0;    // PosTime 32-bit NetTime µs (4172); function model 0 only
-  int8_t pos_cycle = 0;        // PosCycle (4163)
-  int8_t sdc_life_count = 0;   // SDCLifeCount (683); function model 0 only
-  uint8_t error_info = 0;      // ErrorInfo (261)
-  uint8_t input_sequence = 0;  // InputSequence (4672)
-  std::array<uint8_t, kMaxFlatstreamMtu> rx_bytes{};  // RxByte1.. (4673..)
+  uint32_t position_hw = 0;    // PositionHW
+  uint32_t position_lw = 0;    // PositionLW
+  uint32_t pos_time_us = 0;    // PosTime 32-bit NetTime µs; function model 0 only
+  int8_t pos_cycle = 0;        // PosCycle
+  int8_t sdc_life_count = 0;   // SDCLifeCount; function model 0 only
+  uint8_t error_info = 0;      // ErrorInfo
+  uint8_t input_sequence = 0;  // InputSequence
+  std::array<uint8_t, kMaxFlatstreamMtu> rx_bytes{};  // RxByte1..
 };
 
 // Cyclic outputs (master → module).
 struct ModuleOutputs {
-  uint8_t output_sequence = 0;                        // OutputSequence (4704)
-  std::array<uint8_t, kMaxFlatstreamMtu> tx_bytes{};  // TxByte1.. (4705..)
-  uint8_t ack_error_info = 0;                         // AckErrorInfo (325)
+  uint8_t output_sequence = 0;                        // OutputSequence
+  std::array<uint8_t, kMaxFlatstreamMtu> tx_bytes{};  // TxByte1..
+  uint8_t ack_error_info = 0;                         // AckErrorInfo
 };
 
-// Acyclic register numbers of the datasheet (function model 0 numbering; function model 254
-// uses the same identifiers).
-namespace reg {
-inline constexpr uint16_t kSlframeGenId = 513;
-inline constexpr uint16_t kSystemCyclePrescaler = 654;
-inline constexpr uint16_t kErrorEnable = 389;
-inline constexpr uint16_t kEnDatError = 4352;
-inline constexpr uint16_t kEnDatWarning = 4353;
-inline constexpr uint16_t kEnDatAck = 4099;
-inline constexpr uint16_t kSinCosEnable = 1025;
-inline constexpr uint16_t kSinCosRefSource = 1027;
-inline constexpr uint16_t kSinCosVssMin = 1034;
-inline constexpr uint16_t kSinCosVssMax = 1038;
-inline constexpr uint16_t kSinCosQuitTime = 1044;
-inline constexpr uint16_t kEnDatMode = 4097;
-inline constexpr uint16_t kOperatingParam0 = 4400;      // + N, N = 0..15
-inline constexpr uint16_t kOperatingStatus0 = 4352;     // + N, N = 0..3
-inline constexpr uint16_t kParamManuf0 = 4352;          // + N, N = 4..47
-inline constexpr uint16_t kParamManufEnDat22_0 = 4416;  // + N, N = 1..63
-inline constexpr uint16_t kOutputMtu = 4609;
-inline constexpr uint16_t kInputMtu = 4611;
-inline constexpr uint16_t kFlatstreamMode = 4613;
-inline constexpr uint16_t kForward = 4615;
-inline constexpr uint16_t kForwardDelay = 4620;
-}  // namespace reg
-
-// EnDatMode (4097) bits.
+// EnDatMode bits.
 namespace endat_mode {
 inline constexpr uint8_t kEnable = 0x01;        // 1 = EnDat interface enabled
 inline constexpr uint8_t kSigned = 0x02;        // 1 = position format signed
@@ -66,7 +40,7 @@ inline constexpr uint8_t kFastClockOff = 0x04;  // 1 = no 6 MHz clock
 inline constexpr uint8_t kSinCosUnused = 0x08;  // 1 = sin/cos track not used
 }  // namespace endat_mode
 
-// ErrorInfo (261) / AckErrorInfo (325) bits.
+// ErrorInfo / AckErrorInfo bits.
 namespace error_info {
 inline constexpr uint8_t kEncoderSupplyError = 0x01;
 inline constexpr uint8_t kVssCheckError = 0x04;

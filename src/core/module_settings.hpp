@@ -1,6 +1,6 @@
 // Settings a master writes into one X20DS1928 at start (X20DS1928.md §3). Defaults are the
 // datasheet's unless noted; the registers they land in and the order of the writes are in the
-// register catalogue (core/register_catalogue.hpp).
+// object dictionary (x20ds1928/object_dictionary.hpp).
 #pragma once
 
 #include <cstdint>

@@ -21,12 +21,12 @@
 
 namespace ds1928::flatstream {
 
-// CPU → module: OutputSequence (4704) + TxBytes.
+// CPU → module: OutputSequence + TxBytes.
 struct OutputFrame {
   uint8_t output_sequence = 0;
   MtuBytes tx{};
 };
-// Module → CPU: InputSequence (4672) + RxBytes.
+// Module → CPU: InputSequence + RxBytes.
 struct InputFrame {
   uint8_t input_sequence = 0;
   MtuBytes rx{};
@@ -59,11 +59,11 @@ struct MasterConfig {
 };
 
 struct ModuleConfig {
-  uint8_t output_mtu = 7;         // OutputMTU (4609)
-  uint8_t input_mtu = 7;          // InputMTU (4611)
-  uint8_t flatstream_mode = 0;    // FlatstreamMode (4613): bit 0 MultiSegmentMTU, bit 1 large
-  uint8_t forward = 1;            // Forward (4615), 1..7
-  uint16_t forward_delay_us = 0;  // ForwardDelay (4620)
+  uint8_t output_mtu = 7;         // OutputMTU
+  uint8_t input_mtu = 7;          // InputMTU
+  uint8_t flatstream_mode = 0;    // FlatstreamMode: bit 0 MultiSegmentMTU, bit 1 large
+  uint8_t forward = 1;            // Forward, 1..7
+  uint16_t forward_delay_us = 0;  // ForwardDelay
   uint32_t timeout_cycles = 200;  // per-sequence timeout of the input sender
 };
 

@@ -36,7 +36,7 @@ inline constexpr uint8_t kIdle = 0x00;        // "C0": nothing (more) in this MT
 }
 }  // namespace cb
 
-// ---- FlatstreamMode (4613): layout of the send array --------------------------------------
+// ---- FlatstreamMode: layout of the send array ---------------------------------------------
 // The module sends the input direction in the configured layout; every receiver accepts all four.
 enum class Layout : uint8_t {
   Default = 0,            // one segment per sequence, segment < MTU, tail of a message's MTU wasted

@@ -6,9 +6,9 @@
 #include <numeric>
 #include <string>
 
-#include "core/register_catalogue.hpp"
 #include "powerlink/concise_dcf.hpp"
 #include "powerlink/managing_node_cn.hpp"
+#include "x20ds1928/object_dictionary.hpp"
 
 namespace ds1928::powerlink {
 

@@ -23,7 +23,7 @@
 #include "powerlink/frames.hpp"
 #include "powerlink/process_image.hpp"
 #include "powerlink/sdo.hpp"
-#include "powerlink/sdo_mapping.hpp"
+#include "x20ds1928/sdo_mapping.hpp"
 
 namespace ds1928::powerlink {
 

@@ -3,8 +3,8 @@
 #include <algorithm>
 #include <cstring>
 
-#include "core/register_catalogue.hpp"
 #include "powerlink/frames.hpp"
+#include "x20ds1928/object_dictionary.hpp"
 
 namespace ds1928::powerlink {
 

@@ -7,9 +7,9 @@
 #include "canio/object_codec.hpp"
 #include "canio/sdo_expedited.hpp"
 #include "core/clock.hpp"
-#include "core/register_catalogue.hpp"
 #include "core/sdo_abort.hpp"
 #include "sim/sim_error.hpp"
+#include "x20ds1928/object_dictionary.hpp"
 
 namespace ds1928::sim {
 

@@ -22,8 +22,8 @@
 
 #include "canio/can_port.hpp"
 #include "config/config.hpp"
-#include "powerlink/sdo_mapping.hpp"
 #include "sim/ds1928_module.hpp"
+#include "x20ds1928/sdo_mapping.hpp"
 
 namespace ds1928::sim {
 
@@ -122,7 +122,7 @@ class CanioNode {
 
   CanioNodeConfig config_;
   canio::CanPort& port_;
-  powerlink::SdoMapping mapping_;
+  SdoMapping mapping_;
   std::vector<std::unique_ptr<Ds1928Module>> modules_;
   CanioNodeCounters counters_;
   std::mt19937_64 rng_;

@@ -3,62 +3,49 @@
 #include <cmath>
 #include <numbers>
 
-#include "core/register_catalogue.hpp"
 #include "sim/sim_error.hpp"
+#include "x20ds1928/object_dictionary.hpp"
 
 namespace ds1928::sim {
 
 namespace {
 
-// Acyclic registers. power_up() gives them the bus-controller defaults of the register catalogue
-// (EnDatMode = 0: the encoder interface starts disabled, so a master that configures nothing
-// reads nothing).
-struct Registers {
-  uint8_t slframe_gen_id = 0;
-  uint16_t prescaler = 0;
-  uint8_t error_enable = 0;
-  uint8_t sincos_enable = 0;
-  uint8_t sincos_ref_source = 0;
-  uint16_t vss_min_mv = 0;
-  uint16_t vss_max_mv = 0;
-  uint32_t quit_time_us = 0;
-  uint8_t endat_mode = 0;
-  // No datasheet default: function model 0 starts with 7 here; under function model 254 they
-  // power up unset (0) — "bei der Minimalkonfiguration müssen InputMTU und OutputMTU eingestellt
-  // werden" (§11.9.4.1) — and the Flatstream is idle until both are written (3..5).
-  uint8_t output_mtu = 7;
-  uint8_t input_mtu = 7;
-  uint8_t flatstream_mode = 0;
-  uint8_t forward = 0;
-  uint16_t forward_delay_us = 0;
+// The acyclic registers the simulated module keeps: the configuration a master writes at start
+// (every object-dictionary entry with a setting) and the self-clearing commands (EnDatAck, which
+// reads back 0). The EnDatInfo channels are not simulated; identification and status words come
+// from the EnDat bridge.
+[[nodiscard]] constexpr bool kept(const RegisterInfo& r) noexcept {
+  return !r.view && r.count == 1 &&
+         (r.setting != Setting::None || r.direction == RegisterDirection::Command);
+}
+
+// Values by object-dictionary position (only kept() entries are used).
+class Registers {
+ public:
+  // Power-up: the bus-controller defaults of the object dictionary (EnDatMode = 0: the encoder
+  // interface starts disabled, so a master that configures nothing reads nothing). Registers
+  // without a datasheet default (OutputMTU, InputMTU): under function model 254 they power up
+  // unset (0) — "bei der Minimalkonfiguration müssen InputMTU und OutputMTU eingestellt werden"
+  // (§11.9.4.1) — and the Flatstream is idle until both are written; under function model 0 the
+  // bus controller has already configured them with the settings' defaults.
+  static Registers power_up(FunctionModel model) noexcept {
+    Registers g;
+    for (const RegisterInfo& r : kObjectDictionary) {
+      if (!kept(r)) continue;
+      g.values_[od_index(r)] = r.default_value.value_or(
+          model == FunctionModel::BusController ? 0 : setting_value(r.setting, ModuleSettings{}));
+    }
+    return g;
+  }
+  [[nodiscard]] uint32_t operator[](uint16_t reg) const noexcept {
+    const RegisterInfo* r = find_register(reg);
+    return r ? values_[od_index(*r)] : 0;
+  }
+  void set(const RegisterInfo& r, uint32_t v) noexcept { values_[od_index(r)] = v; }
+
+ private:
+  std::array<uint32_t, kObjectDictionary.size()> values_{};
 };
-
-[[nodiscard]] Registers power_up_registers() noexcept {
-  Registers g;
-  auto def = [](uint16_t r) { return find_register(r)->default_value.value_or(0); };
-  g.slframe_gen_id = static_cast<uint8_t>(def(reg::kSlframeGenId));
-  g.prescaler = static_cast<uint16_t>(def(reg::kSystemCyclePrescaler));
-  g.error_enable = static_cast<uint8_t>(def(reg::kErrorEnable));
-  g.sincos_enable = static_cast<uint8_t>(def(reg::kSinCosEnable));
-  g.sincos_ref_source = static_cast<uint8_t>(def(reg::kSinCosRefSource));
-  g.vss_min_mv = static_cast<uint16_t>(def(reg::kSinCosVssMin));
-  g.vss_max_mv = static_cast<uint16_t>(def(reg::kSinCosVssMax));
-  g.quit_time_us = def(reg::kSinCosQuitTime);
-  g.endat_mode = static_cast<uint8_t>(def(reg::kEnDatMode));
-  g.flatstream_mode = static_cast<uint8_t>(def(reg::kFlatstreamMode));
-  g.forward = static_cast<uint8_t>(def(reg::kForward));
-  g.forward_delay_us = static_cast<uint16_t>(def(reg::kForwardDelay));
-  return g;
-}
-
-[[nodiscard]] uint8_t max_mtu(FunctionModel model) noexcept {
-  return model == FunctionModel::Standard ? 15 : 5;
-}
-// Function model 254: Tx/RxByte1..5 (§11.3); an MTU holds a sequence of at least 3 bytes
-// (§11.9.4.1.1). Function model 0 keeps its historic lower bound.
-[[nodiscard]] uint8_t min_mtu(FunctionModel model) noexcept {
-  return model == FunctionModel::Standard ? 2 : 3;
-}
 
 }  // namespace
 
@@ -66,11 +53,15 @@ struct Registers {
   flatstream::ModuleConfig c;
   // An unset MTU (0, function model 254 at power-up) idles the Flatstream (run_flatstream); the
   // channel itself keeps the smallest valid size meanwhile.
-  c.output_mtu = r.output_mtu == 0 ? uint8_t{3} : r.output_mtu;
-  c.input_mtu = r.input_mtu == 0 ? uint8_t{3} : r.input_mtu;
-  c.flatstream_mode = r.flatstream_mode;
-  c.forward = r.forward;
-  c.forward_delay_us = r.forward_delay_us;
+  const auto mtu = [&](uint16_t reg) {
+    const auto v = static_cast<uint8_t>(r[reg]);
+    return v == 0 ? uint8_t{3} : v;
+  };
+  c.output_mtu = mtu(reg::kOutputMtu);
+  c.input_mtu = mtu(reg::kInputMtu);
+  c.flatstream_mode = static_cast<uint8_t>(r[reg::kFlatstreamMode]);
+  c.forward = static_cast<uint8_t>(r[reg::kForward]);
+  c.forward_delay_us = static_cast<uint16_t>(r[reg::kForwardDelay]);
   return c;
 }
 
@@ -80,7 +71,7 @@ struct Ds1928Module::State {
                              ? 1.0
                              : static_cast<double>(encoder.steps_per_revolution) /
                                    encoder.signal_periods),
-        channel(channel_config(power_up_registers())),
+        channel(channel_config(Registers::power_up(FunctionModel::Standard))),
         bridge(EnDatEncoder(std::move(encoder))) {}
   double steps_per_period;  // the encoder's measuring steps per sine period
   FunctionModel model;
@@ -121,8 +112,7 @@ FunctionModel Ds1928Module::function_model() const noexcept {
 
 void Ds1928Module::power_up() noexcept {
   State& s = *state_;
-  s.regs = power_up_registers();
-  if (s.model == FunctionModel::BusController) s.regs.output_mtu = s.regs.input_mtu = 0;
+  s.regs = Registers::power_up(s.model);
   s.in = ModuleInputs{};
   s.out = ModuleOutputs{};
   s.latched_errors = s.sim.inject_error_info;
@@ -133,7 +123,8 @@ void Ds1928Module::power_up() noexcept {
   s.channel.reset();
   s.outputs_pending = false;
   s.command.reset();
-  if ((s.regs.endat_mode & endat_mode::kEnable) == 0 && s.model == FunctionModel::BusController)
+  if ((s.regs[reg::kEnDatMode] & endat_mode::kEnable) == 0 &&
+      s.model == FunctionModel::BusController)
     s.bridge.power_up_unread();  // EnDat disabled: the encoder is not read until a Rescan
   else
     (void)s.bridge.power_up(s.now_ns);  // a failed identification shows as EnDatParSetError
@@ -199,10 +190,11 @@ void Ds1928Module::tick(int64_t monotonic_ns, uint64_t net_time_us) noexcept {
     ++s.ticks;
     if (s.model == FunctionModel::Standard)
       s.in.sdc_life_count = static_cast<int8_t>(s.in.sdc_life_count + 1);
-    const uint16_t prescaler = s.regs.prescaler == 0 ? 1 : s.regs.prescaler;
+    const uint32_t prescaler =
+        s.regs[reg::kSystemCyclePrescaler] == 0 ? 1 : s.regs[reg::kSystemCyclePrescaler];
     if (s.ticks % prescaler != 0) continue;
     // One EnDat cycle: acquire a position when the interface is enabled.
-    if ((s.regs.endat_mode & endat_mode::kEnable) == 0) continue;
+    if ((s.regs[reg::kEnDatMode] & endat_mode::kEnable) == 0) continue;
     const double t_s = static_cast<double>(at_ns - s.origin_ns) * 1e-9;
     const double periods = profile_position(s.sim, t_s);
     const uint64_t raw = to_fixed_point(periods);
@@ -227,7 +219,7 @@ void Ds1928Module::tick(int64_t monotonic_ns, uint64_t net_time_us) noexcept {
 void Ds1928Module::update_error_info() noexcept {
   State& s = *state_;
   const uint8_t present = static_cast<uint8_t>(s.latched_errors | s.bridge.error_info());
-  s.in.error_info = static_cast<uint8_t>(present & s.regs.error_enable & ~0x02);
+  s.in.error_info = static_cast<uint8_t>(present & s.regs[reg::kErrorEnable] & ~0x02);
 }
 
 void Ds1928Module::run_flatstream(int64_t now_ns) noexcept {
@@ -242,7 +234,7 @@ void Ds1928Module::run_flatstream(int64_t now_ns) noexcept {
   if (s.command && s.bridge.submit(s.command->payload(), now_ns)) s.command.reset();
   if (!s.outputs_pending) return;
   s.outputs_pending = false;
-  if (s.regs.output_mtu == 0 || s.regs.input_mtu == 0) return;  // MTUs not set yet
+  if (s.regs[reg::kOutputMtu] == 0 || s.regs[reg::kInputMtu] == 0) return;  // MTUs not set yet
   const auto frame =
       s.channel.step(flatstream::output_frame(s.out), static_cast<uint64_t>(now_ns / 1000));
   flatstream::apply(frame, s.in);
@@ -266,115 +258,35 @@ ModuleInputs Ds1928Module::inputs() const noexcept {
   return state_->in;
 }
 
-std::error_code Ds1928Module::write_register(uint16_t r, uint8_t size, uint32_t v) noexcept {
-  Registers& g = state_->regs;
-  auto want = [&](uint8_t expected) { return size == expected; };
-  auto in_range = [&](uint32_t lo, uint32_t hi) { return v >= lo && v <= hi; };
-  switch (r) {
-    case reg::kSlframeGenId:
-      if (!want(1)) return make_error_code(SimErrc::wrong_size);
-      g.slframe_gen_id = static_cast<uint8_t>(v);
-      return {};
-    case reg::kSystemCyclePrescaler:
-      if (!want(2)) return make_error_code(SimErrc::wrong_size);
-      if (!in_range(2, 0xFFFF)) return make_error_code(SimErrc::out_of_range);
-      g.prescaler = static_cast<uint16_t>(v);
-      return {};
-    case reg::kErrorEnable:
-      if (!want(1)) return make_error_code(SimErrc::wrong_size);
-      g.error_enable = static_cast<uint8_t>(v);
-      return {};
-    case reg::kSinCosEnable:
-    case reg::kSinCosRefSource:
-      if (!want(1)) return make_error_code(SimErrc::wrong_size);
-      if (v != 1) return make_error_code(SimErrc::out_of_range);  // must always be 1
-      return {};
-    case reg::kSinCosVssMin:
-    case reg::kSinCosVssMax:
-      if (!want(2)) return make_error_code(SimErrc::wrong_size);
-      if (!in_range(0, 1500)) return make_error_code(SimErrc::out_of_range);
-      (r == reg::kSinCosVssMin ? g.vss_min_mv : g.vss_max_mv) = static_cast<uint16_t>(v);
-      return {};
-    case reg::kSinCosQuitTime:
-      if (!want(4)) return make_error_code(SimErrc::wrong_size);
-      if (!in_range(0, 20'000'000)) return make_error_code(SimErrc::out_of_range);
-      g.quit_time_us = v;
-      return {};
-    case reg::kEnDatMode:
-      if (!want(1)) return make_error_code(SimErrc::wrong_size);
-      if (v > 0x0F) return make_error_code(SimErrc::out_of_range);
-      g.endat_mode = static_cast<uint8_t>(v);
-      return {};
-    case reg::kEnDatAck:
-      if (!want(1)) return make_error_code(SimErrc::wrong_size);
-      if (v > 0x03) return make_error_code(SimErrc::out_of_range);
-      state_->bridge.endat_ack(static_cast<uint8_t>(v), state_->now_ns);
-      return {};
-    case reg::kOutputMtu:
-    case reg::kInputMtu:
-      if (!want(1)) return make_error_code(SimErrc::wrong_size);
-      if (!in_range(min_mtu(state_->model), max_mtu(state_->model)))
-        return make_error_code(SimErrc::out_of_range);
-      (r == reg::kOutputMtu ? g.output_mtu : g.input_mtu) = static_cast<uint8_t>(v);
-      state_->channel.configure(channel_config(g));
-      return {};
-    case reg::kFlatstreamMode:
-      if (!want(1)) return make_error_code(SimErrc::wrong_size);
-      if (v > 3) return make_error_code(SimErrc::out_of_range);
-      g.flatstream_mode = static_cast<uint8_t>(v);
-      state_->channel.configure(channel_config(g));
-      return {};
-    case reg::kForward:
-      if (!want(1)) return make_error_code(SimErrc::wrong_size);
-      if (!in_range(1, 7)) return make_error_code(SimErrc::out_of_range);
-      g.forward = static_cast<uint8_t>(v);
-      state_->channel.configure(channel_config(g));
-      return {};
-    case reg::kForwardDelay:
-      if (!want(2)) return make_error_code(SimErrc::wrong_size);
-      g.forward_delay_us = static_cast<uint16_t>(v);
-      state_->channel.configure(channel_config(g));
-      return {};
-    default:
-      break;
+std::error_code Ds1928Module::write_register(uint16_t reg, uint8_t size, uint32_t v) noexcept {
+  State& s = *state_;
+  const RegisterInfo* r = find_register(reg);
+  if (!r || !kept(*r) || !r->in_model(s.model)) {
+    uint32_t ignored = 0;
+    if (!read_register(reg, size, ignored)) return make_error_code(SimErrc::read_only);
+    return make_error_code(SimErrc::unknown_register);
   }
-  uint32_t ignored = 0;
-  if (!read_register(r, size, ignored)) return make_error_code(SimErrc::read_only);
-  return make_error_code(SimErrc::unknown_register);
+  if (size != r->size()) return make_error_code(SimErrc::wrong_size);
+  if (!r->accepts(s.model).contains(v)) return make_error_code(SimErrc::out_of_range);
+  if (r->direction == RegisterDirection::Command) {
+    s.bridge.endat_ack(static_cast<uint8_t>(v), s.now_ns);  // EnDatAck: self-clearing
+    return {};
+  }
+  s.regs.set(*r, v);
+  if (is_flatstream_setting(r->setting)) s.channel.configure(channel_config(s.regs));
+  return {};
 }
 
-std::error_code Ds1928Module::read_register(uint16_t r, uint8_t size, uint32_t& v) const noexcept {
-  const Registers& g = state_->regs;
-  struct Entry {
-    uint16_t reg;
-    uint8_t size;
-    uint32_t value;
-  };
-  const Entry table[] = {
-      {reg::kSlframeGenId, 1, g.slframe_gen_id},
-      {reg::kSystemCyclePrescaler, 2, g.prescaler},
-      {reg::kErrorEnable, 1, g.error_enable},
-      {reg::kSinCosEnable, 1, g.sincos_enable},
-      {reg::kSinCosRefSource, 1, g.sincos_ref_source},
-      {reg::kSinCosVssMin, 2, g.vss_min_mv},
-      {reg::kSinCosVssMax, 2, g.vss_max_mv},
-      {reg::kSinCosQuitTime, 4, g.quit_time_us},
-      {reg::kEnDatMode, 1, g.endat_mode},
-      {reg::kEnDatAck, 1, 0},
-      {reg::kOutputMtu, 1, g.output_mtu},
-      {reg::kInputMtu, 1, g.input_mtu},
-      {reg::kFlatstreamMode, 1, g.flatstream_mode},
-      {reg::kForward, 1, g.forward},
-      {reg::kForwardDelay, 2, g.forward_delay_us},
-  };
-  for (const Entry& e : table) {
-    if (e.reg != r) continue;
-    if (e.size != size) return make_error_code(SimErrc::wrong_size);
-    v = e.value;
+std::error_code Ds1928Module::read_register(uint16_t reg, uint8_t size,
+                                            uint32_t& v) const noexcept {
+  const State& s = *state_;
+  if (const RegisterInfo* r = find_register(reg); r && kept(*r) && r->in_model(s.model)) {
+    if (size != r->size()) return make_error_code(SimErrc::wrong_size);
+    v = r->direction == RegisterDirection::Command ? 0 : s.regs[reg];
     return {};
   }
   // Identification, EnDatError/EnDatWarning: the encoder's words (UINT).
-  if (auto word = state_->bridge.read_register(r)) {
+  if (auto word = s.bridge.read_register(reg)) {
     if (size != 2) return make_error_code(SimErrc::wrong_size);
     v = *word;
     return {};

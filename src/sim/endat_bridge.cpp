@@ -4,6 +4,7 @@
 
 #include "core/module_image.hpp"
 #include "endat/wire.hpp"
+#include "x20ds1928/object_dictionary.hpp"
 
 namespace ds1928::sim {
 
@@ -422,19 +423,31 @@ PositionReading EnDatBridge::read_position(int64_t now_ns) {
 }
 
 std::optional<uint16_t> EnDatBridge::read_register(uint16_t reg) const noexcept {
-  if (reg >= reg::kOperatingStatus0 && reg < reg::kOperatingStatus0 + 4) {
-    return ident_.operating_status[reg - reg::kOperatingStatus0];
+  // The identification families of the object dictionary, each filled from its memory area.
+  static_assert(od_entry("OperatingStatus_02..03").last() - reg::kOperatingStatus0 <
+                std::tuple_size_v<decltype(ident_.operating_status)>);
+  static_assert(od_entry("ParamManuf_04..47").last() - reg::kParamManuf0 <
+                std::tuple_size_v<decltype(ident_.manufacturer)>);
+  static_assert(od_entry("OperatingParam_00..15").last() - reg::kOperatingParam0 <
+                std::tuple_size_v<decltype(ident_.operating_param)>);
+  static_assert(od_entry("ParamManufEnDat22_01..63").last() - reg::kParamManufEnDat22_0 <
+                std::tuple_size_v<decltype(ident_.manufacturer_endat22)>);
+  const RegisterInfo* r = find_register(reg);
+  if (!r) return std::nullopt;
+  switch (r->number) {
+    case reg::kEnDatError:
+    case reg::kEnDatWarning:
+    case reg::kOperatingStatus2:
+      return ident_.operating_status[reg - reg::kOperatingStatus0];
+    case reg::kParamManuf4:
+      return ident_.manufacturer[reg - reg::kParamManuf0];
+    case reg::kOperatingParam0:
+      return ident_.operating_param[reg - reg::kOperatingParam0];
+    case reg::kParamManufEnDat22_1:
+      return ident_.manufacturer_endat22[reg - reg::kParamManufEnDat22_0];
+    default:
+      return std::nullopt;
   }
-  if (reg >= reg::kParamManuf0 + 4 && reg < reg::kParamManuf0 + 48) {
-    return ident_.manufacturer[reg - reg::kParamManuf0];
-  }
-  if (reg >= reg::kOperatingParam0 && reg < reg::kOperatingParam0 + 16) {
-    return ident_.operating_param[reg - reg::kOperatingParam0];
-  }
-  if (reg >= reg::kParamManufEnDat22_0 + 1 && reg < reg::kParamManufEnDat22_0 + 64) {
-    return ident_.manufacturer_endat22[reg - reg::kParamManufEnDat22_0];
-  }
-  return std::nullopt;
 }
 
 }  // namespace ds1928::sim

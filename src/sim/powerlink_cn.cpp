@@ -107,7 +107,7 @@ class PowerlinkCn::Objects final : public pl::SdoObjectAccess {
  private:
   uint32_t locate(uint16_t index, uint8_t subindex, Ds1928Module*& module,
                   uint16_t& reg) const noexcept {
-    const auto address = cn_.mapping_.register_for(pl::SdoObject{index, subindex});
+    const auto address = cn_.mapping_.register_for(SdoObject{index, subindex});
     if (!address) return sdo_abort::kNoObject;
     for (const HostedModule& m : cn_.modules_) {
       if (m.slot == address->slot) {

@@ -34,9 +34,9 @@
 #include "powerlink/link.hpp"
 #include "powerlink/process_image.hpp"
 #include "powerlink/sdo.hpp"
-#include "powerlink/sdo_mapping.hpp"
 #include "sim/cn_object_dictionary.hpp"
 #include "sim/ds1928_module.hpp"
+#include "x20ds1928/sdo_mapping.hpp"
 
 namespace ds1928::sim {
 
@@ -81,7 +81,7 @@ struct PowerlinkCnConfig {
   uint32_t serial_no = 1;
   uint32_t response_time_ns = 10'000;  // reported PRes response time
   std::vector<PowerlinkCnModuleConfig> modules{PowerlinkCnModuleConfig{}};
-  powerlink::SdoMapping::Overrides sdo_overrides;
+  SdoMapping::Overrides sdo_overrides;
   int64_t nettime_offset_us = 0;
   // No SoC for this many learned cycle periods (at least soc_timeout_min_ns) = loss of SoC.
   uint32_t soc_loss_periods = 5;
@@ -210,7 +210,7 @@ class PowerlinkCn {
   powerlink::NmtState state_ = powerlink::NmtState::kOff;
   std::vector<HostedModule> modules_;
   powerlink::NodeImageLayout layout_;
-  powerlink::SdoMapping mapping_;
+  SdoMapping mapping_;
   CnObjectDictionary comm_;  // communication objects an MN configures
   std::unique_ptr<Objects> objects_;
   std::unique_ptr<powerlink::SdoServer> sdo_;

@@ -8,6 +8,7 @@
 
 #include "canio/can_netlink.hpp"
 #include "rig.hpp"
+#include "x20ds1928/object_dictionary.hpp"
 
 using namespace ds1928;
 using namespace ds1928::test;

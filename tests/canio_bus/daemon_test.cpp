@@ -16,6 +16,7 @@
 #include "rig.hpp"
 #include "support/unix_socket.hpp"
 #include "support/wait.hpp"
+#include "x20ds1928/object_dictionary.hpp"
 
 using namespace ds1928;
 using json = nlohmann::json;

@@ -15,6 +15,7 @@
 #include "cycle_work.hpp"
 #include "endat/command.hpp"
 #include "support/alloc_counter.hpp"
+#include "x20ds1928/object_dictionary.hpp"
 
 namespace ds1928::test {
 

@@ -10,6 +10,7 @@
 #include "endat/command.hpp"
 #include "endat/names.hpp"
 #include "sim/endat_bridge.hpp"
+#include "x20ds1928/object_dictionary.hpp"
 
 using namespace ds1928;
 using namespace ds1928::sim;

@@ -9,7 +9,7 @@
 #include "powerlink/frames.hpp"
 #include "powerlink/process_image.hpp"
 #include "powerlink/sdo.hpp"
-#include "powerlink/sdo_mapping.hpp"
+#include "x20ds1928/sdo_mapping.hpp"
 
 namespace pl = ds1928::powerlink;
 namespace sim = ds1928::sim;
@@ -251,7 +251,7 @@ TEST_CASE("CN SDO server maps objects onto the module registers") {
       client.tick(h.now);
     }
   };
-  const pl::SdoMapping mapping;
+  const ds1928::SdoMapping mapping;
   const auto mode_obj = mapping.object_for(1, ds1928::reg::kEnDatMode);
   REQUIRE(mode_obj.has_value());
   const uint8_t mode_value = ds1928::endat_mode::kEnable | ds1928::endat_mode::kSigned;

@@ -11,6 +11,7 @@
 #include "powerlink/link.hpp"
 #include "powerlink/powerlink_bus.hpp"
 #include "sim/powerlink_cn.hpp"
+#include "x20ds1928/object_dictionary.hpp"
 
 namespace pl = ds1928::powerlink;
 namespace sim = ds1928::sim;

@@ -7,6 +7,7 @@
 #include "mn_rig.hpp"
 #include "powerlink/powerlink_bus.hpp"
 #include "test_cn.hpp"
+#include "x20ds1928/object_dictionary.hpp"
 
 using namespace ds1928;
 using namespace ds1928::powerlink;

@@ -4,6 +4,7 @@
 #include "sim/ds1928_module.hpp"
 #include "sim/sim_error.hpp"
 #include "sim/simulated_bus.hpp"
+#include "x20ds1928/object_dictionary.hpp"
 
 using namespace ds1928;
 using sim::Ds1928Module;
