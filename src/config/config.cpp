@@ -332,7 +332,8 @@ DaemonConfig parse_document(Diagnostics& diag, const YAML::Node& doc, const std:
   root.finish();
 
   check_cross_fields(diag, c, axis_sites, locate(doc, {"cycle", "spin_us"}));
-  if (bus.check) {
+  // Without its required section (reported above) a bus' checks have nothing to look at.
+  if (bus.check && (have_section || bus.needs.empty())) {
     bus.check(
         BusDocument{diag, c, doc, axis_sites, have_section, root.value_at(bus.name), pl_sites});
   }
