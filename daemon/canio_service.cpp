@@ -130,7 +130,8 @@ class CanioService final : public BusService {
 }  // namespace
 
 std::unique_ptr<BusService> make_canio_service(const DaemonConfig& config, std::string& why_not) {
-  const canio::CanioBusOptions options = canio::make_canio_options(config);
+  const canio::CanioBusOptions options =
+      canio::make_canio_options(config.canio, config.axes, config.cycle.period_us);
   std::unique_ptr<canio::CanPort> cycle_port;
   std::unique_ptr<canio::CanPort> sdo_port;
   std::shared_ptr<canio::VirtualCanBus> vbus;

@@ -8,7 +8,7 @@ namespace {
 
 class SimulatedService final : public BusService {
  public:
-  explicit SimulatedService(const DaemonConfig& config) : bus_(config) {}
+  explicit SimulatedService(const DaemonConfig& config) : bus_(config.axes, config.simulated) {}
   [[nodiscard]] BusDriver& driver() noexcept override { return bus_; }
   [[nodiscard]] std::string start_detail() const override { return bus_.load_error(); }
 

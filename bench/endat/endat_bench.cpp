@@ -72,7 +72,7 @@ class Bench {
     axis.function_model = s.mtu <= 5 ? FunctionModel::BusController : FunctionModel::Standard;
     config_.axes.push_back(axis);
     config_.shm.name = "/ds1928-endat-bench-" + std::to_string(getpid());
-    bus_ = std::make_unique<sim::SimulatedBus>(config_);
+    bus_ = std::make_unique<sim::SimulatedBus>(config_.axes, config_.simulated);
     if (auto ec = bus_->start()) throw std::runtime_error(ec.message());
     if (auto ec = publisher_.open(config_.shm, 1, uint64_t{period_us} * 1000))
       throw std::runtime_error(ec.message());

@@ -89,17 +89,18 @@ std::string check_interface(CanPort& port, uint32_t expected_bitrate) {
   return verdict.error ? verdict.message : std::string();
 }
 
-CanioBusOptions make_canio_options(const DaemonConfig& config) {
+CanioBusOptions make_canio_options(const CanioBusConfig& bus, std::span<const AxisConfig> axes,
+                                   uint32_t period_us) {
   CanioBusOptions o;
-  o.bus = config.canio;
-  o.period_us = config.cycle.period_us;
-  o.response_window_us = canio_timing(config.canio, config.axes.size(), o.period_us).window_us;
-  for (std::size_t i = 0; i < config.axes.size(); ++i) {
-    const AxisConfig& a = config.axes[i];
+  o.bus = bus;
+  o.period_us = period_us;
+  o.response_window_us = canio_timing(bus, axes.size(), period_us).window_us;
+  for (std::size_t i = 0; i < axes.size(); ++i) {
+    const AxisConfig& a = axes[i];
     CanioAxisPlan p;
     p.node = a.node;
     p.slot = a.slot;
-    p.ids = canio_axis_ids(config.canio, a, i);
+    p.ids = canio_axis_ids(bus, a, i);
     p.module = a.module;
     p.name = a.name;
     o.axes.push_back(p);

@@ -30,11 +30,11 @@
 #include <vector>
 
 #include "canio/can_port.hpp"
+#include "canio/canio_options.hpp"
 #include "canio/object_codec.hpp"
 #include "canio/sdo_client.hpp"
 #include "canio/sdo_expedited.hpp"
 #include "canio/sync_pairing.hpp"
-#include "config/config.hpp"
 #include "core/bus.hpp"
 #include "x20ds1928/object_dictionary.hpp"
 #include "core/spsc_queue.hpp"
@@ -129,8 +129,11 @@ struct CanioBusOptions {
 // words for SocketCAN and the virtual bus: empty when usable, else the message naming the fix.
 [[nodiscard]] std::string check_interface(CanPort& port, uint32_t expected_bitrate);
 
-// The plan of every configured axis (identifiers resolved).
-[[nodiscard]] CanioBusOptions make_canio_options(const DaemonConfig& config);
+// The driver's plan of every configured axis (identifiers resolved, response window derived)
+// from the bus' options, the axes (in exchange() order) and the cycle period.
+[[nodiscard]] CanioBusOptions make_canio_options(const CanioBusConfig& bus,
+                                                 std::span<const AxisConfig> axes,
+                                                 uint32_t period_us);
 
 class CanioBus final : public BusDriver {
  public:

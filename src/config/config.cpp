@@ -24,6 +24,7 @@
 #include <sstream>
 #include <utility>
 
+#include "config/config_bus_kinds.hpp"
 #include "config/config_canio.hpp"
 #include "config/config_loader.hpp"
 #include "config/config_metrics.hpp"
@@ -107,17 +108,25 @@ void parse_module(Section s, ModuleSettings& m, FunctionModel fm) {
   s.finish();
 }
 
-void parse_axis(Section s, AxisConfig& a, BusKind bus, size_t index) {
+// Buses whose modules may be placed in the process image by offset ("powerlink").
+std::string offset_buses() {
+  std::string out;
+  for (const BusKindRules& k : bus_kinds())
+    if (k.module_offsets) out += (out.empty() ? "" : " or ") + std::string(k.name);
+  return out;
+}
+
+void parse_axis(Section s, AxisConfig& a, const BusKindRules& bus, size_t index) {
   a.name = "axis" + std::to_string(index);
   a.slot = static_cast<uint8_t>(std::min<size_t>(index + 1, 253));
-  a.function_model = bus == BusKind::Canio ? FunctionModel::BusController : FunctionModel::Standard;
+  a.function_model = bus.function_model.value_or(FunctionModel::Standard);
   if (s.text("name", a.name, 31)) {
     if (a.name.empty() || !std::all_of(a.name.begin(), a.name.end(), valid_name_char)) {
       s.error("name", "'" + a.name +
                           "' is not a valid axis name: 1..31 characters of letters, digits, _ - .");
     }
   }
-  s.integer("node", a.node, 1, bus == BusKind::Powerlink ? 239 : kU8);
+  s.integer("node", a.node, 1, bus.max_node);
   s.integer("slot", a.slot, 1, 253);
   int64_t fm = 0;
   if (s.integer("function_model", fm, 0, kU8)) {
@@ -125,14 +134,12 @@ void parse_axis(Section s, AxisConfig& a, BusKind bus, size_t index) {
       s.error(
           "function_model",
           std::to_string(fm) + " is not allowed; expected 0 (standard) or 254 (bus controller)");
-    } else if (bus == BusKind::Powerlink && fm != 0) {
-      s.error("function_model",
-              "254 is not allowed on bus powerlink; modules behind a POWERLINK "
-              "bus controller run function model 0");
-    } else if (bus == BusKind::Canio && fm != 254) {
-      s.error("function_model",
-              "0 is not allowed on bus canio; modules behind a CAN-I/O bus "
-              "controller run function model 254");
+    } else if (bus.function_model && fm != static_cast<int64_t>(*bus.function_model)) {
+      s.error("function_model", std::to_string(fm) + " is not allowed on bus " +
+                                    std::string(bus.name) + "; modules behind a " +
+                                    std::string(bus.controller) +
+                                    " bus controller run function model " +
+                                    std::to_string(static_cast<int>(*bus.function_model)));
     } else {
       a.function_model = static_cast<FunctionModel>(fm);
     }
@@ -142,11 +149,11 @@ void parse_axis(Section s, AxisConfig& a, BusKind bus, size_t index) {
   s.integer("flatstream_timeout_cycles", a.flatstream_timeout_cycles, 1, 1000000);
   for (auto [key, field] :
        {std::pair{"pres_offset", &a.pres_offset}, std::pair{"preq_offset", &a.preq_offset}}) {
-    if (bus != BusKind::Powerlink && s.has(key)) {
+    if (!bus.module_offsets && s.has(key)) {
       std::optional<uint16_t> ignored;
       s.optional_integer(key, ignored, 0, 1489);
-      s.error(key, std::string("is only meaningful on bus powerlink (the bus here is ") +
-                       std::string(to_string(bus)) + ")");
+      s.error(key, "is only meaningful on bus " + offset_buses() + " (the bus here is " +
+                       std::string(bus.name) + ")");
       continue;
     }
     s.optional_integer(key, *field, 0, 1489);
@@ -218,7 +225,7 @@ void parse_capture(Section s, CaptureConfig& c) {
 // ---------------------------------------------------------------------------------------------
 
 void check_cross_fields(Diagnostics& diag, const DaemonConfig& c, const std::vector<AxisSite>& axes,
-                        const PowerlinkSites& pl_sites, Loc spin_at) {
+                        Loc spin_at) {
   std::map<std::string, size_t> names;
   std::map<std::pair<uint8_t, uint8_t>, size_t> places;
   for (size_t i = 0; i < axes.size() && i < c.axes.size(); ++i) {
@@ -235,13 +242,6 @@ void check_cross_fields(Diagnostics& diag, const DaemonConfig& c, const std::vec
                      " is already used by axes[" + std::to_string(it->second) + "] (" +
                      where(axes[it->second].at) + ")");
     }
-    if (c.bus == BusKind::Powerlink && pl_sites.present && pl_sites.nodes.count(a.node) == 0) {
-      std::vector<std::string> listed;
-      for (const auto& [id, at] : pl_sites.nodes) listed.push_back(std::to_string(id));
-      diag.error(site.node_at, site.path + ".node",
-                 "node " + std::to_string(a.node) + " is not listed in powerlink.nodes (listed: " +
-                     (listed.empty() ? std::string("none") : join(listed)) + ")");
-    }
   }
   if (c.cycle.spin_us >= c.cycle.period_us) {
     diag.error(spin_at, "cycle.spin_us",
@@ -249,7 +249,6 @@ void check_cross_fields(Diagnostics& diag, const DaemonConfig& c, const std::vec
                    ") must be less than cycle.period_us (" + std::to_string(c.cycle.period_us) +
                    ")");
   }
-  if (c.bus == BusKind::Powerlink) check_powerlink(diag, c, axes, pl_sites);
 }
 
 DaemonConfig parse_document(Diagnostics& diag, const YAML::Node& doc, const std::string& name,
@@ -258,10 +257,10 @@ DaemonConfig parse_document(Diagnostics& diag, const YAML::Node& doc, const std:
   c.source_file = name;
   Section root(diag, doc, "", Loc{1, 1});
 
-  root.choice("bus", c.bus,
-              {{"simulated", BusKind::Simulated},
-               {"powerlink", BusKind::Powerlink},
-               {"canio", BusKind::Canio}});
+  std::vector<std::pair<std::string_view, BusKind>> bus_words;
+  for (const BusKindRules& k : bus_kinds()) bus_words.emplace_back(k.name, k.kind);
+  root.choice_of("bus", c.bus, bus_words);
+  const BusKindRules& bus = bus_kind_rules(c.bus);
   root.choice("log_level", c.log_level,
               {{"trace", std::string("trace")},
                {"debug", std::string("debug")},
@@ -270,27 +269,16 @@ DaemonConfig parse_document(Diagnostics& diag, const YAML::Node& doc, const std:
                {"error", std::string("error")},
                {"critical", std::string("critical")},
                {"off", std::string("off")}});
-  // CAN-I/O: SYNC + 3 objects of one module take 920 µs of a 500 kbit/s wire (worst case): the
-  // 1 ms default period cannot hold them within canio.max_bus_load; 2 ms can (docs/canio.md).
-  if (c.bus == BusKind::Canio) c.cycle.period_us = 2000;
+  c.cycle.period_us = bus.default_period_us;
   parse_cycle(root.section("cycle"), c.cycle);
 
   PowerlinkSites pl_sites;
-  const bool have_powerlink = root.has("powerlink");
-  pl_sites.present = have_powerlink;
-  const bool have_canio = root.has("canio");
   parse_powerlink(root.section("powerlink"), c.powerlink, pl_sites, base_dir);
   parse_canio(root.section("canio"), c.canio);
-  if (c.bus == BusKind::Powerlink && !have_powerlink) {
-    root.error("bus",
-               "bus is 'powerlink' but the file has no powerlink section (interface, nodes)");
-  } else if (c.bus == BusKind::Powerlink && c.powerlink.interface.empty() &&
-             !pl_sites.interface_refused) {
-    diag.error(root.value_at("powerlink"), "powerlink.interface",
-               "missing: bus powerlink needs the network interface of the POWERLINK segment");
-  }
-  if (c.bus == BusKind::Canio && !have_canio) {
-    root.error("bus", "bus is 'canio' but the file has no canio section (interface, bitrate)");
+  const bool have_section = root.has(bus.name);
+  if (!bus.needs.empty() && !have_section) {
+    root.error("bus", "bus is '" + std::string(bus.name) + "' but the file has no " +
+                          std::string(bus.name) + " section (" + std::string(bus.needs) + ")");
   }
 
   std::vector<AxisSite> axis_sites;
@@ -298,7 +286,7 @@ DaemonConfig parse_document(Diagnostics& diag, const YAML::Node& doc, const std:
   for (size_t i = 0; i < axis_items.size(); ++i) {
     const auto& item = axis_items[i];
     AxisConfig axis;
-    parse_axis(Section(diag, item.node, item.path, item.at), axis, c.bus, i);
+    parse_axis(Section(diag, item.node, item.path, item.at), axis, bus, i);
     const Loc name_at = item.node.IsMap() ? locate(item.node, {"name"}) : item.at;
     const Loc node_at = item.node.IsMap() ? locate(item.node, {"node"}) : item.at;
     const Loc pres_offset_at = item.node.IsMap() ? locate(item.node, {"pres_offset"}) : item.at;
@@ -307,15 +295,12 @@ DaemonConfig parse_document(Diagnostics& diag, const YAML::Node& doc, const std:
     c.axes.push_back(std::move(axis));
   }
   if (c.axes.empty()) {
-    if (c.bus == BusKind::Powerlink) {
-      // Valid: the MN then runs CNs without X20DS1928 only (generic CNs, raw process data).
-    } else if (c.bus == BusKind::Simulated) {
+    if (bus.empty_axes == EmptyAxes::OneDefault) {
       AxisConfig axis;
       axis.name = "axis0";
       c.axes.push_back(axis);
-    } else {
-      root.error("axes", std::string("at least one axis is needed on bus ") +
-                             std::string(to_string(c.bus)));
+    } else if (bus.empty_axes == EmptyAxes::Refused) {
+      root.error("axes", "at least one axis is needed on bus " + std::string(bus.name));
     }
   } else if (c.axes.size() > kMaxAxes) {
     root.error("axes", std::to_string(c.axes.size()) + " axes configured; at most " +
@@ -346,8 +331,12 @@ DaemonConfig parse_document(Diagnostics& diag, const YAML::Node& doc, const std:
   parse_capture(root.section("capture"), c.capture);
   root.finish();
 
-  check_cross_fields(diag, c, axis_sites, pl_sites, locate(doc, {"cycle", "spin_us"}));
-  if (c.bus == BusKind::Canio) check_canio(diag, c, doc);
+  check_cross_fields(diag, c, axis_sites, locate(doc, {"cycle", "spin_us"}));
+  // Without its required section (reported above) a bus' checks have nothing to look at.
+  if (bus.check && (have_section || bus.needs.empty())) {
+    bus.check(
+        BusDocument{diag, c, doc, axis_sites, have_section, root.value_at(bus.name), pl_sites});
+  }
   return c;
 }
 
@@ -481,18 +470,6 @@ ConfigResult load_config(const std::string& path) {
 
 ConfigResult load_config_from_string(std::string_view text, const std::string& name) {
   return load_text(text, name, std::filesystem::path(name).parent_path());
-}
-
-std::string_view to_string(BusKind bus) noexcept {
-  switch (bus) {
-    case BusKind::Simulated:
-      return "simulated";
-    case BusKind::Powerlink:
-      return "powerlink";
-    case BusKind::Canio:
-      return "canio";
-  }
-  return "?";
 }
 
 std::string_view to_string(MotionProfile profile) noexcept {

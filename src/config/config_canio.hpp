@@ -4,6 +4,7 @@
 #include <ostream>
 
 #include "config/config.hpp"
+#include "config/config_bus_kinds.hpp"
 #include "config/config_reader.hpp"
 
 namespace ds1928::config_detail {
@@ -13,7 +14,8 @@ void parse_canio(Section s, CanioBusConfig& c);
 
 // Checks that need the whole document (axes, cycle) when the bus is canio: node numbers,
 // MTUs, identifiers (range, collisions, predefined-set limits), timeouts, bus load.
-void check_canio(Diagnostics& diag, const DaemonConfig& c, const YAML::Node& doc);
+// (bus canio's row of the bus kinds)
+void check_canio(const BusDocument& d);
 
 // The section as dump_config() prints it.
 void dump_canio(std::ostream& o, const CanioBusConfig& c);

@@ -407,8 +407,26 @@ static void check_cycle_budget(Diagnostics& diag, const DaemonConfig& c,
   diag.error(sites.async_timeout_at, "powerlink", text);
 }
 
-void check_powerlink(Diagnostics& diag, const DaemonConfig& c, const std::vector<AxisSite>& axes,
-                     const PowerlinkSites& sites) {
+void check_powerlink(const BusDocument& d) {
+  Diagnostics& diag = d.diag;
+  const DaemonConfig& c = d.config;
+  const std::vector<AxisSite>& axes = d.axes;
+  const PowerlinkSites& sites = d.powerlink;
+  if (d.section_present) {
+    if (c.powerlink.interface.empty() && !sites.interface_refused) {
+      diag.error(d.section_at, "powerlink.interface",
+                 "missing: bus powerlink needs the network interface of the POWERLINK segment");
+    }
+    for (size_t i = 0; i < axes.size() && i < c.axes.size(); ++i) {
+      const uint8_t node = c.axes[i].node;
+      if (sites.nodes.count(node) != 0) continue;
+      std::vector<std::string> listed;
+      for (const auto& [id, at] : sites.nodes) listed.push_back(std::to_string(id));
+      diag.error(axes[i].node_at, axes[i].path + ".node",
+                 "node " + std::to_string(node) + " is not listed in powerlink.nodes (listed: " +
+                     (listed.empty() ? std::string("none") : join(listed)) + ")");
+    }
+  }
   check_process_image(diag, c, axes);
   for (size_t i = 0; i < c.powerlink.nodes.size() && i < sites.pres_timeout_at.size(); ++i) {
     const auto& n = c.powerlink.nodes[i];

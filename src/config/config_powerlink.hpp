@@ -9,13 +9,13 @@
 #include <ostream>
 #include <vector>
 
+#include "config/config_bus_kinds.hpp"
 #include "config/config_reader.hpp"
 
 namespace ds1928::config_detail {
 
 // Where the parts of the section were written, for messages of later cross-field checks.
 struct PowerlinkSites {
-  bool present = false;
   bool interface_refused = false;    // given but invalid: reported already, not "missing"
   std::map<uint8_t, Loc> nodes;      // node id → where it is listed
   std::vector<Loc> pres_timeout_at;  // per nodes[] entry
@@ -26,9 +26,9 @@ struct PowerlinkSites {
 void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
                      const std::filesystem::path& base_dir);
 
-// Checks of the section against the axes and the cycle (only called on bus powerlink).
-void check_powerlink(Diagnostics& diag, const DaemonConfig& c, const std::vector<AxisSite>& axes,
-                     const PowerlinkSites& sites);
+// Checks of the section against the axes and the cycle (bus powerlink's row of the bus kinds):
+// the interface is given, every axis' node is listed, process images, timeouts, cycle budget.
+void check_powerlink(const BusDocument& d);
 
 void dump_powerlink(std::ostream& o, const PowerlinkBusConfig& p);
 

@@ -377,6 +377,11 @@ class Section {
   template <class E>
   bool choice(std::string_view key, E& out,
               std::initializer_list<std::pair<std::string_view, E>> options) {
+    return choice_of(key, out, options);
+  }
+  // The same over any range of (word, value) pairs (a table built elsewhere).
+  template <class E, class Options>
+  bool choice_of(std::string_view key, E& out, const Options& options) {
     const YAML::Node* v = find(key);
     if (!v) return false;
     std::vector<std::string> names;

@@ -24,7 +24,7 @@
 #include <string_view>
 #include <system_error>
 
-#include "config/config.hpp"
+#include "control/socket_config.hpp"
 
 namespace boost::asio {
 class io_context;

@@ -9,7 +9,7 @@
 #include <system_error>
 #include <thread>
 
-#include "config/config.hpp"
+#include "core/cycle_config.hpp"
 #include "core/cycle_stats.hpp"
 #include "core/rt_setup.hpp"
 

@@ -18,9 +18,10 @@
 #include <system_error>
 #include <vector>
 
-#include "config/config.hpp"
+#include "core/axis_config.hpp"
 #include "powerlink/error_signalling.hpp"
 #include "powerlink/frames.hpp"
+#include "powerlink/powerlink_options.hpp"
 #include "powerlink/process_image.hpp"
 #include "powerlink/sdo.hpp"
 #include "x20ds1928/sdo_mapping.hpp"

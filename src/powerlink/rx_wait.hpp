@@ -3,7 +3,7 @@
 
 #include <cstdint>
 
-#include "config/config.hpp"
+#include "powerlink/powerlink_options.hpp"
 #include "powerlink/raw_link.hpp"
 
 namespace ds1928::powerlink {

@@ -7,9 +7,9 @@
 #include <string>
 #include <system_error>
 
-#include "config/config.hpp"
 #include "core/axis_sample.hpp"
 #include "ds1928/shm.h"
+#include "shm/shm_config.hpp"
 
 namespace ds1928::shm {
 

@@ -13,20 +13,22 @@
 
 namespace ds1928::sim {
 
-CanioNodeConfig canio_node_from_config(const DaemonConfig& config, uint8_t node) {
+CanioNodeConfig canio_node_from_config(const CanioBusConfig& canio,
+                                       std::span<const AxisConfig> axes,
+                                       const SimulatedBusConfig& simulated, uint8_t node) {
   CanioNodeConfig n;
   n.node = node;
-  n.little_endian = config.canio.little_endian;
-  n.sync_enabled = config.canio.sync_enabled;
-  n.sync_id = config.canio.sync_id;
-  n.sdo_overrides = config.canio.sdo_overrides;
-  for (std::size_t i = 0; i < config.axes.size(); ++i) {
-    const AxisConfig& a = config.axes[i];
+  n.little_endian = canio.little_endian;
+  n.sync_enabled = canio.sync_enabled;
+  n.sync_id = canio.sync_id;
+  n.sdo_overrides = canio.sdo_overrides;
+  for (std::size_t i = 0; i < axes.size(); ++i) {
+    const AxisConfig& a = axes[i];
     if (a.node != node) continue;
     CanioNodeModule m;
     m.slot = a.slot;
-    m.ids = canio_axis_ids(config.canio, a, i);
-    if (i < config.simulated.axes.size()) m.sim = config.simulated.axes[i];
+    m.ids = canio_axis_ids(canio, a, i);
+    if (i < simulated.axes.size()) m.sim = simulated.axes[i];
     n.modules.push_back(m);
   }
   return n;

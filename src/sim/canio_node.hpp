@@ -21,8 +21,9 @@
 #include <vector>
 
 #include "canio/can_port.hpp"
-#include "config/config.hpp"
+#include "canio/canio_options.hpp"
 #include "sim/ds1928_module.hpp"
+#include "sim/sim_options.hpp"
 #include "x20ds1928/sdo_mapping.hpp"
 
 namespace ds1928::sim {
@@ -64,8 +65,12 @@ struct CanioNodeConfig {
   std::function<int64_t()> clock;
 };
 
-// The node behind `node` of a daemon configuration: the axes on that node become its modules.
-[[nodiscard]] CanioNodeConfig canio_node_from_config(const DaemonConfig& config, uint8_t node);
+// The node behind `node` of a configured bus: the axes on that node become its modules
+// (simulated.axes[i] describes axes[i]).
+[[nodiscard]] CanioNodeConfig canio_node_from_config(const CanioBusConfig& canio,
+                                                     std::span<const AxisConfig> axes,
+                                                     const SimulatedBusConfig& simulated,
+                                                     uint8_t node);
 
 struct CanioNodeCounters {
   uint64_t syncs = 0;

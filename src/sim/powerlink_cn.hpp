@@ -28,7 +28,6 @@
 #include <string_view>
 #include <vector>
 
-#include "config/config.hpp"
 #include "powerlink/error_signalling.hpp"
 #include "powerlink/frames.hpp"
 #include "powerlink/link.hpp"
@@ -36,6 +35,7 @@
 #include "powerlink/sdo.hpp"
 #include "sim/cn_object_dictionary.hpp"
 #include "sim/ds1928_module.hpp"
+#include "sim/sim_options.hpp"
 #include "x20ds1928/sdo_mapping.hpp"
 
 namespace ds1928::sim {

@@ -4,19 +4,18 @@
 
 namespace ds1928::sim {
 
-SimulatedBus::SimulatedBus(const DaemonConfig& config) {
-  for (std::size_t i = 0; i < config.axes.size(); ++i) {
-    const SimAxisConfig sim =
-        i < config.simulated.axes.size() ? config.simulated.axes[i] : SimAxisConfig{};
+SimulatedBus::SimulatedBus(std::span<const AxisConfig> axes, const SimulatedBusConfig& simulated) {
+  for (std::size_t i = 0; i < axes.size(); ++i) {
+    const SimAxisConfig sim = i < simulated.axes.size() ? simulated.axes[i] : SimAxisConfig{};
     auto encoder = load_encoder(sim);
     if (!encoder.description) {
       // Reported by start(); the module gets the built-in encoder meanwhile.
       if (load_error_.empty()) load_error_ = encoder.error;
       encoder.description = default_encoder_description();
     }
-    modules_.push_back(std::make_unique<Ds1928Module>(config.axes[i].function_model, sim,
+    modules_.push_back(std::make_unique<Ds1928Module>(axes[i].function_model, sim,
                                                       std::move(*encoder.description)));
-    settings_.push_back(config.axes[i].module);
+    settings_.push_back(axes[i].module);
   }
 }
 

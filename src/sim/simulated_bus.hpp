@@ -3,18 +3,22 @@
 #pragma once
 
 #include <memory>
+#include <span>
 #include <vector>
 
-#include "config/config.hpp"
+#include "core/axis_config.hpp"
 #include "core/bus.hpp"
 #include "core/spsc_queue.hpp"
 #include "sim/ds1928_module.hpp"
+#include "sim/sim_options.hpp"
 
 namespace ds1928::sim {
 
 class SimulatedBus final : public BusDriver {
  public:
-  explicit SimulatedBus(const DaemonConfig& config);
+  // One simulated X20DS1928 per axis; simulated.axes[i] describes axes[i] (defaults for the
+  // rest).
+  SimulatedBus(std::span<const AxisConfig> axes, const SimulatedBusConfig& simulated);
 
   [[nodiscard]] std::string_view name() const noexcept override { return "simulated"; }
   [[nodiscard]] std::error_code start() override;

@@ -159,7 +159,8 @@ TEST_CASE("CAN-I/O: wrong lengths and foreign identifiers are counted and ignore
   // No start(): without the kernel filter every foreign frame reaches the driver, as it would
   // when another device shares an identifier the filter lets through.
   rig.nodes.clear();
-  sim::CanioNodeConfig nc = sim::canio_node_from_config(config, 1);
+  sim::CanioNodeConfig nc =
+      sim::canio_node_from_config(config.canio, config.axes, config.simulated, 1);
   nc.faults.wrong_length_every = 4;
   nc.faults.unexpected_id = 0x123;
   rig.nodes.push_back(std::make_unique<sim::CanioNode>(nc, *rig.node_ports[0]));

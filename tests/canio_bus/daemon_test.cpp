@@ -32,7 +32,8 @@ struct SimulatedNodeThread {
     auto p = bus->open_port({});
     if (!p) throw std::runtime_error("virtual port: " + p.error().message());
     port = std::move(p.value());
-    node = std::make_unique<sim::CanioNode>(sim::canio_node_from_config(config, 1), *port);
+    node = std::make_unique<sim::CanioNode>(
+        sim::canio_node_from_config(config.canio, config.axes, config.simulated, 1), *port);
     if (node->open()) throw std::runtime_error("node filters");
     thread = std::thread([this] {
       while (!stop.load()) (void)node->service(test::Rig::monotonic() + 2'000'000);

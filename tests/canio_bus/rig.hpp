@@ -18,6 +18,7 @@
 
 #include "canio/canio_bus.hpp"
 #include "canio/virtual_bus.hpp"
+#include "config/config.hpp"
 #include "sim/canio_node.hpp"
 
 namespace ds1928::test {
@@ -119,7 +120,8 @@ struct Rig {
       for (auto& n : nodes) have |= n->config().node == a.node;
       if (have) continue;
       node_ports.push_back(open_port("node" + std::to_string(a.node)));
-      sim::CanioNodeConfig nc = sim::canio_node_from_config(config, a.node);
+      sim::CanioNodeConfig nc =
+          sim::canio_node_from_config(config.canio, config.axes, config.simulated, a.node);
       if (stepped) nc.clock = [] { return fake_now(); };
       if (tweak) tweak(nc);
       nodes.push_back(std::make_unique<sim::CanioNode>(nc, *node_ports.back()));
@@ -128,7 +130,8 @@ struct Rig {
         for (std::size_t m = 0; m < nodes.back()->module_count(); ++m)
           (void)sim::configure_module(nodes.back()->module(m), a.module);
     }
-    canio::CanioBusOptions options = canio::make_canio_options(config);
+    canio::CanioBusOptions options =
+        canio::make_canio_options(config.canio, config.axes, config.cycle.period_us);
     options.assume_configured = assume_configured;
     std::unique_ptr<canio::CanPort> cycle;
     if (stepped) {

@@ -431,6 +431,74 @@ TEST_CASE("cross-field and list rules", "[config]") {
   }
 }
 
+// What differs between the bus kinds comes from one table (src/config/config_bus_kinds.cpp):
+// each kind's word, period, function model, node range, empty-axes rule and required section.
+TEST_CASE("each bus kind brings its own rules", "[config][bus]") {
+  const std::string pl = "bus: powerlink\npowerlink: {interface: eth1, nodes: [{node_id: 1}]}\n";
+  SECTION("the word of every kind loads that kind") {
+    const std::pair<BusKind, std::string> kinds[] = {
+        {BusKind::Simulated, "\n"},
+        {BusKind::Powerlink, "\npowerlink: {interface: eth1, nodes: [{node_id: 1}]}\n"},
+        {BusKind::Canio, "\ncanio: {}\naxes: [{node: 1}]\n"}};
+    for (const auto& [kind, rest] : kinds) {
+      const ConfigResult r = from("bus: " + std::string(to_string(kind)) + rest);
+      INFO(r.error_report());
+      REQUIRE(r.ok());
+      CHECK(r.config().bus == kind);
+    }
+  }
+  SECTION("cycle period: 1 ms, CAN-I/O 2 ms") {
+    CHECK(from("bus: simulated").config().cycle.period_us == 1000);
+    CHECK(from(pl + "axes: [{node: 1}]").config().cycle.period_us == 1000);
+    CHECK(from("bus: canio\ncanio: {}\naxes: [{node: 1}]").config().cycle.period_us == 2000);
+    CHECK(from("bus: canio\ncanio: {}\ncycle: {period_us: 5000}\naxes: [{node: 1}]")
+              .config()
+              .cycle.period_us == 5000);
+  }
+  SECTION("function model: what the bus controller runs") {
+    CHECK(one_error("bus: canio\ncanio: {}\naxes: [{function_model: 0}]") ==
+          "test.yaml:3:25: axes[0].function_model: 0 is not allowed on bus canio; modules behind "
+          "a CAN-I/O bus controller run function model 254");
+    CHECK(one_error(pl + "axes: [{node: 1, function_model: 254}]") ==
+          "test.yaml:3:34: axes[0].function_model: 254 is not allowed on bus powerlink; modules "
+          "behind a POWERLINK bus controller run function model 0");
+    const ConfigResult sim = from("axes: [{function_model: 254}, {}]");
+    INFO(sim.error_report());
+    REQUIRE(sim.ok());
+    CHECK(sim.config().axes[0].function_model == FunctionModel::BusController);
+    CHECK(sim.config().axes[1].function_model == FunctionModel::Standard);
+  }
+  SECTION("node numbers: POWERLINK CNs end at 239") {
+    CHECK_THAT(one_error(pl + "axes: [{node: 240}]"),
+               Catch::EndsWith("axes[0].node: 240 is out of range 1..239"));
+    const ConfigResult sim = from("axes: [{node: 255}]");
+    INFO(sim.error_report());
+    CHECK(sim.ok());
+  }
+  SECTION("no axes: simulated adds one, powerlink runs without, canio refuses") {
+    const ConfigResult sim = from("bus: simulated");
+    REQUIRE(sim.ok());
+    REQUIRE(sim.config().axes.size() == 1);
+    CHECK(sim.config().axes[0].name == "axis0");
+    const ConfigResult p = from(pl);
+    INFO(p.error_report());
+    REQUIRE(p.ok());
+    CHECK(p.config().axes.empty());
+    CHECK(one_error("bus: canio\ncanio: {}\n") ==
+          "test.yaml:1:1: axes: at least one axis is needed on bus canio");
+  }
+  SECTION("the bus' own section is required, and says what it must give") {
+    // (Without a canio section the canio checks used to stop the loader with "cannot interpret
+    // the document: invalid node" besides this error.)
+    CHECK(one_error("bus: canio\naxes: [{node: 1}]") ==
+          "test.yaml:1:6: bus: bus is 'canio' but the file has no canio section (interface, "
+          "bitrate)");
+    CHECK(one_error("bus: powerlink\naxes: [{node: 1}]") ==
+          "test.yaml:1:6: bus: bus is 'powerlink' but the file has no powerlink section "
+          "(interface, nodes)");
+  }
+}
+
 TEST_CASE("dump_config round-trips", "[config]") {
   for (const char* file : {"simulated.yaml", "powerlink.yaml", "canio.yaml"}) {
     const ConfigResult first = load_config(kSource + "/config/" + file);

@@ -17,7 +17,7 @@ TEST_CASE("the cycle thread's command and tunnel queues refuse past their depth"
   config.axes.resize(1);
   config.axes[0].name = "x";
   config.shm.name = "/ds1928d-queues-" + std::to_string(::getpid());
-  sim::SimulatedBus bus(config);
+  sim::SimulatedBus bus(config.axes, config.simulated);
   shm::Publisher publisher;
   REQUIRE_FALSE(publisher.open(config.shm, 1, 1'000'000));
   CycleWork work(config, bus, publisher);

@@ -45,7 +45,7 @@ DaemonConfig four_axes(uint32_t period_us) {
 TEST_CASE("the daemon's cycle work allocates nothing and locks no mutex in 100 000 cycles",
           "[daemon][rt]") {
   const DaemonConfig config = four_axes(100);
-  sim::SimulatedBus bus(config);
+  sim::SimulatedBus bus(config.axes, config.simulated);
   REQUIRE_FALSE(bus.start());
   shm::Publisher publisher;
   REQUIRE_FALSE(publisher.open(config.shm, 4, 100'000));

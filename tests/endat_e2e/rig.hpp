@@ -216,7 +216,7 @@ class Rig {
     config_.socket.path = control::test::temp_socket_path("endat");
     socket_dir_.dir = std::filesystem::path(config_.socket.path).parent_path();
     config_.socket.privileged_group = "";
-    sim_ = std::make_unique<sim::SimulatedBus>(config_);
+    sim_ = std::make_unique<sim::SimulatedBus>(config_.axes, config_.simulated);
     switch (o.peer) {
       case Peer::Simulated:
         bus_ = sim_.get();

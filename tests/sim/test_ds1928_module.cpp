@@ -152,10 +152,9 @@ TEST_CASE("acyclic register access rejects bad registers, sizes and values by na
 
 TEST_CASE("the simulated bus configures modules at start and answers acyclic requests in the cycle",
           "[sim]") {
-  DaemonConfig cfg;
-  cfg.axes.resize(2);
-  cfg.axes[1].module.prescaler = 4;
-  sim::SimulatedBus bus(cfg);
+  std::vector<AxisConfig> axes(2);
+  axes[1].module.prescaler = 4;
+  sim::SimulatedBus bus(axes, SimulatedBusConfig{});
   REQUIRE_FALSE(bus.start());
   CHECK(bus.state() == BusState::Operational);
   std::array<AxisIo, 2> io{};

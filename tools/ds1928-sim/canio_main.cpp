@@ -26,7 +26,8 @@ int run_canio(const CanioOptions& o, const std::atomic<bool>& stop) {
       std::fprintf(stderr, "%s", loaded.error_report().c_str());
       return 1;
     }
-    node = sim::canio_node_from_config(loaded.config(), static_cast<uint8_t>(o.node));
+    node = sim::canio_node_from_config(loaded.config().canio, loaded.config().axes,
+                                       loaded.config().simulated, static_cast<uint8_t>(o.node));
     if (node.modules.empty()) {
       std::fprintf(stderr, "ds1928-sim: %s has no axis on node %d\n", o.config_file.c_str(),
                    o.node);
@@ -51,7 +52,7 @@ int run_canio(const CanioOptions& o, const std::atomic<bool>& stop) {
       c.canio.axes.push_back(ca);
     }
     c.simulated.axes.resize(c.axes.size());
-    node = sim::canio_node_from_config(c, static_cast<uint8_t>(o.node));
+    node = sim::canio_node_from_config(c.canio, c.axes, c.simulated, static_cast<uint8_t>(o.node));
   }
   node.faults.drop = o.drop;
   node.faults.wrong_length_every = o.wrong_length_every;

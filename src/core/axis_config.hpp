@@ -1,0 +1,29 @@
+// One configured axis: which module on which bus node it is and how the module is set up. Every
+// bus driver, the simulators and the daemon's EnDat service read it; the configuration (`axes:`)
+// fills it.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <string>
+
+#include "core/module_image.hpp"
+#include "core/module_settings.hpp"
+
+namespace ds1928 {
+
+struct AxisConfig {
+  std::string name;  // shown in status; default "axis<N>"
+  uint8_t node = 1;  // POWERLINK CN node id / CAN-I/O node number / sim node
+  uint8_t slot = 1;  // module position behind the bus controller (1-based)
+  FunctionModel function_model = FunctionModel::Standard;
+  ModuleSettings module;
+  uint32_t command_timeout_ms = 2000;        // EnDat command over Flatstream
+  uint32_t flatstream_timeout_cycles = 200;  // per-sequence timeout
+  // POWERLINK only: byte offset of this module's block in its CN's PRes / PReq payload
+  // (0..1489); unset = the default packed layout (docs/powerlink.md §Process image).
+  std::optional<uint16_t> pres_offset;
+  std::optional<uint16_t> preq_offset;
+};
+
+}  // namespace ds1928

@@ -1,0 +1,18 @@
+// What the cycle engine is told: the period and how it may use the CPU (docs/realtime.md).
+// The configuration (`cycle:`) fills it; the engine checks it again (CycleEngine::validate).
+#pragma once
+
+#include <cstdint>
+
+namespace ds1928 {
+
+struct CycleConfig {
+  uint32_t period_us = 1000;
+  int rt_priority = 80;  // SCHED_FIFO 1..99
+  int cpu = -1;          // -1 = no affinity
+  uint32_t spin_us = 0;  // busy-wait this long before the deadline (0 = off)
+  bool hold_cpu_dma_latency = true;
+  bool lock_memory = true;
+};
+
+}  // namespace ds1928

@@ -1,0 +1,103 @@
+// What the POWERLINK Managing Node is told about its segment: interface, CNs, DLL thresholds,
+// NMT timing, receive strategy, SDO mapping (docs/powerlink.md). The configuration's
+// `powerlink:` section fills it (src/config); the daemon hands it to the MN in MnConfig.
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace ds1928 {
+
+// One object the MN writes to a CN by SDO in the boot step "configure" (little endian bytes).
+struct CnObjectWrite {
+  uint16_t index = 0;
+  uint8_t subindex = 0;
+  std::vector<uint8_t> data;
+  bool from_cdc = false;  // from a concise DCF (else from the YAML `sdo_writes`)
+  friend bool operator==(const CnObjectWrite&, const CnObjectWrite&) = default;
+};
+
+// POWERLINK Controlled Node as the MN sees it.
+struct PowerlinkNodeConfig {
+  uint8_t node_id = 1;
+  // Identity (docs/powerlink.md §Third-party CNs): checked in the IdentResponse and read back
+  // by SDO (0x1000, 0x1018/1..4) before the node is configured.
+  std::optional<uint32_t> vendor_id;
+  std::optional<uint32_t> product_code;
+  std::optional<uint32_t> device_type;
+  std::optional<uint32_t> revision_no;
+  std::optional<uint32_t> serial_no;
+  std::string cdc;  // concise DCF of this CN (the content of the MN's 0x1F22/node), as given
+  // Written in this order in the boot step "configure": the CN's concise DCF (node `cdc`, else
+  // 0x1F22/node of powerlink.cdc), the cycle objects (cycle_objects), then `sdo_writes`.
+  std::vector<CnObjectWrite> object_writes;
+  bool cycle_objects = false;  // write 0x1006 and 0x1F98/4,5 from the configuration
+  // PResTimeout (0x1F92/node): how long the MN waits for the PRes after the PReq. Long enough for
+  // a CN that answers from software on a busy PC (docs/realtime.md); a lost PRes costs it once.
+  uint32_t pres_timeout_us = 200;
+  // DLL_MNCNLossPResThreshold (0x1C09/node); unset: powerlink.thresholds.loss_of_pres.
+  std::optional<uint32_t> loss_of_pres_threshold;
+  bool mandatory = true;
+  uint32_t multiplex = 0;             // 0 = continuous, n = polled every n-th cycle
+  std::optional<uint16_t> preq_size;  // default: from IdentResponse PollOutSize / module list
+  std::optional<uint16_t> pres_size;  // default: from IdentResponse PollInSize / module list
+};
+// DLL threshold counters (+8 per cycle with the error, −1 per cycle without; 0 = disabled).
+struct DllThresholds {
+  // DLL_MNCNLossPResThreshold (0x1C09) of every CN without its own; unset: ride through
+  // kLossOfPresRideThroughUs of silence, at least 5 lost PRes in a row, reset at the next loss
+  // (default_loss_of_pres_threshold()).
+  std::optional<uint32_t> loss_of_pres;
+  uint32_t cycle_time_exceeded = 15;  // DLL_MNCycTimeExceed_REC (0x1C02/3)
+  uint32_t late_pres = 15;
+};
+// A CN whose host stalls this long (PRes lost in a row) is not reset with the default threshold;
+// measured stalls of a busy 2-core VM: 7–13 ms (docs/realtime.md).
+inline constexpr uint32_t kLossOfPresRideThroughUs = 20'000;
+[[nodiscard]] constexpr uint32_t default_loss_of_pres_threshold(uint32_t period_us) noexcept {
+  // Fires at the first loss past the ride-through: 8 × (tolerated losses in a row + 1).
+  const uint32_t cycles =
+      period_us == 0 ? 5 : (kLossOfPresRideThroughUs + period_us - 1) / period_us;
+  return 8 * ((cycles < 5 ? 5 : cycles) + 1);
+}
+
+// How the cycle thread waits for a PRes or an awaited ASnd (docs/realtime.md).
+enum class RxWait : uint8_t {
+  Block,     // RX ring, polled for rx_spin_us, then a blocking ppoll(): the CPU is free meanwhile
+  Spin,      // RX ring polled until the frame or the deadline: no syscall, but nothing of lower
+             // priority runs on the cycle thread's CPU until then
+  BusyPoll,  // recv(MSG_DONTWAIT) in a loop until the deadline (no ring)
+};
+// The MN's NMT timing while booting CNs (docs/powerlink.md, boot sequence).
+struct PowerlinkNmtConfig {
+  uint32_t pre_op1_timeout_ms = 500;     // reduced cycle before the MN starts full cycles
+  uint32_t boot_step_timeout_ms = 5000;  // a CN stuck in a boot step is reset
+  uint32_t reset_wait_ms = 100;          // after NMTResetNode, before identifying again
+  uint32_t status_request_every = 8;     // cycles between StatusRequests to a booting CN
+};
+
+struct PowerlinkBusConfig {
+  std::string interface;  // raw-socket interface, e.g. "eth1"
+  std::string cdc;        // the MN's concise DCF (openCONFIGURATOR's mnobd.cdc), as given
+  std::vector<PowerlinkNodeConfig> nodes;
+  DllThresholds thresholds;
+  PowerlinkNmtConfig nmt;
+  // AsyncSlotTimeout (0x1F8A/2): wait for the invited ASnd after the SoA.
+  uint32_t async_timeout_us = 100;
+  // WaitSoCPReq (0x1F8A/1): pause between the SoC and the first PReq, for CNs that need time to
+  // take the SoC (a software CN) before they can answer a PReq.
+  uint32_t wait_soc_preq_us = 0;
+  RxWait rx_wait = RxWait::Block;
+  uint32_t rx_spin_us = 0;  // Block: poll the ring this long before blocking
+  uint32_t sdo_timeout_ms = 500;
+  // PosTime relation: PosTime = low 32 bits of (SoC RelativeTime µs + offset).
+  int64_t nettime_offset_us = 0;
+  // Register → (index, subindex) overrides; default scheme in docs/powerlink.md.
+  std::map<uint16_t, std::pair<uint16_t, uint8_t>> sdo_overrides;
+};
+
+}  // namespace ds1928
