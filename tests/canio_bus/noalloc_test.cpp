@@ -9,6 +9,7 @@
 #include <unistd.h>
 
 #include <catch2/catch.hpp>
+#include <string>
 #include <thread>
 #include <vector>
 
@@ -27,10 +28,13 @@ namespace {
 
 constexpr uint64_t kCounted = 3000;
 
-// One capture point's window: begin() .. finish(), and what the test drained from its ring.
+// One capture point's window: begin() .. finish(), what the test drained from its ring, and the
+// point's counters at the end (the point lives in the rig's port: gone once run_proof returns).
 struct CaptureWindow {
-  capture::Tap* tap = nullptr;
+  capture::Tap* tap = nullptr;  // valid inside run_proof only
   uint64_t start = 0, end = 0, drained = 0;
+  std::string name;
+  capture::TapCounters counters;
 };
 
 struct ProofResult {
@@ -73,7 +77,12 @@ ProofResult run_proof(std::size_t capture_ring) {
   REQUIRE(test::wait_until([&] { return rig.canio->state() == BusState::Operational; }));
 
   ProofResult result;
-  for (capture::Tap* tap : taps) result.windows.push_back({tap, tap->begin(), 0, 0});
+  for (capture::Tap* tap : taps) {
+    CaptureWindow w;
+    w.tap = tap;
+    w.start = tap->begin();
+    result.windows.push_back(std::move(w));
+  }
   auto drain = [&] {
     for (CaptureWindow& w : result.windows)
       while (w.tap->pop([&](const capture::TapFrame&) { ++w.drained; })) {
@@ -103,6 +112,11 @@ ProofResult run_proof(std::size_t capture_ring) {
   engine->stop();
   for (CaptureWindow& w : result.windows) w.end = w.tap->finish();
   drain();
+  for (CaptureWindow& w : result.windows) {
+    w.name = w.tap->name();
+    w.counters = w.tap->counters();
+    w.tap = nullptr;
+  }
   result.counts = task.result();
   result.samples = rig.canio->axis_counters(0).samples.load();
   return result;
@@ -149,11 +163,11 @@ TEST_CASE("bus canio: with a capture running and its ring full, still no allocat
   const CaptureWindow& cycle = r.windows[0];
   const CaptureWindow& sdo = r.windows[1];
   for (const CaptureWindow& w : r.windows) {
-    const capture::TapCounters c = w.tap->counters();
+    const capture::TapCounters& c = w.counters;
     std::printf(
         "  capture point %s: window %llu frames = %llu drained + %llu dropped (tx %llu, rx %llu "
         "since the start)\n",
-        w.tap->name().c_str(), static_cast<unsigned long long>(w.end - w.start),
+        w.name.c_str(), static_cast<unsigned long long>(w.end - w.start),
         static_cast<unsigned long long>(w.drained), static_cast<unsigned long long>(c.dropped),
         static_cast<unsigned long long>(c.tx_frames), static_cast<unsigned long long>(c.rx_frames));
     // Every frame of the window is accounted for: in the ring (drained) or dropped.
@@ -164,7 +178,7 @@ TEST_CASE("bus canio: with a capture running and its ring full, still no allocat
   // and inputs), and the ring overflowed inside the counted cycles.
   CHECK(cycle.end - cycle.start > kCounted);
   CHECK(cycle.drained > kCounted / 2);
-  CHECK(cycle.tap->counters().dropped > 0);
+  CHECK(cycle.counters.dropped > 0);
   CHECK(r.dropped_in_window);
   // The register reads went over the SDO port, through its capture point.
   CHECK(sdo.end - sdo.start >= 2 * r.traffic.register_results);

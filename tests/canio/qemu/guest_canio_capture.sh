@@ -95,14 +95,19 @@ pass "ds1928d operational over socketcan on can0 ($bitrate bit/s), node configur
 
 # ---- 2. the captures ----------------------------------------------------------------------------
 # capture NAME ARGS...: ds1928ctl --json capture ARGS, the reply in $out/NAME.json.
-# Every process start costs seconds under TCG: status only around the pcapng capture.
+# Every process start costs seconds under TCG: status (saved, read on the host) only around the
+# pcapng capture.
+snapshot() {
+  "$ctl" --json --timeout 20000 -s "$sock" status > "$out/status-$1.json" 2>> "$tmp/ctl.log" ||
+    fail "ds1928ctl status ($1): $(tail -n 3 "$tmp/ctl.log")"
+}
 capture() {
   local name=$1
   shift
-  [ "$name" = pcapng ] && { status "$name-before" || fail "status before the $name capture"; }
+  [ "$name" = pcapng ] && snapshot "$name-before"
   "$ctl" --json --timeout 60000 -s "$sock" capture "$@" > "$out/$name.json" 2> "$tmp/$name.log" ||
     fail "ds1928ctl capture $*: $(cat "$tmp/$name.log")"
-  [ "$name" = pcapng ] && { status "$name-after" || fail "status after the $name capture"; }
+  [ "$name" = pcapng ] && snapshot "$name-after"
   kill -0 "$daemon_pid" 2> /dev/null || fail "ds1928d exited during the $name capture"
 }
 capture pcapng -w "$out/can.pcapng" --duration 5
@@ -116,7 +121,9 @@ pass "candump log of 1 s: ${#lines[@]} lines, first: ${lines[0]}"
 # candump -L records the replay into the guest's tmpfs (a write per frame to the 9p work
 # directory is slow enough under TCG to overflow its socket's receive queue) with a larger receive
 # buffer, and exits after as many frames as the log has or after 15 s of silence; canplayer maps
-# the log's interface can0 to vcan0 and keeps the logged spacing.
+# the log's interface can0 to vcan0 and keeps the logged spacing. The guest's own kernel: its
+# receive buffer limit may be raised.
+echo 1048576 > /proc/sys/net/core/rmem_max
 candump -L -r 1048576 -n ${#lines[@]} -T 15000 vcan0 > "$tmp/replayed.txt" 2> "$tmp/candump.log" &
 candump_pid=$!
 pids+=("$candump_pid")
