@@ -42,14 +42,13 @@ check_pcapng() {
   local idx name epbs out inb ifrecv ifdrop i window
   errlog=$(mktemp)
   # One pass for the fields, one for the malformed/erroneous packets (a filter tshark refuses
-  # fails loudly: checked first).
+  # is an error exit, not an empty answer).
   tshark -r "$file" -T fields -E separator=' ' -e frame.interface_id -e can.id \
     > "$errlog.fields" 2> "$errlog"
   sed -i '/Running as user/d' "$errlog"
   [ -s "$errlog" ] && fail "tshark complained: $(head -n 5 "$errlog")"
-  tshark -r "$file" -Y '_ws.malformed || _ws.expert.severity >= error' -c 1 > /dev/null 2>&1 ||
-    fail "tshark refuses the malformed-packet filter"
-  bad=$(tshark -r "$file" -Y '_ws.malformed || _ws.expert.severity >= error' 2> /dev/null)
+  bad=$(tshark -r "$file" -Y '_ws.malformed || _ws.expert.severity >= error' 2> "$errlog") ||
+    fail "tshark refuses the malformed-packet filter: $(grep -v 'Running as user' "$errlog" | head -n 3)"
   [ -z "$bad" ] || fail "malformed or erroneous frames: $(head -n 5 <<< "$bad")"
   total=$(wc -l < "$errlog.fields")
   # A frame tshark did not decode as CAN has no can.id.
