@@ -199,7 +199,7 @@ TEST_CASE("frame_wire agrees with the bit-level model and never exceeds the wors
   }
 }
 
-TEST_CASE("constructed frames come close to the worst-case formula; it stays an upper bound",
+TEST_CASE("constructed frames come close to the worst-case formula, it stays an upper bound",
           "[canio][budget]") {
   // The formula's worst case needs the pattern 00000 1111 0000 1111 ... through the whole
   // stuffable part, but a real data frame has RTR, IDE and r0 dominant in a row and the CRC is

@@ -128,7 +128,7 @@ TEST_CASE("a response that does not answer the request is an error naming why", 
         "SDO response names another subindex than the request");
 }
 
-TEST_CASE("random SDO exchanges round-trip; random frames are parsed or named",
+TEST_CASE("random SDO exchanges round-trip, random frames are parsed or named",
           "[canio][sdo][random]") {
   std::mt19937_64 rng(0x5D0);
   for (int i = 0; i < 20000; ++i) {

@@ -219,7 +219,7 @@ TEST_CASE("two processes exchange frames over the two controllers", "[socketcan]
   CHECK(WEXITSTATUS(status) == 0);
 }
 
-TEST_CASE("interface state, bit rate and restart-ms from netlink; mismatch is refused",
+TEST_CASE("interface state, bit rate and restart-ms from netlink, mismatch is refused",
           "[socketcan][pair]") {
   if (g_env.can_a.empty()) {
     WARN("no CAN controller: only the vcan is checked");
@@ -273,7 +273,7 @@ TEST_CASE("a full TX queue is reported and counted, never waited for", "[socketc
   WARN("burst of 2000: " << sent << " sent, " << full << " refused with a full queue");
 }
 
-TEST_CASE("an interface that goes down: receive and send say so; open refuses it",
+TEST_CASE("an interface that goes down: receive and send say so, open refuses it",
           "[socketcan][down]") {
   if (g_env.vcan.empty()) {
     WARN("no vcan of this test's own to take down: skipped");

@@ -82,7 +82,7 @@ TEST_CASE("every port sees the other ports' frames, never its own", "[canio][vbu
   CHECK(drain(*d).empty());
 }
 
-TEST_CASE("filters pass exactly the listed identifiers; error frames only when subscribed",
+TEST_CASE("filters pass exactly the listed identifiers, error frames only when subscribed",
           "[canio][vbus]") {
   auto bus = VirtualCanBus::create_local();
   auto tx = port(bus), rx = port(bus);

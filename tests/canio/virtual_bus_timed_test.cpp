@@ -97,7 +97,7 @@ TEST_CASE("timed bus: wire time from the frame's real bits, stamped at end of fr
   CHECK(info->bitrate == kBitrate);
 }
 
-TEST_CASE("timed bus: a sender waits for a busy bus; a frame on the wire is not preempted",
+TEST_CASE("timed bus: a sender waits for a busy bus, a frame on the wire is not preempted",
           "[canio][vbus][timed]") {
   FakeClock clock;
   auto bus = VirtualCanBus::create_local(clock.options());
@@ -145,7 +145,7 @@ TEST_CASE("timed bus: frames queued on several ports go out by arbitration, lowe
   CHECK(bus->wire_totals().bus_free_ns == start);
 }
 
-TEST_CASE("timed bus: a port's own queue is FIFO; standard beats extended with the same base",
+TEST_CASE("timed bus: a port's own queue is FIFO, standard beats extended with the same base",
           "[canio][vbus][timed]") {
   FakeClock clock;
   auto bus = VirtualCanBus::create_local(clock.options());

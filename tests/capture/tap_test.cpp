@@ -58,7 +58,7 @@ TEST_CASE("tap: counted always, copied only while active, full ring drops and co
   CHECK(tap.counters().frames == 9);
 }
 
-TEST_CASE("tap: frames longer than the slot are cut; time 0 is stamped at record") {
+TEST_CASE("tap: frames longer than the slot are cut, time 0 is stamped at record") {
   Tap tap("can0", kLinkTypeCanSocketCan, 16, 2);
   (void)tap.begin();
   std::vector<uint8_t> big(40, 7);

@@ -108,7 +108,7 @@ TEST_CASE("sdo_writes take one typed value each, little endian", "[config][power
              Catch::Contains("unknown key 'typo'"));
 }
 
-TEST_CASE("A node's concise DCF becomes its writes; its mapping gives the payload sizes",
+TEST_CASE("A node's concise DCF becomes its writes, its mapping gives the payload sizes",
           "[config][powerlink][cdc]") {
   TempDir dir;
   const std::vector<CdcEntry> node_cdc = {

@@ -69,7 +69,7 @@ TEST_CASE("a command gets its peer's credentials and its reply echoes the id") {
   CHECK_FALSE(r3.contains("id"));
 }
 
-TEST_CASE("malformed JSON, non-objects and a missing cmd get precise errors; the line survives") {
+TEST_CASE("malformed JSON, non-objects and a missing cmd get precise errors, the line survives") {
   ServerThread t(config_for("badjson"));
   add_test_commands(t.server());
   REQUIRE_FALSE(t.start());

@@ -31,7 +31,7 @@ TEST_CASE("position splits into whole periods and a 16-bit fraction", "[decode]"
   CHECK(s.position_sdc == 0x0002'4000);
 }
 
-TEST_CASE("signed format sign-extends the whole periods; the SDC view is the low 32 bits signed",
+TEST_CASE("signed format sign-extends the whole periods, the SDC view is the low 32 bits signed",
           "[decode]") {
   AxisDecodeState st;
   AxisDecodeParams signed_params;

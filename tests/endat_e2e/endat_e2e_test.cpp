@@ -359,7 +359,7 @@ TEST_CASE("under a lossy bus every result is the right value or an explicit erro
   CHECK(publish_count(rig.shm_name()) - published_before + 5 >= cycles);
 }
 
-TEST_CASE("an axis queues 16 EnDat commands behind the one in flight; one more is busy",
+TEST_CASE("an axis queues 16 EnDat commands behind the one in flight, one more is busy",
           "[endat_e2e]") {
   // The first command is never answered (timeout 60 s): it stays in flight, nothing leaves the
   // queue while the test fills it.

@@ -56,7 +56,7 @@ std::vector<uint8_t> le(uint64_t v, int n) {
 }  // namespace
 
 TEST_CASE(
-    "The MN configures a generic simulated CN from a concise DCF; its PRes follows the "
+    "The MN configures a generic simulated CN from a concise DCF, its PRes follows the "
     "written mapping",
     "[integration][powerlink][generic]") {
   // What openCONFIGURATOR puts into 0x1F22/9 for such a CN: cycle, tolerance, mapping (disable,

@@ -32,7 +32,7 @@ TEST_CASE("A concise DCF decodes field by field as EPSG DS 301 lays it out", "[p
   CHECK_FALSE(sizes.preq_size.has_value());
 }
 
-TEST_CASE("PDO mapping entries give the payload size; 0x1F98 limits take precedence",
+TEST_CASE("PDO mapping entries give the payload size, 0x1F98 limits take precedence",
           "[powerlink][cdc]") {
   auto u64 = [](uint64_t v) {
     std::vector<uint8_t> d;
@@ -95,7 +95,7 @@ TEST_CASE("Truncated and garbage concise DCFs are refused with the place and the
              Catch::Contains("not a concise DCF"));
 }
 
-TEST_CASE("Random object lists round-trip; every prefix and random bytes decode or fail cleanly",
+TEST_CASE("Random object lists round-trip, every prefix and random bytes decode or fail cleanly",
           "[powerlink][cdc][fuzz]") {
   std::mt19937 rng(1928);
   for (int round = 0; round < 300; ++round) {

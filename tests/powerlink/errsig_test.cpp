@@ -143,7 +143,7 @@ TEST_CASE("CN: EC follows the ER it is asked with, and is set after a reset",
   CHECK(cn.exception_clear());
 }
 
-TEST_CASE("CN: EN toggles once per acknowledged batch; entries stay until EA",
+TEST_CASE("CN: EN toggles once per acknowledged batch, entries stay until EA",
           "[powerlink][errsig]") {
   CnErrorSignalling cn;
   cn.on_status_request(true, false);
@@ -187,7 +187,7 @@ TEST_CASE("CN: the emergency queue is bounded (oldest dropped)", "[powerlink][er
   CHECK((cn.entries()[0].type & entry_type::kEmergency) != 0);
 }
 
-TEST_CASE("MN: ER until EC=1, then ER=0 until EC=0; a CN that lags a request is fine",
+TEST_CASE("MN: ER until EC=1, then ER=0 until EC=0, a CN that lags a request is fine",
           "[powerlink][errsig]") {
   MnErrorSignalling mn;
   CHECK(mn.status_request_due());

@@ -51,7 +51,7 @@ TEST_CASE(
 }
 
 TEST_CASE(
-    "A generic CN gets its configured objects in order; a refused object is reported with "
+    "A generic CN gets its configured objects in order, a refused object is reported with "
     "its abort code and the boot goes on",
     "[powerlink][mn][configure]") {
   Rig rig({7}, 0, {}, [](PowerlinkNodeConfig& n) {
@@ -93,7 +93,7 @@ TEST_CASE("cycle_objects: the MN writes the CN's cycle length and payload limits
   CHECK(rig.st(3).pres_size == 16 + 7);
 }
 
-TEST_CASE("The identity is read back by SDO; a mismatch names the object, expected and found",
+TEST_CASE("The identity is read back by SDO, a mismatch names the object, expected and found",
           "[powerlink][mn][identity]") {
   SECTION("matching identity boots") {
     Rig rig({4}, 0, {}, [](PowerlinkNodeConfig& n) {

@@ -536,7 +536,7 @@ struct RawRig : Rig {
 
 }  // namespace
 
-TEST_CASE("A CN without modules is booted and cycled; its raw PRes is published",
+TEST_CASE("A CN without modules is booted and cycled, its raw PRes is published",
           "[powerlink][mn][raw]") {
   RawRig rig;
   REQUIRE(rig.run_until([&] { return rig.bus->state() == BusState::Operational; }));

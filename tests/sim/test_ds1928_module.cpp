@@ -175,7 +175,7 @@ TEST_CASE("the simulated bus configures modules at start and answers acyclic req
   CHECK(io[0].inputs_fresh);
 }
 
-TEST_CASE("function model 254: MTUs power up unset and take 3..5 only; identification after Rescan",
+TEST_CASE("function model 254: MTUs power up unset and take 3..5 only, identification after Rescan",
           "[sim][fm254]") {
   Ds1928Module m(FunctionModel::BusController, constant(100));
   uint32_t v = 99;
