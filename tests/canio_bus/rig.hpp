@@ -103,10 +103,15 @@ enum class BusMode { Default, Timed, Instant };
 struct Rig {
   // stepped: fake clock and synchronous nodes; else real clock and a node thread.
   using NodeTweak = std::function<void(sim::CanioNodeConfig&)>;
-  Rig(const DaemonConfig& config, bool stepped, bool assume_configured, BusMode mode)
-      : Rig(config, stepped, assume_configured, NodeTweak{}, mode) {}
+  // Wraps each of the driver's ports (the cycle port, then the SDO port: `sdo`) before CanioBus
+  // gets it, as the daemon puts a capture point (capture::CapturingCanPort) around both.
+  using PortWrap =
+      std::function<std::unique_ptr<canio::CanPort>(std::unique_ptr<canio::CanPort>, bool sdo)>;
+  Rig(const DaemonConfig& config, bool stepped, bool assume_configured, BusMode mode,
+      PortWrap wrap = {})
+      : Rig(config, stepped, assume_configured, NodeTweak{}, mode, std::move(wrap)) {}
   Rig(const DaemonConfig& config, bool stepped, bool assume_configured, NodeTweak tweak = {},
-      BusMode mode = BusMode::Default)
+      BusMode mode = BusMode::Default, PortWrap wrap = {})
       : config(config), stepped(stepped) {
     if (stepped) g_fake_ns.store(kT0);  // every rig starts at the same fake time
     canio::VirtualBusOptions bo;
@@ -146,6 +151,10 @@ struct Rig {
     }
     std::unique_ptr<canio::CanPort> sdo;
     if (!assume_configured) sdo = open_port("daemon-sdo");
+    if (wrap) {
+      cycle = wrap(std::move(cycle), false);
+      if (sdo) sdo = wrap(std::move(sdo), true);
+    }
     canio = std::make_unique<canio::CanioBus>(options, std::move(cycle), std::move(sdo));
     if (stepped) canio->set_clock(&fake_now);
     io.resize(config.axes.size());

@@ -5,12 +5,16 @@
 # binaries as they are. The kernel package (apt-get download), its modules and the initramfs are
 # cached in the build tree and made once.
 #
-# Usage: run-guest.sh [--prepare-only] [--timeout SECONDS] BUILD_DIR [GUEST_SCRIPT [ARGS...]]
+# Usage: run-guest.sh [--prepare-only] [--timeout SECONDS] [--host-check CMD] BUILD_DIR
+#                     [GUEST_SCRIPT [ARGS...]]
 #   GUEST_SCRIPT runs in the guest as root with can0, can1 (500 kbit/s, restart-ms 100) and vcan0 UP
 #   (tests/canio/qemu/guest-main.sh). Its exit status is this script's: 0 pass, 1 fail, 77 skipped
 #   (not root: only root may install the packages and share / with the guest as the files' owner).
 #   --timeout: QEMU is killed after this many seconds (default 240; the guest's own budget is
 #   2 minutes, a longer run is reported as a warning).
+#   --host-check: once the guest script passed, `CMD WORK_DIR` runs on the host and its exit
+#   status is this script's (0, 1, 77): it checks what the guest left in the run's work directory
+#   ($CANIO_WORK in the guest) with the host's tools at native speed (e.g. tshark).
 # Environment: CANIO_QEMU_CACHE (cache directory, default BUILD_DIR/canio-qemu),
 #   CANIO_QEMU_KEEP=1 (keep the run's work directory even on success),
 #   CANIO_QEMU_EXTRA / CANIO_QEMU_APPEND (more QEMU arguments / kernel command line).
@@ -18,14 +22,16 @@ set -u
 here=$(cd "$(dirname "$0")" && pwd)
 prepare_only=0
 qemu_timeout=240
+host_check=""
 while [ $# -gt 0 ]; do
   case "$1" in
     --prepare-only) prepare_only=1; shift ;;
     --timeout) qemu_timeout=${2:?seconds}; shift 2 ;;
+    --host-check) host_check=${2:?command}; shift 2 ;;
     *) break ;;
   esac
 done
-build=${1:?usage: run-guest.sh [--prepare-only] [--timeout S] BUILD_DIR [GUEST_SCRIPT [ARGS...]]}
+build=${1:?usage: run-guest.sh [--prepare-only] [--timeout S] [--host-check CMD] BUILD_DIR [GUEST_SCRIPT [ARGS...]]}
 shift
 build=$(cd "$build" && pwd) || exit 1
 if [ $prepare_only = 0 ]; then
@@ -264,5 +270,15 @@ if [ "$rc" != 0 ]; then
   fail "guest script $(basename "$script") exited $rc"
 fi
 cat "$work/guest.log"
+if [ -n "$host_check" ]; then
+  note "host check: $host_check"
+  "$host_check" "$work"
+  rc=$?
+  case $rc in
+    0) ;;
+    77) note "SKIP: the host check $(basename "$host_check") was skipped"; exit 77 ;;
+    *) fail "host check $(basename "$host_check") exited $rc" ;;
+  esac
+fi
 note "PASS $(basename "$script")"
 exit 0
