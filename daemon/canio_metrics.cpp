@@ -3,7 +3,7 @@
 #include <string>
 #include <vector>
 
-#include "canio/bit_budget.hpp"
+#include "can/bit_budget.hpp"
 #include "canio/can_state.hpp"
 
 namespace ds1928 {

@@ -2,7 +2,7 @@
 //  1. The bit budget: bits on the wire per cycle (nominal and with worst-case bit stuffing) for
 //     1, 2, 4, 8 X20DS1928 modules (2 input objects + 1 output object of 8 bytes each) at
 //     500 kbit/s and 1 Mbit/s, with and without SYNC, and the shortest cycle the bus allows.
-//     Pure arithmetic (src/canio/bit_budget.hpp): the physical limit any master is held to.
+//     Pure arithmetic (src/can/bit_budget.hpp): the physical limit any master is held to.
 //  2. What a master/node pair sustains per cycle over the virtual CAN bus (the test transport):
 //     the master sends SYNC + N output objects, the node answers with 2N input objects, the master
 //     waits for all of them; one cycle after another, as fast as they go. Two threads in one
@@ -24,7 +24,7 @@
 #include <thread>
 #include <vector>
 
-#include "canio/bit_budget.hpp"
+#include "can/bit_budget.hpp"
 #include "canio/virtual_bus.hpp"
 
 using namespace ds1928::canio;

@@ -19,7 +19,7 @@
 #include <string>
 
 #include "../../tests/canio_bus/rig.hpp"
-#include "canio/bit_budget.hpp"
+#include "can/bit_budget.hpp"
 #include "endat/command.hpp"
 #include "flatstream/channel.hpp"
 

@@ -11,7 +11,7 @@
 #include <cstdint>
 #include <optional>
 
-#include "canio/can_frame.hpp"
+#include "can/can_frame.hpp"
 #include "canio/can_state.hpp"
 #include "canio/errors.hpp"
 

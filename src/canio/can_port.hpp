@@ -16,7 +16,7 @@
 #include <string_view>
 #include <system_error>
 
-#include "canio/can_frame.hpp"
+#include "can/can_frame.hpp"
 #include "canio/can_state.hpp"
 #include "canio/errors.hpp"
 

@@ -29,15 +29,15 @@
 #include <string>
 #include <vector>
 
+#include "can/canio_options.hpp"
 #include "canio/can_port.hpp"
-#include "canio/canio_options.hpp"
 #include "canio/object_codec.hpp"
 #include "canio/sdo_client.hpp"
 #include "canio/sdo_expedited.hpp"
 #include "canio/sync_pairing.hpp"
 #include "core/bus.hpp"
-#include "x20ds1928/object_dictionary.hpp"
 #include "core/spsc_queue.hpp"
+#include "x20ds1928/object_dictionary.hpp"
 #include "x20ds1928/sdo_mapping.hpp"
 
 namespace ds1928::canio {

@@ -13,7 +13,7 @@
 #include <optional>
 #include <system_error>
 
-#include "canio/can_frame.hpp"
+#include "can/can_frame.hpp"
 #include "canio/errors.hpp"
 #include "canio/sdo_expedited.hpp"
 

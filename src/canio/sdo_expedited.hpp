@@ -14,7 +14,7 @@
 #include <cstdint>
 #include <system_error>
 
-#include "canio/can_frame.hpp"
+#include "can/can_frame.hpp"
 #include "canio/errors.hpp"
 #include "core/sdo_abort.hpp"
 

@@ -12,7 +12,7 @@
 #include <new>
 #include <string>
 
-#include "canio/bit_budget.hpp"
+#include "can/bit_budget.hpp"
 #include "canio/virtual_bus_ring.hpp"
 #include "core/clock.hpp"
 

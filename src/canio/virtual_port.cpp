@@ -5,7 +5,7 @@
 #include <climits>
 #include <cstring>
 
-#include "canio/bit_budget.hpp"
+#include "can/bit_budget.hpp"
 #include "canio/virtual_bus.hpp"
 #include "canio/virtual_bus_ring.hpp"
 #include "core/spsc_queue.hpp"

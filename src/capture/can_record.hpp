@@ -10,7 +10,7 @@
 #include <string>
 #include <string_view>
 
-#include "canio/can_frame.hpp"
+#include "can/can_frame.hpp"
 
 namespace ds1928::capture {
 

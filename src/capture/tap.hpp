@@ -1,8 +1,8 @@
 // A capture point on one link or port: counts every frame the bus driver sends or receives
 // through it and, while a capture is active, copies each into a fixed ring that the normal
-// thread drains. The thread that owns the link/port (the cycle thread, or the CAN-I/O SDO worker
-// for its port) is the single producer; the capture service on the normal thread is the single
-// consumer.
+// thread drains. The thread that owns the link/port (the cycle thread, which also steps CAN-I/O's
+// SDO transfers on their own port) is the single producer; the capture service on the normal
+// thread is the single consumer.
 //
 // Producer side: record() never allocates, locks or blocks; a full ring drops the frame and
 // counts it. The ring (ring_frames slots of max_frame bytes) is allocated once, in the

@@ -30,6 +30,7 @@
 #include "config/config_metrics.hpp"
 #include "config/config_powerlink.hpp"
 #include "config/config_reader.hpp"
+#include "x20ds1928/object_dictionary.hpp"
 
 namespace ds1928 {
 using namespace config_detail;
@@ -66,45 +67,62 @@ void parse_cycle(Section s, CycleConfig& c) {
   s.finish();
 }
 
+// axes[].module.<key> accepts what the register behind it accepts under `fm`: the object
+// dictionary's range (docs/registers.md), so the configuration and the module never disagree.
+template <class T>
+bool setting_integer(Section& s, std::string_view key, T& out, const RegisterInfo& reg,
+                     FunctionModel fm, std::string_view note = {}) {
+  const ValueRange accepted = reg.accepts(fm);
+  return s.integer(key, out, accepted.min, accepted.max, note);
+}
+
 void parse_module(Section s, ModuleSettings& m, FunctionModel fm) {
   s.boolean("endat_enable", m.endat_enable);
   s.boolean("position_signed", m.position_signed);
   s.boolean("fast_clock_off", m.fast_clock_off);
   s.boolean("sincos_unused", m.sincos_unused);
-  s.integer("prescaler", m.prescaler, 2, kU16,
-            "(the EnDat cycle must be at least twice the module cycle)");
-  if (s.integer("slframe_gen_id", m.slframe_gen_id, 0, kU8) && m.slframe_gen_id != 9 &&
-      m.slframe_gen_id != 14) {
+  setting_integer(s, "prescaler", m.prescaler, setting_register(Setting::Prescaler), fm,
+                  "(the EnDat cycle must be at least twice the module cycle)");
+  if (setting_integer(s, "slframe_gen_id", m.slframe_gen_id,
+                      setting_register(Setting::SlframeGenId), fm) &&
+      m.slframe_gen_id != 9 && m.slframe_gen_id != 14) {
     s.error("slframe_gen_id", std::to_string(m.slframe_gen_id) +
                                   " is not allowed; expected 9 (fastest response) or 14 "
                                   "(aligned to the X2X cycle)");
   }
-  s.integer("error_enable", m.error_enable, 0, kU8);
-  const bool have_min = s.integer("vss_min_mv", m.vss_min_mv, 0, 1500, "mV");
-  const bool have_max = s.integer("vss_max_mv", m.vss_max_mv, 0, 1500, "mV");
+  setting_integer(s, "error_enable", m.error_enable, setting_register(Setting::ErrorEnable), fm);
+  const bool have_min =
+      setting_integer(s, "vss_min_mv", m.vss_min_mv, setting_register(Setting::VssMin), fm, "mV");
+  const bool have_max =
+      setting_integer(s, "vss_max_mv", m.vss_max_mv, setting_register(Setting::VssMax), fm, "mV");
   if ((have_min || have_max) && m.vss_min_mv > m.vss_max_mv) {
     s.error(have_min ? "vss_min_mv" : "vss_max_mv", "vss_min_mv (" + std::to_string(m.vss_min_mv) +
                                                         ") must not exceed vss_max_mv (" +
                                                         std::to_string(m.vss_max_mv) + ")");
   }
-  s.integer("quit_time_us", m.quit_time_us, 0, 20000000, "µs");
+  setting_integer(s, "quit_time_us", m.quit_time_us, setting_register(Setting::QuitTime), fm, "µs");
+  // Function model 0: a control byte and at least one data byte; 254: Tx/RxByte1..5 (datasheet
+  // §11.3) and a sequence needs at least 3 bytes (§11.9.4.1.1, "theoretisch: 3 bis 27").
   const bool standard = fm == FunctionModel::Standard;
-  const int64_t max_mtu = standard ? 15 : 5;
-  // Function model 254: Tx/RxByte1..5 (datasheet §11.3) and a sequence needs at least 3 bytes
-  // (§11.9.4.1.1, "theoretisch: 3 bis 27").
-  const int64_t min_mtu = standard ? 1 : 3;
   const char* note = standard ? "for function model 0"
                               : "for function model 254 (datasheet §11.3: Tx/RxByte1..5; "
                                 "§11.9.4.1.1: an MTU holds at least 3 bytes)";
-  s.integer("output_mtu", m.output_mtu, min_mtu, max_mtu, note);
-  s.integer("input_mtu", m.input_mtu, min_mtu, max_mtu, note);
+  const RegisterInfo& output_mtu = setting_register(Setting::OutputMtu);
+  const RegisterInfo& input_mtu = setting_register(Setting::InputMtu);
+  setting_integer(s, "output_mtu", m.output_mtu, output_mtu, fm, note);
+  setting_integer(s, "input_mtu", m.input_mtu, input_mtu, fm, note);
   // The struct defaults fit function model 0; under 254 only 5 Tx/Rx bytes exist.
-  if (!standard && !s.has("output_mtu")) m.output_mtu = std::min<uint8_t>(m.output_mtu, 5);
-  if (!standard && !s.has("input_mtu")) m.input_mtu = std::min<uint8_t>(m.input_mtu, 5);
-  s.integer("flatstream_mode", m.flatstream_mode, 0, 3,
-            "(bit 0 multi-segment MTU, bit 1 large segments)");
-  s.integer("forward", m.forward, 1, 7);
-  s.integer("forward_delay_us", m.forward_delay_us, 0, kU16, "µs");
+  if (!s.has("output_mtu"))
+    m.output_mtu =
+        static_cast<uint8_t>(std::min<uint32_t>(m.output_mtu, output_mtu.accepts(fm).max));
+  if (!s.has("input_mtu"))
+    m.input_mtu = static_cast<uint8_t>(std::min<uint32_t>(m.input_mtu, input_mtu.accepts(fm).max));
+  setting_integer(s, "flatstream_mode", m.flatstream_mode,
+                  setting_register(Setting::FlatstreamMode), fm,
+                  "(bit 0 multi-segment MTU, bit 1 large segments)");
+  setting_integer(s, "forward", m.forward, setting_register(Setting::Forward), fm);
+  setting_integer(s, "forward_delay_us", m.forward_delay_us,
+                  setting_register(Setting::ForwardDelay), fm, "µs");
   s.finish();
 }
 

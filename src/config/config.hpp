@@ -12,7 +12,7 @@
 #include <string>
 #include <vector>
 
-#include "canio/canio_options.hpp"
+#include "can/canio_options.hpp"
 #include "control/socket_config.hpp"
 #include "core/axis_config.hpp"
 #include "core/cycle_config.hpp"

@@ -9,7 +9,7 @@
 #include <set>
 #include <sstream>
 
-#include "x20ds1928/object_dictionary.hpp"
+#include "config/config_sdo_objects.hpp"
 
 namespace ds1928::config_detail {
 namespace {
@@ -92,27 +92,7 @@ void parse_canio(Section s, CanioBusConfig& c) {
         {{"canopen_sdo", CanAcyclicTransport::CanopenSdo}, {"none", CanAcyclicTransport::None}});
     acyclic.integer("sdo_timeout_ms", c.sdo_timeout_ms, 1, 10000, "ms");
     acyclic.integer("sdo_interval_us", c.sdo_interval_us, 0, 10'000'000, "µs");
-    std::map<uint16_t, Loc> seen;
-    for (auto& item : acyclic.list("sdo_objects")) {
-      Section o(s.diag(), item.node, item.path, item.at);
-      uint16_t reg = 0;
-      uint16_t index = 0;
-      uint8_t subindex = 0;
-      const bool ok = o.integer("register", reg, 1, kU16) & o.integer("index", index, 1, kU16) &
-                      o.integer("subindex", subindex, 0, kU8);
-      if (ok && !register_size(reg)) {
-        o.error("register",
-                std::to_string(reg) + " is not an X20DS1928 register (docs/registers.md)");
-      } else if (ok) {
-        if (const auto [it, fresh] = seen.emplace(reg, o.value_at("register")); !fresh) {
-          o.error("register",
-                  "register " + std::to_string(reg) + " is already mapped at " + where(it->second));
-        } else {
-          c.sdo_overrides[reg] = {index, subindex};
-        }
-      }
-      o.finish();
-    }
+    parse_sdo_objects(acyclic, "sdo_objects", c.sdo_overrides);
     acyclic.finish();
   }
   s.text("virtual_bus", c.virtual_bus, 200);
@@ -252,7 +232,7 @@ void check_canio(const BusDocument& d) {
             (k.sync_enabled ? " + SYNC" : "") + ") take " +
             std::to_string((timing.cyclic_ns + 999) / 1000) + " µs with worst-case stuffing at " +
             std::to_string(k.bitrate) + " bit/s" +
-            (timing.acyclic_ns > 0 ? ", the SDO worker's share " +
+            (timing.acyclic_ns > 0 ? ", the SDO transfers' share " +
                                          std::to_string((timing.acyclic_ns + 999) / 1000) + " µs"
                                    : std::string()) +
             "; use period_us ≥ " + std::to_string(need_us) +

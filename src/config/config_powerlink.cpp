@@ -10,6 +10,7 @@
 #include <string>
 #include <tuple>
 
+#include "config/config_sdo_objects.hpp"
 #include "powerlink/concise_dcf.hpp"
 #include "powerlink/cycle_budget.hpp"
 
@@ -345,31 +346,7 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
   s.integer("sdo_timeout_ms", p.sdo_timeout_ms, 1, 60000, "ms");
   s.integer("nettime_offset_us", p.nettime_offset_us, std::numeric_limits<int64_t>::min(),
             std::numeric_limits<int64_t>::max());
-  std::map<uint16_t, Loc> overridden;
-  for (auto& item : s.list("sdo_overrides")) {
-    Section o(s.diag(), item.node, item.path, item.at);
-    uint16_t reg = 0;
-    uint16_t index = 0;
-    uint8_t subindex = 0;
-    for (const char* required : {"register", "index"}) {
-      if (!o.has(required)) {
-        s.diag().error(item.at, o.child(required), "missing required key");
-      }
-    }
-    const bool have_reg = o.integer("register", reg, 0, kU16, "(X20DS1928 register number)");
-    const bool have_index = o.integer("index", index, 1, kU16);
-    o.integer("subindex", subindex, 0, kU8);
-    if (have_reg && have_index) {
-      if (const auto prev = overridden.find(reg); prev != overridden.end()) {
-        o.error("register", "register " + std::to_string(reg) + " is overridden twice (also at " +
-                                where(prev->second) + ")");
-      } else {
-        overridden.emplace(reg, o.value_at("register"));
-        p.sdo_overrides[reg] = {index, subindex};
-      }
-    }
-    o.finish();
-  }
+  parse_sdo_objects(s, "sdo_overrides", p.sdo_overrides);
   s.finish();
 }
 

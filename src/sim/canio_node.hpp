@@ -20,8 +20,8 @@
 #include <utility>
 #include <vector>
 
+#include "can/canio_options.hpp"
 #include "canio/can_port.hpp"
-#include "canio/canio_options.hpp"
 #include "sim/ds1928_module.hpp"
 #include "sim/sim_options.hpp"
 #include "x20ds1928/sdo_mapping.hpp"

@@ -328,23 +328,8 @@ void PowerlinkCn::note_soc_timing(const pl::Soc& soc, int64_t now_ns) noexcept {
   have_soc_ = true;
   last_soc_ns_ = now_ns;
   soc_relative_us_ = soc.relative_time_us;
-  // The X20DS1928's NetTime is exact in the MN's time base (datasheet §8: hardware takes the SoC).
-  // Here a SoC can reach this process milliseconds late (a delayed softirq, a descheduled
-  // thread); anchoring NetTime at each arrival would shift every stamp by that delay and make
-  // stamps and positions disagree, a fault the module does not have. So the anchor is the
-  // earliest arrival seen: the offset follows a sample only downwards, creeps up by 1 µs per SoC
-  // (clock drift between hosts is far below that), and takes a jump of 100 ms or more at once:
-  // the MN set its NetTime, or it sends no RelativeTime that advances (then NetTime is only
-  // roughly right, as before). Delays up to 100 ms are ridden through.
-  const int64_t offset = now_ns - static_cast<int64_t>(soc.relative_time_us) * 1000;
-  constexpr int64_t kCreepNs = 1000;
-  constexpr int64_t kJumpNs = 100'000'000;
-  if (!have_net_offset_ || offset < net_offset_ns_ || offset - net_offset_ns_ >= kJumpNs) {
-    net_offset_ns_ = offset;
-    have_net_offset_ = true;
-  } else {
-    net_offset_ns_ = std::min(net_offset_ns_ + kCreepNs, offset);
-  }
+  // NetTime from the earliest SoC arrival, not the latest (sim/nettime_anchor.hpp).
+  net_anchor_.sample(now_ns - static_cast<int64_t>(soc.relative_time_us) * 1000);
 }
 
 void PowerlinkCn::soc_activate(const pl::Soc& soc, int64_t now_ns) noexcept {
@@ -640,8 +625,9 @@ void PowerlinkCn::queue_error(uint16_t type, uint16_t code, const std::array<uin
 // ---- Time and modules ---------------------------------------------------------------------
 
 uint64_t PowerlinkCn::net_time_us_at(int64_t now_ns) const noexcept {
-  if (!have_net_offset_) return static_cast<uint64_t>(now_ns / 1000);
-  return pl::net_time_us(static_cast<uint64_t>((now_ns - net_offset_ns_) / 1000),
+  const std::optional<int64_t> offset = net_anchor_.offset();
+  if (!offset) return static_cast<uint64_t>(now_ns / 1000);
+  return pl::net_time_us(static_cast<uint64_t>((now_ns - *offset) / 1000),
                          config_.nettime_offset_us);
 }
 

@@ -35,6 +35,7 @@
 #include "powerlink/sdo.hpp"
 #include "sim/cn_object_dictionary.hpp"
 #include "sim/ds1928_module.hpp"
+#include "sim/nettime_anchor.hpp"
 #include "sim/sim_options.hpp"
 #include "x20ds1928/sdo_mapping.hpp"
 
@@ -225,10 +226,8 @@ class PowerlinkCn {
   int64_t period_ns_ = 0;
   uint64_t soc_relative_us_ = 0;
   bool have_soc_ = false;
-  // The module's NetTime: CLOCK_MONOTONIC minus this offset (RelativeTime of the SoC against its
-  // arrival, filtered by its minimum; see note_soc_timing).
-  int64_t net_offset_ns_ = 0;
-  bool have_net_offset_ = false;
+  // The module's NetTime: CLOCK_MONOTONIC minus this anchor's offset.
+  NetTimeAnchor net_anchor_;
   // Loss of PReq: cycles since the last PReq vs. the learned multiplex interval.
   uint32_t cycles_since_preq_ = 0;
   uint32_t preq_interval_ = 0;  // 0 = not polled yet

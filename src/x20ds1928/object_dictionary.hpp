@@ -218,6 +218,13 @@ inline constexpr std::array<RegisterInfo, 37> kObjectDictionary{{
   return static_cast<std::size_t>(&r - kObjectDictionary.data());
 }
 
+// The register a module setting is written to; a setting no register carries does not compile.
+// The configuration takes the values it accepts for the setting from here (accepts()).
+[[nodiscard]] consteval const RegisterInfo& setting_register(Setting s) {
+  for (const RegisterInfo& r : kObjectDictionary)
+    if (!r.view && r.setting == s) return r;
+  throw "no register carries this setting";
+}
 // Compile-time lookup by the table's name; an unknown name does not compile.
 [[nodiscard]] consteval const RegisterInfo& od_entry(std::string_view name) {
   for (const RegisterInfo& r : kObjectDictionary)

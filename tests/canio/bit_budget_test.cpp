@@ -1,6 +1,6 @@
 // Bits on the wire: the frame formula checked against a bit-level model of a CAN 2.0A frame
 // (stuffing counted on real bit patterns), and the cycle budget's arithmetic.
-#include "canio/bit_budget.hpp"
+#include "can/bit_budget.hpp"
 
 #include <catch2/catch.hpp>
 #include <random>

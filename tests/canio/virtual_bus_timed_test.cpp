@@ -10,7 +10,7 @@
 #include <string>
 #include <vector>
 
-#include "canio/bit_budget.hpp"
+#include "can/bit_budget.hpp"
 #include "canio/virtual_bus.hpp"
 #include "support/alloc_counter.hpp"
 #include "vbus_test_support.hpp"

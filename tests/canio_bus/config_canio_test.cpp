@@ -70,7 +70,7 @@ TEST_CASE("canio: the bus-load budget includes the SDO share and keeps a margin"
   CHECK_THAT(e, Catch::Contains("cycle.period_us") &&
                     Catch::Contains("1500 µs loads the CAN-I/O bus to 72 %") &&
                     Catch::Contains("above canio.max_bus_load 70 %") &&
-                    Catch::Contains("the SDO worker's share") &&
+                    Catch::Contains("the SDO transfers' share") &&
                     Catch::Contains("use period_us ≥ 1555"));
   CHECK(errors_of(canio_yaml("", "1555")).empty());
   CHECK_FALSE(errors_of(canio_yaml("", "1554")).empty());

@@ -11,6 +11,7 @@
 #include <string>
 
 #include "config/config_loader.hpp"
+#include "x20ds1928/object_dictionary.hpp"
 
 namespace {
 
@@ -34,7 +35,7 @@ const Expected kBadFiles[] = {
     {"wrong_type.yaml", 3, 16, "cycle.rt_priority",
      "expected an integer (decimal or 0x hex) in 1..99 (SCHED_FIFO), got 'high'"},
     {"output_mtu_fm0.yaml", 6, 19, "axes[0].module.output_mtu",
-     "16 is out of range 1..15 for function model 0"},
+     "16 is out of range 2..15 for function model 0"},
     {"input_mtu_fm254.yaml", 8, 18, "axes[0].module.input_mtu",
      "6 is out of range 3..5 for function model 254"},
     {"forward.yaml", 3, 16, "axes[0].module.forward", "0 is out of range 1..7"},
@@ -199,7 +200,7 @@ TEST_CASE("all errors of a file are reported, in document order", "[config]") {
   const std::vector<std::tuple<int, int, std::string, std::string>> expected = {
       {3, 14, "cycle.period_us", "99 is out of range 100..100000"},
       {4, 3, "cycle.rt_prio", "did you mean 'rt_priority'?"},
-      {9, 19, "axes[0].module.output_mtu", "16 is out of range 1..15 for function model 0"},
+      {9, 19, "axes[0].module.output_mtu", "16 is out of range 2..15 for function model 0"},
       {10, 16, "axes[0].module.forward", "9 is out of range 1..7"},
       {11, 11, "axes[1].name", "axis name 'a' is already used by axes[0]"},
       {13, 9, "shm.mode", "expected an octal file mode"},
@@ -379,9 +380,13 @@ TEST_CASE("cross-field and list rules", "[config]") {
     const auto it = r.config().powerlink.sdo_overrides.find(4097);
     REQUIRE(it != r.config().powerlink.sdo_overrides.end());
     CHECK(it->second == std::pair<uint16_t, uint8_t>{0x2001, 5});
-    CHECK_THAT(one_error("powerlink: {sdo_overrides: [{register: 1, index: 2}, "
-                         "{register: 1, index: 3}]}"),
-               Catch::Contains("register 1 is overridden twice"));
+    CHECK_THAT(one_error("powerlink: {sdo_overrides: [{register: 4097, index: 2}, "
+                         "{register: 4097, index: 3}]}"),
+               Catch::Contains("register 4097 is mapped twice (also at line 1)"));
+    CHECK_THAT(one_error("powerlink: {sdo_overrides: [{register: 1, index: 2}]}"),
+               Catch::Contains("1 is not an X20DS1928 register"));
+    CHECK_THAT(one_error("powerlink: {sdo_overrides: [{register: 4097}]}"),
+               Catch::Contains("index: missing required key"));
   }
   SECTION("unknown keys without a close match list the allowed keys") {
     CHECK_THAT(one_error("shm: {colour: blue}"),
@@ -659,4 +664,57 @@ TEST_CASE("capture limits: defaults, values, a ring that is not a power of two",
   REQUIRE(bad.errors().size() == 1);
   CHECK(bad.errors()[0].key == "capture.ring_frames");
   CHECK_THAT(bad.errors()[0].message, Catch::Contains("power of two"));
+}
+
+// Every axes[].module range is the object dictionary's (docs/registers.md): one value past each end
+// of what the register accepts is refused, each end itself is taken, in both function models.
+TEST_CASE("module settings accept exactly the object dictionary's range", "[config]") {
+  struct Key {
+    const char* key;
+    Setting setting;
+  };
+  const Key keys[] = {{"prescaler", Setting::Prescaler},
+                      {"vss_min_mv", Setting::VssMin},
+                      {"vss_max_mv", Setting::VssMax},
+                      {"quit_time_us", Setting::QuitTime},
+                      {"output_mtu", Setting::OutputMtu},
+                      {"input_mtu", Setting::InputMtu},
+                      {"flatstream_mode", Setting::FlatstreamMode},
+                      {"forward", Setting::Forward},
+                      {"forward_delay_us", Setting::ForwardDelay},
+                      {"error_enable", Setting::ErrorEnable}};
+  for (const FunctionModel fm : {FunctionModel::Standard, FunctionModel::BusController}) {
+    const RegisterInfo* reg = nullptr;
+    for (const Key& k : keys) {
+      for (const RegisterInfo& r : object_dictionary())
+        if (!r.view && r.setting == k.setting) reg = &r;
+      REQUIRE(reg != nullptr);
+      const ValueRange accepted = reg->accepts(fm);
+      const std::string head =
+          std::string("bus: simulated\naxes:\n  - name: x\n    function_model: ") +
+          (fm == FunctionModel::Standard ? "0" : "254") + "\n    module: {";
+      // vss_min must not exceed vss_max: test each against the other's widest value.
+      const std::string partner = k.setting == Setting::VssMin   ? ", vss_max_mv: 1500"
+                                  : k.setting == Setting::VssMax ? ", vss_min_mv: 0"
+                                                                 : "";
+      auto with = [&](int64_t v) {
+        return head + k.key + ": " + std::to_string(v) + partner + "}\n";
+      };
+      INFO(k.key << " under function model " << static_cast<int>(fm));
+      for (const int64_t v : {int64_t{accepted.min}, int64_t{accepted.max}}) {
+        const ConfigResult r = load_config_from_string(with(v));
+        INFO(r.error_report());
+        CHECK(r.ok());
+      }
+      const std::string range = std::to_string(accepted.min) + ".." + std::to_string(accepted.max);
+      if (accepted.min > 0) {
+        const ConfigResult r = load_config_from_string(with(int64_t{accepted.min} - 1));
+        REQUIRE_FALSE(r.ok());
+        CHECK_THAT(r.error_report(), Catch::Contains("is out of range " + range));
+      }
+      const ConfigResult r = load_config_from_string(with(int64_t{accepted.max} + 1));
+      REQUIRE_FALSE(r.ok());
+      CHECK_THAT(r.error_report(), Catch::Contains("is out of range " + range));
+    }
+  }
 }

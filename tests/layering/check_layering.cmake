@@ -13,6 +13,7 @@ cmake_minimum_required(VERSION 3.25)
 set(LAYER_core 0)
 set(LAYER_ds1928 0)      # include/ds1928: shared-memory layout, C-compatible
 set(LAYER_x20ds1928 1)   # the module's object dictionary (the one register table)
+set(LAYER_can 1)         # CAN wire facts: frame, bit time, the CAN-I/O bus options and timing
 set(LAYER_endat 1)       # codecs
 set(LAYER_flatstream 1)
 set(LAYER_powerlink 2)   # links and bus drivers
@@ -30,9 +31,11 @@ set(LAYER_tools 8)
 # register facts CAN-I/O took from powerlink/ live in x20ds1928/).
 set(SIDEWAYS "")
 
-# Includes of a lower layer restricted to named headers, ONLY_<from>__<to> → allowed headers: the
-# configuration reads the CAN-I/O driver's options, nothing of its internals.
-set(ONLY_config__canio "canio/canio_options.hpp")
+# Lower folders a folder must not include although the layers would allow it, NEVER_<from> →
+# folders, with the reason in NEVER_<from>_WHY: the configuration takes the CAN-I/O bus options
+# from can/ and never sees the driver, which only the daemon builds.
+set(NEVER_config "canio")
+set(NEVER_config_WHY "the CAN-I/O bus options live in can/; the driver is the daemon's to build")
 
 # The folder a file belongs to; empty when it is none of the layered ones.
 function(folder_of root file out)
@@ -82,8 +85,8 @@ function(check_tree root out)
         list(APPEND found "${rel}: #include \"${header}\": ${from} (layer ${LAYER_${from}}) must not include ${to} (layer ${LAYER_${to}})")
       elseif(LAYER_${to} EQUAL LAYER_${from} AND NOT "${from}>${to}" IN_LIST SIDEWAYS)
         list(APPEND found "${rel}: #include \"${header}\": ${from} and ${to} share layer ${LAYER_${to}}; a sideways include needs its reason in SIDEWAYS")
-      elseif(DEFINED ONLY_${from}__${to} AND NOT header IN_LIST ONLY_${from}__${to})
-        list(APPEND found "${rel}: #include \"${header}\": ${from} may include only ${ONLY_${from}__${to}} of ${to}")
+      elseif(to IN_LIST NEVER_${from})
+        list(APPEND found "${rel}: #include \"${header}\": ${from} must not include ${to} (${NEVER_${from}_WHY})")
       endif()
     endforeach()
   endforeach()
@@ -96,12 +99,12 @@ if(SELF_TEST)
   set(t "${WORK_DIR}/layering-self-test")
   file(REMOVE_RECURSE "${t}")
   file(WRITE "${t}/src/core/cycle_engine.hpp" "#include \"core/cycle_config.hpp\"\n#include \"config/config.hpp\"\n")
-  file(WRITE "${t}/src/config/config.hpp" "#include \"core/cycle_config.hpp\"\n#include \"canio/canio_bus.hpp\"\n#include \"canio/canio_options.hpp\"\n")
+  file(WRITE "${t}/src/config/config.hpp" "#include \"core/cycle_config.hpp\"\n#include \"canio/canio_bus.hpp\"\n#include \"can/canio_options.hpp\"\n")
   file(WRITE "${t}/src/shm/publisher.hpp" "#  include \"control/socket_config.hpp\"\n#include <vector>\n")
   check_tree("${t}" found)
   file(REMOVE_RECURSE "${t}")
   set(expected
-      "src/config/config.hpp: #include \"canio/canio_bus.hpp\": config may include only canio/canio_options.hpp of canio"
+      "src/config/config.hpp: #include \"canio/canio_bus.hpp\": config must not include canio (the CAN-I/O bus options live in can/; the driver is the daemon's to build)"
       "src/core/cycle_engine.hpp: #include \"config/config.hpp\": core (layer 0) must not include config (layer 6)"
       "src/shm/publisher.hpp: #include \"control/socket_config.hpp\": shm and control share layer 4; a sideways include needs its reason in SIDEWAYS")
   if(NOT found STREQUAL expected)

@@ -66,7 +66,7 @@ struct CanioBusConfig {
   std::vector<CanioAxisConfig> axes;  // one per configured axis (missing entries: defaults)
   CanAcyclicTransport acyclic = CanAcyclicTransport::CanopenSdo;
   uint32_t sdo_timeout_ms = 100;
-  // The SDO worker starts at most one transfer this often (and at most one a cycle): the acyclic
+  // The bus loop starts at most one SDO transfer this often (and at most one a cycle): the acyclic
   // share of the bus-load budget.
   uint32_t sdo_interval_us = 5000;
   // Register → (index, subindex) overrides of the default SDO scheme (same as POWERLINK's,
@@ -87,7 +87,7 @@ struct CanioTiming {
   uint32_t derived_window_us = 0;  // wire + reaction, rounded up to µs
   uint32_t min_window_us = 0;      // wire time rounded up: a shorter window can never be whole
   int64_t cyclic_ns = 0;           // the cycle's own frames (SYNC + objects), worst case
-  int64_t acyclic_ns = 0;          // the SDO worker's share a cycle: one transfer (2 frames) per
+  int64_t acyclic_ns = 0;          // the SDO transfers' share a cycle: one transfer (2 frames) per
                                    // max(period, sdo_interval_us), averaged over the period
   double load = 0.0;               // (cyclic + acyclic) / period
 };

@@ -1,10 +1,10 @@
 // The facts derived from the `canio` options that the configuration checks and the driver use
 // alike: an axis' identifiers and the cycle's time on the wire (docs/canio.md).
-#include "canio/canio_options.hpp"
+#include "can/canio_options.hpp"
 
 #include <algorithm>
 
-#include "canio/bit_budget.hpp"
+#include "can/bit_budget.hpp"
 
 namespace ds1928 {
 
@@ -51,7 +51,7 @@ CanioTiming canio_timing(const CanioBusConfig& canio, std::size_t modules, uint3
   t.min_window_us = static_cast<uint32_t>((t.wire_ns + 999) / 1000);
   t.derived_window_us = static_cast<uint32_t>((t.wire_ns + t.reaction_ns + 999) / 1000);
   t.window_us = canio.response_timeout_us != 0 ? canio.response_timeout_us : t.derived_window_us;
-  // The SDO worker starts at most one transfer per max(period, sdo_interval_us) and the node
+  // The bus loop starts at most one SDO transfer per max(period, sdo_interval_us) and the node
   // answers it: two 8-byte frames, averaged over the cycle.
   if (canio.acyclic == CanAcyclicTransport::CanopenSdo && period_us > 0) {
     const int64_t interval_us = std::max<int64_t>(period_us, canio.sdo_interval_us);

@@ -14,7 +14,7 @@
 
 #include <cstdint>
 
-#include "canio/can_frame.hpp"
+#include "can/can_frame.hpp"
 
 namespace ds1928::canio {
 

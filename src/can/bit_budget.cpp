@@ -1,4 +1,4 @@
-#include "canio/bit_budget.hpp"
+#include "can/bit_budget.hpp"
 
 namespace ds1928::canio {
 namespace {
