@@ -149,6 +149,21 @@ class DaemonProcess {
     return s.str();
   }
 
+  // How many times `needle` is in the log once it reaches `expected` or the bound (wait.hpp)
+  // runs out: the daemon's logger is asynchronous, so a line for what a client just saw happen
+  // (its connection closed) is written a moment later, by the logger's own thread.
+  [[nodiscard]] std::size_t log_count(const std::string& needle, std::size_t expected) const {
+    std::size_t count = 0;
+    (void)ds1928::test::wait_until([&] {
+      const std::string text = log();
+      count = 0;
+      for (auto p = text.find(needle); p != std::string::npos; p = text.find(needle, p + 1))
+        ++count;
+      return count >= expected;
+    });
+    return count;
+  }
+
   [[nodiscard]] uint64_t last_cycle() const { return ds1928_shm_last_cycle(&reader_.header()); }
   [[nodiscard]] const ShmReader& shm() const { return reader_; }
   [[nodiscard]] const std::string& socket_path() const { return socket_path_; }
