@@ -81,62 +81,107 @@ struct ChannelState {
   ReceiverState receiving;
 };
 
-// The daemon's side.
-class MasterChannel {
+// One role's end of the channel: a sender for the direction it writes and a receiver for the
+// direction it reads, both stepped once per bus cycle by the sequence register the peer sent.
+// The roles differ only in which frame they send and which of their configuration's fields feed
+// the sender and the receiver; `Role` names them (MasterRole, ModuleRole below).
+template <class Role>
+class Channel {
  public:
-  explicit MasterChannel(const MasterConfig& config) noexcept;
+  using Config = typename Role::Config;
+  using Received = typename Role::Received;
+  using Sent = typename Role::Sent;
 
-  // One bus cycle: what the module sent (InputSequence + RxBytes) → what to send.
-  [[nodiscard]] OutputFrame step(const InputFrame& received, uint64_t now_us) noexcept;
+  explicit Channel(const Config& config) noexcept
+      : config_(config), sender_(Role::sender(config)), receiver_(Role::receiver(config)) {}
 
-  // Queue an output message (EnDat command). Errc::message_too_long / Errc::queue_full.
-  [[nodiscard]] std::error_code submit(std::span<const uint8_t> message, uint32_t tag) noexcept;
-  // Complete input messages, in order.
-  [[nodiscard]] std::optional<Message> take_received() noexcept;
+  // One bus cycle: what the peer sent (its sequence register + MTU bytes) → what to send.
+  [[nodiscard]] Sent step(const Received& received, uint64_t now_us) noexcept {
+    const auto in = SequenceRegister::decode(Role::sequence(received));
+    receiver_.step(in.counter, in.sync_bit, Role::bytes(received), now_us);
+    sender_.step(in.ack, in.sync_ack, now_us);
+    const SequenceRegister out{sender_.counter(), sender_.sync_bit(), receiver_.ack(),
+                               receiver_.sync_ack()};
+    return {out.encode(), sender_.mtu()};
+  }
+
+  // Queue a message for the peer (an EnDat command or reply). Errc::message_too_long /
+  // Errc::queue_full.
+  [[nodiscard]] std::error_code submit(std::span<const uint8_t> message, uint32_t tag) noexcept {
+    return sender_.submit(message, tag);
+  }
+  // Complete messages from the peer, in order.
+  [[nodiscard]] std::optional<Message> take_received() noexcept {
+    std::optional<Message> out{std::in_place};
+    if (!receiver_.take(*out)) out.reset();
+    return out;
+  }
   [[nodiscard]] bool take_received(Message& out) noexcept { return receiver_.take(out); }
   // One outcome per accepted submit, in submit order.
-  [[nodiscard]] std::optional<SendOutcome> take_outcome() noexcept;
+  [[nodiscard]] std::optional<SendOutcome> take_outcome() noexcept {
+    SendOutcome o;
+    if (!sender_.take_outcome(o)) return std::nullopt;
+    return o;
+  }
 
-  [[nodiscard]] Counters counters() const noexcept;
-  [[nodiscard]] ChannelState state() const noexcept;
-  [[nodiscard]] const MasterConfig& config() const noexcept { return config_; }
-  // Both directions start again; queued and in-flight output messages are reported failed.
-  void reset() noexcept;
-  void configure(const MasterConfig& config) noexcept;
+  [[nodiscard]] Counters counters() const noexcept {
+    return {sender_.counters(), receiver_.counters()};
+  }
+  [[nodiscard]] ChannelState state() const noexcept { return {sender_.state(), receiver_.state()}; }
+  [[nodiscard]] const Config& config() const noexcept { return config_; }
+
+  // Both directions start again; queued and in-flight messages are reported failed.
+  void reset() noexcept {
+    sender_.reset();
+    receiver_.reset();
+  }
+  // New MTUs, layout, Forward, ForwardDelay take effect here: both directions resynchronise.
+  void configure(const Config& config) noexcept {
+    config_ = config;
+    sender_.configure(Role::sender(config));
+    receiver_.configure(Role::receiver(config));
+  }
 
  private:
-  MasterConfig config_;
+  Config config_;
   SequenceSender sender_;
   SequenceReceiver receiver_;
 };
 
-// The module's side (used by the simulator).
-class ModuleChannel {
- public:
-  explicit ModuleChannel(const ModuleConfig& config) noexcept;
-
-  // One bus cycle: what the CPU sent (OutputSequence + TxBytes) → what to send.
-  [[nodiscard]] InputFrame step(const OutputFrame& received, uint64_t now_us) noexcept;
-
-  // Queue an input message (EnDat reply).
-  [[nodiscard]] std::error_code submit(std::span<const uint8_t> message, uint32_t tag) noexcept;
-  // Complete output messages (EnDat commands), in order.
-  [[nodiscard]] std::optional<Message> take_received() noexcept;
-  [[nodiscard]] bool take_received(Message& out) noexcept { return receiver_.take(out); }
-  [[nodiscard]] std::optional<SendOutcome> take_outcome() noexcept;
-
-  [[nodiscard]] Counters counters() const noexcept;
-  [[nodiscard]] ChannelState state() const noexcept;
-  [[nodiscard]] const ModuleConfig& config() const noexcept { return config_; }
-  void reset() noexcept;
-  // Register writes (MTUs, FlatstreamMode, Forward, ForwardDelay) take effect here: both
-  // directions resynchronise.
-  void configure(const ModuleConfig& config) noexcept;
-
- private:
-  ModuleConfig config_;
-  SequenceSender sender_;
-  SequenceReceiver receiver_;
+// The daemon ("CPU"): sends OutputSequence + TxBytes, receives InputSequence + RxBytes.
+struct MasterRole {
+  using Config = MasterConfig;
+  using Received = InputFrame;
+  using Sent = OutputFrame;
+  [[nodiscard]] static SenderConfig sender(const MasterConfig& c) noexcept {
+    return {c.output_mtu, c.output_layout, c.output_forward, 0, c.timeout_cycles};
+  }
+  [[nodiscard]] static ReceiverConfig receiver(const MasterConfig& c) noexcept {
+    return {c.input_mtu, 0};
+  }
+  [[nodiscard]] static uint8_t sequence(const InputFrame& f) noexcept { return f.input_sequence; }
+  [[nodiscard]] static const MtuBytes& bytes(const InputFrame& f) noexcept { return f.rx; }
 };
+
+// The module (the simulator): sends InputSequence + RxBytes, receives OutputSequence + TxBytes.
+struct ModuleRole {
+  using Config = ModuleConfig;
+  using Received = OutputFrame;
+  using Sent = InputFrame;
+  [[nodiscard]] static SenderConfig sender(const ModuleConfig& c) noexcept {
+    return {c.input_mtu, static_cast<Layout>(c.flatstream_mode & 0x03), c.forward,
+            c.forward_delay_us, c.timeout_cycles};
+  }
+  // ForwardDelay delays the module's acknowledgement in the output direction (datasheet
+  // §11.9.5.2.2).
+  [[nodiscard]] static ReceiverConfig receiver(const ModuleConfig& c) noexcept {
+    return {c.output_mtu, c.forward_delay_us};
+  }
+  [[nodiscard]] static uint8_t sequence(const OutputFrame& f) noexcept { return f.output_sequence; }
+  [[nodiscard]] static const MtuBytes& bytes(const OutputFrame& f) noexcept { return f.tx; }
+};
+
+using MasterChannel = Channel<MasterRole>;  // the daemon's side
+using ModuleChannel = Channel<ModuleRole>;  // the module's side (used by the simulator)
 
 }  // namespace ds1928::flatstream
