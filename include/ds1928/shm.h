@@ -18,10 +18,19 @@
  *    registers in a "factor slot" so that it is woken only on the cycles it asked for, and the
  *    daemon makes the wake-up system call only when someone is registered.
  *
- * Requires Linux and GCC or Clang; in strict ISO C mode (-std=c11) define _DEFAULT_SOURCE
- * before including system headers (syscall() is an extension). */
+ * Requires Linux and GCC or Clang; C99, C11, C17 (also strict ISO modes such as -std=c99
+ * -pedantic) and C++. The functions below need POSIX and syscall(): when the translation unit
+ * chose no feature-test macro, this header selects _DEFAULT_SOURCE (glibc's default outside
+ * strict ISO mode). In a strict ISO build include this header before any system header, or
+ * define a feature-test macro yourself; otherwise it stops with an #error saying so. */
 #ifndef DS1928_SHM_H
 #define DS1928_SHM_H
+
+#if !defined(__cplusplus) && !defined(_GNU_SOURCE) && !defined(_DEFAULT_SOURCE) &&   \
+    !defined(_POSIX_C_SOURCE) && !defined(_XOPEN_SOURCE) && !defined(_BSD_SOURCE) && \
+    !defined(_SVID_SOURCE) && !defined(_POSIX_SOURCE)
+#define _DEFAULT_SOURCE 1
+#endif
 
 #include <errno.h>
 #include <fcntl.h>
@@ -35,6 +44,12 @@
 #include <sys/syscall.h>
 #include <time.h>
 #include <unistd.h>
+
+#if defined(__GLIBC__) && (!defined(__USE_POSIX199309) || !defined(__USE_MISC))
+#error "ds1928/shm.h: clock_gettime() and syscall() are not declared: a system header was \
+included in strict ISO C mode before this one. Include ds1928/shm.h first or define \
+_DEFAULT_SOURCE."
+#endif
 
 #ifdef __cplusplus
 extern "C" {
@@ -149,11 +164,19 @@ static_assert(sizeof(struct ds1928_axis_data) == 8 * DS1928_AXIS_DATA_WORDS, "ax
 static_assert(sizeof(struct ds1928_shm_axis) == 128, "axis record layout");
 static_assert(sizeof(struct ds1928_shm_header) == 128, "header layout");
 static_assert(sizeof(struct ds1928_shm_wait_area) == 256, "wait area layout");
-#else
+#elif defined(__STDC_VERSION__) && __STDC_VERSION__ >= 201112L
 _Static_assert(sizeof(struct ds1928_axis_data) == 8 * DS1928_AXIS_DATA_WORDS, "axis data layout");
 _Static_assert(sizeof(struct ds1928_shm_axis) == 128, "axis record layout");
 _Static_assert(sizeof(struct ds1928_shm_header) == 128, "header layout");
 _Static_assert(sizeof(struct ds1928_shm_wait_area) == 256, "wait area layout");
+#else /* C99: a negative array size stops the compilation instead */
+typedef char ds1928_shm_layout_check[(sizeof(struct ds1928_axis_data) ==
+                                      8 * DS1928_AXIS_DATA_WORDS) &&
+                                             sizeof(struct ds1928_shm_axis) == 128 &&
+                                             sizeof(struct ds1928_shm_header) == 128 &&
+                                             sizeof(struct ds1928_shm_wait_area) == 256
+                                         ? 1
+                                         : -1];
 #endif
 
 /* Results of the functions below besides 0 and -errno. */
