@@ -28,7 +28,7 @@
 
 MODULE_AUTHOR("ds1928d");
 MODULE_DESCRIPTION("ds1928d shared-memory positions (X20DS1928 EnDat) as HAL pins");
-MODULE_LICENSE("GPL");
+MODULE_LICENSE("Proprietary"); /* packaging/debian/copyright */
 
 #define MAX_INSTANCES 8
 #define MAX_AXES 64

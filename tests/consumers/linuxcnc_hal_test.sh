@@ -1,0 +1,182 @@
+#!/bin/bash
+# The HAL component `ds1928` in the real LinuxCNC (uspace, "POSIX non-realtime" here): the daemon
+# on the simulated node, halcmd loads the component and a 1 ms servo thread, LinuxCNC's own
+# `sampler` records the pins in the servo thread (one consistent snapshot per period).
+#
+#   1. pins = `ds1928ctl --json position --follow` for the same bus cycle (raw value, scaled
+#      position, PosCycle, ErrorInfo, EnDat words, validity), at least 300 cycles matched;
+#   2. SIGTERM of the daemon: daemon-alive and valid drop; a new daemon: valid again, restarts=1,
+#      no HAL reload; SIGKILL (a dead daemon, nobody says "stopped"): the same, restarts=2;
+#   3. the servo thread's system calls, traced (strace) over the whole of step 2, are a subset of
+#      those of an empty thread of the same kind: the realtime function makes none, reattaching
+#      included;
+#   4. torn-read stress: the daemon at its shortest period (100 µs), the function in a 50 µs
+#      thread: every sampled (cycle, position) pair is one the daemon published (equal to
+#      ds1928ctl's where both saw the cycle, and one position per cycle, nondecreasing with the
+#      cycle at the simulated constant velocity); no read failure.
+#
+# LinuxCNC's realtime environment is one per machine (SysV shm key, `ps -C rtapi_app`): the test
+# runs in its own mount, IPC and PID namespaces, with the module directory overlaid so that the
+# freshly built ds1928.so is found next to LinuxCNC's modules (rtapi_app loads by name only).
+# As root, with RTAPI_UID an unprivileged uid (nobody) and RTAPI_FIFO_PATH in a directory it may
+# write. DS1928_HAL_DOC=FILE writes the halcmd output quoted in docs/linuxcnc.md.
+#
+# Usage: linuxcnc_hal_test.sh BUILD_DIR SOURCE_DIR     (exit 77 = skipped)
+set -u
+build=${1:?build dir}
+src=${2:?source dir}
+here=$(cd "$(dirname "$0")" && pwd)
+module=$build/linuxcnc/ds1928.so
+modules=/usr/lib/linuxcnc/modules
+
+if [ "$(id -u)" != 0 ]; then echo "SKIP: needs root (namespaces, bind mounts)"; exit 77; fi
+for t in halcmd halsampler strace unshare python3; do
+  command -v $t >/dev/null || { echo "SKIP: $t missing (make deps-test installs it)"; exit 77; }
+done
+[ -f "$module" ] || { echo "FAIL: $module not built (linuxcnc-uspace-dev installed?)"; exit 1; }
+
+if [ -z "${DS1928_HAL_IN_NS:-}" ]; then
+  exec unshare --mount --ipc --pid --fork --mount-proc --propagation private \
+    env DS1928_HAL_IN_NS=1 "$0" "$@"
+fi
+
+tag=$(printf '%x%x' $$ $((RANDOM % 256)))$(date +%N | cut -c1-4)
+work=$(mktemp -d /tmp/ds1928-hal-XXXXXX)
+chmod 0755 "$work"
+shm=/ds1928-hal-$tag
+daemon=$build/daemon/ds1928d ctl=$build/tools/ds1928ctl/ds1928ctl
+dpid=""
+fail=0
+cleanup() {
+  halcmd stop >/dev/null 2>&1; halcmd unload all >/dev/null 2>&1
+  /usr/lib/linuxcnc/realtime stop >/dev/null 2>&1
+  [ -n "$dpid" ] && kill -TERM "$dpid" 2>/dev/null && timeout 10 tail --pid="$dpid" -f /dev/null
+  rm -f /dev/shm"$shm" /dev/shm"$shm".wait
+  rm -rf "$work"
+}
+trap cleanup EXIT
+check() {  # check DESCRIPTION COMMAND...
+  if "${@:2}"; then echo "ok:   $1"; else echo "FAIL: $1"; fail=1; fi
+}
+
+# LinuxCNC's modules plus ours, in this mount namespace only.
+mkdir "$work/orig" "$work/modules" "$work/fifo"
+mount --bind "$modules" "$work/orig" || exit 1
+for f in "$work"/orig/*; do ln -s "$f" "$work/modules/"; done
+cp "$module" "$work/modules/ds1928.so"
+mount --bind "$work/modules" "$modules" || exit 1
+chown nobody "$work/fifo"
+export RTAPI_UID=$(id -u nobody) RTAPI_FIFO_PATH=$work/fifo/rtapi HAL_RTMOD_DIR=$modules
+
+# configure PERIOD_US: the default configuration on our names
+configure() {
+  sed -e "s|^\(  name:\) /ds1928d |\1 $shm |" \
+      -e "s|^\(  path:\) /run/ds1928d/control.sock|\1 $work/control.sock|" \
+      -e "s|^\(  period_us:\) 1000 |\1 $1 |" \
+      -e "s|^\(  hold_cpu_dma_latency:\) true|\1 false|" \
+      "$src/config/simulated.yaml" > "$work/daemon.yaml"
+  grep -q "name: $shm " "$work/daemon.yaml" && grep -q "period_us: $1 " "$work/daemon.yaml" ||
+    { echo "FAIL: could not derive the configuration"; exit 1; }
+}
+start_daemon() {
+  dpid=$(python3 "$src/tests/deploy/notify_start.py" "$work" 60 "$work/daemon.log" -- \
+           "$daemon" --config "$work/daemon.yaml")
+  [ -n "$dpid" ] || { echo "FAIL: the daemon did not start"; cat "$work/daemon.log"; exit 1; }
+}
+stop_daemon() {  # stop_daemon SIGNAL
+  kill -"$1" "$dpid"; timeout 20 tail --pid="$dpid" -f /dev/null; dpid=""
+}
+getp() { halcmd -s getp "$1" 2>/dev/null | tr -d ' '; }
+wait_pin() {  # wait_pin PIN VALUE SECONDS: until the pin shows VALUE
+  local end=$((SECONDS + $3))
+  while [ $SECONDS -lt $end ]; do [ "$(getp "$1")" = "$2" ] && return 0; sleep 0.05; done
+  echo "      $1 = $(getp "$1") after $3 s, expected $2"; return 1
+}
+# The pins sampled in the servo thread, one line per period (halsampler).
+pins=(bus-cycle x.raw-hi x.raw-lo x.pos-cycle x.error-info x.endat-error x.endat-warning
+      x.valid x.fresh daemon-alive x.position x.age-us phase-us)
+sampler_cfg=uuusuuubbbfff
+net_sampler() {
+  local i=0
+  for p in "${pins[@]}"; do halcmd net "s$i" "ds1928.$p" "sampler.0.pin.$i" || return 1; i=$((i + 1)); done
+}
+
+echo "--- 1. pins against ds1928ctl for the same bus cycle (daemon 1 ms, servo thread 1 ms)"
+configure 1000
+start_daemon
+/usr/lib/linuxcnc/realtime start >"$work/rt.log" 2>&1 || { cat "$work/rt.log"; exit 1; }
+halcmd loadrt ds1928 shm="$shm" axes=x || { echo "FAIL: loadrt ds1928"; exit 1; }
+halcmd loadrt threads name1=servo period1=1000000 name2=base period2=1000000 || exit 1
+halcmd loadrt sampler depth=8000 cfg=$sampler_cfg || exit 1
+halcmd addf ds1928.read servo && halcmd addf sampler.0 servo && net_sampler || exit 1
+halcmd setp ds1928.x.scale 65536 && halcmd setp ds1928.x.offset 0.5 || exit 1
+halcmd start || exit 1
+check "daemon-alive and valid after start" wait_pin ds1928.x.valid TRUE 10
+halsampler -c 0 -n 2500 >"$work/samples1.txt" &
+sampler=$!
+timeout 20 "$ctl" --shm "$shm" --json position --axis 0 --follow --count 2500 >"$work/ctl1.json"
+wait $sampler
+if [ -n "${DS1928_HAL_DOC:-}" ]; then
+  { echo '$ halcmd show pin ds1928'; halcmd show pin ds1928; echo '$ halcmd show param ds1928';
+    halcmd show param ds1928; echo '$ halcmd show funct ds1928'; halcmd show funct ds1928;
+  } >"$DS1928_HAL_DOC"
+fi
+check "sampled pins equal ds1928ctl's record of the same bus cycle" \
+  python3 "$here/hal_compare.py" equal "$work/samples1.txt" "$work/ctl1.json" 65536 0.5
+
+echo "--- 2. daemon stop / death and restart, no HAL reload; 3. syscalls of the servo thread"
+rtapi=$(pgrep -x rtapi_app | head -1)
+servo_tid="" base_tid=""
+for t in /proc/"$rtapi"/task/*; do
+  case $(cat "$t/comm") in
+    "rtapi_app:T#0") servo_tid=${t##*/} ;;  # the threads' creation order: name1, name2
+    "rtapi_app:T#1") base_tid=${t##*/} ;;
+  esac
+done
+[ -n "$servo_tid" ] && [ -n "$base_tid" ] || { echo "FAIL: no rtapi_app threads found"; exit 1; }
+strace -qq -c -S name -o "$work/strace-servo.txt" -p "$servo_tid" &
+st1=$!
+strace -qq -c -S name -o "$work/strace-base.txt" -p "$base_tid" &
+st2=$!
+sleep 1
+check "restarts 0 before" test "$(getp ds1928.restarts)" = 0
+stop_daemon TERM
+check "SIGTERM: daemon-alive drops" wait_pin ds1928.daemon-alive FALSE 5
+check "SIGTERM: valid drops" test "$(getp ds1928.x.valid)" = FALSE
+check "SIGTERM: stale" test "$(getp ds1928.x.stale)" = TRUE
+start_daemon
+check "restart: valid again" wait_pin ds1928.x.valid TRUE 10
+check "restart: restarts = 1" test "$(getp ds1928.restarts)" = 1
+stop_daemon KILL
+check "SIGKILL: daemon-alive drops (silence)" wait_pin ds1928.daemon-alive FALSE 5
+check "SIGKILL: valid drops" test "$(getp ds1928.x.valid)" = FALSE
+start_daemon
+check "restart after SIGKILL: valid again" wait_pin ds1928.x.valid TRUE 10
+check "restart after SIGKILL: restarts = 2" test "$(getp ds1928.restarts)" = 2
+sleep 0.5
+kill -INT $st1 $st2; wait $st1 $st2
+echo "servo thread (ds1928.read):"; cat "$work/strace-servo.txt"
+echo "empty thread:"; cat "$work/strace-base.txt"
+check "the servo thread's system calls are those of an empty thread" \
+  python3 "$here/hal_compare.py" syscalls "$work/strace-servo.txt" "$work/strace-base.txt"
+halcmd stop; halcmd unload all
+
+echo "--- 4. torn-read stress: daemon at 100 µs, the function in a 50 µs thread"
+stop_daemon TERM
+configure 100
+start_daemon
+halcmd loadrt ds1928 shm="$shm" axes=x || { echo "FAIL: loadrt ds1928 again"; exit 1; }
+halcmd loadrt threads name1=fast period1=50000 || exit 1
+halcmd loadrt sampler depth=20000 cfg=$sampler_cfg || exit 1
+halcmd addf ds1928.read fast && halcmd addf sampler.0 fast && net_sampler || exit 1
+halcmd start || exit 1
+check "stress: valid" wait_pin ds1928.x.valid TRUE 10
+halsampler -c 0 -n 40000 >"$work/samples4.txt" &
+sampler=$!
+timeout 20 "$ctl" --shm "$shm" --json position --axis 0 --follow --count 10000 >"$work/ctl4.json"
+wait $sampler
+echo "read-retries $(getp ds1928.read-retries), read-failures $(getp ds1928.read-failures)"
+check "stress: no read failure" test "$(getp ds1928.read-failures)" = 0
+check "stress: every sampled position is one the daemon published" \
+  python3 "$here/hal_compare.py" published "$work/samples4.txt" "$work/ctl4.json" 1 0
+exit $fail
