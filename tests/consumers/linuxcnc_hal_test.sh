@@ -27,7 +27,6 @@ build=${1:?build dir}
 src=${2:?source dir}
 here=$(cd "$(dirname "$0")" && pwd)
 module=$build/linuxcnc/ds1928.so
-modules=/usr/lib/linuxcnc/modules
 
 if [ "$(id -u)" != 0 ]; then echo "SKIP: needs root (namespaces, bind mounts)"; exit 77; fi
 for t in halcmd halsampler strace unshare python3; do
@@ -35,63 +34,33 @@ for t in halcmd halsampler strace unshare python3; do
 done
 [ -f "$module" ] || { echo "FAIL: $module not built (linuxcnc-uspace-dev installed?)"; exit 1; }
 
-if [ -z "${DS1928_HAL_IN_NS:-}" ]; then
-  exec unshare --mount --ipc --pid --fork --mount-proc --propagation private \
-    env DS1928_HAL_IN_NS=1 "$0" "$@"
-fi
+. "$src/tests/lib/linuxcnc.sh"
+linuxcnc_enter_namespaces "$0" "$@"
 
 tag=$(printf '%x%x' $$ $((RANDOM % 256)))$(date +%N | cut -c1-4)
 work=$(mktemp -d /tmp/ds1928-hal-XXXXXX)
 chmod 0755 "$work"
 shm=/ds1928-hal-$tag
-daemon=$build/daemon/ds1928d ctl=$build/tools/ds1928ctl/ds1928ctl
+ctl=$build/tools/ds1928ctl/ds1928ctl
 dpid=""
 fail=0
 cleanup() {
-  halcmd stop >/dev/null 2>&1; halcmd unload all >/dev/null 2>&1
-  /usr/lib/linuxcnc/realtime stop >/dev/null 2>&1
-  [ -n "$dpid" ] && kill -TERM "$dpid" 2>/dev/null && timeout 10 tail --pid="$dpid" -f /dev/null
+  linuxcnc_stop
+  ds1928_daemon_stop TERM
   rm -f /dev/shm"$shm" /dev/shm"$shm".wait
-  rm -rf "$work"
+  linuxcnc_teardown "$work" && rm -rf "$work"
 }
 trap cleanup EXIT
 check() {  # check DESCRIPTION COMMAND...
   if "${@:2}"; then echo "ok:   $1"; else echo "FAIL: $1"; fail=1; fi
 }
 
-# LinuxCNC's modules plus ours, in this mount namespace only.
-mkdir "$work/orig" "$work/modules" "$work/fifo"
-mount --bind "$modules" "$work/orig" || exit 1
-for f in "$work"/orig/*; do ln -s "$f" "$work/modules/"; done
-cp "$module" "$work/modules/ds1928.so"
-mount --bind "$work/modules" "$modules" || exit 1
-chown nobody "$work/fifo"
-export RTAPI_UID=$(id -u nobody) RTAPI_FIFO_PATH=$work/fifo/rtapi HAL_RTMOD_DIR=$modules
-
-# configure PERIOD_US: the default configuration on our names
-configure() {
-  sed -e "s|^\(  name:\) /ds1928d |\1 $shm |" \
-      -e "s|^\(  path:\) /run/ds1928d/control.sock|\1 $work/control.sock|" \
-      -e "s|^\(  period_us:\) 1000 |\1 $1 |" \
-      -e "s|^\(  hold_cpu_dma_latency:\) true|\1 false|" \
-      "$src/config/simulated.yaml" > "$work/daemon.yaml"
-  grep -q "name: $shm " "$work/daemon.yaml" && grep -q "period_us: $1 " "$work/daemon.yaml" ||
-    { echo "FAIL: could not derive the configuration"; exit 1; }
-}
-start_daemon() {
-  dpid=$(python3 "$src/tests/deploy/notify_start.py" "$work" 60 "$work/daemon.log" -- \
-           "$daemon" --config "$work/daemon.yaml")
-  [ -n "$dpid" ] || { echo "FAIL: the daemon did not start"; cat "$work/daemon.log"; exit 1; }
-}
-stop_daemon() {  # stop_daemon SIGNAL
-  kill -"$1" "$dpid"; timeout 20 tail --pid="$dpid" -f /dev/null; dpid=""
-}
-getp() { halcmd -s getp "$1" 2>/dev/null | tr -d ' '; }
-wait_pin() {  # wait_pin PIN VALUE SECONDS: until the pin shows VALUE
-  local end=$((SECONDS + $3))
-  while [ $SECONDS -lt $end ]; do [ "$(getp "$1")" = "$2" ] && return 0; sleep 0.05; done
-  echo "      $1 = $(getp "$1") after $3 s, expected $2"; return 1
-}
+linuxcnc_setup "$work" "$module" || { echo "FAIL: cannot overlay LinuxCNC's modules"; exit 1; }
+configure() { ds1928_daemon_configure "$work" "$shm" "$1" || exit 1; }
+start_daemon() { ds1928_daemon_start "$build" "$src" "$work" || exit 1; }
+stop_daemon() { ds1928_daemon_stop "$1"; }
+getp() { hal_getp "$1"; }
+wait_pin() { hal_wait_pin "$@"; }
 # The pins sampled in the servo thread, one line per period (halsampler).
 pins=(bus-cycle x.raw-hi x.raw-lo x.pos-cycle x.error-info x.endat-error x.endat-warning
       x.valid x.fresh daemon-alive x.position x.age-us phase-us)
@@ -104,7 +73,7 @@ net_sampler() {
 echo "--- 1. pins against ds1928ctl for the same bus cycle (daemon 1 ms, servo thread 1 ms)"
 configure 1000
 start_daemon
-/usr/lib/linuxcnc/realtime start >"$work/rt.log" 2>&1 || { cat "$work/rt.log"; exit 1; }
+linuxcnc_start >"$work/rt.log" 2>&1 || { cat "$work/rt.log"; exit 1; }
 halcmd loadrt ds1928 shm="$shm" axes=x || { echo "FAIL: loadrt ds1928"; exit 1; }
 halcmd loadrt threads name1=servo period1=1000000 name2=base period2=1000000 || exit 1
 halcmd loadrt sampler depth=8000 cfg=$sampler_cfg || exit 1
