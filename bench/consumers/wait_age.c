@@ -4,10 +4,10 @@
  *   waiting <n> <age p50> <age p99> <age max> <pub p50> <pub p99> <pub max>   (ns)
  *
  *   wait_age SHM_NAME COUNT */
-#include "ds1928/shm.h"
-
 #include <stdio.h>
 #include <stdlib.h>
+
+#include "ds1928/shm.h"
 
 static int by_value(const void* a, const void* b) {
   const int64_t x = *(const int64_t*)a, y = *(const int64_t*)b;

@@ -17,7 +17,7 @@ import json
 import sys
 
 FIELDS = ["cycle", "raw_hi", "raw_lo", "pos_cycle", "error_info", "endat_error", "endat_warning",
-          "valid", "fresh", "alive", "position", "age_us", "phase_us"]
+          "valid", "fresh", "alive", "position", "age_us", "phase_us", "failures"]
 
 
 def load_samples(path):
@@ -59,10 +59,12 @@ def quantiles(values):
 def equal(samples_path, ctl_path, scale, offset):
     samples, ctl = load_samples(samples_path), load_ctl(ctl_path)
     matched, errors = 0, []
-    for s in samples:
+    for i, s in enumerate(samples):
         r = ctl.get(s["cycle"])
         if r is None or not s["alive"]:
             continue
+        if i > 0 and s["failures"] != samples[i - 1]["failures"]:
+            continue  # a read given up: the last value, invalid (checked by `published`)
         matched += 1
         expect_pos = (r["periods"] * 65536 + r["fraction"]) / scale + offset
         checks = [
@@ -105,6 +107,14 @@ def published(samples_path, ctl_path, scale, offset):
             if r["position_raw"] != s["raw"]:
                 errors.append(f"cycle {s['cycle']}: {s['raw']:#x} != ds1928ctl "
                               f"{r['position_raw']:#x}")
+    gave_up = 0
+    for prev, s in zip(samples, samples[1:]):
+        if s["failures"] == prev["failures"]:
+            continue
+        gave_up += 1
+        if s["valid"] or s["raw"] != prev["raw"] or s["cycle"] != prev["cycle"]:
+            errors.append(f"read given up after cycle {prev['cycle']}: valid {s['valid']}, "
+                          f"raw {s['raw']:#x} (before {prev['raw']:#x}), cycle {s['cycle']}")
     last = None
     for cycle in sorted(by_cycle):
         if last is not None and by_cycle[cycle] < by_cycle[last]:
@@ -112,7 +122,8 @@ def published(samples_path, ctl_path, scale, offset):
                           f"{by_cycle[last]:#x}")
         last = cycle
     print(f"{len(samples)} reads sampled, {len(by_cycle)} distinct bus cycles, {matched} reads "
-          f"of a cycle ds1928ctl printed too, {len(errors)} inconsistencies")
+          f"of a cycle ds1928ctl printed too, {gave_up} reads given up, "
+          f"{len(errors)} inconsistencies")
     for e in errors[:10]:
         print("  ", e)
     return not errors and matched >= 100 and len(by_cycle) >= 1000

@@ -13,7 +13,8 @@
 #   4. torn-read stress: the daemon at its shortest period (100 µs), the function in a 50 µs
 #      thread: every sampled (cycle, position) pair is one the daemon published (equal to
 #      ds1928ctl's where both saw the cycle, and one position per cycle, nondecreasing with the
-#      cycle at the simulated constant velocity); no read failure.
+#      cycle at the simulated constant velocity); a read given up (the daemon preempted in the
+#      middle of a write) keeps the previous values with valid false.
 #
 # LinuxCNC's realtime environment is one per machine (SysV shm key, `ps -C rtapi_app`): the test
 # runs in its own mount, IPC and PID namespaces, with the module directory overlaid so that the
@@ -63,8 +64,8 @@ getp() { hal_getp "$1"; }
 wait_pin() { hal_wait_pin "$@"; }
 # The pins sampled in the servo thread, one line per period (halsampler).
 pins=(bus-cycle x.raw-hi x.raw-lo x.pos-cycle x.error-info x.endat-error x.endat-warning
-      x.valid x.fresh daemon-alive x.position x.age-us phase-us)
-sampler_cfg=uuusuuubbbfff
+      x.valid x.fresh daemon-alive x.position x.age-us phase-us read-failures)
+sampler_cfg=uuusuuubbbfffu
 net_sampler() {
   local i=0
   for p in "${pins[@]}"; do halcmd net "s$i" "ds1928.$p" "sampler.0.pin.$i" || return 1; i=$((i + 1)); done
@@ -145,7 +146,8 @@ sampler=$!
 timeout 20 "$ctl" --shm "$shm" --json position --axis 0 --follow --count 10000 >"$work/ctl4.json"
 wait $sampler
 echo "read-retries $(getp ds1928.read-retries), read-failures $(getp ds1928.read-failures)"
-check "stress: no read failure" test "$(getp ds1928.read-failures)" = 0
-check "stress: every sampled position is one the daemon published" \
+# A read gives up after 8 attempts when the daemon's cycle thread is preempted in the middle of
+# a record (a loaded machine without PREEMPT_RT): then the pins must keep the last value, invalid.
+check "stress: every sampled position is one the daemon published; a failed read kept the last value, invalid" \
   python3 "$here/hal_compare.py" published "$work/samples4.txt" "$work/ctl4.json" 1 0
 exit $fail
