@@ -82,7 +82,7 @@ struct mapping {
 };
 
 struct instance {
-  char shm_name[NAME_MAX + 1];
+  char shm_name[DS1928_SHM_NAME_MAX + 1];
   char prefix[NAME_LEN];
   unsigned axis_count;
   struct instance_pins* pins; /* HAL memory */

@@ -21,8 +21,8 @@
  * Requires Linux and GCC or Clang; C99, C11, C17 (also strict ISO modes such as -std=c99
  * -pedantic) and C++. The functions below need POSIX and syscall(): when the translation unit
  * chose no feature-test macro, this header selects _DEFAULT_SOURCE (glibc's default outside
- * strict ISO mode). In a strict ISO build include this header before any system header, or
- * define a feature-test macro yourself; otherwise it stops with an #error saying so. */
+ * strict ISO mode); when a system header came first in strict ISO mode, it declares the few
+ * functions it needs itself. No feature-test macro is needed from the user, in any order. */
 #ifndef DS1928_SHM_H
 #define DS1928_SHM_H
 
@@ -45,10 +45,35 @@
 #include <time.h>
 #include <unistd.h>
 
-#if defined(__GLIBC__) && (!defined(__USE_POSIX199309) || !defined(__USE_MISC))
-#error "ds1928/shm.h: clock_gettime() and syscall() are not declared: a system header was \
-included in strict ISO C mode before this one. Include ds1928/shm.h first or define \
-_DEFAULT_SOURCE."
+/* A system header came first in a strict ISO C translation unit (or the user chose a narrower
+ * feature-test macro): glibc then declared only what that mode allows, and the _DEFAULT_SOURCE
+ * above came too late. The few POSIX/Linux names used below are declared here, with glibc's own
+ * types (compatible with its declarations). */
+#if defined(__GLIBC__) && !defined(__cplusplus)
+#if !defined(__USE_POSIX199309)
+#ifndef _STRUCT_TIMESPEC /* C99: ISO C declares no struct timespec before C11 */
+#define _STRUCT_TIMESPEC 1
+struct timespec {
+  __time_t tv_sec;
+  __syscall_slong_t tv_nsec;
+};
+#endif
+#ifndef CLOCK_MONOTONIC
+#define CLOCK_MONOTONIC 1 /* Linux ABI */
+#endif
+extern int clock_gettime(__clockid_t clock_id, struct timespec* tp);
+#endif
+#if !defined(__USE_MISC)
+extern long int syscall(long int sysno, ...);
+#endif
+#endif
+#if !defined(O_CLOEXEC) && defined(__O_CLOEXEC)
+#define O_CLOEXEC __O_CLOEXEC
+#endif
+#ifdef NAME_MAX
+#define DS1928_SHM_NAME_MAX NAME_MAX
+#else
+#define DS1928_SHM_NAME_MAX 255 /* Linux; <limits.h> names it only outside strict ISO C */
 #endif
 
 #ifdef __cplusplus
@@ -170,13 +195,13 @@ _Static_assert(sizeof(struct ds1928_shm_axis) == 128, "axis record layout");
 _Static_assert(sizeof(struct ds1928_shm_header) == 128, "header layout");
 _Static_assert(sizeof(struct ds1928_shm_wait_area) == 256, "wait area layout");
 #else /* C99: a negative array size stops the compilation instead */
-typedef char ds1928_shm_layout_check[(sizeof(struct ds1928_axis_data) ==
-                                      8 * DS1928_AXIS_DATA_WORDS) &&
-                                             sizeof(struct ds1928_shm_axis) == 128 &&
-                                             sizeof(struct ds1928_shm_header) == 128 &&
-                                             sizeof(struct ds1928_shm_wait_area) == 256
-                                         ? 1
-                                         : -1];
+typedef char
+    ds1928_shm_layout_check[(sizeof(struct ds1928_axis_data) == 8 * DS1928_AXIS_DATA_WORDS) &&
+                                    sizeof(struct ds1928_shm_axis) == 128 &&
+                                    sizeof(struct ds1928_shm_header) == 128 &&
+                                    sizeof(struct ds1928_shm_wait_area) == 256
+                                ? 1
+                                : -1];
 #endif
 
 /* Results of the functions below besides 0 and -errno. */
@@ -347,7 +372,7 @@ static inline int ds1928_shm_reader_open(struct ds1928_shm_reader* r, const char
   }
   r->generation = h->generation;
 
-  char wait_name[NAME_MAX + 1];
+  char wait_name[DS1928_SHM_NAME_MAX + 1];
   const size_t len = strlen(name);
   if (len + sizeof(DS1928_SHM_WAIT_SUFFIX) <= sizeof(wait_name)) {
     memcpy(wait_name, name, len);
