@@ -416,7 +416,17 @@ void rtapi_app_exit(void) {
     pthread_join(helper, NULL);
     helper_started = 0;
   }
-  /* HAL removes the function before the module exits: nothing reads the mappings now. */
+  /* Remove the function from its thread first, then wait (bounded) for an invocation that was
+   * already running, and only then unmap what it reads. */
+  hal_exit(comp_id);
+  for (int waited = 0; waited < 100; ++waited) {
+    int running = 0;
+    for (unsigned i = 0; i < instance_count; ++i)
+      running |= __atomic_load_n(&instances[i].rt_enter, __ATOMIC_SEQ_CST) !=
+                 __atomic_load_n(&instances[i].rt_exit, __ATOMIC_SEQ_CST);
+    if (!running) break;
+    sleep_ms(1);
+  }
   for (unsigned i = 0; i < instance_count; ++i) {
     struct mapping* m = __atomic_exchange_n(&instances[i].current, NULL, __ATOMIC_SEQ_CST);
     if (m) {
@@ -424,5 +434,4 @@ void rtapi_app_exit(void) {
       free(m);
     }
   }
-  hal_exit(comp_id);
 }
