@@ -10,8 +10,8 @@
 #   3. the servo thread's system calls, traced (strace) over the whole of step 2, are a subset of
 #      those of an empty thread of the same kind: the realtime function makes none, reattaching
 #      included;
-#   4. torn-read stress: the daemon at its shortest period (100 µs), the function in a 50 µs
-#      thread: every sampled (cycle, position) pair is one the daemon published (equal to
+#   4. torn-read stress: the daemon at its shortest period (100 µs), the function (two instances,
+#      the second with its axes named by index) in a 50 µs thread: every sampled (cycle, position) pair is one the daemon published (equal to
 #      ds1928ctl's where both saw the cycle, and one position per cycle, nondecreasing with the
 #      cycle at the simulated constant velocity); a read given up (the daemon preempted in the
 #      middle of a write) keeps the previous values with valid false.
@@ -135,12 +135,15 @@ echo "--- 4. torn-read stress: daemon at 100 µs, the function in a 50 µs threa
 stop_daemon TERM
 configure 100
 start_daemon
-halcmd loadrt ds1928 shm="$shm" axes=x || { echo "FAIL: loadrt ds1928 again"; exit 1; }
+# Two instances this time (the second on the same daemon, named "twin", axes named by index).
+halcmd loadrt ds1928 shm="$shm,$shm" names=ds1928,twin axes=x ||
+  { echo "FAIL: loadrt ds1928 with two instances"; exit 1; }
 halcmd loadrt threads name1=fast period1=50000 || exit 1
 halcmd loadrt sampler depth=20000 cfg=$sampler_cfg || exit 1
 halcmd addf ds1928.read fast && halcmd addf sampler.0 fast && net_sampler || exit 1
 halcmd start || exit 1
 check "stress: valid" wait_pin ds1928.x.valid TRUE 10
+check "second instance: twin.0.valid" wait_pin twin.0.valid TRUE 10
 halsampler -c 0 -n 40000 >"$work/samples4.txt" &
 sampler=$!
 timeout 20 "$ctl" --shm "$shm" --json position --axis 0 --follow --count 10000 >"$work/ctl4.json"
