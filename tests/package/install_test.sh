@@ -167,11 +167,13 @@ if [ -n "$pid" ]; then
   echo "  python3: ${py:0:160}"
   check "python3 -c 'import ds1928' reads axis 0 (member of ds1928)" grep -q "state='valid'" <<<"$py"
   if [ -n "$hal_deb" ]; then
-    # LinuxCNC's realtime in its own IPC and PID namespaces (one per machine otherwise);
-    # rtapi_app as the reader (RTAPI_UID), its socket in a directory the reader owns.
+    # LinuxCNC's realtime in its own IPC and PID namespaces (one per machine otherwise), started
+    # by the reader as a LinuxCNC user would (rtapi_app is setuid root and reads files as the
+    # user, with the user's groups); its socket in a directory the reader owns.
     in_root install -d -o reader /tmp/rtapi
-    hal=$(chroot "$root" unshare --ipc --pid --fork --mount-proc env RTAPI_UID="$(in_root id -u reader)" \
-            RTAPI_FIFO_PATH=/tmp/rtapi/fifo sh -c '/usr/lib/linuxcnc/realtime start &&
+    hal=$(chroot "$root" unshare --ipc --pid --fork --mount-proc setpriv --reuid=reader \
+            --regid=reader --init-groups env RTAPI_FIFO_PATH=/tmp/rtapi/fifo \
+            sh -c '/usr/lib/linuxcnc/realtime start &&
               halcmd loadrt ds1928 && halcmd loadrt threads name1=servo period1=1000000 &&
               halcmd addf ds1928.read servo && halcmd start && sleep 0.5 &&
               halcmd show pin ds1928; halcmd stop; halcmd unload all; /usr/lib/linuxcnc/realtime stop' 2>&1)
