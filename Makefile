@@ -3,7 +3,8 @@
 #   make run-canio   the daemon on bus canio against `ds1928-sim canio` over the virtual CAN bus
 #   make test   build and run every test (warnings are errors in this build)
 # and for deployment:
-#   make deb            build the Debian packages ds1928d and libds1928-dev (+ lintian)
+#   make deb            build the Debian packages ds1928d, libds1928-dev, python3-ds1928 and
+#                       (with linuxcnc-uspace-dev) linuxcnc-ds1928 (+ lintian)
 #   make test-package   install them into a fresh Debian 12 root and check them there
 # and the deeper checks (docs/testing.md):
 #   make check-asan       the tests under ASan+UBSan (build-asan/)
@@ -23,12 +24,18 @@ BUILD_DEPS := cmake make g++ pkg-config libyaml-cpp-dev libspdlog-dev libfmt-dev
 # qemu-system-x86 … can-utils: the real-kernel CAN test (tests/canio/qemu), which also downloads
 # Debian's linux-image package into the build tree with apt-get download.
 # prometheus: promtool checks a scrape of the metrics endpoint. build-essential, libpcap-dev: the
-# openPOWERLINK test peer (tests/peers/openpowerlink.sh).
+# openPOWERLINK test peer (tests/peers/openpowerlink.sh). linuxcnc-uspace-dev, strace: the HAL
+# component in the real LinuxCNC (tests/consumers); clang: the header's strict-C compile test.
 TEST_DEPS  := $(BUILD_DEPS) rt-tests tshark iproute2 python3 util-linux passwd jq \
               qemu-system-x86 busybox-static cpio kmod xz-utils can-utils prometheus \
-              build-essential libpcap-dev
+              build-essential libpcap-dev linuxcnc-uspace-dev strace clang
 # dpkg-buildpackage and the Build-Depends of packaging/debian/control.
-DEB_DEPS   := $(BUILD_DEPS) build-essential debhelper devscripts fakeroot lintian help2man
+DEB_DEPS   := $(BUILD_DEPS) build-essential debhelper devscripts fakeroot lintian help2man \
+              dh-python python3
+# The LinuxCNC component's package (linuxcnc-ds1928) is built when linuxcnc-uspace-dev is
+# installed; otherwise the build profile nolinuxcnc leaves it out.
+DEB_PROFILES = $(if $(shell dpkg-query -W -f='$${Status}' linuxcnc-uspace-dev 2>/dev/null | \
+                 grep -q 'install ok installed' && echo y),,-Pnolinuxcnc)
 PKGTEST_DEPS := mmdebstrap util-linux systemd
 # Where make deb builds: a copy of the source tree (the packaging expects debian/ at the top).
 DEB_DIR    ?= build-deb
@@ -86,7 +93,7 @@ deb: deps-deb
 	cp -r packaging/debian $(DEB_DIR)/src/debian
 	# ccache's compiler wrappers when installed: a rebuild of the same tree is fast.
 	cd $(DEB_DIR)/src && PATH="$$(test -d /usr/lib/ccache && echo /usr/lib/ccache:)$$PATH" \
-	  dpkg-buildpackage -us -uc -b -j$(JOBS)
+	  dpkg-buildpackage -us -uc -b -j$(JOBS) $(DEB_PROFILES)
 	lintian --fail-on error,warning --info --display-info $(DEB_DIR)/*.changes
 
 # Installs the packages into a fresh Debian 12 root (mmdebstrap; the base root is cached in

@@ -18,10 +18,19 @@
  *    registers in a "factor slot" so that it is woken only on the cycles it asked for, and the
  *    daemon makes the wake-up system call only when someone is registered.
  *
- * Requires Linux and GCC or Clang; in strict ISO C mode (-std=c11) define _DEFAULT_SOURCE
- * before including system headers (syscall() is an extension). */
+ * Requires Linux and GCC or Clang; C99, C11, C17 (also strict ISO modes such as -std=c99
+ * -pedantic) and C++. The functions below need POSIX and syscall(): when the translation unit
+ * chose no feature-test macro, this header selects _DEFAULT_SOURCE (glibc's default outside
+ * strict ISO mode); when a system header came first in strict ISO mode, it declares the few
+ * functions it needs itself. No feature-test macro is needed from the user, in any order. */
 #ifndef DS1928_SHM_H
 #define DS1928_SHM_H
+
+#if !defined(__cplusplus) && !defined(_GNU_SOURCE) && !defined(_DEFAULT_SOURCE) &&   \
+    !defined(_POSIX_C_SOURCE) && !defined(_XOPEN_SOURCE) && !defined(_BSD_SOURCE) && \
+    !defined(_SVID_SOURCE) && !defined(_POSIX_SOURCE)
+#define _DEFAULT_SOURCE 1
+#endif
 
 #include <errno.h>
 #include <fcntl.h>
@@ -35,6 +44,37 @@
 #include <sys/syscall.h>
 #include <time.h>
 #include <unistd.h>
+
+/* A system header came first in a strict ISO C translation unit (or the user chose a narrower
+ * feature-test macro): glibc then declared only what that mode allows, and the _DEFAULT_SOURCE
+ * above came too late. The few POSIX/Linux names used below are declared here, with glibc's own
+ * types (compatible with its declarations). */
+#if defined(__GLIBC__) && !defined(__cplusplus)
+#if !defined(__USE_POSIX199309)
+#ifndef _STRUCT_TIMESPEC /* C99: ISO C declares no struct timespec before C11 */
+#define _STRUCT_TIMESPEC 1
+struct timespec {
+  __time_t tv_sec;
+  __syscall_slong_t tv_nsec;
+};
+#endif
+#ifndef CLOCK_MONOTONIC
+#define CLOCK_MONOTONIC 1 /* Linux ABI */
+#endif
+extern int clock_gettime(__clockid_t clock_id, struct timespec* tp);
+#endif
+#if !defined(__USE_MISC)
+extern long int syscall(long int sysno, ...);
+#endif
+#endif
+#if !defined(O_CLOEXEC) && defined(__O_CLOEXEC)
+#define O_CLOEXEC __O_CLOEXEC
+#endif
+#ifdef NAME_MAX
+#define DS1928_SHM_NAME_MAX NAME_MAX
+#else
+#define DS1928_SHM_NAME_MAX 255 /* Linux; <limits.h> names it only outside strict ISO C */
+#endif
 
 #ifdef __cplusplus
 extern "C" {
@@ -149,11 +189,19 @@ static_assert(sizeof(struct ds1928_axis_data) == 8 * DS1928_AXIS_DATA_WORDS, "ax
 static_assert(sizeof(struct ds1928_shm_axis) == 128, "axis record layout");
 static_assert(sizeof(struct ds1928_shm_header) == 128, "header layout");
 static_assert(sizeof(struct ds1928_shm_wait_area) == 256, "wait area layout");
-#else
+#elif defined(__STDC_VERSION__) && __STDC_VERSION__ >= 201112L
 _Static_assert(sizeof(struct ds1928_axis_data) == 8 * DS1928_AXIS_DATA_WORDS, "axis data layout");
 _Static_assert(sizeof(struct ds1928_shm_axis) == 128, "axis record layout");
 _Static_assert(sizeof(struct ds1928_shm_header) == 128, "header layout");
 _Static_assert(sizeof(struct ds1928_shm_wait_area) == 256, "wait area layout");
+#else /* C99: a negative array size stops the compilation instead */
+typedef char
+    ds1928_shm_layout_check[(sizeof(struct ds1928_axis_data) == 8 * DS1928_AXIS_DATA_WORDS) &&
+                                    sizeof(struct ds1928_shm_axis) == 128 &&
+                                    sizeof(struct ds1928_shm_header) == 128 &&
+                                    sizeof(struct ds1928_shm_wait_area) == 256
+                                ? 1
+                                : -1];
 #endif
 
 /* Results of the functions below besides 0 and -errno. */
@@ -324,7 +372,7 @@ static inline int ds1928_shm_reader_open(struct ds1928_shm_reader* r, const char
   }
   r->generation = h->generation;
 
-  char wait_name[NAME_MAX + 1];
+  char wait_name[DS1928_SHM_NAME_MAX + 1];
   const size_t len = strlen(name);
   if (len + sizeof(DS1928_SHM_WAIT_SUFFIX) <= sizeof(wait_name)) {
     memcpy(wait_name, name, len);

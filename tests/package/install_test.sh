@@ -4,7 +4,7 @@
 #   1. a minimal bookworm root made by mmdebstrap from Debian's mirror, with systemd and the
 #      packages' dependencies (resolved by apt from the .deb's Depends), cached as a tarball in
 #      DEB_DIR keyed by that package list — reruns only unpack it;
-#   2. dpkg installs ds1928d and libds1928-dev there; the maintainer scripts run (systemd-sysusers
+#   2. dpkg installs ds1928d, libds1928-dev, python3-ds1928 (and linuxcnc-ds1928 when built) there; the maintainer scripts run (systemd-sysusers
 #      creates the user and groups; systemd is not running in the root, so nothing is started);
 #   3. files: programs, units, sysusers/tmpfiles/udev entries, man pages, header and example,
 #      the configuration as a conffile;
@@ -12,7 +12,9 @@
 #   5. the units: systemd-analyze verify; the exposure score of ds1928d.service ≤ 2.0;
 #   6. the configuration passes ds1928d --check-config;
 #   7. the installed daemon starts in the root as ds1928d with the unit's capabilities (READY=1),
-#      runs real-time, and a member of ds1928 gets its status and positions.
+#      runs real-time, and a member of ds1928 gets its status and positions;
+#   8. that member reads axis 0 with `python3 -c 'import ds1928 ...'`, and LinuxCNC's halcmd loads
+#      the HAL component ds1928 (as that member, RTAPI_UID) with axis 0 valid.
 # Everything runs in a private mount namespace; the root is removed at the end.
 #
 # Usage: install_test.sh DEB_DIR        (root; needs mmdebstrap, network to the Debian mirror
@@ -34,11 +36,17 @@ fi
 start=$(date +%s)
 daemon_deb=$(ls "$debs"/ds1928d_*.deb 2>/dev/null | head -1)
 dev_deb=$(ls "$debs"/libds1928-dev_*.deb 2>/dev/null | head -1)
-[ -n "$daemon_deb" ] && [ -n "$dev_deb" ] || { echo "FAIL: no ds1928d/libds1928-dev .deb in $debs"; exit 1; }
+py_deb=$(ls "$debs"/python3-ds1928_*.deb 2>/dev/null | head -1)
+# linuxcnc-ds1928 exists when the packages were built with linuxcnc-uspace-dev installed.
+hal_deb=$(ls "$debs"/linuxcnc-ds1928_*.deb 2>/dev/null | head -1)
+[ -n "$daemon_deb" ] && [ -n "$dev_deb" ] && [ -n "$py_deb" ] ||
+  { echo "FAIL: no ds1928d/libds1928-dev/python3-ds1928 .deb in $debs"; exit 1; }
+[ -n "$hal_deb" ] || echo "note: no linuxcnc-ds1928 .deb (built without linuxcnc-uspace-dev): not checked"
+all_debs=("$daemon_deb" "$dev_deb" "$py_deb" ${hal_deb:+"$hal_deb"})
 
 # --- 1. the base root -------------------------------------------------------------------------
 # Depends of both packages, without versions and alternatives beyond the first.
-deps=$( { dpkg-deb -f "$daemon_deb" Depends; dpkg-deb -f "$dev_deb" Depends; } |
+deps=$( for d in "${all_debs[@]}"; do dpkg-deb -f "$d" Depends; echo ,; done |
         tr ',' '\n' | sed -e 's/|.*//' -e 's/(.*)//' -e 's/ //g' | grep -v '^$' | sort -u | tr '\n' ',')
 include="systemd,util-linux,passwd,python3-minimal,${deps%,}"
 key=$(printf '%s' "bookworm $include" | sha256sum | cut -c1-12)
@@ -76,18 +84,20 @@ check() {  # check DESCRIPTION COMMAND...
 in_root() { chroot "$root" "$@"; }
 
 # --- 2. install ---------------------------------------------------------------------------------
-cp "$daemon_deb" "$dev_deb" "$root/tmp/"
+cp "${all_debs[@]}" "$root/tmp/"
 # As an administrator installs them: apt resolves what the cached root lacks (then it needs the
 # mirror's package lists).
 apt_install() {
   in_root env DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends \
-    "/tmp/${daemon_deb##*/}" "/tmp/${dev_deb##*/}"
+    $(for d in "${all_debs[@]}"; do echo "/tmp/${d##*/}"; done)
 }
 if ! apt_install; then
   in_root apt-get update -qq && apt_install || { echo "FAIL: apt-get install"; exit 1; }
 fi
-check "both packages installed" \
-  test "$(in_root dpkg-query -W -f='${db:Status-Status} ' ds1928d libds1928-dev)" = "installed installed "
+check "the packages installed" \
+  test "$(in_root dpkg-query -W -f='${db:Status-Status} ' ds1928d libds1928-dev python3-ds1928)" = "installed installed installed "
+[ -n "$hal_deb" ] && check "linuxcnc-ds1928 installed" \
+  test "$(in_root dpkg-query -W -f='${db:Status-Status}' linuxcnc-ds1928)" = "installed"
 
 # --- 3. files -----------------------------------------------------------------------------------
 for f in /usr/bin/ds1928d /usr/bin/ds1928ctl /usr/bin/ds1928-sim \
@@ -151,6 +161,26 @@ if [ -n "$pid" ]; then
   check "a member of ds1928 reads the shared memory" grep -q '"cycle":' <<<"$position"
   check "the shared memory belongs to ds1928d:ds1928" \
     test "$(stat -c '%u:%g %a' "$root/dev/shm/ds1928d" 2>/dev/null)" = "$(cut -d: -f3 <<<"$pw"):$(cut -d: -f4 <<<"$pw") 640"
+  # --- 8. python3-ds1928 and linuxcnc-ds1928 against the installed daemon ----------------------
+  py=$(in_root setpriv --reuid=reader --regid=reader --init-groups -- \
+         python3 -c 'import ds1928; print(ds1928.Reader("/ds1928d").axis(0))' 2>&1)
+  echo "  python3: ${py:0:160}"
+  check "python3 -c 'import ds1928' reads axis 0 (member of ds1928)" grep -q "state='valid'" <<<"$py"
+  if [ -n "$hal_deb" ]; then
+    # LinuxCNC's realtime in its own IPC and PID namespaces (one per machine otherwise), started
+    # by the reader as a LinuxCNC user would (rtapi_app is setuid root and reads files as the
+    # user, with the user's groups); its socket in a directory the reader owns.
+    in_root install -d -o reader /tmp/rtapi
+    hal=$(chroot "$root" unshare --ipc --pid --fork --mount-proc setpriv --reuid=reader \
+            --regid=reader --init-groups env RTAPI_FIFO_PATH=/tmp/rtapi/fifo \
+            sh -c '/usr/lib/linuxcnc/realtime start &&
+              halcmd loadrt ds1928 && halcmd loadrt threads name1=servo period1=1000000 &&
+              halcmd addf ds1928.read servo && halcmd start && sleep 0.5 &&
+              halcmd show pin ds1928; halcmd stop; halcmd unload all; /usr/lib/linuxcnc/realtime stop' 2>&1)
+    sed 's/^/  | /' <<<"$hal"
+    check "halcmd loadrt ds1928 in the root: axis 0 valid" \
+      grep -Eq 'bit +OUT +TRUE +ds1928\.0\.valid' <<<"$hal"
+  fi
 fi
 
 elapsed=$(( $(date +%s) - start ))

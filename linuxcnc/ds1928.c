@@ -1,0 +1,437 @@
+/* ds1928: LinuxCNC HAL component (uspace) that reads the positions ds1928d publishes in shared
+ * memory (include/ds1928/shm.h, docs/shared-memory.md) into HAL pins. docs/linuxcnc.md is the
+ * user's guide; this comment is the design.
+ *
+ *   loadrt ds1928 [shm=/ds1928d[,/other...]] [names=ds1928[,...]] [axes=x:y[,...]]
+ *   addf ds1928.read servo-thread
+ *
+ * One instance per daemon (per shm name). The realtime function `ds1928.read` reads every axis
+ * of every instance with the seqlock of the header (a bounded number of attempts, each copy also
+ * checked against its check word), and otherwise only stores pins: no lock, no allocation, no
+ * system call (the clock is CLOCK_MONOTONIC through the vDSO).
+ *
+ * Everything that needs system calls (shm_open, mmap, munmap) happens in one helper thread of
+ * normal priority: it maps the daemon's object when it appears, and when the daemon stops or dies
+ * and a new one (new generation) publishes under the name, it maps the new object, hands it to
+ * the realtime function through an atomic pointer and unmaps the old one once no invocation of
+ * the function that may have loaded the old pointer is still running (the enter/exit counters
+ * below). The realtime function never waits for the helper: until the handover its pins say
+ * invalid. */
+#include <pthread.h>
+#include <stdio.h>
+#include <stdlib.h>
+
+#include "ds1928/shm.h"
+#include "hal.h"
+#include "rtapi.h"
+#include "rtapi_app.h"
+
+MODULE_AUTHOR("ds1928d");
+MODULE_DESCRIPTION("ds1928d shared-memory positions (X20DS1928 EnDat) as HAL pins");
+MODULE_LICENSE("Proprietary"); /* packaging/debian/copyright */
+
+#define MAX_INSTANCES 8
+#define MAX_AXES 64
+#define NAME_LEN 48
+/* Attempts of one seqlock copy in the realtime function. A daemon write takes ~100 ns; more than
+ * a few consecutive failures means a writer that died in the middle of a record. */
+#define READ_ATTEMPTS 8
+
+static char* shm[MAX_INSTANCES] = {DS1928_SHM_DEFAULT_NAME};
+RTAPI_MP_ARRAY_STRING(shm, MAX_INSTANCES, "shared memory names of the daemons, one instance each");
+static char* names[MAX_INSTANCES];
+RTAPI_MP_ARRAY_STRING(names, MAX_INSTANCES,
+                      "pin prefix of each instance (default ds1928, ds1928-1, ...)");
+static char* axes[MAX_INSTANCES];
+RTAPI_MP_ARRAY_STRING(axes, MAX_INSTANCES,
+                      "axis names of each instance, separated by ':' (default 0, 1, ... "
+                      "for every axis the daemon has at load time)");
+
+struct axis_pins {
+  hal_float_t* position;
+  hal_u32_t* raw_hi;
+  hal_u32_t* raw_lo;
+  hal_bit_t* valid;
+  hal_bit_t* fresh;
+  hal_bit_t* new_position;
+  hal_bit_t* stale;
+  hal_s32_t* pos_cycle;
+  hal_u32_t* error_info;
+  hal_u32_t* endat_error;
+  hal_u32_t* endat_warning;
+  hal_float_t* age_us;
+  hal_float_t scale;  /* parameter: counts (LSBs of the 64-bit position) per user unit */
+  hal_float_t offset; /* parameter: added after scaling */
+};
+
+struct instance_pins {
+  hal_bit_t* daemon_alive;
+  hal_u32_t* bus_cycle;
+  hal_u32_t* restarts;
+  hal_float_t* phase_us;
+  hal_float_t* bus_period_us;
+  hal_u32_t* read_retries;
+  hal_u32_t* read_failures;
+  hal_u32_t timeout_us; /* parameter: a daemon silent this long is dead (0: automatic) */
+  struct axis_pins axis[];
+};
+
+/* A mapped daemon generation, owned by the helper thread. */
+struct mapping {
+  struct ds1928_shm_reader reader;
+};
+
+struct instance {
+  char shm_name[DS1928_SHM_NAME_MAX + 1];
+  char prefix[NAME_LEN];
+  unsigned axis_count;
+  struct instance_pins* pins; /* HAL memory */
+  struct mapping* current;    /* atomic: what the realtime function reads, NULL = none */
+  uint64_t rt_enter;          /* atomic: invocations of the realtime function started */
+  uint64_t rt_exit;           /* atomic: ... and finished */
+  uint32_t restarts;          /* atomic: generations mapped after the first one */
+  uint64_t first_generation;  /* helper only: 0 = nothing mapped yet */
+  uint32_t retries;           /* realtime function only */
+  uint32_t failures;          /* realtime function only */
+  int reported;               /* helper only: last open error printed */
+};
+
+static int comp_id = -1;
+static struct instance instances[MAX_INSTANCES];
+static unsigned instance_count;
+static pthread_t helper;
+static int helper_started;
+static int helper_stop; /* atomic */
+
+/* A daemon silent this long is taken for dead: ten bus periods, at least 10 ms (a busy
+ * non-PREEMPT_RT kernel delays the daemon's cycle thread by milliseconds now and then). */
+static int64_t silence_limit_ns(const struct instance* in, const struct ds1928_shm_header* h) {
+  if (in->pins->timeout_us != 0) return (int64_t)in->pins->timeout_us * 1000;
+  int64_t limit = 10 * (int64_t)h->cycle_period_ns;
+  return limit < 10000000 ? 10000000 : limit;
+}
+
+static int daemon_publishing(const struct instance* in, const struct ds1928_shm_header* h,
+                             int64_t now) {
+  if (ds1928_shm_daemon_state(h) == DS1928_DAEMON_STOPPED) return 0;
+  const int64_t last = ds1928_shm_last_publish_ns(h);
+  return last != 0 && now - last <= silence_limit_ns(in, h);
+}
+
+/* One consistent copy in at most READ_ATTEMPTS tries: seqlock plus check word. */
+static int read_record(const struct ds1928_shm_axis* rec, struct ds1928_axis_data* out,
+                       uint32_t* retries) {
+  uint64_t* dst = (uint64_t*)(void*)out;
+  for (unsigned attempt = 0; attempt < READ_ATTEMPTS; ++attempt) {
+    if (attempt != 0) {
+      ++*retries;
+      ds1928_shm_cpu_relax();
+    }
+    const uint64_t s1 = __atomic_load_n(&rec->seq, __ATOMIC_ACQUIRE);
+    if (s1 & 1u) continue;
+    for (unsigned i = 0; i < DS1928_AXIS_DATA_WORDS; ++i)
+      dst[i] = __atomic_load_n(&rec->u.words[i], __ATOMIC_RELAXED);
+    __atomic_thread_fence(__ATOMIC_ACQUIRE);
+    if (__atomic_load_n(&rec->seq, __ATOMIC_RELAXED) == s1 && ds1928_shm_check(out) == out->check)
+      return 1;
+  }
+  return 0;
+}
+
+static void invalidate(struct instance_pins* p, unsigned from, unsigned to) {
+  for (unsigned a = from; a < to; ++a) {
+    *p->axis[a].valid = 0;
+    *p->axis[a].fresh = 0;
+    *p->axis[a].new_position = 0;
+    *p->axis[a].stale = 1;
+  }
+}
+
+static void read_instance(struct instance* in, int64_t now) {
+  struct instance_pins* p = in->pins;
+  __atomic_fetch_add(&in->rt_enter, 1, __ATOMIC_SEQ_CST);
+  const struct mapping* m = __atomic_load_n(&in->current, __ATOMIC_SEQ_CST);
+  *p->restarts = __atomic_load_n(&in->restarts, __ATOMIC_RELAXED);
+  if (!m) {
+    *p->daemon_alive = 0;
+    invalidate(p, 0, in->axis_count);
+  } else {
+    const struct ds1928_shm_header* h = m->reader.header;
+    const int alive = daemon_publishing(in, h, now);
+    const int64_t period = (int64_t)h->cycle_period_ns;
+    const int64_t last = ds1928_shm_last_publish_ns(h);
+    *p->daemon_alive = alive;
+    *p->bus_period_us = (double)period / 1000.0;
+    if (last != 0 && period > 0) {
+      int64_t phase = (now - last) % period;
+      if (phase < 0) phase += period;
+      *p->phase_us = (double)phase / 1000.0;
+    }
+    const unsigned present = h->axis_count < in->axis_count ? h->axis_count : in->axis_count;
+    for (unsigned a = 0; a < present; ++a) {
+      struct axis_pins* ap = &p->axis[a];
+      struct ds1928_axis_data d;
+      if (!read_record(ds1928_shm_axis_record(h, a), &d, &in->retries)) {
+        ++in->failures; /* keep the last values, but not as valid */
+        *ap->valid = 0;
+        continue;
+      }
+      const int64_t counts_hi = d.periods; /* periods carry the daemon's signed/unsigned choice */
+      const double counts = (double)counts_hi * 65536.0 + (double)d.fraction;
+      const double scale = ap->scale != 0.0 ? ap->scale : 1.0;
+      *ap->position = counts / scale + ap->offset;
+      *ap->raw_hi = (uint32_t)(d.position_raw >> 32);
+      *ap->raw_lo = (uint32_t)d.position_raw;
+      *ap->valid = alive && d.validity == DS1928_AXIS_VALID;
+      *ap->fresh = alive && (d.flags & DS1928_AXIS_FRESH) != 0;
+      *ap->new_position = alive && (d.flags & DS1928_AXIS_NEW_POSITION) != 0;
+      *ap->stale = !alive || d.validity == DS1928_AXIS_STALE;
+      *ap->pos_cycle = d.pos_cycle;
+      *ap->error_info = d.error_info;
+      *ap->endat_error = d.endat_error;
+      *ap->endat_warning = d.endat_warning;
+      const int64_t t = d.pos_time_ns != 0 ? d.pos_time_ns : d.publish_ns;
+      *ap->age_us = (double)(now - t) / 1000.0;
+      if (a == 0) *p->bus_cycle = (uint32_t)d.cycle;
+    }
+    if (present == 0) *p->bus_cycle = (uint32_t)ds1928_shm_last_cycle(h);
+    invalidate(p, present, in->axis_count); /* the new daemon has fewer axes */
+  }
+  *p->read_retries = in->retries;
+  *p->read_failures = in->failures;
+  __atomic_fetch_add(&in->rt_exit, 1, __ATOMIC_SEQ_CST);
+}
+
+/* The realtime function: every instance, once per thread period. */
+static void read_all(void* arg, long period) {
+  (void)arg;
+  (void)period;
+  const int64_t now = ds1928_shm_now_ns(); /* vDSO: no system call */
+  for (unsigned i = 0; i < instance_count; ++i) read_instance(&instances[i], now);
+}
+
+/* ---- helper thread (normal priority; the only place with system calls) ---- */
+
+static void sleep_ms(long ms) {
+  struct timespec ts = {ms / 1000, (ms % 1000) * 1000000L};
+  nanosleep(&ts, NULL);
+}
+
+/* Publishes `m` to the realtime function and unmaps what it replaces once no invocation that may
+ * have loaded the old pointer runs any more: an invocation counts itself in rt_enter before it
+ * loads the pointer, so every one that can see the old mapping started before `started` was read
+ * below, and the function runs on one thread at a time. */
+static void hand_over(struct instance* in, struct mapping* m) {
+  struct mapping* old = __atomic_exchange_n(&in->current, m, __ATOMIC_SEQ_CST);
+  if (!old) return;
+  const uint64_t started = __atomic_load_n(&in->rt_enter, __ATOMIC_SEQ_CST);
+  while (__atomic_load_n(&in->rt_exit, __ATOMIC_SEQ_CST) < started) sleep_ms(1);
+  ds1928_shm_reader_close(&old->reader);
+  free(old);
+}
+
+static const char* open_problem(int rc) {
+  switch (rc) {
+    case -ENOENT:
+      return "no such shared memory (is ds1928d running?)";
+    case -EACCES:
+      return "permission denied (shm.group / shm.mode of the daemon's configuration)";
+    case -EPROTO:
+      return "not ds1928d shared memory of this ABI version";
+    default:
+      return strerror(-rc);
+  }
+}
+
+/* Maps a new generation under the instance's name if there is one. */
+static void try_attach(struct instance* in) {
+  struct mapping* m = (struct mapping*)calloc(1, sizeof *m);
+  if (!m) return;
+  const int rc = ds1928_shm_reader_open(&m->reader, in->shm_name);
+  const struct mapping* cur = __atomic_load_n(&in->current, __ATOMIC_SEQ_CST);
+  if (rc != 0 || (cur && m->reader.generation == cur->reader.generation)) {
+    if (rc != 0 && rc != -EAGAIN && rc != in->reported)
+      rtapi_print_msg(RTAPI_MSG_ERR, "ds1928: %s: %s\n", in->shm_name, open_problem(rc));
+    if (rc != -EAGAIN) in->reported = rc;
+    if (rc == 0) ds1928_shm_reader_close(&m->reader);
+    free(m);
+    return;
+  }
+  in->reported = 0;
+  if (in->first_generation == 0) {
+    in->first_generation = m->reader.generation;
+  } else {
+    __atomic_fetch_add(&in->restarts, 1, __ATOMIC_SEQ_CST);
+  }
+  if (m->reader.header->axis_count < in->axis_count)
+    rtapi_print_msg(RTAPI_MSG_ERR, "ds1928: %s: the daemon has %u axes, %u are configured\n",
+                    in->shm_name, m->reader.header->axis_count, in->axis_count);
+  rtapi_print_msg(RTAPI_MSG_INFO, "ds1928: %s: attached to generation %llu\n", in->shm_name,
+                  (unsigned long long)m->reader.generation);
+  hand_over(in, m);
+}
+
+static void* helper_main(void* arg) {
+  (void)arg;
+  while (!__atomic_load_n(&helper_stop, __ATOMIC_SEQ_CST)) {
+    const int64_t now = ds1928_shm_now_ns();
+    for (unsigned i = 0; i < instance_count; ++i) {
+      struct instance* in = &instances[i];
+      const struct mapping* cur = __atomic_load_n(&in->current, __ATOMIC_SEQ_CST);
+      if (!cur || !daemon_publishing(in, cur->reader.header, now)) try_attach(in);
+    }
+    sleep_ms(20);
+  }
+  return NULL;
+}
+
+/* ---- loading ---- */
+
+static int export_axis(const char* prefix, const char* axis, struct axis_pins* p) {
+  int r = 0;
+  r |= hal_pin_float_newf(HAL_OUT, &p->position, comp_id, "%s.%s.position", prefix, axis);
+  r |= hal_pin_u32_newf(HAL_OUT, &p->raw_hi, comp_id, "%s.%s.raw-hi", prefix, axis);
+  r |= hal_pin_u32_newf(HAL_OUT, &p->raw_lo, comp_id, "%s.%s.raw-lo", prefix, axis);
+  r |= hal_pin_bit_newf(HAL_OUT, &p->valid, comp_id, "%s.%s.valid", prefix, axis);
+  r |= hal_pin_bit_newf(HAL_OUT, &p->fresh, comp_id, "%s.%s.fresh", prefix, axis);
+  r |= hal_pin_bit_newf(HAL_OUT, &p->new_position, comp_id, "%s.%s.new-position", prefix, axis);
+  r |= hal_pin_bit_newf(HAL_OUT, &p->stale, comp_id, "%s.%s.stale", prefix, axis);
+  r |= hal_pin_s32_newf(HAL_OUT, &p->pos_cycle, comp_id, "%s.%s.pos-cycle", prefix, axis);
+  r |= hal_pin_u32_newf(HAL_OUT, &p->error_info, comp_id, "%s.%s.error-info", prefix, axis);
+  r |= hal_pin_u32_newf(HAL_OUT, &p->endat_error, comp_id, "%s.%s.endat-error", prefix, axis);
+  r |= hal_pin_u32_newf(HAL_OUT, &p->endat_warning, comp_id, "%s.%s.endat-warning", prefix, axis);
+  r |= hal_pin_float_newf(HAL_OUT, &p->age_us, comp_id, "%s.%s.age-us", prefix, axis);
+  r |= hal_param_float_newf(HAL_RW, &p->scale, comp_id, "%s.%s.scale", prefix, axis);
+  r |= hal_param_float_newf(HAL_RW, &p->offset, comp_id, "%s.%s.offset", prefix, axis);
+  if (r != 0) return -1;
+  p->scale = 1.0;
+  p->offset = 0.0;
+  *p->stale = 1;
+  return 0;
+}
+
+/* Axis names of instance i: the axes= entry split at ':', else 0..n-1 for the n axes the daemon
+ * has now (read by mapping it once here). */
+static int setup_instance(unsigned i, struct instance* in) {
+  static char axis_names[MAX_AXES][NAME_LEN]; /* loading is single-threaded */
+  unsigned n = 0;
+  snprintf(in->shm_name, sizeof in->shm_name, "%s", shm[i]);
+  if (names[i] && names[i][0])
+    snprintf(in->prefix, sizeof in->prefix, "%s", names[i]);
+  else if (i == 0)
+    snprintf(in->prefix, sizeof in->prefix, "ds1928");
+  else
+    snprintf(in->prefix, sizeof in->prefix, "ds1928-%u", i);
+  if (axes[i] && axes[i][0]) {
+    const char* s = axes[i];
+    while (*s) {
+      const char* e = strchr(s, ':');
+      const size_t len = e ? (size_t)(e - s) : strlen(s);
+      if (len == 0 || len >= NAME_LEN || n == MAX_AXES) {
+        rtapi_print_msg(RTAPI_MSG_ERR, "ds1928: axes=%s: empty or too long name, or more than %d\n",
+                        axes[i], MAX_AXES);
+        return -1;
+      }
+      memcpy(axis_names[n], s, len);
+      axis_names[n][len] = '\0';
+      ++n;
+      s += len + (e ? 1 : 0);
+    }
+  } else {
+    struct ds1928_shm_reader r;
+    int rc = ds1928_shm_reader_open(&r, in->shm_name);
+    for (int tries = 0; rc == -EAGAIN && tries < 20; ++tries) {
+      sleep_ms(50);
+      rc = ds1928_shm_reader_open(&r, in->shm_name);
+    }
+    if (rc != 0) {
+      rtapi_print_msg(RTAPI_MSG_ERR,
+                      "ds1928: %s: %s; start ds1928d before loading, or name the axes with "
+                      "axes=NAME:NAME...\n",
+                      in->shm_name, open_problem(rc));
+      return -1;
+    }
+    n = r.header->axis_count < MAX_AXES ? r.header->axis_count : MAX_AXES;
+    ds1928_shm_reader_close(&r);
+    for (unsigned a = 0; a < n; ++a) snprintf(axis_names[a], NAME_LEN, "%u", a);
+  }
+  in->axis_count = n;
+  in->pins = (struct instance_pins*)hal_malloc(
+      (long)(sizeof(struct instance_pins) + n * sizeof(struct axis_pins)));
+  if (!in->pins) return -1;
+  memset(in->pins, 0, sizeof(struct instance_pins) + n * sizeof(struct axis_pins));
+  struct instance_pins* p = in->pins;
+  const char* pre = in->prefix;
+  int r = 0;
+  r |= hal_pin_bit_newf(HAL_OUT, &p->daemon_alive, comp_id, "%s.daemon-alive", pre);
+  r |= hal_pin_u32_newf(HAL_OUT, &p->bus_cycle, comp_id, "%s.bus-cycle", pre);
+  r |= hal_pin_u32_newf(HAL_OUT, &p->restarts, comp_id, "%s.restarts", pre);
+  r |= hal_pin_float_newf(HAL_OUT, &p->phase_us, comp_id, "%s.phase-us", pre);
+  r |= hal_pin_float_newf(HAL_OUT, &p->bus_period_us, comp_id, "%s.bus-period-us", pre);
+  r |= hal_pin_u32_newf(HAL_OUT, &p->read_retries, comp_id, "%s.read-retries", pre);
+  r |= hal_pin_u32_newf(HAL_OUT, &p->read_failures, comp_id, "%s.read-failures", pre);
+  r |= hal_param_u32_newf(HAL_RW, &p->timeout_us, comp_id, "%s.timeout-us", pre);
+  if (r != 0) return -1;
+  for (unsigned a = 0; a < n; ++a)
+    if (export_axis(pre, axis_names[a], &p->axis[a]) != 0) return -1;
+  return 0;
+}
+
+int rtapi_app_main(void) {
+  comp_id = hal_init("ds1928");
+  if (comp_id < 0) return comp_id;
+  instance_count = 0;
+  for (unsigned i = 0; i < MAX_INSTANCES && shm[i] && shm[i][0]; ++i) {
+    if (strlen(shm[i]) >= sizeof instances[i].shm_name || shm[i][0] != '/') {
+      rtapi_print_msg(RTAPI_MSG_ERR, "ds1928: shm=%s: a POSIX shm name starts with '/'\n", shm[i]);
+      hal_exit(comp_id);
+      return -EINVAL;
+    }
+    if (setup_instance(i, &instances[i]) != 0) {
+      hal_exit(comp_id);
+      return -EINVAL;
+    }
+    instance_count = i + 1;
+  }
+  if (hal_export_funct("ds1928.read", read_all, NULL, 1, 0, comp_id) != 0) {
+    hal_exit(comp_id);
+    return -EINVAL;
+  }
+  /* The first mapping before any thread runs: pins are right from the first period. */
+  for (unsigned i = 0; i < instance_count; ++i) try_attach(&instances[i]);
+  __atomic_store_n(&helper_stop, 0, __ATOMIC_SEQ_CST);
+  if (pthread_create(&helper, NULL, helper_main, NULL) != 0) {
+    rtapi_print_msg(RTAPI_MSG_ERR, "ds1928: cannot start the attach thread\n");
+    hal_exit(comp_id);
+    return -ENOMEM;
+  }
+  helper_started = 1;
+  hal_ready(comp_id);
+  return 0;
+}
+
+void rtapi_app_exit(void) {
+  if (helper_started) {
+    __atomic_store_n(&helper_stop, 1, __ATOMIC_SEQ_CST);
+    pthread_join(helper, NULL);
+    helper_started = 0;
+  }
+  /* Remove the function from its thread first, then wait (bounded) for an invocation that was
+   * already running, and only then unmap what it reads. */
+  hal_exit(comp_id);
+  for (int waited = 0; waited < 100; ++waited) {
+    int running = 0;
+    for (unsigned i = 0; i < instance_count; ++i)
+      running |= __atomic_load_n(&instances[i].rt_enter, __ATOMIC_SEQ_CST) !=
+                 __atomic_load_n(&instances[i].rt_exit, __ATOMIC_SEQ_CST);
+    if (!running) break;
+    sleep_ms(1);
+  }
+  for (unsigned i = 0; i < instance_count; ++i) {
+    struct mapping* m = __atomic_exchange_n(&instances[i].current, NULL, __ATOMIC_SEQ_CST);
+    if (m) {
+      ds1928_shm_reader_close(&m->reader);
+      free(m);
+    }
+  }
+}

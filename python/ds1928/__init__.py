@@ -1,0 +1,17 @@
+"""ds1928: read the positions ds1928d publishes in shared memory, and talk to its control socket.
+
+Pure Python (mmap + struct on the ABI of include/ds1928/shm.h, docs/shared-memory.md):
+
+    >>> import ds1928
+    >>> r = ds1928.Reader("/ds1928d")
+    >>> r.axis(0)            # one consistent record (seqlock + check word)
+    >>> r.wait(every=1)      # sleep until the next publication (futex, through ctypes)
+    >>> ds1928.Control().status()
+"""
+from .shm import (ABI_VERSION, AbiMismatch, AxisData, DaemonStopped, NotReady, Reader,
+                  TornRead, check_value)
+from .control import Control, ControlError
+
+__all__ = ["ABI_VERSION", "AbiMismatch", "AxisData", "Control", "ControlError", "DaemonStopped",
+           "NotReady", "Reader", "TornRead", "check_value"]
+__version__ = "0.1.0"

@@ -1,0 +1,399 @@
+"""Reader of ds1928d's shared memory (ABI version 1, include/ds1928/shm.h).
+
+The layout is read with struct at the offsets of the C header; every value that changes at run
+time is read as one aligned 8-byte (or 4-byte) load from the mapping (memoryview.cast), which the
+CPU performs as a single access, so the seqlock protocol of the header holds: read `seq`, copy
+the nine payload words, read `seq` again; equal and even means consistent. The copy must also
+match its check word. Python cannot order loads with fences the way C's atomics do, so the check
+word is what makes a copy trustworthy here: a copy that passes the seqlock but not the check is
+retried like a torn one.
+"""
+import ctypes
+import ctypes.util
+import errno
+import mmap
+import os
+import struct
+import time
+from dataclasses import dataclass
+
+SHM_MAGIC = 0x4D48533832393144  # "D1928SHM"
+WAIT_MAGIC = 0x5449415738323944  # "D928WAIT"
+ABI_VERSION = 1
+DEFAULT_NAME = "/ds1928d"
+WAIT_SUFFIX = ".wait"
+WAIT_SLOTS = 16
+HEADER_SIZE = 128
+RECORD_SIZE = 128
+WAIT_SIZE = 256
+DATA_WORDS = 9
+
+# Header: magic, abi_version, header_size, record_size, axis_count, generation, cycle_period_ns,
+# daemon_pid (offsets 0..44); run-time words at 64 (state u32), 72, 80, 88.
+_HEADER_CONST = struct.Struct("<QIIIIQQi")
+_PAYLOAD = struct.Struct("<QqqqQiIIIHBbBBBBQ")  # struct ds1928_axis_data, 72 bytes
+
+VALIDITY = {0: "valid", 1: "stale", 2: "bus_down", 3: "module_error"}
+TIME_SOURCE = {0: "none", 1: "nettime", 2: "rx_timestamp"}
+STATE = {0: "starting", 1: "running", 2: "stopping", 3: "stopped"}
+FLAG_NEW_POSITION, FLAG_FRACTION_VALID, FLAG_FRESH = 0x01, 0x02, 0x04
+_M64 = (1 << 64) - 1
+
+
+class AbiMismatch(Exception):
+    """The object under the name is not ds1928d shared memory of ABI version 1."""
+
+
+class NotReady(Exception):
+    """The daemon is still creating the object (retry shortly)."""
+
+
+class TornRead(Exception):
+    """No consistent copy in the allowed attempts (a writer died in the middle of a record)."""
+
+
+class DaemonStopped(Exception):
+    """wait(): the daemon stopped; its object is no longer updated."""
+
+
+def check_value(words):
+    """ds1928_shm_check() of the first eight payload words."""
+    h = 0x6A09E667F3BCC909
+    for w in words[:8]:
+        h = ((h ^ w) * 0x9E3779B97F4A7C15) & _M64
+        h ^= h >> 29
+    return h
+
+
+@dataclass(frozen=True)
+class AxisData:
+    """One axis record (struct ds1928_axis_data), the names of ds1928ctl --json position."""
+    axis: int
+    position_raw: int
+    periods: int
+    fraction: int
+    pos_time_ns: int
+    publish_ns: int
+    cycle: int
+    position_sdc: int
+    pos_time_raw: int
+    endat_error: int
+    endat_warning: int
+    time_source: str
+    pos_cycle: int
+    error_info: int
+    state: str
+    flags: int
+
+    @property
+    def valid(self):
+        return self.state == "valid"
+
+    @property
+    def fresh(self):
+        return bool(self.flags & FLAG_FRESH)
+
+    @property
+    def new_position(self):
+        return bool(self.flags & FLAG_NEW_POSITION)
+
+    @property
+    def position(self):
+        """Whole and fractional sine periods as a float."""
+        return self.periods + self.fraction / 65536.0
+
+
+def _shm_path(name):
+    if not name.startswith("/") or "/" in name[1:] or len(name) < 2:
+        raise ValueError(f"shared memory name {name!r}: one '/' then a file name")
+    return "/dev/shm" + name
+
+
+_libc = None
+_SYS_FUTEX = {"x86_64": 202, "aarch64": 98, "armv7l": 240, "i686": 240}.get(os.uname().machine)
+_FUTEX_WAIT_BITSET = 9
+
+
+class _Timespec(ctypes.Structure):
+    _fields_ = [("tv_sec", ctypes.c_long), ("tv_nsec", ctypes.c_long)]
+
+
+class Reader:
+    """A mapped daemon instance: Reader(name="/ds1928d")."""
+
+    def __init__(self, name=DEFAULT_NAME, open_wait=True):
+        self.name = name
+        self._map = None
+        self._wait = None
+        self._open(open_wait)
+
+    # -- mapping ---------------------------------------------------------------------------
+    def _open(self, open_wait):
+        path = _shm_path(self.name)
+        try:
+            fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC | os.O_NOFOLLOW)
+        except FileNotFoundError:
+            raise FileNotFoundError(errno.ENOENT, f"no shared memory {self.name} (is ds1928d "
+                                    "running?)", path) from None
+        try:
+            st = os.fstat(fd)
+            import stat as _stat
+            if not _stat.S_ISREG(st.st_mode):
+                raise AbiMismatch(f"{self.name}: not a regular file")
+            if st.st_size < HEADER_SIZE:
+                raise NotReady(f"{self.name}: being created")
+            m = mmap.mmap(fd, st.st_size, mmap.MAP_SHARED, mmap.PROT_READ)
+        finally:
+            os.close(fd)
+        u64 = memoryview(m).cast("Q")
+        magic = u64[0]
+        if magic == 0:
+            u64.release()
+            m.close()
+            raise NotReady(f"{self.name}: being created")
+        (magic, abi, header_size, record_size, axis_count, generation, period,
+         pid) = _HEADER_CONST.unpack_from(m, 0)
+        problem = None
+        if magic != SHM_MAGIC:
+            problem = f"magic {magic:#018x}, expected {SHM_MAGIC:#018x} (not ds1928d shared memory)"
+        elif abi != ABI_VERSION:
+            problem = f"ABI version {abi}, this reader knows version {ABI_VERSION}"
+        elif header_size < HEADER_SIZE or record_size < RECORD_SIZE or \
+                header_size + axis_count * record_size > st.st_size:
+            problem = (f"header_size {header_size}, record_size {record_size}, {axis_count} axes "
+                       f"do not fit ABI version {ABI_VERSION} in {st.st_size} bytes")
+        if problem:
+            u64.release()
+            m.close()
+            raise AbiMismatch(f"{self.name}: {problem}")
+        self._map, self._u64, self._u32 = m, u64, memoryview(m).cast("I")
+        self.header_size, self.record_size = header_size, record_size
+        self.axis_count, self.generation = axis_count, generation
+        self.cycle_period_ns, self.daemon_pid = period, pid
+        if open_wait:
+            self._open_wait()
+
+    def _open_wait(self):
+        try:
+            fd = os.open(_shm_path(self.name + WAIT_SUFFIX), os.O_RDWR | os.O_CLOEXEC | os.O_NOFOLLOW)
+        except OSError:
+            return  # no write permission: reading still works, wait() does not
+        try:
+            w = mmap.mmap(fd, WAIT_SIZE, mmap.MAP_SHARED, mmap.PROT_READ | mmap.PROT_WRITE)
+        except (OSError, ValueError):
+            return
+        finally:
+            os.close(fd)
+        magic, generation = struct.unpack_from("<QQ", w, 0)
+        if magic != WAIT_MAGIC or generation != self.generation:
+            w.close()
+            return
+        self._wait = w
+
+    def close(self):
+        for attr in ("_u64", "_u32"):
+            view = getattr(self, attr, None)
+            if view is not None:
+                view.release()
+                setattr(self, attr, None)
+        if self._map is not None:
+            self._map.close()
+            self._map = None
+        if self._wait is not None:
+            self._wait.close()
+            self._wait = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def reopen(self):
+        """For a reader whose daemon stopped or died: True when a new generation is now mapped."""
+        try:
+            fresh = Reader(self.name, open_wait=True)
+        except (OSError, NotReady):
+            return False
+        if fresh.generation == self.generation:
+            fresh.close()
+            return False
+        self.close()
+        self.__dict__.update(fresh.__dict__)
+        fresh.__dict__.clear()
+        return True
+
+    # -- header ----------------------------------------------------------------------------
+    @property
+    def state(self):
+        return STATE.get(self._u32[64 // 4], "unknown")
+
+    @property
+    def last_cycle(self):
+        return self._u64[72 // 8]
+
+    @property
+    def last_publish_ns(self):
+        return self._u64[80 // 8]
+
+    @property
+    def publish_count(self):
+        return self._u64[88 // 8]
+
+    def daemon_alive(self, missed_cycles=10):
+        """As ds1928_shm_daemon_alive(): not stopped and published within max(N periods, 100 ms)."""
+        if self.state == "stopped":
+            return False
+        last = self.last_publish_ns
+        if last == 0:
+            return True
+        tolerance = max(self.cycle_period_ns * missed_cycles, 100_000_000)
+        return time.clock_gettime_ns(time.CLOCK_MONOTONIC) - last <= tolerance
+
+    # -- records ---------------------------------------------------------------------------
+    def words(self, axis, attempts=100_000):
+        """The nine payload words of one consistent copy (seqlock + check word)."""
+        if not 0 <= axis < self.axis_count:
+            raise IndexError(f"axis {axis}: the daemon has {self.axis_count} axes")
+        u64 = self._u64
+        seq_index = (self.header_size + axis * self.record_size) // 8
+        first, stop = seq_index + 1, seq_index + 1 + DATA_WORDS
+        for _ in range(attempts):
+            s1 = u64[seq_index]
+            if s1 & 1:
+                continue
+            words = u64[first:stop].tolist()
+            if u64[seq_index] == s1 and check_value(words) == words[8]:
+                return words
+        raise TornRead(f"{self.name}: axis {axis} stayed locked for {attempts} attempts")
+
+    def axis(self, axis=0):
+        w = self.words(axis)
+        (raw, periods, pos_time, publish, cycle, sdc, pos_time_raw, endat_error, endat_warning,
+         fraction, time_source, pos_cycle, error_info, validity, flags, _reserved,
+         _check) = _PAYLOAD.unpack(struct.pack("<9Q", *w))
+        return AxisData(axis=axis, position_raw=raw, periods=periods, fraction=fraction,
+                        pos_time_ns=pos_time, publish_ns=publish, cycle=cycle, position_sdc=sdc,
+                        pos_time_raw=pos_time_raw, endat_error=endat_error,
+                        endat_warning=endat_warning,
+                        time_source=TIME_SOURCE.get(time_source, "none"), pos_cycle=pos_cycle,
+                        error_info=error_info, state=VALIDITY.get(validity, "unknown"),
+                        flags=flags)
+
+    def axes(self):
+        return [self.axis(a) for a in range(self.axis_count)]
+
+    # -- waiting (futex) -------------------------------------------------------------------
+    @property
+    def can_wait(self):
+        return self._wait is not None and _SYS_FUTEX is not None
+
+    def wait_start(self):
+        """The starting value of wait()'s `seen`: the last published cycle (None before any)."""
+        return self.last_cycle if self.publish_count != 0 else None
+
+    def _due(self, seen, every):
+        if self.publish_count == 0:
+            return None
+        cycle = self.last_cycle
+        if seen is None:
+            return cycle if cycle % every == 0 else None
+        return cycle if cycle > seen and cycle // every > seen // every else None
+
+    def _slot(self, every):
+        """The wait slot for `every` (claimed when free), as ds1928_shm_wait_slot_for()."""
+        w32 = memoryview(self._wait).cast("I")
+        try:
+            for factor in ((every, 1) if every != 1 else (1,)):
+                for i in range(WAIT_SLOTS):
+                    f = w32[(128 + 8 * i) // 4]
+                    if f == factor:
+                        return i
+                    if f == 0 and _cas32(self._wait, 128 + 8 * i, 0, factor) in (0, factor):
+                        return i
+            return -1
+        finally:
+            w32.release()
+
+    def wait(self, seen=None, every=1, timeout=1.0):
+        """Sleeps until a publication whose cycle is a multiple of `every` follows cycle `seen`
+        (None: the next matching one). Returns the last published cycle, or None on timeout;
+        raises DaemonStopped when the daemon stops. Without write access to <name>.wait (or on
+        an architecture without a known futex number) it polls at the bus period."""
+        every = max(1, int(every))
+        if seen is None:
+            seen = self.wait_start()
+        deadline = time.clock_gettime_ns(time.CLOCK_MONOTONIC) + int(timeout * 1e9)
+        slot = self._slot(every) if self.can_wait else -1
+        while True:
+            if slot >= 0:
+                _atomic_add32(self._wait, 128 + 8 * slot + 4, 1)
+            try:
+                futex_value = struct.unpack_from("<I", self._wait, 64)[0] if slot >= 0 else 0
+                cycle = self._due(seen, every)
+                if cycle is not None:
+                    return cycle
+                if self.state == "stopped":
+                    raise DaemonStopped(f"{self.name}: the daemon stopped")
+                now = time.clock_gettime_ns(time.CLOCK_MONOTONIC)
+                if now >= deadline:
+                    return None
+                if slot >= 0:
+                    _futex_wait(self._wait, 64, futex_value, deadline, 1 << slot)
+                else:
+                    time.sleep(min(max(self.cycle_period_ns, 100_000), deadline - now) / 1e9)
+            finally:
+                if slot >= 0:
+                    _atomic_add32(self._wait, 128 + 8 * slot + 4, -1)
+
+
+# ---- atomics and the futex through ctypes ------------------------------------------------------
+# Python has no atomic read-modify-write on a mapping; the registration counters need one (the
+# daemon and other readers change them concurrently). libatomic's __atomic_fetch_add_4 and
+# __atomic_compare_exchange_4 are the C11 atomics the header uses, reached through ctypes.
+
+def _lib():
+    global _libc
+    if _libc is None:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+        atomic_name = ctypes.util.find_library("atomic") or "libatomic.so.1"
+        atomic = ctypes.CDLL(atomic_name)
+        atomic.__atomic_fetch_add_4.restype = ctypes.c_uint32
+        atomic.__atomic_fetch_add_4.argtypes = [ctypes.c_void_p, ctypes.c_uint32, ctypes.c_int]
+        atomic.__atomic_compare_exchange_4.restype = ctypes.c_bool
+        atomic.__atomic_compare_exchange_4.argtypes = [ctypes.c_void_p, ctypes.c_void_p,
+                                                       ctypes.c_uint32, ctypes.c_int, ctypes.c_int]
+        libc.syscall.restype = ctypes.c_long
+        _libc = (libc, atomic)
+    return _libc
+
+
+def _address(m, offset):
+    return ctypes.addressof(ctypes.c_char.from_buffer(m, offset))
+
+
+_SEQ_CST = 5
+
+
+def _atomic_add32(m, offset, delta):
+    _lib()[1].__atomic_fetch_add_4(_address(m, offset), delta & 0xFFFFFFFF, _SEQ_CST)
+
+
+def _cas32(m, offset, expected, desired):
+    """Compare-and-swap; returns the value seen (== expected on success)."""
+    seen = ctypes.c_uint32(expected)
+    _lib()[1].__atomic_compare_exchange_4(_address(m, offset), ctypes.byref(seen), desired,
+                                          _SEQ_CST, _SEQ_CST)
+    return seen.value
+
+
+def _futex_wait(m, offset, value, deadline_ns, bitset):
+    libc = _lib()[0]
+    ts = _Timespec(deadline_ns // 1_000_000_000, deadline_ns % 1_000_000_000)
+    r = libc.syscall(ctypes.c_long(_SYS_FUTEX), ctypes.c_void_p(_address(m, offset)),
+                     ctypes.c_int(_FUTEX_WAIT_BITSET), ctypes.c_uint32(value), ctypes.byref(ts),
+                     ctypes.c_void_p(0), ctypes.c_uint32(bitset))
+    if r != 0:
+        e = ctypes.get_errno()
+        if e not in (errno.EAGAIN, errno.ETIMEDOUT, errno.EINTR):
+            raise OSError(e, os.strerror(e))
