@@ -120,8 +120,9 @@ TEST_CASE("the daemon's cycle work allocates nothing and locks no mutex in 100 0
                       << " publications; wake-up calls " << publisher.wake_calls()
                       << ", rings by the cycle thread " << publisher.doorbell_calls());
   CHECK(publisher.doorbell_calls() <= 1);
-  for (const auto& g : got) CHECK(g.load() >= 100);
-  CHECK(publisher.wake_calls() >= 100);
+  // (A floor, not a rate: how often a loaded machine lets the readers run is not the point.)
+  for (const auto& g : got) CHECK(g.load() >= 10);
+  CHECK(publisher.wake_calls() >= 10);
   // The traffic really went through the counted cycles.
   CHECK(traffic.replies > 100);
   CHECK(traffic.acks > 100);

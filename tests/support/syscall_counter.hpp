@@ -47,6 +47,7 @@ class SyscallCounter {
     ok.push_back(SYS_exit_group);
     ok.push_back(SYS_munmap);  // thread exit frees its stack cache
     ok.push_back(SYS_madvise);
+    ok.push_back(SYS_rt_sigprocmask);  // thread exit blocks signals
     std::vector<sock_filter> prog;
     prog.push_back(BPF_STMT(BPF_LD | BPF_W | BPF_ABS, offsetof(seccomp_data, arch)));
     prog.push_back(BPF_JUMP(BPF_JMP | BPF_JEQ | BPF_K, AUDIT_ARCH_X86_64, 1, 0));
