@@ -259,6 +259,7 @@ struct CaptureService::Run : std::enable_shared_from_this<Run> {
     spdlog::info("capture for pid {} uid {} ended ({}): {} frames, {} bytes", peer.pid, peer.uid,
                  reason, frames, bytes);
     reply.ok({{"capture", summary()}});
+    for (Point& p : points) p.tap->release();
     service.run_.reset();  // may destroy *this: last statement
   }
 
@@ -267,11 +268,7 @@ struct CaptureService::Run : std::enable_shared_from_this<Run> {
     if (gone) return;
     gone = true;
     timer.cancel();
-    for (Point& p : points) {
-      p.tap->deactivate();
-      while (p.tap->pop([](const capture::TapFrame&) {})) {
-      }
-    }
+    for (Point& p : points) p.tap->release();
     spdlog::info("capture for pid {} uid {} ended: client gone ({} frames written)", peer.pid,
                  peer.uid, frames);
     service.run_.reset();

@@ -13,7 +13,9 @@ CycleWork::CycleWork(const DaemonConfig& config, BusDriver& bus, shm::Publisher&
       status_(config.axes.size()),
       ack_bits_(config.axes.size(), 0),
       ack_hold_(config.axes.size(), 0),
-      counters_(std::make_unique<AxisCounters[]>(config.axes.size())) {
+      counters_(std::make_unique<AxisCounters[]>(config.axes.size())),
+      next_wake_offset_ns_((int64_t{config.cycle.period_us} - int64_t{config.cycle.spin_us}) *
+                           1000) {
   for (std::size_t i = 0; i < config.axes.size(); ++i) {
     const ModuleSettings& m = config.axes[i].module;
     flatstream::MasterConfig fc;
@@ -95,7 +97,10 @@ void CycleWork::run_cycle(const CycleContext& ctx) noexcept {
   if (any_fresh)
     data_exchanges_.store(data_exchanges_.load(std::memory_order_relaxed) + 1,
                           std::memory_order_relaxed);
-  publisher_.publish(ctx.index, status_);
+  // The next cycle's wake-up on the engine's timeline (the start, less the spin): the
+  // shared-memory wake-up thread, on the same CPU, wakes then too and runs once this thread
+  // sleeps again.
+  publisher_.publish(ctx.index, status_, ctx.start_ns + next_wake_offset_ns_);
 }
 
 }  // namespace ds1928

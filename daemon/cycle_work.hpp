@@ -150,6 +150,7 @@ class CycleWork final : public CycleTask {
   std::vector<uint8_t> ack_bits_;
   std::vector<uint32_t> ack_hold_;
   std::unique_ptr<AxisCounters[]> counters_;
+  int64_t next_wake_offset_ns_;  // cycle start -> the engine's next wake-up (period - spin)
   std::vector<std::unique_ptr<Tunnel>> tunnels_;
   SpscQueue<AxisCommand, 64> commands_;
   std::atomic<uint64_t> exchanges_{0};

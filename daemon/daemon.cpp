@@ -112,6 +112,12 @@ std::error_code Daemon::start() {
   }
   started_ = true;
   if (!started.warning.empty()) spdlog::warn("{}", started.warning);
+  // The shared-memory wake-up thread: one priority below the cycle thread, on its CPU, so that
+  // it runs the moment the cycle thread has published and sleeps (docs/shared-memory.md).
+  if (const int rc =
+          publisher_.place_waker(std::max(config_.cycle.rt_priority - 1, 1), config_.cycle.cpu);
+      rc != 0 && engine_->realtime())
+    spdlog::warn("shared memory wake-up thread: scheduling not applied ({})", rt::errno_text(rc));
   registers_->start(std::chrono::microseconds(std::max<uint32_t>(config_.cycle.period_us, 1000)));
   endat_ = std::make_unique<EnDatService>(io_, *work_, *registers_, config_);
   endat_->register_commands(*server_);
@@ -195,6 +201,10 @@ void Daemon::on_tick() {
   if (now - last_log_ >= std::chrono::seconds(1)) {
     last_log_ = now;
     spdlog::info("{}", summary_line());
+    // Free heap pages back to the kernel (they stay resident and locked under mlockall until
+    // then): what a burst of clients left behind. The cycle thread never uses malloc, so the
+    // arena locks this takes are never in its way.
+    (void)rt::trim_heap(256 * 1024);
   }
   tick_timer_.expires_after(kTick);
   tick_timer_.async_wait([this](const boost::system::error_code& ec) {

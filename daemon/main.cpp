@@ -1,4 +1,5 @@
 // ds1928d: real-time master of X20DS1928 EnDat encoder modules.
+#include <malloc.h>
 #include <spdlog/spdlog.h>
 #include <sys/un.h>
 
@@ -86,6 +87,15 @@ int main(int argc, char** argv) {
   // pre-faults 256 KiB of it) instead of glibc's default of RLIMIT_STACK, usually 8 MiB. Before the
   // first thread (the logger's) starts.
   const ds1928::rt::SetupStep stack = ds1928::rt::limit_default_thread_stack(kThreadStackBytes);
+  // Under mlockall a heap page stays resident until malloc gives it back. Blocks from 64 KiB
+  // (a client's reply buffer, a capture's output) get their own mapping, returned at free()
+  // (glibc's threshold would otherwise climb to 32 MiB after the first such free), and free
+  // space above 128 KiB at the top of the heap is returned at once; Daemon's tick trims the
+  // rest once a second. One malloc arena per thread at most 2: each arena keeps its own free
+  // pages.
+  mallopt(M_MMAP_THRESHOLD, 64 * 1024);
+  mallopt(M_TRIM_THRESHOLD, 128 * 1024);
+  mallopt(M_ARENA_MAX, 2);
   const auto level =
       ds1928::control::parse_log_level(config.log_level).value_or(spdlog::level::info);
   ds1928::control::setup_logging(level, ds1928::control::detect_log_sink());

@@ -325,6 +325,11 @@ int main(int argc, char** argv) {
 
   Histogram wake(20'000'000);
   Histogram ref_error(20'000'000);
+  // The cycle thread's own work per cycle: from its wake-up to the end of the cycle's work
+  // (the exchange, decoding and this runner's checks), what competes with the period.
+  Histogram work(20'000'000);
+  uint64_t measured_overruns = 0;
+  uint32_t resets_at_start = 0;
   uint32_t min_timeout_us = UINT32_MAX;
   for (const auto& n : config.powerlink.nodes)
     min_timeout_us = std::min(min_timeout_us, n.pres_timeout_us);
@@ -410,6 +415,7 @@ int main(int argc, char** argv) {
       measuring = true;
       link.measuring = true;
       loss_totals(fired_at_start, events_at_start);
+      for (const pl::CnStatus& st : bus->managing_node().nodes()) resets_at_start += st.resets;
       prev_fired = fired_at_start;
       prev_events = events_at_start;
       measure_until = o.duration_s > 0 ? woke + static_cast<int64_t>(o.duration_s * 1e9) : 0;
@@ -512,10 +518,12 @@ int main(int argc, char** argv) {
     ++index;
     next += period_ns;
     const int64_t after = ds1928::rt::now_ns();
+    if (measuring) work.add(after - woke);
     if (after > next) {
       // Overrun: skip the missed cycles instead of bursting to catch up.
       const int64_t missed = (after - next) / period_ns + 1;
       overruns += static_cast<uint64_t>(missed);
+      if (measuring) ++measured_overruns;
       next += missed * period_ns;
       index += static_cast<uint64_t>(missed);
     }
@@ -564,6 +572,14 @@ int main(int argc, char** argv) {
               link.latency().max_us(), static_cast<unsigned long long>(link.latency().count()));
   std::printf("WAKE latency_us p50=%.1f p99=%.1f max=%.1f\n", wake.percentile_us(0.5),
               wake.percentile_us(0.99), wake.max_us());
+  // Overruns here: measured cycles whose work ended after the next cycle's start (each once,
+  // however many slots it cost); resets: CN resets by the MN in the measured window.
+  std::printf(
+      "WORK cycle_work_us p50=%.1f p99=%.1f max=%.1f measured_overruns=%llu "
+      "measured_resets=%u\n",
+      work.percentile_us(0.5), work.percentile_us(0.99), work.max_us(),
+      static_cast<unsigned long long>(measured_overruns),
+      resets - std::min(resets, resets_at_start));
   std::printf(
       "NETTIME soc_send_delay_us p50=%.1f p99=%.1f max=%.1f (SoC send instant vs "
       "NetTimeRef.monotonic_ns)\n",

@@ -3,7 +3,7 @@
 //    the writer, while the writer publishes at 10 kHz; baseline: the textbook seqlock read of a
 //    record of the same size (sequence, memcpy, fence, sequence) in the same conditions;
 //  - publish: Publisher::publish() of all axes on the writer, without and with a reader asleep
-//    in ds1928_shm_wait (the FUTEX_WAKE); baseline: plain seqlock writes of the same records.
+//    in ds1928_shm_wait (woken by the wake-up thread); baseline: plain seqlock writes.
 // Times are taken per operation with the TSC (serialised), calibrated against CLOCK_MONOTONIC;
 // the figures include the median cost of an empty measurement, printed on the first line
 // (subtracting it would credit the operation with overlap the serialisation does not allow).
@@ -244,7 +244,8 @@ int main(int argc, char** argv) {
   const Figures plain_publish = figures(plain_ticks, per_ns);
   print("publish, no waiter", figures(pub_ticks, per_ns), plain_publish);
 
-  // With a reader asleep in the wait: the publication includes the FUTEX_WAKE.
+  // With a reader asleep in the wait: the wake-up thread, not this one, makes the FUTEX_WAKE
+  // (bench/shm/shm_wake_bench compares it with the former inline wake).
   ShmReader waiter_map;
   if (auto ec = waiter_map.open(name)) return 1;
   std::atomic<bool> stop{false};
@@ -268,7 +269,8 @@ int main(int argc, char** argv) {
   waiter.join();
   const Figures with_waiter = figures(wake_ticks, per_ns);
   std::printf("%-34s p50 %7.1f ns  p99 %7.1f ns  max %9.1f ns | %llu of %zu publications woke\n",
-              "publish, a reader asleep", with_waiter.p50, with_waiter.p99, with_waiter.max,
+              "publish, a reader asleep (woken by the wake-up thread)", with_waiter.p50,
+              with_waiter.p99, with_waiter.max,
               static_cast<unsigned long long>(pub.wake_calls() - calls0), woken);
   std::printf("(checksum %llu)\n", static_cast<unsigned long long>(sink & 1));
   return 0;

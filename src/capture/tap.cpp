@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cstring>
+#include <new>
 #include <stdexcept>
 
 #include "core/clock.hpp"
@@ -29,15 +30,17 @@ Tap::Tap(std::string name, uint16_t link_type, std::size_t max_frame, std::size_
   if (ring_frames < 2 || (ring_frames & (ring_frames - 1)) != 0)
     throw std::invalid_argument("capture ring of " + std::to_string(ring_frames) +
                                 " frames: must be a power of two, at least 2");
-  // Value-initialised: every page is touched now, not by the cycle thread's first copy.
-  ring_ = std::make_unique<uint8_t[]>(capacity_ * slot_size_);
+  // The ring exists only while a capture runs (begin() .. release()): a POWERLINK tap's ring
+  // is 6.5 MiB at the default 4096 slots, which an idle daemon should not keep resident.
 }
 
 void Tap::record(Direction direction, int64_t time_ns, std::span<const uint8_t> bytes) noexcept {
   const uint64_t seq = seq_.load(std::memory_order_relaxed) + 1;
   seq_.store(seq, std::memory_order_seq_cst);
   bump(direction == Direction::Outbound ? tx_ : rx_);
-  if (active_.load(std::memory_order_seq_cst)) {
+  // ring_ is set before active_ turns true and freed only after release() saw every producer
+  // that could have seen active_ true finish (both through the sequentially consistent pair).
+  if (active_.load(std::memory_order_seq_cst) && ring_ != nullptr) {
     const std::size_t head = head_.load(std::memory_order_relaxed);
     if (head - tail_.load(std::memory_order_acquire) == capacity_) {
       bump(dropped_);
@@ -56,6 +59,13 @@ void Tap::record(Direction direction, int64_t time_ns, std::span<const uint8_t> 
 }
 
 uint64_t Tap::begin() noexcept {
+  if (ring_ == nullptr) {
+    // Value-initialised: every page is touched here, on the normal thread, not by the cycle
+    // thread's first copy. Without memory the capture records nothing: every frame of the
+    // window counts as dropped.
+    ring_.reset(new (std::nothrow) uint8_t[capacity_ * slot_size_]());
+    tail_.store(head_.load(std::memory_order_relaxed), std::memory_order_relaxed);
+  }
   active_.store(true, std::memory_order_seq_cst);
   return seq_.load(std::memory_order_seq_cst);
 }
@@ -71,6 +81,16 @@ uint64_t Tap::finish() noexcept {
 
 void Tap::deactivate() noexcept {
   active_.store(false, std::memory_order_seq_cst);
+}
+
+void Tap::release() noexcept {
+  active_.store(false, std::memory_order_seq_cst);
+  // A producer that saw active_ true has stored its sequence number before (seq_cst), so it is
+  // at most `seen`; once done_ reaches it, nobody is or will be in the ring.
+  const uint64_t seen = seq_.load(std::memory_order_seq_cst);
+  while (done_.load(std::memory_order_acquire) < seen) sched_yield();
+  tail_.store(head_.load(std::memory_order_acquire), std::memory_order_release);
+  ring_.reset();
 }
 
 TapCounters Tap::counters() const noexcept {

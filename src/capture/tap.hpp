@@ -5,8 +5,9 @@
 // thread is the single consumer.
 //
 // Producer side: record() never allocates, locks or blocks; a full ring drops the frame and
-// counts it. The ring (ring_frames slots of max_frame bytes) is allocated once, in the
-// constructor.
+// counts it. The ring (ring_frames slots of max_frame bytes) is allocated by the consumer when a
+// capture begins and freed by release() when it is over, so that an idle daemon does not keep
+// it resident.
 //
 // The exact window: every frame gets a sequence number (frames seen by this tap since it was
 // made). begin() activates the tap and returns S; a frame numbered above S is then either in the
@@ -75,6 +76,11 @@ class Tap {
   [[nodiscard]] uint64_t finish() noexcept;
   // Deactivates without a window end (a capture that stops at a frame it already has).
   void deactivate() noexcept;
+  // After the capture: deactivates, waits (briefly) until no producer can be in the ring any
+  // more, drops what it still holds and frees it. The next begin() allocates it again.
+  void release() noexcept;
+  // Whether the ring is allocated (between begin() and release()).
+  [[nodiscard]] bool has_ring() const noexcept { return ring_ != nullptr; }
   [[nodiscard]] bool active() const noexcept { return active_.load(std::memory_order_relaxed); }
   // Hands the oldest frame to `f` and releases its slot; false when the ring is empty. The span
   // is valid during the call only.

@@ -44,6 +44,12 @@ inline constexpr std::size_t kStackReserve = 64 * 1024;
 // does not page-fault, and returns how many it touched: fewer when the stack left, less
 // kStackReserve, is smaller.
 [[nodiscard]] std::size_t prefault_stack(std::size_t bytes) noexcept;
+// Normal thread: gives the main heap's free pages back to the kernel when more than `min_free`
+// bytes are free in it, and returns how many bytes the heap's resident size shrank by. Under
+// mlockall free heap pages stay resident (malloc_trim's MADV_DONTNEED is refused on locked
+// pages), so the heap range is unlocked for the trim and locked again (on fault) right after:
+// pages in use stay resident throughout (unlocking does not evict), the free ones go.
+std::size_t trim_heap(std::size_t min_free) noexcept;
 // Whether `cpu` exists and the process may run on it.
 [[nodiscard]] bool cpu_usable(int cpu) noexcept;
 

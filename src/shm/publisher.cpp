@@ -1,7 +1,11 @@
 #include "shm/publisher.hpp"
 
 #include <grp.h>
+#include <linux/futex.h>
+#include <sched.h>
 #include <signal.h>
+#include <sys/syscall.h>
+#include <unistd.h>
 
 #include <atomic>
 #include <climits>
@@ -9,6 +13,7 @@
 #include <vector>
 
 #include "core/clock.hpp"
+#include "core/rt_setup.hpp"
 #include "shm/shm_error.hpp"
 
 namespace ds1928::shm {
@@ -145,6 +150,28 @@ void write_record(ds1928_shm_axis& record, const ds1928_axis_data& data) noexcep
   seq.store(s + 2, std::memory_order_release);
 }
 
+// A waiter seen this recently keeps the wake-up thread following the publications; after that
+// long without one it goes idle and the cycle thread rings it again when a reader registers.
+constexpr int64_t kWakerIdleAfterNs = 1'000'000'000;
+// resume_after_ while no publication has rung the idle waker yet.
+constexpr uint64_t kResumePending = DS1928_SHM_NO_CYCLE - 1;
+
+// Sleeps on a process-private futex word until it differs from `expected`, it is woken, or the
+// absolute CLOCK_MONOTONIC `deadline_ns` passes (0 = no deadline). FUTEX_WAIT_BITSET takes an
+// absolute time, so a late wake-up never adds up, like clock_nanosleep(TIMER_ABSTIME).
+void futex_wait_until(std::atomic<uint32_t>& word, uint32_t expected, int64_t deadline_ns) {
+  timespec ts{};
+  ts.tv_sec = static_cast<time_t>(deadline_ns / 1'000'000'000);
+  ts.tv_nsec = static_cast<long>(deadline_ns % 1'000'000'000);
+  syscall(SYS_futex, reinterpret_cast<uint32_t*>(&word), FUTEX_WAIT_BITSET | FUTEX_PRIVATE_FLAG,
+          expected, deadline_ns > 0 ? &ts : nullptr, nullptr, FUTEX_BITSET_MATCH_ANY);
+}
+
+void futex_wake_all(std::atomic<uint32_t>& word) {
+  syscall(SYS_futex, reinterpret_cast<uint32_t*>(&word), FUTEX_WAKE | FUTEX_PRIVATE_FLAG, INT_MAX,
+          nullptr, nullptr, 0);
+}
+
 }  // namespace
 
 std::error_code Publisher::open(const ShmConfig& config, uint32_t axis_count,
@@ -217,13 +244,168 @@ std::error_code Publisher::open(const ShmConfig& config, uint32_t axis_count,
   wait_name_ = wait_name;
   axis_count_ = axis_count;
   generation_ = generation;
+  period_ns_ = static_cast<int64_t>(cycle_period_ns);
   prev_cycle_ = 0;
   publish_count_ = 0;
-  wake_calls_ = 0;
+  wake_calls_.store(0, std::memory_order_relaxed);
+  doorbell_calls_.store(0, std::memory_order_relaxed);
+  if (!start_waker()) {
+    close();
+    return std::error_code(EAGAIN, std::system_category());
+  }
   return {};
 }
 
+bool Publisher::start_waker() noexcept {
+  pthread_attr_t attr;
+  if (pthread_attr_init(&attr) != 0) return false;
+  // An explicit stack: the process default (1 MiB in the daemon) would be locked whole by
+  // mlockall for a loop that needs a few hundred bytes. glibc takes the TLS from the same block.
+  std::size_t stack = kWakerStackBytes + rt::thread_stack_overhead();
+  stack = (stack + 4095) / 4096 * 4096;
+  if (stack < static_cast<std::size_t>(PTHREAD_STACK_MIN))
+    stack = static_cast<std::size_t>(PTHREAD_STACK_MIN);
+  (void)pthread_attr_setstacksize(&attr, stack);
+  waker_stop_.store(false, std::memory_order_relaxed);
+  // Idle until the first reader registers: the cycle thread rings it then.
+  waker_idle_.store(true, std::memory_order_relaxed);
+  resume_after_.store(kResumePending, std::memory_order_relaxed);
+  waker_follows_.store(false, std::memory_order_relaxed);
+  next_wake_ns_.store(0, std::memory_order_relaxed);
+  next_publish_ns_.store(0, std::memory_order_relaxed);
+  const int rc = pthread_create(&waker_, &attr, &Publisher::waker_entry, this);
+  pthread_attr_destroy(&attr);
+  if (rc != 0) return false;
+  waker_started_ = true;
+  pthread_setname_np(waker_, "ds1928-shmwake");
+  return true;
+}
+
+void Publisher::stop_waker() noexcept {
+  if (!waker_started_) return;
+  waker_stop_.store(true, std::memory_order_seq_cst);
+  doorbell_.fetch_add(1, std::memory_order_seq_cst);
+  futex_wake_all(doorbell_);
+  pthread_join(waker_, nullptr);
+  waker_started_ = false;
+}
+
+int Publisher::place_waker(int rt_priority, int cpu) noexcept {
+  if (!waker_started_) return ESRCH;
+  int first_error = 0;
+  if (cpu >= 0) {
+    cpu_set_t set;
+    CPU_ZERO(&set);
+    CPU_SET(cpu, &set);
+    if (const int rc = pthread_setaffinity_np(waker_, sizeof(set), &set); rc != 0) first_error = rc;
+  }
+  if (rt_priority > 0) {
+    sched_param param{};
+    param.sched_priority = rt_priority;
+    if (const int rc = pthread_setschedparam(waker_, SCHED_FIFO, &param);
+        rc != 0 && first_error == 0)
+      first_error = rc;
+  }
+  // Follow the cycle thread's own timeline only where the CPU is shared for sure.
+  waker_follows_.store(cpu >= 0 && first_error == 0, std::memory_order_relaxed);
+  // The flag is read by the waker at its next pass; a ring makes that pass now.
+  doorbell_.fetch_add(1, std::memory_order_seq_cst);
+  futex_wake_all(doorbell_);
+  return first_error;
+}
+
+void* Publisher::waker_entry(void* self) noexcept {
+  static_cast<Publisher*>(self)->waker_main();
+  return nullptr;
+}
+
+bool Publisher::any_waiter() const noexcept {
+  for (unsigned i = 0; i < DS1928_SHM_WAIT_SLOTS; ++i)
+    if (atomic(wait_->slots[i].waiters).load(std::memory_order_seq_cst) != 0) return true;
+  return false;
+}
+
+// Slots with waiters that a publication in (seen_cycle, last] is due for (before the first
+// publication, waiters hold DS1928_SHM_NO_CYCLE: only a multiple itself is due).
+uint32_t Publisher::due_mask(uint64_t seen_cycle, uint64_t last) const noexcept {
+  uint32_t mask = 0;
+  for (unsigned i = 0; i < DS1928_SHM_WAIT_SLOTS; ++i) {
+    if (atomic(wait_->slots[i].waiters).load(std::memory_order_seq_cst) == 0) continue;
+    const uint32_t factor = atomic(wait_->slots[i].factor).load(std::memory_order_relaxed);
+    const bool due =
+        factor <= 1 || (seen_cycle == DS1928_SHM_NO_CYCLE ? last % factor == 0
+                                                          : last / factor != seen_cycle / factor);
+    if (due) mask |= 1u << i;
+  }
+  return mask;
+}
+
+// The wake-up thread. Active, it looks at the futex word once per publication: it sleeps until
+// the cycle thread's next wake-up (pinned to its CPU at a lower priority, it therefore runs the
+// moment the cycle thread, having published, goes back to sleep) or until the predicted next
+// publication, then polls in short steps while the publication is not there yet. Then it reads
+// the registrations and makes the FUTEX_WAKE_BITSET for the due slots. Correctness does not
+// depend on the timing: it loads the word, then the registrations (both sequentially
+// consistent) after the cycle thread stored the word, exactly where the cycle thread used to.
+void Publisher::waker_main() noexcept {
+  uint32_t seen_word = 0;
+  uint64_t seen_cycle = DS1928_SHM_NO_CYCLE;
+  int64_t last_waiter_ns = 0;
+  const int64_t step = period_ns_ / 32 > 5'000 ? period_ns_ / 32 : 5'000;
+  // Idle: sleeps until publish() rings (it stored where to resume first) or stop.
+  auto sleep_while_idle = [&]() -> bool {
+    while (waker_idle_.load(std::memory_order_seq_cst)) {
+      if (waker_stop_.load(std::memory_order_acquire)) return false;
+      const uint32_t bell = doorbell_.load(std::memory_order_seq_cst);
+      if (waker_idle_.load(std::memory_order_seq_cst) &&
+          !waker_stop_.load(std::memory_order_acquire))
+        futex_wait_until(doorbell_, bell, 0);
+    }
+    // The publication that rang and every later one are ours to look at.
+    seen_cycle = resume_after_.load(std::memory_order_acquire);
+    seen_word = atomic(wait_->futex).load(std::memory_order_seq_cst) - 1;  // look at once
+    last_waiter_ns = rt::now_ns();
+    return true;
+  };
+  if (!sleep_while_idle()) return;
+  while (!waker_stop_.load(std::memory_order_acquire)) {
+    const uint32_t word = atomic(wait_->futex).load(std::memory_order_seq_cst);
+    if (word != seen_word) {
+      seen_word = word;
+      if (atomic(header_->publish_count).load(std::memory_order_acquire) == 0) continue;
+      const uint64_t last = atomic(header_->last_cycle).load(std::memory_order_acquire);
+      const uint32_t mask = due_mask(seen_cycle, last);
+      seen_cycle = last;
+      if (mask != 0) wake(mask);
+      const int64_t now = rt::now_ns();
+      if (mask != 0 || any_waiter()) {
+        last_waiter_ns = now;
+      } else if (now - last_waiter_ns > kWakerIdleAfterNs) {
+        // Idle. The flag is announced (seq_cst) before the last look at the registrations, so a
+        // registration that raced this decision is seen here or by publish().
+        resume_after_.store(kResumePending, std::memory_order_relaxed);
+        waker_idle_.store(true, std::memory_order_seq_cst);
+        if (any_waiter() && waker_idle_.exchange(false, std::memory_order_seq_cst)) {
+          last_waiter_ns = now;
+        } else if (!sleep_while_idle()) {
+          return;
+        }
+      }
+      continue;
+    }
+    // Nothing new: sleep until the publication should be there (doorbell_ only changes to stop
+    // or to re-place this thread).
+    const int64_t now = rt::now_ns();
+    int64_t target = waker_follows_.load(std::memory_order_relaxed)
+                         ? next_wake_ns_.load(std::memory_order_relaxed)
+                         : next_publish_ns_.load(std::memory_order_relaxed);
+    if (target <= now) target = now + step;
+    futex_wait_until(doorbell_, doorbell_.load(std::memory_order_relaxed), target);
+  }
+}
+
 void Publisher::close() noexcept {
+  stop_waker();
   if (header_ == nullptr) return;
   set_state(DaemonState::Stopped);
   // Waiters return DS1928_SHM_STOPPED: change the word so that a reader about to sleep sees it.
@@ -248,7 +430,8 @@ void Publisher::set_state(DaemonState state) noexcept {
   atomic(header_->daemon_state).store(static_cast<uint32_t>(state), std::memory_order_release);
 }
 
-void Publisher::publish(uint64_t cycle, std::span<const AxisStatus> axes) noexcept {
+void Publisher::publish(uint64_t cycle, std::span<const AxisStatus> axes,
+                        int64_t next_wake_ns) noexcept {
   if (header_ == nullptr) return;
   const int64_t now = rt::now_ns();  // vDSO, no system call
   const std::size_t n = axes.size() < axis_count_ ? axes.size() : axis_count_;
@@ -261,25 +444,32 @@ void Publisher::publish(uint64_t cycle, std::span<const AxisStatus> axes) noexce
   atomic(header_->publish_count).store(publish_count_, std::memory_order_release);
   if (first) set_state(DaemonState::Running);
 
-  // Store the word, then look for waiters (both seq_cst): a reader registers, then reads the
-  // word, so one of the two sides always sees the other.
+  next_wake_ns_.store(next_wake_ns, std::memory_order_relaxed);
+  next_publish_ns_.store(now + period_ns_, std::memory_order_relaxed);
+  // Store the word (seq_cst). The wake-up thread reads it, then the registrations; a reader
+  // registers, then reads the word: one of the two sides always sees the other.
   atomic(wait_->futex).fetch_add(1, std::memory_order_seq_cst);
-  uint32_t mask = 0;
-  for (unsigned i = 0; i < DS1928_SHM_WAIT_SLOTS; ++i) {
-    if (atomic(wait_->slots[i].waiters).load(std::memory_order_seq_cst) == 0) continue;
-    const uint32_t factor = atomic(wait_->slots[i].factor).load(std::memory_order_relaxed);
-    // Due: a multiple of the factor was published since the last publication (before the
-    // first one, waiters hold DS1928_SHM_NO_CYCLE: only a multiple itself is due).
-    const bool due =
-        factor <= 1 || (first ? cycle % factor == 0 : cycle / factor != prev_cycle_ / factor);
-    if (due) mask |= 1u << i;
+  // An idle wake-up thread reads nothing, so here the cycle thread looks at the registrations
+  // itself (16 loads) and rings it: the one system call, once per idle -> active transition.
+  // The waker announces idleness (seq_cst) before its last look at the registrations, so a
+  // registration it missed is seen here.
+  if (waker_idle_.load(std::memory_order_seq_cst) && any_waiter()) {
+    // Where the waker resumes: after the previous publication, so this one counts as new to
+    // it. Stored before the flag changes, read after the waker sees it changed.
+    resume_after_.store(first ? DS1928_SHM_NO_CYCLE : prev_cycle_, std::memory_order_relaxed);
+  }
+  if (waker_idle_.load(std::memory_order_seq_cst) && any_waiter() &&
+      waker_idle_.exchange(false, std::memory_order_seq_cst)) {
+    doorbell_.fetch_add(1, std::memory_order_seq_cst);
+    doorbell_calls_.store(doorbell_calls_.load(std::memory_order_relaxed) + 1,
+                          std::memory_order_relaxed);
+    futex_wake_all(doorbell_);
   }
   prev_cycle_ = cycle;
-  if (mask != 0) wake(mask);
 }
 
 void Publisher::wake(uint32_t mask) noexcept {
-  ++wake_calls_;
+  wake_calls_.fetch_add(1, std::memory_order_relaxed);
   syscall(SYS_futex, &wait_->futex, FUTEX_WAKE_BITSET, INT_MAX, nullptr, nullptr, mask);
 }
 

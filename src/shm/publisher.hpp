@@ -2,6 +2,9 @@
 // publishes every axis once per cycle from the cycle thread, removes the objects at exit.
 #pragma once
 
+#include <pthread.h>
+
+#include <atomic>
 #include <cstdint>
 #include <span>
 #include <string>
@@ -67,10 +70,21 @@ class Publisher {
 
   // Cycle thread, once per cycle. `cycle` must increase from call to call (the engine's cycle
   // index). Publishes min(axes.size(), axis_count) records, then the header, then bumps the
-  // futex word, and wakes the slots whose factor divides a cycle index passed since the last
-  // call — with one FUTEX_WAKE_BITSET, and only when a reader is registered. No allocation, no
-  // lock, no other system call. The first publication sets the state to Running.
-  void publish(uint64_t cycle, std::span<const AxisStatus> axes) noexcept;
+  // futex word. It never wakes a reader itself: the wake-up thread does (see below). No
+  // allocation, no lock, and no system call, except one FUTEX_WAKE of the wake-up thread when a
+  // reader registers while that thread is idle (no reader for a second). `next_wake_ns` is
+  // when the cycle thread will wake for the next cycle (CLOCK_MONOTONIC; 0 = unknown): the
+  // wake-up thread, when it shares the cycle thread's CPU, wakes at that instant too. The first
+  // publication sets the state to Running.
+  void publish(uint64_t cycle, std::span<const AxisStatus> axes, int64_t next_wake_ns = 0) noexcept;
+
+  // Normal thread, after open(): the wake-up thread's scheduling. `rt_priority` 1..99 sets
+  // SCHED_FIFO (the daemon uses one below the cycle thread's), 0 leaves it as it is; `cpu` >= 0
+  // pins it to the cycle thread's CPU ("follow" mode: it runs right after the cycle thread goes
+  // back to sleep), -1 leaves it free ("predict" mode: it sleeps until the predicted next
+  // publication and then polls in short steps). Returns 0 or the errno of the first call that
+  // failed (the thread keeps running with what it has).
+  [[nodiscard]] int place_waker(int rt_priority, int cpu) noexcept;
 
   // Any thread.
   void set_state(DaemonState state) noexcept;
@@ -79,11 +93,32 @@ class Publisher {
   [[nodiscard]] uint64_t generation() const noexcept { return generation_; }
   [[nodiscard]] uint32_t axis_count() const noexcept { return axis_count_; }
   [[nodiscard]] const std::string& name() const noexcept { return name_; }
-  // Futex wake-ups issued so far (for tests and statistics).
-  [[nodiscard]] uint64_t wake_calls() const noexcept { return wake_calls_; }
+  // FUTEX_WAKE_BITSET calls made for readers so far, all by the wake-up thread (for tests and
+  // statistics).
+  [[nodiscard]] uint64_t wake_calls() const noexcept {
+    return wake_calls_.load(std::memory_order_relaxed);
+  }
+  // System calls publish() made: one per idle -> active transition of the wake-up thread.
+  [[nodiscard]] uint64_t doorbell_calls() const noexcept {
+    return doorbell_calls_.load(std::memory_order_relaxed);
+  }
+  // True while the wake-up thread follows the publications (a reader registered within the
+  // last second); false while it sleeps until the cycle thread rings it.
+  [[nodiscard]] bool waker_active() const noexcept {
+    return !waker_idle_.load(std::memory_order_acquire);
+  }
+  // Usable stack of the wake-up thread (locked in RAM under mlockall): it only runs the loop
+  // below and one futex call.
+  static constexpr std::size_t kWakerStackBytes = 64 * 1024;
 
  private:
   void wake(uint32_t mask) noexcept;
+  [[nodiscard]] bool start_waker() noexcept;
+  void stop_waker() noexcept;
+  void waker_main() noexcept;
+  [[nodiscard]] bool any_waiter() const noexcept;
+  [[nodiscard]] uint32_t due_mask(uint64_t seen_cycle, uint64_t last) const noexcept;
+  static void* waker_entry(void* self) noexcept;
 
   std::string name_;
   std::string wait_name_;
@@ -95,9 +130,23 @@ class Publisher {
   int wait_fd_ = -1;
   uint32_t axis_count_ = 0;
   uint64_t generation_ = 0;
+  int64_t period_ns_ = 0;
   uint64_t prev_cycle_ = 0;
   uint64_t publish_count_ = 0;
-  uint64_t wake_calls_ = 0;
+
+  // The wake-up thread and what the cycle thread tells it. Written by publish(), read by the
+  // waker: plain atomics, no read-modify-write except on the idle -> active transition.
+  pthread_t waker_{};
+  bool waker_started_ = false;
+  std::atomic<bool> waker_follows_{false};  // pinned to the cycle thread's CPU
+  std::atomic<bool> waker_stop_{false};
+  std::atomic<bool> waker_idle_{false};      // sleeping on doorbell_
+  std::atomic<uint32_t> doorbell_{0};        // private futex word of the idle waker
+  std::atomic<uint64_t> resume_after_{0};    // cycle before the publication that rang
+  std::atomic<int64_t> next_wake_ns_{0};     // the cycle thread's next wake-up (0 unknown)
+  std::atomic<int64_t> next_publish_ns_{0};  // predicted next publication
+  std::atomic<uint64_t> wake_calls_{0};
+  std::atomic<uint64_t> doorbell_calls_{0};
 };
 
 }  // namespace ds1928::shm

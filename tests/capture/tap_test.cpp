@@ -119,3 +119,34 @@ TEST_CASE("tap: exact window against a running producer") {
   producer.join();
   CHECK(produced.load() == tap.counters().frames);
 }
+
+TEST_CASE("tap: the ring exists only during a capture, release frees it with what it held") {
+  Tap tap("eth0", kLinkTypeEthernet, 1514, 64);
+  const uint8_t frame[3] = {1, 2, 3};
+  CHECK_FALSE(tap.has_ring());  // an idle tap keeps no ring resident
+  tap.record(Direction::Outbound, 10, frame);
+  CHECK(tap.counters().frames == 1);
+
+  const uint64_t start = tap.begin();
+  CHECK(tap.has_ring());
+  for (int i = 0; i < 3; ++i) tap.record(Direction::Inbound, 20 + i, frame);
+  (void)tap.finish();
+  CHECK(tap.counters().captured == 3);
+  // Frames still in the ring at release are dropped with it.
+  tap.release();
+  CHECK_FALSE(tap.has_ring());
+  CHECK_FALSE(tap.pop([](const TapFrame&) {}));
+  tap.record(Direction::Inbound, 30, frame);  // counted, nowhere copied
+  CHECK(tap.counters().frames == 5);
+  CHECK(tap.counters().captured == 3);
+
+  // A second capture gets a new, empty ring and exactly its own window.
+  const uint64_t again = tap.begin();
+  CHECK(again == 5);
+  CHECK(again > start);
+  tap.record(Direction::Outbound, 40, frame);
+  const uint64_t end = tap.finish();
+  CHECK(drain(tap, again, end) == std::vector<uint64_t>{6});
+  tap.release();
+  CHECK_FALSE(tap.has_ring());
+}

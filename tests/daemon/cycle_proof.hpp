@@ -1,10 +1,14 @@
 // The two halves of the allocation proofs of the daemon's cycle work (simulated bus and
-// POWERLINK): CountingTask counts heap allocations and mutex locks on the cycle thread over a
-// window of cycles; CycleTraffic is the normal thread's side, one round of the traffic a running
-// daemon puts through its cycle work — an EnDat command into every axis' Flatstream tunnel,
-// replies collected, an error acknowledgement, an acyclic register read — counted so the proofs
-// can require that it really went through the counted cycles.
+// POWERLINK): CountingTask counts heap allocations, mutex locks and page faults (minor and
+// major: the daemon locks memory as it is first touched, so a page the cycle thread touches
+// late would fault) on the cycle thread over a window of cycles; CycleTraffic is the normal
+// thread's side, one round of the traffic a running daemon puts through its cycle work — an EnDat
+// command into every axis' Flatstream tunnel, replies collected, an error acknowledgement, an
+// acyclic register read — counted so the proofs can require that it really went through the counted
+// cycles.
 #pragma once
+
+#include <sys/resource.h>
 
 #include <algorithm>
 #include <atomic>
@@ -28,6 +32,7 @@ class CountingTask final : public CycleTask {
   void run_cycle(const CycleContext& ctx) noexcept override {
     if (!counting_ && !done() && executed_ >= warmup_ && armed_.load(std::memory_order_acquire)) {
       counting_ = true;
+      faults_at_start_ = thread_faults();
       begin_counting();
     }
     inner_.run_cycle(ctx);
@@ -35,9 +40,17 @@ class CountingTask final : public CycleTask {
     if (counting_ && ++in_window_ == counted_) {
       counting_ = false;
       result_ = end_counting();
+      const Faults end = thread_faults();
+      faults_.minor = end.minor - faults_at_start_.minor;
+      faults_.major = end.major - faults_at_start_.major;
       done_.store(true, std::memory_order_release);
     }
   }
+  struct Faults {
+    long minor = 0, major = 0;
+  };
+  // Page faults of the cycle thread within the window. Valid once done().
+  [[nodiscard]] Faults faults() const noexcept { return faults_; }
   void arm() noexcept { armed_.store(true, std::memory_order_release); }
   [[nodiscard]] bool done() const noexcept { return done_.load(std::memory_order_acquire); }
   // Valid once done().
@@ -51,6 +64,14 @@ class CountingTask final : public CycleTask {
   std::atomic<bool> armed_;
   std::atomic<bool> done_{false};
   HeapCounts result_;
+  Faults faults_at_start_, faults_;
+
+  // getrusage is a system call: made at the window's two edges only, outside what it counts.
+  static Faults thread_faults() noexcept {
+    rusage u{};
+    getrusage(RUSAGE_THREAD, &u);
+    return {u.ru_minflt, u.ru_majflt};
+  }
 };
 
 struct CycleTraffic {

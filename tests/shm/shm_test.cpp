@@ -10,6 +10,7 @@
 #include "shm/shm_error.hpp"
 #include "shm_test_util.hpp"
 #include "support/alloc_counter.hpp"
+#include "support/syscall_counter.hpp"
 #include "support/wait.hpp"
 
 using namespace ds1928;
@@ -167,6 +168,150 @@ TEST_CASE("publishing allocates nothing, takes no mutex, and makes no futex call
   if (!ds1928::test::counts_mutexes())
     WARN("TSan build: mutex locks are not counted; that check is void");
   CHECK(pub.wake_calls() == 0);
+  CHECK(pub.doorbell_calls() == 0);
+  CHECK_FALSE(pub.waker_active());
+}
+
+namespace {
+
+// Readers in threads of their own, each sleeping in ds1928_shm_wait with its factor and
+// counting the publications it got.
+class SleepingReaders {
+ public:
+  SleepingReaders(const std::string& name, const std::vector<uint32_t>& factors)
+      : got_(factors.size()) {
+    for (std::size_t i = 0; i < factors.size(); ++i) {
+      threads_.emplace_back([this, name, i, every = factors[i]] {
+        ShmReader reader;
+        if (reader.open(name)) return;
+        uint64_t seen = reader.wait_start();
+        std::error_code ec;
+        while (!stop_.load()) {
+          const auto r = reader.wait(seen, every, now_ns() + 200'000'000, ec);
+          if (r == ShmWait::Published) got_[i].fetch_add(1);
+          if (r == ShmWait::Stopped) break;
+        }
+      });
+    }
+  }
+  ~SleepingReaders() {
+    stop_ = true;
+    for (auto& t : threads_) t.join();
+  }
+  [[nodiscard]] uint64_t got(std::size_t i) const { return got_[i].load(); }
+  [[nodiscard]] uint64_t least() const {
+    uint64_t m = UINT64_MAX;
+    for (const auto& g : got_) m = std::min(m, g.load());
+    return m;
+  }
+
+ private:
+  std::vector<std::atomic<uint64_t>> got_;
+  std::atomic<bool> stop_{false};
+  std::vector<std::thread> threads_;
+};
+
+void sleep_until_ns(int64_t t) {
+  timespec ts{};
+  ts.tv_sec = static_cast<time_t>(t / 1'000'000'000);
+  ts.tv_nsec = static_cast<long>(t % 1'000'000'000);
+  clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr);
+}
+
+}  // namespace
+
+TEST_CASE("with readers asleep, publishing makes no system call: the wake-up thread wakes them") {
+  const auto name = unique_name("nosys");
+  Publisher pub;
+  const int64_t period = 200'000;
+  REQUIRE_FALSE(pub.open(config_for(name), 4, period));
+  // One reader, or sixteen in every slot (factors 1..16).
+  const unsigned readers = GENERATE(1u, 16u);
+  std::vector<uint32_t> factors;
+  for (unsigned i = 0; i < readers; ++i) factors.push_back(i + 1);
+  SleepingReaders sleeping(name, factors);
+
+  std::atomic<uint64_t> trapped{UINT64_MAX}, last_nr{0}, doorbells_in_window{UINT64_MAX};
+  std::atomic<uint64_t> wakes_before{0}, got_before{0};
+  std::atomic<bool> filtered{false};
+  constexpr uint64_t kWarmup = 2'000, kCounted = 2'000;
+  std::thread cycle([&] {
+    std::vector<AxisStatus> st(4);
+    int64_t next = now_ns();
+    uint64_t c = 1;
+    // Warm-up: every reader asleep and woken at least once (the waker has been rung).
+    for (; c <= kWarmup || (sleeping.least() == 0 && c < 50'000); ++c) {
+      next += period;
+      sleep_until_ns(next);
+      for (uint32_t a = 0; a < 4; ++a) st[a] = status_for(c, a);
+      pub.publish(c, st, next + period);
+    }
+    got_before = sleeping.got(0);
+    wakes_before = pub.wake_calls();
+    const uint64_t doorbells = pub.doorbell_calls();
+    const uint64_t trapped_before = ds1928::test::SyscallCounter::trapped();
+    filtered = ds1928::test::SyscallCounter::trap_all_but({SYS_clock_nanosleep, SYS_clock_gettime});
+    // At least kCounted publications, and on until the readers were woken 20 times more (a
+    // bound that only stops a hung test): how often the scheduler lets the reader threads run
+    // on a loaded machine is not what is counted here.
+    const uint64_t end = c + kCounted;
+    const int64_t give_up = now_ns() + 60'000'000'000;
+    for (; c < end || (sleeping.got(0) < got_before + 20 && now_ns() < give_up); ++c) {
+      next += period;
+      sleep_until_ns(next);
+      for (uint32_t a = 0; a < 4; ++a) st[a] = status_for(c, a);
+      pub.publish(c, st, next + period);
+    }
+    trapped = ds1928::test::SyscallCounter::trapped() - trapped_before;
+    last_nr = static_cast<uint64_t>(ds1928::test::SyscallCounter::last_nr());
+    doorbells_in_window = pub.doorbell_calls() - doorbells;
+  });
+  cycle.join();
+  REQUIRE(filtered);
+  INFO(readers << " reader(s); last trapped system call number " << last_nr.load());
+  CHECK(trapped == 0);
+  CHECK(doorbells_in_window == 0);
+  CHECK(pub.waker_active());
+  // The readers really slept and were woken meanwhile, by the wake-up thread.
+  CHECK(sleeping.got(0) >= got_before + 20);
+  CHECK(pub.wake_calls() >= wakes_before + 20);
+}
+
+TEST_CASE("the wake-up thread goes idle without readers and is rung by the next one") {
+  const auto name = unique_name("idle");
+  Publisher pub;
+  const int64_t period = 1'000'000;
+  REQUIRE_FALSE(pub.open(config_for(name), 1, period));
+  std::vector<AxisStatus> st(1);
+  uint64_t c = 0;
+  auto publish_until = [&](auto done, int64_t limit_ns) {
+    const int64_t deadline = now_ns() + limit_ns;
+    while (!done() && now_ns() < deadline) {
+      ++c;
+      st[0] = status_for(c, 0);
+      pub.publish(c, st);
+      std::this_thread::sleep_for(std::chrono::microseconds(period / 1000));
+    }
+    return done();
+  };
+  REQUIRE(publish_until([] { return false; }, 20'000'000) == false);
+  CHECK_FALSE(pub.waker_active());
+  CHECK(pub.doorbell_calls() == 0);
+  {
+    SleepingReaders sleeping(name, {1});
+    REQUIRE(publish_until([&] { return sleeping.got(0) >= 20; }, 10'000'000'000));
+    CHECK(pub.doorbell_calls() == 1);  // one ring for the transition, not one per cycle
+    CHECK(pub.waker_active());
+  }
+  // No reader for more than a second: idle again (bounded wait instead of a timing assertion).
+  REQUIRE(publish_until([&] { return !pub.waker_active(); }, 20'000'000'000));
+  const uint64_t wakes = pub.wake_calls();
+  {
+    SleepingReaders sleeping(name, {3});
+    REQUIRE(publish_until([&] { return sleeping.got(0) >= 5; }, 10'000'000'000));
+    CHECK(pub.doorbell_calls() == 2);
+    CHECK(pub.wake_calls() > wakes);
+  }
 }
 
 TEST_CASE("a waiting reader is woken at every publication, and with a factor only on multiples") {
