@@ -567,6 +567,9 @@ void CanioBus::mark_configured(std::size_t axis, int64_t now) noexcept {
   a.fresh = false;
   a.backoff_ns = 0;
   axis_counters_[axis].unconfigurable.store(false, std::memory_order_relaxed);
+  // The configuration is the proof: the first samples after it (the node was silent while
+  // pre-operational) are not a return from silence that needs checking again.
+  axis_counters_[axis].last_sample_ns.store(0, std::memory_order_relaxed);
   bump(axis_counters_[axis].generation);
   axis_counters_[axis].configured.store(true, std::memory_order_release);
   node_configured(axis, now);

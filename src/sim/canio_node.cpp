@@ -99,6 +99,10 @@ void CanioNode::on_nmt(const canio::NmtMessage& m) {
   ++counters_.nmt_commands;
   switch (m.command) {
     case NmtCommand::Start:
+      if (starts_ignored_ < config_.faults.ignore_nmt_starts) {
+        ++starts_ignored_;
+        return;
+      }
       nmt_.store(NmtState::Operational);
       return;
     case NmtCommand::Stop:

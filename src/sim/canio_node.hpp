@@ -58,6 +58,8 @@ struct CanioNodeFaults {
   uint32_t abort_code = 0;
   bool abort_on_write = true;
   bool abort_on_read = true;
+  // NMT: the first n Start commands addressed to the node are lost (a node that misses them).
+  uint32_t ignore_nmt_starts = 0;
   // SDO: upload responses say "size not indicated" (CiA 301 e = 1, s = 0; 4 data bytes).
   bool upload_size_not_indicated = false;
   uint64_t seed = 1;
@@ -185,6 +187,7 @@ class CanioNode {
   int64_t next_heartbeat_ns_ = 0;
   std::vector<ModuleInputs> last_inputs_;  // per module: the last answer (stall fault)
   std::vector<bool> have_last_;
+  uint32_t starts_ignored_ = 0;
   uint64_t position_objects_ = 0;
   // Answers waiting for their time, in the order they go out (fixed size: no allocation).
   struct Queued {
