@@ -198,7 +198,8 @@ std::error_code CanioBus::start() {
     for (const NodeTrack& t : nodes_) {
       sdo_ids.push_back({kSdoResponseBase + t.node, false});
       sdo_ids.push_back({kErrorControlBase + t.node, false});
-      if (kEmcyBase + t.node != options_.bus.sync_id) sdo_ids.push_back({kEmcyBase + t.node, false});
+      if (kEmcyBase + t.node != options_.bus.sync_id)
+        sdo_ids.push_back({kEmcyBase + t.node, false});
     }
     if (auto ec = sdo_port_->set_filters(sdo_ids)) {
       start_error_ = "CAN filters (SDO) on " + std::string(sdo_port_->name()) + ": " + ec.message();
@@ -468,8 +469,8 @@ ExchangeResult CanioBus::exchange(std::span<AxisIo> axes, int64_t, uint64_t) noe
     if (t.gated) {
       if (whole) bump(c.gated);
       // No process data at all since the configuration: the node has not started (yet).
-      const bool starting = !t.gate_have && options_.bus.nmt == CanNmt::Start &&
-                            !options_.assume_configured;
+      const bool starting =
+          !t.gate_have && options_.bus.nmt == CanNmt::Start && !options_.assume_configured;
       c.state.store(starting ? CanioAxisState::Starting : CanioAxisState::AwaitingPosCycle,
                     std::memory_order_relaxed);
       continue;

@@ -102,7 +102,7 @@ struct CanioAxisCounters {
   std::atomic<uint32_t> generation{0};      // SDO: bumped by every (re)configuration
   std::atomic<bool> configured{false};      // SDO: the module is configured (status reads it)
   std::atomic<CanioAxisState> state{CanioAxisState::Configuring};  // cycle thread
-  std::atomic<bool> silent{true};  // no complete sample for input_timeout_ms
+  std::atomic<bool> silent{true};           // no complete sample for input_timeout_ms
   std::atomic<bool> unconfigurable{false};  // SDO: a register it needs was refused
   std::atomic<uint64_t> write_aborts{0};    // SDO: configuration writes refused (abort)
   std::atomic<int64_t> last_sample_ns{0};
@@ -110,15 +110,15 @@ struct CanioAxisCounters {
 
 // Per CANopen node (cycle thread writes, any thread reads).
 struct CanioNodeCounters {
-  uint8_t node = 0;                          // fixed after construction
-  std::atomic<uint64_t> nmt_starts{0};       // NMT Start sent (after each configuration)
-  std::atomic<uint64_t> start_retries{0};    // Start repeated: configured but silent after it
-  std::atomic<uint64_t> boot_ups{0};         // boot-up messages (the node reset)
-  std::atomic<uint64_t> heartbeats{0};       // heartbeat messages received
-  std::atomic<uint64_t> heartbeat_misses{0};  // consumer timeouts
-  std::atomic<uint64_t> emcys{0};            // EMCY messages received
-  std::atomic<uint64_t> last_emcy{0};        // code | register << 16 | vendor << 24
-  std::atomic<uint8_t> nmt_state{0xFF};      // last reported (canio::NmtState), 0xFF: none
+  uint8_t node = 0;                            // fixed after construction
+  std::atomic<uint64_t> nmt_starts{0};         // NMT Start sent (after each configuration)
+  std::atomic<uint64_t> start_retries{0};      // Start repeated: configured but silent after it
+  std::atomic<uint64_t> boot_ups{0};           // boot-up messages (the node reset)
+  std::atomic<uint64_t> heartbeats{0};         // heartbeat messages received
+  std::atomic<uint64_t> heartbeat_misses{0};   // consumer timeouts
+  std::atomic<uint64_t> emcys{0};              // EMCY messages received
+  std::atomic<uint64_t> last_emcy{0};          // code | register << 16 | vendor << 24
+  std::atomic<uint8_t> nmt_state{0xFF};        // last reported (canio::NmtState), 0xFF: none
   std::atomic<bool> heartbeat_watched{false};  // consumer armed (0x1017 written)
 };
 
@@ -135,10 +135,10 @@ enum class CanioNodeEventKind : uint8_t {
 [[nodiscard]] std::string_view to_string(CanioNodeEventKind k) noexcept;
 struct CanioNodeEvent {
   CanioNodeEventKind kind = CanioNodeEventKind::BootUp;
-  uint8_t node = 0;      // 0: the bus
-  int64_t time_ns = 0;   // driver clock
-  Emcy emcy{};           // Emcy
-  uint32_t detail = 0;   // StartRetry: next back-off ms; HeartbeatMissed: timeout ms
+  uint8_t node = 0;     // 0: the bus
+  int64_t time_ns = 0;  // driver clock
+  Emcy emcy{};          // Emcy
+  uint32_t detail = 0;  // StartRetry: next back-off ms; HeartbeatMissed: timeout ms
 };
 inline constexpr std::size_t kNodeEventQueueDepth = 64;
 
@@ -150,12 +150,12 @@ struct CanioBusCounters {
   std::atomic<uint64_t> tx_failed{0};       // bus-off, interface down, other errors
   std::atomic<uint64_t> unexpected_ids{0};  // data frames with an identifier no axis uses
   std::atomic<uint64_t> error_frames{0};
-  std::atomic<uint64_t> receive_errors{0};  // port receive failures (interface down)
-  std::atomic<uint64_t> bus_off_cycles{0};  // cycles skipped while bus-off / down
-  std::atomic<int64_t> last_window_ns{0};   // last SYNC → last object of the cycle
+  std::atomic<uint64_t> receive_errors{0};       // port receive failures (interface down)
+  std::atomic<uint64_t> bus_off_cycles{0};       // cycles skipped while bus-off / down
+  std::atomic<int64_t> last_window_ns{0};        // last SYNC → last object of the cycle
   std::atomic<uint64_t> bus_errors_filtered{0};  // bus-error frames dropped before the cycle
-  std::atomic<uint64_t> bus_restarts{0};     // back from bus-off / down: axes checked again
-  std::atomic<uint64_t> events_dropped{0};   // node events the normal thread did not take
+  std::atomic<uint64_t> bus_restarts{0};         // back from bus-off / down: axes checked again
+  std::atomic<uint64_t> events_dropped{0};       // node events the normal thread did not take
 };
 
 struct CanioAxisPlan {
@@ -265,13 +265,13 @@ class CanioBus final : public BusDriver {
   void count_send(SendResult r) noexcept;
 
   // ---- Node lifecycle (canio_nmt.cpp) ----
-  struct NodeTrack {           // cycle thread
+  struct NodeTrack {  // cycle thread
     uint8_t node = 0;
     uint32_t heartbeat_ms = 0;
-    int64_t consumer_ns = 0;   // heartbeat consumer timeout
+    int64_t consumer_ns = 0;            // heartbeat consumer timeout
     int64_t heartbeat_deadline_ns = 0;  // 0: not watched now
-    bool start_due = false;    // send NMT Start at the next step
-    bool started = false;      // Start sent since the last configuration
+    bool start_due = false;             // send NMT Start at the next step
+    bool started = false;               // Start sent since the last configuration
     int64_t start_sent_ns = 0;
     int64_t next_start_ns = 0;
     int64_t start_backoff_ns = 0;

@@ -181,7 +181,10 @@ void CanioBus::step_nmt(int64_t now) noexcept {
       // Heartbeat consumer timeout: the node is gone or hangs. Its axes go down until a check
       // (or a boot-up) proves the configuration again.
       bump(nc.heartbeat_misses);
-      push_event({CanioNodeEventKind::HeartbeatMissed, t.node, now, {},
+      push_event({CanioNodeEventKind::HeartbeatMissed,
+                  t.node,
+                  now,
+                  {},
                   static_cast<uint32_t>(t.consumer_ns / kMs)});
       node_down(k, false, now);
       continue;
@@ -198,7 +201,10 @@ void CanioBus::step_nmt(int64_t now) noexcept {
                                  : std::min(2 * t.start_backoff_ns, kStartBackoffMaxNs);
         t.next_start_ns = now + t.start_backoff_ns;
         bump(nc.start_retries);
-        push_event({CanioNodeEventKind::StartRetry, t.node, now, {},
+        push_event({CanioNodeEventKind::StartRetry,
+                    t.node,
+                    now,
+                    {},
                     static_cast<uint32_t>(t.start_backoff_ns / kMs)});
       }
     } else if (t.started && now - t.start_sent_ns > input_timeout_ns && now >= t.next_start_ns) {
@@ -214,7 +220,10 @@ void CanioBus::step_nmt(int64_t now) noexcept {
                                  : std::min(2 * t.start_backoff_ns, kStartBackoffMaxNs);
         t.next_start_ns = now + t.start_backoff_ns;
         bump(nc.start_retries);
-        push_event({CanioNodeEventKind::StartRetry, t.node, now, {},
+        push_event({CanioNodeEventKind::StartRetry,
+                    t.node,
+                    now,
+                    {},
                     static_cast<uint32_t>(t.start_backoff_ns / kMs)});
       }
     }

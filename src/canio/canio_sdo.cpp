@@ -124,12 +124,12 @@ std::string CanioBus::axis_last_error(std::size_t axis) const {
           "checking the configuration after silence: register " + register_name(n.reg) + ": " + why;
       break;
     case NoteKind::Refused:
-      text = "register " + register_name(n.reg) + " = " + std::to_string(n.value) +
-             " refused: " + why;
+      text =
+          "register " + register_name(n.reg) + " = " + std::to_string(n.value) + " refused: " + why;
       break;
     case NoteKind::Heartbeat:
-      text = "heartbeat producer time 0x1017 = " + std::to_string(n.value) +
-             " ms: " + why + " (no heartbeat watched)";
+      text = "heartbeat producer time 0x1017 = " + std::to_string(n.value) + " ms: " + why +
+             " (no heartbeat watched)";
       break;
   }
   if (n.unverified_after > 0)
@@ -271,8 +271,7 @@ CanioBus::SdoOp CanioBus::current_op() const noexcept {
     case SdoJobKind::Configure: {
       if (job_.stage == SdoStage::Rescan) return {reg::kEnDatAck, 1, true, 0x02};
       if (job_.stage == SdoStage::Heartbeat)
-        return {0, 2, true, nodes_[axis_node_[job_.axis]].heartbeat_ms, kHeartbeatProducerIndex,
-                0};
+        return {0, 2, true, nodes_[axis_node_[job_.axis]].heartbeat_ms, kHeartbeatProducerIndex, 0};
       const RegisterWrite& w = job_.writes[job_.step];
       return {w.reg, w.size, job_.stage == SdoStage::Write, w.value};
     }

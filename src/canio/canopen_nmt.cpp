@@ -85,8 +85,7 @@ std::optional<ErrorControl> parse_error_control(const CanFrame& f) noexcept {
   if (f.id <= kErrorControlBase || f.id > kErrorControlBase + 127) return std::nullopt;
   const auto state = static_cast<uint8_t>(f.data[0] & 0x7F);  // bit 7: node-guarding toggle
   if (!known_state(state)) return std::nullopt;
-  return ErrorControl{static_cast<uint8_t>(f.id - kErrorControlBase),
-                      static_cast<NmtState>(state)};
+  return ErrorControl{static_cast<uint8_t>(f.id - kErrorControlBase), static_cast<NmtState>(state)};
 }
 
 std::optional<CanFrame> build_emcy(const Emcy& e) noexcept {

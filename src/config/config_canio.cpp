@@ -163,10 +163,9 @@ void check_canio(const BusDocument& d) {
                             k.response_timeout_us != 0 ? "response_timeout_us" : "period_us"}),
                k.response_timeout_us != 0 ? "canio.response_timeout_us" : "cycle.period_us",
                "the response window (" + std::to_string(timing.window_us) + " µs)" +
-                   (timing.after_window_us > 0
-                        ? " and the SDO request and answer after it (" +
-                              std::to_string(timing.after_window_us) + " µs)"
-                        : std::string()) +
+                   (timing.after_window_us > 0 ? " and the SDO request and answer after it (" +
+                                                     std::to_string(timing.after_window_us) + " µs)"
+                                               : std::string()) +
                    " must fit into cycle.period_us (" + std::to_string(c.cycle.period_us) +
                    "): use period_us > " +
                    std::to_string(timing.window_us + timing.after_window_us) +
@@ -244,7 +243,8 @@ void check_canio(const BusDocument& d) {
       const uint32_t mid = lo + (hi - lo) / 2;
       (canio_timing(k, c.axes.size(), mid).load <= k.max_bus_load ? hi : lo) = mid;
     }
-    const uint32_t need_us = hi;
+    // ... and in which the response window and the SDO answer after it fit.
+    const uint32_t need_us = std::max(hi, timing.window_us + timing.after_window_us + 1);
     std::ostringstream pct;
     pct << std::fixed << std::setprecision(0) << timing.load * 100.0;
     std::ostringstream max_pct;

@@ -38,9 +38,9 @@ struct AxisSample {
 struct AxisDecodeState {
   int8_t last_pos_cycle = 0;
   bool have_last = false;
-  uint32_t last_pos_time = 0;   // PosTime of the last new position (NetTime source)
-  int64_t first_stamp_ns = 0;   // when the last new position first arrived (RX-stamp source)
-  uint32_t repeats = 0;         // fresh samples in a row without a new position
+  uint32_t last_pos_time = 0;  // PosTime of the last new position (NetTime source)
+  int64_t first_stamp_ns = 0;  // when the last new position first arrived (RX-stamp source)
+  uint32_t repeats = 0;        // fresh samples in a row without a new position
 };
 
 struct AxisDecodeParams {

@@ -169,8 +169,7 @@ void CanioNode::queue(const canio::CanFrame& f, int64_t due_ns) {
 }
 
 int64_t CanioNode::next_due_ns() const noexcept {
-  const int64_t hb =
-      heartbeat_ms_ != 0 ? next_heartbeat_ns_ : std::numeric_limits<int64_t>::max();
+  const int64_t hb = heartbeat_ms_ != 0 ? next_heartbeat_ns_ : std::numeric_limits<int64_t>::max();
   return std::min(tx_count_ == 0 ? std::numeric_limits<int64_t>::max() : tx_[tx_head_].due_ns, hb);
 }
 
@@ -274,11 +273,10 @@ void CanioNode::serve_sdo(const canio::CanFrame& f) {
       if (config_.modules[i].slot == where->slot) module = modules_[i].get();
   }
   const uint8_t size = where ? register_size(where->reg).value_or(0) : uint8_t{0};
-  const bool injected = config_.faults.abort_code != 0 && where &&
-                        where->reg == config_.faults.abort_register &&
-                        (request->command == SdoCommand::UploadRequest
-                             ? config_.faults.abort_on_read
-                             : config_.faults.abort_on_write);
+  const bool injected =
+      config_.faults.abort_code != 0 && where && where->reg == config_.faults.abort_register &&
+      (request->command == SdoCommand::UploadRequest ? config_.faults.abort_on_read
+                                                     : config_.faults.abort_on_write);
   if (!module || size == 0) {
     abort(sdo_abort::kNoObject);
   } else if (injected) {

@@ -9,10 +9,11 @@
 // index/subindex scheme the daemon uses. Single-threaded: the owner calls service() in a loop.
 // Faults for tests: random loss of its frames, wrong lengths, foreign identifiers, silence, object
 // 2 sent late, a reset by itself (brown-out: the modules' settings lost), a stalled acquisition
-// (the same position and PosCycle resent), EMCY messages. The answers to a SYNC go out `sync_reaction_ns` after it (the bus controller's
-// reaction); like a real controller the node sends its answers in order and never sends an answer
-// to an older SYNC after it has queued the answers to a newer one (an object 2 still waiting when
-// the next SYNC's answers are due is sent first).
+// (the same position and PosCycle resent), EMCY messages. The answers to a SYNC go out
+// `sync_reaction_ns` after it (the bus controller's reaction); like a real controller the node
+// sends its answers in order and never sends an answer to an older SYNC after it has queued the
+// answers to a newer one (an object 2 still waiting when the next SYNC's answers are due is sent
+// first).
 #pragma once
 
 #include <array>
@@ -107,7 +108,7 @@ struct CanioNodeCounters {
   uint64_t boot_ups = 0;      // boot-up messages sent (power-up, resets)
   uint64_t heartbeats = 0;
   uint64_t emcys = 0;
-  uint64_t stalled_answers = 0;  // answers that repeated the last position (stall fault)
+  uint64_t stalled_answers = 0;          // answers that repeated the last position (stall fault)
   uint64_t ignored_not_operational = 0;  // SYNC / output objects ignored outside OPERATIONAL
 };
 

@@ -118,9 +118,8 @@ TEST_CASE("CAN-I/O NMT: a node that misses its Start is started again with back-
           [](sim::CanioNodeConfig& nc) { nc.faults.ignore_nmt_starts = 3; });
   REQUIRE_FALSE(rig.canio->start());
   Run run(rig);
-  REQUIRE(run.until([&] {
-    return rig.canio->axis_counters(0).state.load() == canio::CanioAxisState::Starting;
-  }));
+  REQUIRE(run.until(
+      [&] { return rig.canio->axis_counters(0).state.load() == canio::CanioAxisState::Starting; }));
   CHECK_THAT(rig.canio->axis_reason(0), Catch::Contains("NMT Start"));
   REQUIRE(run.until([&] { return run.fresh > 0; }));
   CHECK(run.wrong == 0);
@@ -134,9 +133,10 @@ TEST_CASE("CAN-I/O NMT: a node that misses its Start is started again with back-
   CHECK(backoff == std::vector<uint32_t>{100, 200, 400});  // bounded, doubling
 }
 
-TEST_CASE("CAN-I/O boot-up: a node that resets itself with the bus up is configured and started "
-          "again, nothing Valid in between",
-          "[canio][nmt][bootup]") {
+TEST_CASE(
+    "CAN-I/O boot-up: a node that resets itself with the bus up is configured and started "
+    "again, nothing Valid in between",
+    "[canio][nmt][bootup]") {
   // Before: the boot-up was not listened to; after the reset the node waited pre-operational
   // for ever (or, self-starting, was published with EnDat disabled).
   Rig rig(canio_config(1), true, false);
@@ -191,9 +191,10 @@ TEST_CASE("CAN-I/O boot-up: a node that resets during a bus-off is configured ag
   CHECK(has_event(ev, canio::CanioNodeEventKind::BusRestarted));
 }
 
-TEST_CASE("CAN-I/O heartbeat: 0x1017 written, a missed heartbeat takes the axes down within the "
-          "consumer timeout",
-          "[canio][nmt][heartbeat]") {
+TEST_CASE(
+    "CAN-I/O heartbeat: 0x1017 written, a missed heartbeat takes the axes down within the "
+    "consumer timeout",
+    "[canio][nmt][heartbeat]") {
   DaemonConfig config = canio_config(1);
   config.canio.nodes.push_back({1, 50, 0});  // consumer timeout 75 ms
   Rig rig(config, true, false);
@@ -249,9 +250,10 @@ TEST_CASE("CAN-I/O EMCY: decoded, counted, queued as an event, the cycle goes on
   CHECK(seen);
 }
 
-TEST_CASE("CAN-I/O configuration: every abort code at every step ends configured, "
-          "unconfigurable or retried, never silent",
-          "[canio][sdo][abort]") {
+TEST_CASE(
+    "CAN-I/O configuration: every abort code at every step ends configured, "
+    "unconfigurable or retried, never silent",
+    "[canio][sdo][abort]") {
   // Before: a write abort, or a read-back abort other than write-only, ended the attempt before
   // EnDatMode was written; after three the axis went up "UNVERIFIED" with EnDat off and stayed
   // awaiting_pos_cycle for ever.
@@ -310,9 +312,10 @@ TEST_CASE("CAN-I/O configuration: every abort code at every step ends configured
       }
 }
 
-TEST_CASE("CAN-I/O SDO: expedited uploads with \"size not indicated\" are taken by the register's "
-          "size",
-          "[canio][sdo]") {
+TEST_CASE(
+    "CAN-I/O SDO: expedited uploads with \"size not indicated\" are taken by the register's "
+    "size",
+    "[canio][sdo]") {
   // Before: such an answer was taken as 4 bytes: every read-back of a 1- or 2-byte register
   // "differed in size", and the axis went up unverified after three attempts.
   Rig rig(canio_config(1), true, false, [](sim::CanioNodeConfig& nc) {
@@ -383,9 +386,10 @@ TEST_CASE("CAN-I/O: restart-ms 0 is refused at start with the command that fixes
   }
 }
 
-TEST_CASE("CAN-I/O stall: 100 repeated samples are never new, keep their first stamp, and go "
-          "stale after the limit",
-          "[canio][stall]") {
+TEST_CASE(
+    "CAN-I/O stall: 100 repeated samples are never new, keep their first stamp, and go "
+    "stale after the limit",
+    "[canio][stall]") {
   // Before: every repeat was published Valid with a new receive stamp (only NEW_POSITION was
   // cleared): a frozen module looked alive.
   Rig rig(canio_config(1), true, true);
