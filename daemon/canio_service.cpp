@@ -36,6 +36,24 @@ class CanioService final : public BusService {
                            : ""),
            s == canio::CanState::BusOff ? control::LogEvent::BusOff : control::LogEvent::BusState});
     can_state_ = s;
+    if (first && !vbus_) {
+      // Stale replay: without one-shot a controller retransmits a frame nobody acknowledges (all
+      // nodes gone) until the bus returns, and the kernel's queue fills behind it: up to
+      // txqueuelen old SYNCs and output objects go out when a node is back.
+      const auto info = bus_->interface_info();
+      const uint32_t per_cycle = bus_->tx_frames_per_cycle();
+      if (!info.one_shot && info.txqueuelen > 2 * per_cycle)
+        events.push_back(
+            {true,
+             fmt::format("canio {}: one-shot off and txqueuelen {}: after a silence up to {} "
+                         "cycles of old SYNCs and output objects go out when a node is back; "
+                         "ip link set {} down && ip link set {} type can one-shot on && ip link "
+                         "set {} up (or txqueuelen {})",
+                         bus_->port_name(), info.txqueuelen,
+                         (info.txqueuelen + per_cycle - 1) / per_cycle, bus_->port_name(),
+                         bus_->port_name(), bus_->port_name(), 2 * per_cycle),
+             control::LogEvent::BusState, -1, -1, "stale-tx-replay"});
+    }
     const auto& c = bus_->counters();
     uint64_t more = 0;
     const uint64_t full = c.tx_queue_full.load();
@@ -126,6 +144,8 @@ class CanioService final : public BusService {
     j["can_state"] = std::string(canio::to_string(bus_->can_state()));
     j["bitrate"] = info.bitrate;
     j["restart_ms"] = info.restart_ms;
+    j["one_shot"] = info.one_shot;
+    j["txqueuelen"] = info.txqueuelen;
     j["response_window_us"] = bus_->options().response_window_us;
     j["last_window_us"] = static_cast<double>(c.last_window_ns.load()) / 1000.0;
     j["counters"] = {{"cycles", c.cycles.load()},

@@ -232,6 +232,12 @@ class CanioBus final : public BusDriver {
   [[nodiscard]] CanState can_state() const noexcept { return cycle_port_->state(); }
   [[nodiscard]] CanPortCounters port_counters() const noexcept { return cycle_port_->counters(); }
   [[nodiscard]] std::string_view port_name() const noexcept { return cycle_port_->name(); }
+  // Frames the driver sends a cycle (SYNC, output objects, at most one SDO request): how many
+  // cycles of old frames a full TX queue replays after a silence.
+  [[nodiscard]] uint32_t tx_frames_per_cycle() const noexcept {
+    return static_cast<uint32_t>(options_.axes.size()) + (options_.bus.sync_enabled ? 1u : 0u) +
+           1u;
+  }
   // Normal thread: the interface as netlink (or the virtual bus) last reported it.
   [[nodiscard]] CanInterfaceInfo interface_info() const;
   // Last SDO error per axis (configuration, check after silence), for status. Any thread: the
