@@ -170,7 +170,11 @@ void check_clean(const ProofResult& r, const char* what) {
   CHECK(traffic.register_results > 20);
   CHECK(r.sdo_transfers > 20);  // SDO in flight during the counted cycles
   CHECK(r.sdo_errors >= 2);     // the two lost requests timed out on the cycle thread
-  CHECK(r.samples > kCounted / 2);
+  // Whole samples inside the counted cycles (the strict node sends none before its NMT Start, so
+  // the count no longer includes the configuration's cycles): 1 ms on the real clock against a
+  // node thread on a loaded 2-core host gives about half the cycles whole; a quarter proves the
+  // positions flow while the proof runs.
+  CHECK(r.samples > kCounted / 4);
 }
 
 }  // namespace
