@@ -235,8 +235,7 @@ class CanioBus final : public BusDriver {
   // Frames the driver sends a cycle (SYNC, output objects, at most one SDO request): how many
   // cycles of old frames a full TX queue replays after a silence.
   [[nodiscard]] uint32_t tx_frames_per_cycle() const noexcept {
-    return static_cast<uint32_t>(options_.axes.size()) + (options_.bus.sync_enabled ? 1u : 0u) +
-           1u;
+    return static_cast<uint32_t>(options_.axes.size()) + (options_.bus.sync_enabled ? 1u : 0u) + 1u;
   }
   // Normal thread: the interface as netlink (or the virtual bus) last reported it.
   [[nodiscard]] CanInterfaceInfo interface_info() const;
