@@ -141,8 +141,12 @@ void CanioBus::on_error_control(std::size_t k, NmtState state, int64_t now) noex
     }
     return;
   }
+  // A heartbeat produced before the node took the Start still says pre-operational: only one
+  // that comes two producer times (at least input_timeout_ms) after the Start counts.
+  const int64_t grace_ns = std::max<int64_t>(2 * int64_t{t.heartbeat_ms} * kMs,
+                                             int64_t{options_.bus.input_timeout_ms} * kMs);
   if (state != NmtState::Operational && t.started && options_.bus.nmt == CanNmt::Start &&
-      !t.start_due) {
+      !t.start_due && now - t.start_sent_ns > grace_ns) {
     // Configured and started, but it reports another state (stopped or pre-operational by a
     // tool or by itself): Start again, with the back-off of a silent node.
     t.start_due = true;

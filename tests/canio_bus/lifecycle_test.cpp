@@ -206,6 +206,8 @@ TEST_CASE(
   CHECK(nc.heartbeat_watched.load());
   CHECK(nc.heartbeats.load() >= 2);
   CHECK(nc.heartbeat_misses.load() == 0);
+  CHECK(nc.start_retries.load() == 0);  // a heartbeat sent before the Start took is no reason
+  CHECK(nc.nmt_state.load() == static_cast<uint8_t>(canio::NmtState::Operational));
 
   rig.nodes[0]->set_silent(true);
   const int64_t silent_at = fake_now();
@@ -470,4 +472,30 @@ TEST_CASE("Stall rule under POWERLINK: a PosTime that does not move goes stale a
   io.inputs.pos_time_us = 1'021'000;
   s = decode_axis(io, params, ref, state);
   CHECK(s.new_position);
+}
+
+TEST_CASE("CAN-I/O NMT: a node put pre-operational by another master is started again",
+          "[canio][nmt][heartbeat]") {
+  // A configuration tool on the bus sends Enter Pre-Operational: the node keeps its settings but
+  // sends no process data. Its heartbeat says so; the daemon starts it again (with back-off).
+  DaemonConfig config = canio_config(1);
+  config.canio.nodes.push_back({1, 20, 0});
+  Rig rig(config, true, false);
+  REQUIRE_FALSE(rig.canio->start());
+  Run run(rig);
+  REQUIRE(run.until([&] { return run.fresh >= 100; }));
+  const auto& nc = rig.canio->node_counters(0);
+  REQUIRE(nc.start_retries.load() == 0);
+  auto tool = rig.open_port("tool");
+  auto preop = canio::build_nmt(canio::NmtCommand::EnterPreOperational, 1);
+  REQUIRE(preop);
+  REQUIRE(tool->send(*preop).sent());
+  REQUIRE(
+      run.until([&] { return rig.nodes[0]->nmt_state() == canio::NmtState::PreOperational; }, 10));
+  const uint64_t fresh_before = run.fresh;
+  REQUIRE(run.until([&] { return run.fresh >= fresh_before + 50; }));
+  CHECK(run.wrong == 0);
+  CHECK(nc.start_retries.load() >= 1);
+  CHECK(rig.canio->axis_counters(0).configurations.load() == 1);  // settings kept: no rewrite
+  CHECK(has_event(events(*rig.canio), canio::CanioNodeEventKind::StartRetry));
 }
