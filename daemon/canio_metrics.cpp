@@ -106,6 +106,40 @@ void append_canio_metrics(metrics::Exposition& out, const canio::CanioBus& bus) 
            &canio::CanioAxisCounters::sdo_errors);
   per_node("ds1928_canio_configurations", "Completed start-up configurations of the module.",
            &canio::CanioAxisCounters::configurations);
+  per_node(
+      "ds1928_canio_write_aborts",
+      "Configuration writes the module refused with an SDO abort (reported, the rest written).",
+      &canio::CanioAxisCounters::write_aborts);
+  out.family("ds1928_canio_unconfigurable", Type::Gauge,
+             "1 while a register the axis needs (EnDatMode, the Rescan) is refused: retried with "
+             "back-off.");
+  for (std::size_t i = 0; i < axes.size(); ++i)
+    out.sample(
+        {{"node", node[i]}, {"axis", axis[i]}},
+        uint64_t{bus.axis_counters(i).unconfigurable.load(std::memory_order_relaxed) ? 1u : 0u});
+  // Per CANopen node: NMT and error control (docs/canio.md §Node lifecycle).
+  const auto per_canopen_node = [&](std::string_view name, std::string_view help,
+                                    std::atomic<uint64_t> canio::CanioNodeCounters::*field) {
+    out.family(name, Type::Counter, help);
+    for (std::size_t k = 0; k < bus.node_count(); ++k)
+      out.sample({{"node", std::to_string(bus.node_counters(k).node)}},
+                 relaxed(bus.node_counters(k).*field));
+  };
+  per_canopen_node("ds1928_canio_nmt_starts", "NMT Start commands sent to the node.",
+                   &canio::CanioNodeCounters::nmt_starts);
+  per_canopen_node("ds1928_canio_nmt_start_retries",
+                   "NMT Start repeated: the node stayed silent (or left OPERATIONAL) after it.",
+                   &canio::CanioNodeCounters::start_retries);
+  per_canopen_node("ds1928_canio_boot_ups",
+                   "Boot-up messages: the node reset and was configured again.",
+                   &canio::CanioNodeCounters::boot_ups);
+  per_canopen_node("ds1928_canio_heartbeats", "Heartbeat messages received from the node.",
+                   &canio::CanioNodeCounters::heartbeats);
+  per_canopen_node("ds1928_canio_heartbeat_misses",
+                   "Heartbeat consumer timeouts: the node's axes were taken down.",
+                   &canio::CanioNodeCounters::heartbeat_misses);
+  per_canopen_node("ds1928_canio_emcy", "EMCY (emergency) messages received from the node.",
+                   &canio::CanioNodeCounters::emcys);
   out.family("ds1928_canio_node_silent", Type::Gauge,
              "1 while the node sent no complete sample for input_timeout_ms.");
   for (std::size_t i = 0; i < axes.size(); ++i)

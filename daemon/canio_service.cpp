@@ -36,6 +36,24 @@ class CanioService final : public BusService {
                            : ""),
            s == canio::CanState::BusOff ? control::LogEvent::BusOff : control::LogEvent::BusState});
     can_state_ = s;
+    if (first && !vbus_) {
+      // Stale replay: without one-shot a controller retransmits a frame nobody acknowledges (all
+      // nodes gone) until the bus returns, and the kernel's queue fills behind it: up to
+      // txqueuelen old SYNCs and output objects go out when a node is back.
+      const auto info = bus_->interface_info();
+      const uint32_t per_cycle = bus_->tx_frames_per_cycle();
+      if (!info.one_shot && info.txqueuelen > 2 * per_cycle)
+        events.push_back(
+            {true,
+             fmt::format("canio {}: one-shot off and txqueuelen {}: after a silence up to {} "
+                         "cycles of old SYNCs and output objects go out when a node is back; "
+                         "ip link set {} down && ip link set {} type can one-shot on && ip link "
+                         "set {} up (or txqueuelen {})",
+                         bus_->port_name(), info.txqueuelen,
+                         (info.txqueuelen + per_cycle - 1) / per_cycle, bus_->port_name(),
+                         bus_->port_name(), bus_->port_name(), 2 * per_cycle),
+             control::LogEvent::BusState, -1, -1, "stale-tx-replay"});
+    }
     const auto& c = bus_->counters();
     uint64_t more = 0;
     const uint64_t full = c.tx_queue_full.load();
@@ -61,6 +79,58 @@ class CanioService final : public BusService {
              static_cast<int>(a.node), static_cast<int>(i)});
       silent_[i] = silent;
     }
+    canio::CanioNodeEvent e;
+    while (bus_->poll_event(e)) on_node_event(e, events);
+  }
+
+  // The one place the daemon hears of a CAN node's lifecycle events (boot-up, missed heartbeat,
+  // EMCY, Start repeated, bus-off and restart): each is counted by the driver (status, metrics)
+  // and logged here with the node's journal fields. A hook for such events (e.g. a flight
+  // recorder dump) belongs here.
+  void on_node_event(const canio::CanioNodeEvent& e, std::vector<BusEvent>& events) const {
+    using K = canio::CanioNodeEventKind;
+    const std::string why(canio::to_string(e.kind));
+    switch (e.kind) {
+      case K::BootUp:
+        events.push_back({true,
+                          fmt::format("canio node {}: boot-up (the node reset and lost its "
+                                      "configuration): its axes are down and configured again",
+                                      e.node),
+                          control::LogEvent::NodeReset, e.node, -1, why});
+        return;
+      case K::HeartbeatMissed:
+        events.push_back({true,
+                          fmt::format("canio node {}: heartbeat missed (none within {} ms): its "
+                                      "axes are down until the configuration is checked again",
+                                      e.node, e.detail),
+                          control::LogEvent::NodeSilent, e.node, -1, why});
+        return;
+      case K::Emcy:
+        events.push_back(
+            {true,
+             fmt::format("canio node {}: EMCY error code 0x{:04X}, error register 0x{:02X}, "
+                         "vendor {:02X} {:02X} {:02X} {:02X} {:02X}",
+                         e.node, e.emcy.error_code, e.emcy.error_register, e.emcy.vendor[0],
+                         e.emcy.vendor[1], e.emcy.vendor[2], e.emcy.vendor[3], e.emcy.vendor[4]),
+             control::LogEvent::None, e.node, -1, why});
+        return;
+      case K::StartRetry:
+        events.push_back({true,
+                          fmt::format("canio node {}: configured but no process data after NMT "
+                                      "Start: Start sent again (next in {} ms)",
+                                      e.node, e.detail),
+                          control::LogEvent::NodeSilent, e.node, -1, why});
+        return;
+      case K::BusOff:
+        return;  // the controller's state change is logged above (watch())
+      case K::BusRestarted:
+        events.push_back({false,
+                          "canio " + std::string(bus_->port_name()) +
+                              ": controller back after bus-off: every node is checked (boot-up, "
+                              "heartbeat or read-back) before its axes are trusted",
+                          control::LogEvent::BusState, -1, -1, why});
+        return;
+    }
   }
 
  protected:
@@ -74,6 +144,8 @@ class CanioService final : public BusService {
     j["can_state"] = std::string(canio::to_string(bus_->can_state()));
     j["bitrate"] = info.bitrate;
     j["restart_ms"] = info.restart_ms;
+    j["one_shot"] = info.one_shot;
+    j["txqueuelen"] = info.txqueuelen;
     j["response_window_us"] = bus_->options().response_window_us;
     j["last_window_us"] = static_cast<double>(c.last_window_ns.load()) / 1000.0;
     j["counters"] = {{"cycles", c.cycles.load()},
@@ -88,7 +160,37 @@ class CanioService final : public BusService {
                      {"restarts", pc.restarts},
                      {"rx_frames", pc.rx_frames},
                      {"tx_frames", pc.tx_frames},
-                     {"rx_kernel_drops", pc.rx_kernel_drops}};
+                     {"rx_kernel_drops", pc.rx_kernel_drops},
+                     {"bus_errors_filtered", c.bus_errors_filtered.load()},
+                     {"bus_restarts", c.bus_restarts.load()},
+                     {"node_events_dropped", c.events_dropped.load()}};
+    j["nmt"] = bus_->options().bus.nmt == CanNmt::Start ? "start" : "none";
+    nlohmann::json canopen = nlohmann::json::array();
+    for (std::size_t k = 0; k < bus_->node_count(); ++k) {
+      const auto& nc = bus_->node_counters(k);
+      const uint8_t st = nc.nmt_state.load();
+      const uint64_t emcy = nc.last_emcy.load();
+      nlohmann::json n = {
+          {"node", nc.node},
+          {"nmt_state", st == 0xFF
+                            ? std::string("unknown")
+                            : std::string(canio::to_string(static_cast<canio::NmtState>(st)))},
+          {"nmt_starts", nc.nmt_starts.load()},
+          {"start_retries", nc.start_retries.load()},
+          {"boot_ups", nc.boot_ups.load()},
+          {"heartbeat_watched", nc.heartbeat_watched.load()},
+          {"heartbeats", nc.heartbeats.load()},
+          {"heartbeat_misses", nc.heartbeat_misses.load()},
+          {"emcys", nc.emcys.load()}};
+      if (nc.emcys.load() > 0)
+        n["last_emcy"] = {{"error_code", emcy & 0xFFFF},
+                          {"error_register", (emcy >> 16) & 0xFF},
+                          {"vendor",
+                           {(emcy >> 24) & 0xFF, (emcy >> 32) & 0xFF, (emcy >> 40) & 0xFF,
+                            (emcy >> 48) & 0xFF, (emcy >> 56) & 0xFF}}};
+      canopen.push_back(std::move(n));
+    }
+    j["canopen_nodes"] = std::move(canopen);
     nlohmann::json axes = nlohmann::json::array();
     for (std::size_t i = 0; i < bus_->options().axes.size(); ++i) {
       const auto& a = bus_->options().axes[i];
@@ -99,7 +201,9 @@ class CanioService final : public BusService {
                       {"output_id", a.ids.output},
                       {"configured", ac.configured.load()},
                       {"state", std::string(canio::to_string(ac.state.load()))},
-                      {"reason", std::string(canio::reason(ac.state.load()))},
+                      {"reason", bus_->axis_reason(i)},
+                      {"unconfigurable", ac.unconfigurable.load()},
+                      {"write_aborts", ac.write_aborts.load()},
                       {"unpaired", ac.unpaired.load()},
                       {"gated", ac.gated.load()},
                       {"unverified_writes", ac.unverified.load()},

@@ -28,6 +28,12 @@ CycleWork::CycleWork(const DaemonConfig& config, BusDriver& bus, shm::Publisher&
     params_[i].signed_format = config.axes[i].module.position_signed;
     params_[i].has_pos_time = config.axes[i].function_model == FunctionModel::Standard;
     params_[i].max_stamp_age_ns = default_max_stamp_age_ns(int64_t{config.cycle.period_us} * 1000);
+    // Stalled acquisition (repeats of one position go stale after a limit) on the real buses;
+    // the built-in simulated bus keeps its injected faults' own semantics.
+    if (config.bus == BusKind::Canio || config.bus == BusKind::Powerlink)
+      params_[i].stall_limit =
+          stall_limit_cycles(config.bus == BusKind::Canio ? config.canio.stall_limit : 0,
+                             m.prescaler, config.cycle.period_us);
   }
 }
 
@@ -68,6 +74,8 @@ void CycleWork::run_cycle(const CycleContext& ctx) noexcept {
     bump(sample.fresh ? c.fresh_cycles : c.stale_cycles);
     if (sample.new_position) bump(c.new_positions);
     if (sample.stamp_too_old) bump(c.old_stamps);
+    if (sample.stalled) bump(c.stalled);
+    if (sample.repeated) bump(c.repeats);
     if (sample.fresh && !sample.fraction_valid) bump(c.format_violations);
     c.error_info.store(sample.error_info, std::memory_order_relaxed);
     any_fresh |= sample.fresh;

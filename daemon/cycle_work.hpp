@@ -76,6 +76,8 @@ struct AxisCounters {
   std::atomic<uint64_t> new_positions{0};
   std::atomic<uint64_t> format_violations{0};  // fraction with low 3 bits set
   std::atomic<uint64_t> old_stamps{0};  // new positions stamped too long ago (a late PRes), stale
+  std::atomic<uint64_t> repeats{0};     // samples repeating the last position (not new)
+  std::atomic<uint64_t> stalled{0};     // repeats beyond the stall limit: published stale
   std::atomic<uint8_t> error_info{0};
   // Last sample, for human-readable status only (fields are not read as one consistent set;
   // applications read the seqlock record in shared memory).

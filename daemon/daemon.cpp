@@ -269,6 +269,8 @@ json Daemon::axis_json(std::size_t i, bool with_sample) const {
   j["new_positions"] = c.new_positions.load(std::memory_order_relaxed);
   j["format_violations"] = c.format_violations.load(std::memory_order_relaxed);
   j["old_stamps"] = c.old_stamps.load(std::memory_order_relaxed);
+  j["repeats"] = c.repeats.load(std::memory_order_relaxed);
+  j["stalled"] = c.stalled.load(std::memory_order_relaxed);
   const TunnelCounters& t = work_->tunnel_counters(i);
   j["flatstream"] = {{"messages_sent", t.messages_sent.load(std::memory_order_relaxed)},
                      {"messages_failed", t.messages_failed.load(std::memory_order_relaxed)},

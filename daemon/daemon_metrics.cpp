@@ -153,6 +153,12 @@ std::string Daemon::metrics_text(metrics::Format format) const {
   for (std::size_t i = 0; i < axes; ++i)
     out.sample({{"axis", index[i]}, {"name", config_.axes[i].name}},
                work_->counters(i).old_stamps.load(std::memory_order_relaxed));
+  out.family("ds1928_axis_stalled", Type::Counter,
+             "Samples that repeated the last position (PosCycle, or PosTime, unchanged) beyond "
+             "the stall limit: the acquisition stalled, published as stale.");
+  for (std::size_t i = 0; i < axes; ++i)
+    out.sample({{"axis", index[i]}, {"name", config_.axes[i].name}},
+               work_->counters(i).stalled.load(std::memory_order_relaxed));
   if (endat_) {
     std::vector<EnDatService::Counters> ec(axes);
     for (std::size_t i = 0; i < axes; ++i) ec[i] = endat_->counters(i);

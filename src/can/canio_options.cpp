@@ -30,6 +30,14 @@ CanioAxisIds canio_axis_ids(const CanioBusConfig& canio, const AxisConfig& axis,
   return ids;
 }
 
+CanioNodeOptions canio_node_options(const CanioBusConfig& canio, uint8_t node) {
+  for (const CanioNodeOptions& n : canio.nodes)
+    if (n.node == node) return n;
+  CanioNodeOptions n;
+  n.node = node;
+  return n;
+}
+
 CanioTiming canio_timing(const CanioBusConfig& canio, std::size_t modules, uint32_t period_us) {
   CanioTiming t;
   canio::CycleLoad load;
@@ -56,6 +64,9 @@ CanioTiming canio_timing(const CanioBusConfig& canio, std::size_t modules, uint3
   if (canio.acyclic == CanAcyclicTransport::CanopenSdo && period_us > 0) {
     const int64_t interval_us = std::max<int64_t>(period_us, canio.sdo_interval_us);
     t.acyclic_ns = (2 * blocking_ns * period_us + interval_us - 1) / interval_us;
+    // The transfer starts after the response window; request and answer must end before the
+    // next SYNC.
+    t.after_window_us = static_cast<uint32_t>((2 * blocking_ns + 999) / 1000);
   }
   if (period_us > 0)
     t.load = static_cast<double>(t.cyclic_ns + t.acyclic_ns) / (double(period_us) * 1000.0);

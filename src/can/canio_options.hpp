@@ -34,6 +34,18 @@ enum class CanVerify : uint8_t {
   Readback,  // read it back; "cannot be read" aborts leave the write unverified, not failed
   None,      // write only; after a silence the module is always configured again
 };
+// CiA 301 NMT master (docs/canio.md §NMT): Start: after configuring a node the daemon sends NMT
+// Start to it (and Enter Pre-Operational at stop); None: for bus controllers that start by
+// themselves, no NMT command is ever sent.
+enum class CanNmt : uint8_t { Start, None };
+// One CANopen node on the bus (canio.nodes[]): its error control.
+struct CanioNodeOptions {
+  uint8_t node = 1;
+  // Heartbeat producer time written to the node's object 0x1017 (ms, 0: no heartbeat watched).
+  uint32_t heartbeat_ms = 0;
+  // Consumer timeout (ms); 0: 1.5 × heartbeat_ms (an ASSUMPTION, docs/canio.md).
+  uint32_t heartbeat_timeout_ms = 0;
+};
 // One axis' objects on the bus (index = axes[i]).
 struct CanioAxisConfig {
   uint8_t first_analog_slot = 1;         // the module's first of its 2 analog logical slots
@@ -72,6 +84,14 @@ struct CanioBusConfig {
   // Register → (index, subindex) overrides of the default SDO scheme (same as POWERLINK's,
   // docs/powerlink.md §SDO mapping): the configured index addresses slot 1.
   std::map<uint16_t, std::pair<uint16_t, uint8_t>> sdo_overrides;
+  CanNmt nmt = CanNmt::Start;
+  std::vector<CanioNodeOptions> nodes;  // error control per node (nodes without entry: none)
+  // Repeated samples (PosCycle unchanged) published before the axis goes stale; 0: derived from
+  // the EnDat cycle and the period (stall_limit_cycles()).
+  uint32_t stall_limit = 0;
+  // restart-ms 0 on the interface (a bus-off is permanent until `ip link … restart`) is refused
+  // at start unless this is true.
+  bool allow_manual_restart = false;
   // Test transport instead of SocketCAN: the cross-process virtual bus of this name
   // (docs/canio.md).
   std::string virtual_bus;
@@ -86,6 +106,7 @@ struct CanioTiming {
   uint32_t window_us = 0;          // the response window in use (configured or derived)
   uint32_t derived_window_us = 0;  // wire + reaction, rounded up to µs
   uint32_t min_window_us = 0;      // wire time rounded up: a shorter window can never be whole
+  uint32_t after_window_us = 0;    // an SDO request and its answer after the window (worst case)
   int64_t cyclic_ns = 0;           // the cycle's own frames (SYNC + objects), worst case
   int64_t acyclic_ns = 0;          // the SDO transfers' share a cycle: one transfer (2 frames) per
                                    // max(period, sdo_interval_us), averaged over the period
@@ -93,6 +114,22 @@ struct CanioTiming {
 };
 [[nodiscard]] CanioTiming canio_timing(const CanioBusConfig& canio, std::size_t modules,
                                        uint32_t period_us);
+
+// How many repeated samples (the same PosCycle, or under POWERLINK the same PosTime) in a row an
+// axis may publish before it is stale: a module delivers a new position every EnDat cycle
+// (module cycle × prescaler; the module cycle is at most 200 µs, datasheet: prescaler 2 →
+// 200–400 µs), so after twice the longest EnDat cycle plus one bus cycle without a new position
+// the acquisition has stalled. `configured` > 0 wins.
+[[nodiscard]] constexpr uint32_t stall_limit_cycles(uint32_t configured, uint16_t prescaler,
+                                                    uint32_t period_us) noexcept {
+  if (configured != 0) return configured;
+  if (period_us == 0) return 2;
+  const uint64_t endat_max_us = uint64_t{prescaler == 0 ? 1u : prescaler} * 200;
+  return static_cast<uint32_t>((2 * endat_max_us + period_us - 1) / period_us) + 1;
+}
+
+// The node's error-control options (defaults when canio.nodes has no entry for it).
+[[nodiscard]] CanioNodeOptions canio_node_options(const CanioBusConfig& canio, uint8_t node);
 
 // The identifiers of axis `axis` under `canio` (generator or explicit table); node from the axis.
 [[nodiscard]] CanioAxisIds canio_axis_ids(const CanioBusConfig& canio, const AxisConfig& axis,

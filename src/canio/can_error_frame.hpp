@@ -57,10 +57,13 @@ inline constexpr uint8_t kTx = 0x80;      // the error occurred on transmission
 
 // The error classes the ports subscribe to (CAN_RAW_ERR_FILTER): everything that changes what the
 // master must do. Bus errors and lost arbitration are left out: they may flood (one per bit error)
-// and the counters and state changes already carry their consequence.
-inline constexpr uint32_t kDefaultErrorMask =
-    err_class::kTxTimeout | err_class::kController | err_class::kProtocol | err_class::kNoAck |
-    err_class::kBusOff | err_class::kRestarted | err_class::kTransceiver;
+// and the counters and state changes already carry their consequence. Protocol violations are
+// left out too: the kernel's CAN drivers report every bus error as CAN_ERR_PROT |
+// CAN_ERR_BUSERROR, and the kernel delivers an error frame when any of its class bits is
+// subscribed — subscribing to protocol violations would let every bus error wake the cycle.
+inline constexpr uint32_t kDefaultErrorMask = err_class::kTxTimeout | err_class::kController |
+                                              err_class::kNoAck | err_class::kBusOff |
+                                              err_class::kRestarted | err_class::kTransceiver;
 
 struct CanErrorEvent {
   uint32_t classes = 0;  // err_class bits present

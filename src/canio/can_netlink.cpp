@@ -70,6 +70,10 @@ Result<CanLinkInfo> parse_link_message(std::span<const uint8_t> msg) noexcept {
   uint32_t state = 0;
   const bool walked = for_each_attr(
       msg.data() + attrs_at, h.nlmsg_len - attrs_at, [&](uint16_t type, auto payload) {
+        if (type == IFLA_TXQLEN) {
+          ok &= read_as(payload, link.info.txqueuelen);
+          return;
+        }
         if (type != IFLA_LINKINFO) return;
         ok &= for_each_attr(payload.data(), payload.size(), [&](uint16_t t, auto p) {
           if (t == IFLA_INFO_KIND) {
@@ -93,6 +97,12 @@ Result<CanLinkInfo> parse_link_message(std::span<const uint8_t> msg) noexcept {
                 case IFLA_CAN_RESTART_MS:
                   ok &= read_as(d, link.info.restart_ms);
                   break;
+                case IFLA_CAN_CTRLMODE: {
+                  can_ctrlmode cm{};
+                  ok &= read_as(d, cm);
+                  link.info.one_shot = (cm.flags & CAN_CTRLMODE_ONE_SHOT) != 0;
+                  break;
+                }
                 case IFLA_CAN_BERR_COUNTER: {
                   can_berr_counter bc{};
                   link.info.error_counters_valid = read_as(d, bc);

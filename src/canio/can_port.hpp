@@ -103,6 +103,8 @@ struct CanInterfaceInfo {
   uint32_t bitrate = 0;                // IFLA_CAN_BITTIMING.bitrate, bit/s (0: not configured)
   uint32_t sample_point = 0;           // tenths of a percent (875 = 87.5 %)
   uint32_t restart_ms = 0;             // IFLA_CAN_RESTART_MS (0: no automatic restart)
+  uint32_t txqueuelen = 0;             // IFLA_TXQLEN: frames the kernel queues before ENOBUFS
+  bool one_shot = false;               // IFLA_CAN_CTRLMODE: CAN_CTRLMODE_ONE_SHOT (no retransmit)
   bool error_counters_valid = false;   // IFLA_CAN_BERR_COUNTER present
   uint16_t tx_error_count = 0;
   uint16_t rx_error_count = 0;

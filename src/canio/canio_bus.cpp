@@ -4,6 +4,7 @@
 
 #include "canio/can_error_frame.hpp"
 #include "canio/can_netlink.hpp"
+#include "canio/errors.hpp"
 #include "canio/sdo_expedited.hpp"
 #include "core/clock.hpp"
 #include "x20ds1928/object_dictionary.hpp"
@@ -38,6 +39,8 @@ class CanioBusCategory final : public std::error_category {
         return "no such axis";
       case CanioBusError::kReadBackSize:
         return "the register reads back with another size than it has";
+      case CanioBusError::kNodeReset:
+        return "the node announced a reset (boot-up): configured anew";
     }
     return "unknown CAN-I/O bus error";
   }
@@ -55,6 +58,10 @@ std::string_view to_string(CanioAxisState s) noexcept {
       return "operational";
     case CanioAxisState::Silent:
       return "silent";
+    case CanioAxisState::Starting:
+      return "starting";
+    case CanioAxisState::Unconfigurable:
+      return "unconfigurable";
   }
   return "?";
 }
@@ -69,6 +76,10 @@ std::string_view reason(CanioAxisState s) noexcept {
       return "";
     case CanioAxisState::Silent:
       return "no complete sample within input_timeout_ms (Stale)";
+    case CanioAxisState::Starting:
+      return "configured, NMT Start sent, no process data yet: Start repeated with back-off";
+    case CanioAxisState::Unconfigurable:
+      return "unconfigurable: a register the axis needs was refused; retried with back-off";
   }
   return "";
 }
@@ -123,6 +134,20 @@ CanioBus::CanioBus(CanioBusOptions options, std::unique_ptr<CanPort> cycle_port,
       notes_(std::make_unique<NoteCell[]>(options_.axes.size())) {
   if (options_.axes.size() > kMaxCanioAxes)
     throw std::invalid_argument("canio: at most 64 axes per bus");
+  for (const CanioAxisPlan& a : options_.axes) {
+    if (node_index(a.node) < nodes_.size()) continue;
+    NodeTrack t;
+    t.node = a.node;
+    const CanioNodeOptions no = canio_node_options(options_.bus, a.node);
+    t.heartbeat_ms = no.heartbeat_ms;
+    t.consumer_ns =
+        int64_t{heartbeat_consumer_ms(no.heartbeat_ms, no.heartbeat_timeout_ms)} * 1'000'000;
+    nodes_.push_back(t);
+  }
+  node_counters_ = std::make_unique<CanioNodeCounters[]>(nodes_.size());
+  for (std::size_t k = 0; k < nodes_.size(); ++k) node_counters_[k].node = nodes_[k].node;
+  for (const CanioAxisPlan& a : options_.axes)
+    axis_node_.push_back(static_cast<uint16_t>(node_index(a.node)));
   for (std::size_t i = 0; i < options_.axes.size(); ++i) {
     const auto axis = static_cast<uint16_t>(i);
     routes_.push_back({options_.axes[i].ids.input[0], axis, ObjectKind::Position});
@@ -167,10 +192,14 @@ std::error_code CanioBus::start() {
     return ec;
   }
   if (sdo_port_) {
+    // The node port: SDO answers, boot-up / heartbeat and EMCY of every node (never the cycle
+    // port: they must not wake the response window).
     std::vector<CanIdFilter> sdo_ids;
-    for (const CanioAxisPlan& a : options_.axes) {
-      const CanIdFilter f{kSdoResponseBase + a.node, false};
-      if (std::find(sdo_ids.begin(), sdo_ids.end(), f) == sdo_ids.end()) sdo_ids.push_back(f);
+    for (const NodeTrack& t : nodes_) {
+      sdo_ids.push_back({kSdoResponseBase + t.node, false});
+      sdo_ids.push_back({kErrorControlBase + t.node, false});
+      if (kEmcyBase + t.node != options_.bus.sync_id)
+        sdo_ids.push_back({kEmcyBase + t.node, false});
     }
     if (auto ec = sdo_port_->set_filters(sdo_ids)) {
       start_error_ = "CAN filters (SDO) on " + std::string(sdo_port_->name()) + ": " + ec.message();
@@ -179,6 +208,18 @@ std::error_code CanioBus::start() {
     (void)sdo_port_->set_error_mask(0);
   }
   if (auto info = cycle_port_->query_interface()) {
+    if (info.value().restart_ms == 0 && !options_.bus.allow_manual_restart) {
+      // Without restart-ms the kernel never restarts a controller after bus-off: the bus would
+      // stay down until an administrator runs `ip link set … type can restart`.
+      const std::string ifc(cycle_port_->name());
+      start_error_ = "CAN interface '" + ifc +
+                     "' has restart-ms 0: after a bus-off the controller would stay off until "
+                     "restarted by hand; set an automatic restart: ip link set " +
+                     ifc + " down && ip link set " + ifc + " type can bitrate " +
+                     std::to_string(options_.bus.bitrate) + " restart-ms 100 && ip link set " +
+                     ifc + " up (or accept it with canio.allow_manual_restart: true)";
+      return make_error_code(CanError::kInterfaceDown);
+    }
     std::lock_guard lock(info_mutex_);
     info_ = info.value();
   }
@@ -191,7 +232,12 @@ std::error_code CanioBus::start() {
 }
 
 void CanioBus::stop() noexcept {
-  state_.store(BusState::Down, std::memory_order_relaxed);
+  // NMT master: the nodes stop their process data but stay reachable over SDO (Enter
+  // Pre-Operational; the next start configures and starts them again).
+  if (state_.exchange(BusState::Down, std::memory_order_relaxed) != BusState::Down && sdo_port_ &&
+      options_.bus.nmt == CanNmt::Start && !options_.assume_configured)
+    for (const NodeTrack& t : nodes_)
+      if (auto f = build_nmt(NmtCommand::EnterPreOperational, t.node)) (void)sdo_port_->send(*f);
 }
 
 const CanioBus::ObjectRoute* CanioBus::route(uint32_t id) const noexcept {
@@ -208,8 +254,19 @@ void CanioBus::count_send(SendResult r) noexcept {
     bump(counters_.tx_failed);
 }
 
+bool CanioBus::bus_filtered(const CanFrame& f) noexcept {
+  // A bus error (one per bit error, CAN_ERR_BUSERROR) that announces no state change: its
+  // consequence arrives as a state change; never the cycle's business.
+  if (!f.error || (f.id & err_class::kBusError) == 0) return false;
+  auto ev = decode_error_frame(f);
+  if (ev && ev.value().state_change()) return false;
+  bump(counters_.bus_errors_filtered);
+  return true;
+}
+
 void CanioBus::handle_frame(const CanFrame& f, Stamp where) noexcept {
   if (f.error) {
+    if (bus_filtered(f)) return;
     bump(counters_.error_frames);  // the port has applied the state change
     return;
   }
@@ -270,6 +327,10 @@ ExchangeResult CanioBus::exchange(std::span<AxisIo> axes, int64_t, uint64_t) noe
   if (!can_transmit(can) && can != CanState::Unknown) {
     // Bus-off or down: nothing goes out; the kernel (restart-ms) or the virtual bus restarts the
     // controller, the error frame "restarted" brings the state back.
+    if (!bus_was_down_) {
+      bus_was_down_ = true;
+      push_event({CanioNodeEventKind::BusOff, 0, clock_(), {}, 0});
+    }
     bump(counters_.bus_off_cycles);
     state_.store(BusState::Error, std::memory_order_relaxed);
     result.bus_up = false;
@@ -278,6 +339,23 @@ ExchangeResult CanioBus::exchange(std::span<AxisIo> axes, int64_t, uint64_t) noe
     return result;
   }
 
+  if (bus_was_down_) {
+    // Back from bus-off (or down): a node may have reset meanwhile and its boot-up was lost.
+    // Every configured axis is trusted again only after a boot-up (configured anew), an
+    // OPERATIONAL heartbeat, or a read-back of its configuration (the check after silence).
+    bus_was_down_ = false;
+    bump(counters_.bus_restarts);
+    const int64_t t = clock_();
+    push_event({CanioNodeEventKind::BusRestarted, 0, t, {}, 0});
+    if (!options_.assume_configured)
+      for (std::size_t k = 0; k < nodes_.size(); ++k) {
+        node_down(k, false, t);
+        nodes_[k].trust_by_heartbeat = nodes_[k].heartbeat_ms != 0;
+      }
+  }
+  // Boot-up, heartbeat, EMCY and SDO answers that came in since the last cycle: a node that
+  // announced a reset is down before this cycle's window.
+  drain_node_port(clock_());
   for (std::size_t i = 0; i < n; ++i) track_[i].pairing.open();
   // The window opens before the SYNC is handed to the port: every answer to it is stamped later
   // (its end of frame follows the SYNC's on the wire).
@@ -359,7 +437,10 @@ ExchangeResult CanioBus::exchange(std::span<AxisIo> axes, int64_t, uint64_t) noe
     // Per-axis availability: only this axis is down while its module is being configured.
     if (!c.configured.load(std::memory_order_acquire)) {
       axes[i].axis_up = false;
-      c.state.store(CanioAxisState::Configuring, std::memory_order_relaxed);
+      c.state.store(c.unconfigurable.load(std::memory_order_relaxed)
+                        ? CanioAxisState::Unconfigurable
+                        : CanioAxisState::Configuring,
+                    std::memory_order_relaxed);
       continue;
     }
     axes[i].axis_up = true;
@@ -387,7 +468,11 @@ ExchangeResult CanioBus::exchange(std::span<AxisIo> axes, int64_t, uint64_t) noe
     }
     if (t.gated) {
       if (whole) bump(c.gated);
-      c.state.store(CanioAxisState::AwaitingPosCycle, std::memory_order_relaxed);
+      // No process data at all since the configuration: the node has not started (yet).
+      const bool starting =
+          !t.gate_have && options_.bus.nmt == CanNmt::Start && !options_.assume_configured;
+      c.state.store(starting ? CanioAxisState::Starting : CanioAxisState::AwaitingPosCycle,
+                    std::memory_order_relaxed);
       continue;
     }
     if (!whole) {
@@ -400,8 +485,10 @@ ExchangeResult CanioBus::exchange(std::span<AxisIo> axes, int64_t, uint64_t) noe
     axes[i].inputs_fresh = true;
     axes[i].rx_time_ns = t.pairing.position_rx_ns();
   }
-  // Register access between the windows: the SDO frames stay off the wire while this cycle's
-  // objects are due (the bit budget counts one frame that may have started before a SYNC).
+  // Register access and NMT between the windows: the SDO frames stay off the wire while this
+  // cycle's objects are due (the bit budget counts one frame that may have started before a
+  // SYNC).
+  step_nmt(now);
   step_sdo(now);
   // The bus cycles; which axis is usable is per axis (AxisIo::axis_up).
   state_.store(BusState::Operational, std::memory_order_relaxed);

@@ -12,6 +12,14 @@
 // BusDown), AwaitingPosCycle (configured, but PosCycle has not changed since: Stale), Operational,
 // Silent (no complete sample for input_timeout_ms: Stale). Other axes are not affected.
 //
+// Node lifecycle (CiA 301, canio_nmt.cpp): after configuring every module of a node the driver
+// sends NMT Start to it (canio.nmt: start), and repeats it with a bounded back-off while the node
+// stays silent; the node port watches boot-up / heartbeat (0x700 + node) and EMCY (0x080 +
+// node). A boot-up means the node lost its settings: its axes go down at once and are configured
+// again; a missed heartbeat takes them down until a check proves the configuration. After a
+// bus-off every axis is checked again before it is trusted. Each such event is counted per node
+// and queued as a CanioNodeEvent (poll_event()): the one place the daemon hears of them.
+//
 // Acyclic registers (configuration, Rescan, identification, EnDatError/EnDatWarning) go through
 // expedited CANopen SDO on a second port, as a state machine stepped by the same cycle that owns
 // the bus (canio_sdo.cpp), like POWERLINK's SDO in the ManagingNode: after each response window
@@ -31,6 +39,7 @@
 
 #include "can/canio_options.hpp"
 #include "canio/can_port.hpp"
+#include "canio/canopen_nmt.hpp"
 #include "canio/object_codec.hpp"
 #include "canio/sdo_client.hpp"
 #include "canio/sdo_expedited.hpp"
@@ -51,6 +60,7 @@ enum class CanioBusError : int {
   kSdoSendFailed,           // the SDO request could not be sent (bus-off, queue full, down)
   kNoSuchAxis,
   kReadBackSize,  // a register reads back with another size than it has
+  kNodeReset,     // the node announced a reset (boot-up) during the transfer's job
 };
 [[nodiscard]] const std::error_category& canio_bus_category() noexcept;
 [[nodiscard]] inline std::error_code make_error_code(CanioBusError e) noexcept {
@@ -67,6 +77,8 @@ enum class CanioAxisState : uint8_t {
   AwaitingPosCycle = 1,  // configured; Stale until PosCycle changes (a real new position)
   Operational = 2,       // fresh samples are published
   Silent = 3,            // configured, but no complete sample for input_timeout_ms: Stale
+  Starting = 4,          // configured, NMT Start sent, no process data yet (Start repeated)
+  Unconfigurable = 5,    // a register the axis needs was refused (abort): retried with back-off
 };
 [[nodiscard]] std::string_view to_string(CanioAxisState s) noexcept;
 // Why an axis in this state is not Valid, for status (empty when Operational).
@@ -90,9 +102,45 @@ struct CanioAxisCounters {
   std::atomic<uint32_t> generation{0};      // SDO: bumped by every (re)configuration
   std::atomic<bool> configured{false};      // SDO: the module is configured (status reads it)
   std::atomic<CanioAxisState> state{CanioAxisState::Configuring};  // cycle thread
-  std::atomic<bool> silent{true};  // no complete sample for input_timeout_ms
+  std::atomic<bool> silent{true};           // no complete sample for input_timeout_ms
+  std::atomic<bool> unconfigurable{false};  // SDO: a register it needs was refused
+  std::atomic<uint64_t> write_aborts{0};    // SDO: configuration writes refused (abort)
   std::atomic<int64_t> last_sample_ns{0};
 };
+
+// Per CANopen node (cycle thread writes, any thread reads).
+struct CanioNodeCounters {
+  uint8_t node = 0;                            // fixed after construction
+  std::atomic<uint64_t> nmt_starts{0};         // NMT Start sent (after each configuration)
+  std::atomic<uint64_t> start_retries{0};      // Start repeated: configured but silent after it
+  std::atomic<uint64_t> boot_ups{0};           // boot-up messages (the node reset)
+  std::atomic<uint64_t> heartbeats{0};         // heartbeat messages received
+  std::atomic<uint64_t> heartbeat_misses{0};   // consumer timeouts
+  std::atomic<uint64_t> emcys{0};              // EMCY messages received
+  std::atomic<uint64_t> last_emcy{0};          // code | register << 16 | vendor << 24
+  std::atomic<uint8_t> nmt_state{0xFF};        // last reported (canio::NmtState), 0xFF: none
+  std::atomic<bool> heartbeat_watched{false};  // consumer armed (0x1017 written)
+};
+
+// A node event the daemon logs (and may hook, e.g. a flight recorder): queued by the cycle thread,
+// taken by the normal thread with CanioBus::poll_event().
+enum class CanioNodeEventKind : uint8_t {
+  BootUp,           // the node announced a reset: its axes are configured again
+  HeartbeatMissed,  // no heartbeat within the consumer timeout: its axes are down
+  Emcy,             // an emergency message (code, register, vendor bytes)
+  StartRetry,       // configured but silent after NMT Start: Start sent again
+  BusOff,           // the controller went bus-off (node 0: the whole bus)
+  BusRestarted,     // the controller is back: every axis is checked before it is trusted
+};
+[[nodiscard]] std::string_view to_string(CanioNodeEventKind k) noexcept;
+struct CanioNodeEvent {
+  CanioNodeEventKind kind = CanioNodeEventKind::BootUp;
+  uint8_t node = 0;     // 0: the bus
+  int64_t time_ns = 0;  // driver clock
+  Emcy emcy{};          // Emcy
+  uint32_t detail = 0;  // StartRetry: next back-off ms; HeartbeatMissed: timeout ms
+};
+inline constexpr std::size_t kNodeEventQueueDepth = 64;
 
 // Bus-wide figures.
 struct CanioBusCounters {
@@ -102,9 +150,12 @@ struct CanioBusCounters {
   std::atomic<uint64_t> tx_failed{0};       // bus-off, interface down, other errors
   std::atomic<uint64_t> unexpected_ids{0};  // data frames with an identifier no axis uses
   std::atomic<uint64_t> error_frames{0};
-  std::atomic<uint64_t> receive_errors{0};  // port receive failures (interface down)
-  std::atomic<uint64_t> bus_off_cycles{0};  // cycles skipped while bus-off / down
-  std::atomic<int64_t> last_window_ns{0};   // last SYNC → last object of the cycle
+  std::atomic<uint64_t> receive_errors{0};       // port receive failures (interface down)
+  std::atomic<uint64_t> bus_off_cycles{0};       // cycles skipped while bus-off / down
+  std::atomic<int64_t> last_window_ns{0};        // last SYNC → last object of the cycle
+  std::atomic<uint64_t> bus_errors_filtered{0};  // bus-error frames dropped before the cycle
+  std::atomic<uint64_t> bus_restarts{0};         // back from bus-off / down: axes checked again
+  std::atomic<uint64_t> events_dropped{0};       // node events the normal thread did not take
 };
 
 struct CanioAxisPlan {
@@ -168,9 +219,24 @@ class CanioBus final : public BusDriver {
     return axis_counters_[axis];
   }
   [[nodiscard]] const CanioBusCounters& counters() const noexcept { return counters_; }
+  [[nodiscard]] std::size_t node_count() const noexcept { return nodes_.size(); }
+  [[nodiscard]] const CanioNodeCounters& node_counters(std::size_t k) const noexcept {
+    return node_counters_[k];
+  }
+  // Normal thread: the next node event (boot-up, missed heartbeat, EMCY, Start repeated,
+  // bus-off): false when none is queued.
+  [[nodiscard]] bool poll_event(CanioNodeEvent& out) noexcept;
+  // Why an axis is not Valid (status `reason`): the state's reason, with the refused register
+  // and abort text when it is unconfigurable.
+  [[nodiscard]] std::string axis_reason(std::size_t axis) const;
   [[nodiscard]] CanState can_state() const noexcept { return cycle_port_->state(); }
   [[nodiscard]] CanPortCounters port_counters() const noexcept { return cycle_port_->counters(); }
   [[nodiscard]] std::string_view port_name() const noexcept { return cycle_port_->name(); }
+  // Frames the driver sends a cycle (SYNC, output objects, at most one SDO request): how many
+  // cycles of old frames a full TX queue replays after a silence.
+  [[nodiscard]] uint32_t tx_frames_per_cycle() const noexcept {
+    return static_cast<uint32_t>(options_.axes.size()) + (options_.bus.sync_enabled ? 1u : 0u) + 1u;
+  }
   // Normal thread: the interface as netlink (or the virtual bus) last reported it.
   [[nodiscard]] CanInterfaceInfo interface_info() const;
   // Last SDO error per axis (configuration, check after silence), for status. Any thread: the
@@ -203,10 +269,35 @@ class CanioBus final : public BusDriver {
   [[nodiscard]] const ObjectRoute* route(uint32_t id) const noexcept;
   void count_send(SendResult r) noexcept;
 
+  // ---- Node lifecycle (canio_nmt.cpp) ----
+  struct NodeTrack {  // cycle thread
+    uint8_t node = 0;
+    uint32_t heartbeat_ms = 0;
+    int64_t consumer_ns = 0;            // heartbeat consumer timeout
+    int64_t heartbeat_deadline_ns = 0;  // 0: not watched now
+    bool start_due = false;             // send NMT Start at the next step
+    bool started = false;               // Start sent since the last configuration
+    int64_t start_sent_ns = 0;
+    int64_t next_start_ns = 0;
+    int64_t start_backoff_ns = 0;
+    bool trust_by_heartbeat = false;  // after a bus restart: OPERATIONAL heartbeat suffices
+  };
+  [[nodiscard]] std::size_t node_index(uint8_t node) const noexcept;
+  // Frames on the node port: SDO answers, boot-up / heartbeat, EMCY.
+  void drain_node_port(int64_t now) noexcept;
+  void on_error_control(std::size_t k, NmtState state, int64_t now) noexcept;
+  void on_emcy(std::size_t k, const Emcy& e, int64_t now) noexcept;
+  // The node's axes go down and are configured (`fresh`: anew) or checked again.
+  void node_down(std::size_t k, bool fresh, int64_t now) noexcept;
+  void step_nmt(int64_t now) noexcept;
+  void node_configured(std::size_t axis, int64_t now) noexcept;
+  void push_event(const CanioNodeEvent& e) noexcept;
+  [[nodiscard]] bool bus_filtered(const CanFrame& f) noexcept;
+
   // ---- Register access over SDO (canio_sdo.cpp): one job at a time — a module's configuration,
   // its check after a silence, or one of the daemon's requests — made of expedited transfers.
   enum class SdoJobKind : uint8_t { None, Configure, Check, Request };
-  enum class SdoStage : uint8_t { Write, ReadBack, Rescan, Read };
+  enum class SdoStage : uint8_t { Write, ReadBack, Heartbeat, Rescan, Read };
   struct SdoJob {
     SdoJobKind kind = SdoJobKind::None;
     SdoStage stage = SdoStage::Write;
@@ -219,6 +310,12 @@ class CanioBus final : public BusDriver {
     std::error_code mismatch;
     uint16_t mismatch_reg = 0;
     uint32_t mismatch_value = 0;
+    // Configure: the first write the module refused (an abort); the others are written all the
+    // same.
+    std::error_code refused;
+    uint16_t refused_reg = 0;  // 0: the heartbeat producer time (0x1017)
+    uint32_t refused_value = 0;
+    bool heartbeat_done = false;
   };
   // The transfer a job needs next.
   struct SdoOp {
@@ -226,10 +323,14 @@ class CanioBus final : public BusDriver {
     uint8_t size = 1;
     bool write = false;
     uint32_t value = 0;
+    uint16_t index = 0;  // != 0: this node object instead of the register's (0x1017)
+    uint8_t subindex = 0;
   };
   struct AxisSdo {             // cycle thread
     bool reconfigure = false;  // configure the module (or check it after a silence)
+    bool fresh = false;        // configure anew, no check (the node announced a reset)
     int64_t retry_at_ns = 0;
+    int64_t backoff_ns = 0;   // unconfigurable: next retry after this (doubling, bounded)
     unsigned definitive = 0;  // configurations in a row that got a definitive wrong answer
   };
   struct Deferred {  // a request for an axis being configured
@@ -238,7 +339,7 @@ class CanioBus final : public BusDriver {
   };
   // What status shows as an axis' last SDO error, written by the cycle thread in fixed fields
   // (no string there) under a sequence counter, composed into words by axis_last_error().
-  enum class NoteKind : uint8_t { None, Configuring, Rescan, Checking };
+  enum class NoteKind : uint8_t { None, Configuring, Rescan, Checking, Refused, Heartbeat };
   struct SdoNote {
     NoteKind kind = NoteKind::None;
     uint8_t unverified_after = 0;  // > 0: the axis went up unverified after so many answers
@@ -271,8 +372,10 @@ class CanioBus final : public BusDriver {
   void configure_step_done(int64_t now, std::error_code ec, uint32_t value) noexcept;
   void check_step_done(int64_t now, std::error_code ec, uint32_t value, uint8_t size) noexcept;
   void request_step_done(std::error_code ec, uint32_t value) noexcept;
+  void after_writes(int64_t now) noexcept;
+  void unconfigurable(int64_t now, uint16_t reg, uint32_t value, std::error_code ec) noexcept;
   void finish_configure(int64_t now, std::error_code ec, bool completed) noexcept;
-  void mark_configured(std::size_t axis) noexcept;
+  void mark_configured(std::size_t axis, int64_t now) noexcept;
   void answer(const RegisterRequest& request, std::error_code ec, uint32_t value) noexcept;
   void note(std::size_t axis, const SdoNote& n) noexcept { notes_[axis].store(n); }
 
@@ -306,6 +409,13 @@ class CanioBus final : public BusDriver {
   int64_t next_sdo_ns_ = 0;    // pacing: no transfer starts before
   std::size_t next_axis_ = 0;  // round robin over the axes to configure
   std::unique_ptr<NoteCell[]> notes_;
+
+  // Node lifecycle (cycle thread, but for the counters and the event queue's other end).
+  std::vector<NodeTrack> nodes_;
+  std::vector<uint16_t> axis_node_;  // axis → index into nodes_
+  std::unique_ptr<CanioNodeCounters[]> node_counters_;
+  SpscQueue<CanioNodeEvent, kNodeEventQueueDepth> events_;
+  bool bus_was_down_ = false;  // the last cycle found the controller bus-off / down
 
   mutable std::mutex info_mutex_;  // normal threads only
   CanInterfaceInfo info_;

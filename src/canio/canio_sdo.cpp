@@ -23,6 +23,8 @@ void bump(std::atomic<T>& a, T n = 1) noexcept {
 constexpr int64_t kMs = 1'000'000;
 // A configuration (or check) that failed is tried again this much later.
 constexpr int64_t kRetryConfigureNs = 500 * kMs;
+// An unconfigurable axis is asked again after 0.5, 1, 2, ... s, at most this.
+constexpr int64_t kMaxBackoffNs = 30'000 * kMs;
 // Definitive answers (aborts, read-backs that differ) before the axis goes up unverified: a node
 // that answers must never keep its axis down; the PosCycle gate then decides whether it delivers.
 constexpr unsigned kDefinitiveAttempts = 3;
@@ -92,6 +94,16 @@ CanioBus::SdoNote CanioBus::NoteCell::load() const noexcept {
   }
 }
 
+std::string CanioBus::axis_reason(std::size_t axis) const {
+  if (axis >= options_.axes.size()) return {};
+  const CanioAxisState st = axis_counters_[axis].state.load(std::memory_order_relaxed);
+  if (st != CanioAxisState::Unconfigurable) return std::string(reason(st));
+  const SdoNote n = notes_[axis].load();
+  // "unconfigurable: <register> <abort text>"
+  return "unconfigurable: " + register_name(n.reg) + " " + n.error.message() +
+         "; retried with back-off (up to 30 s)";
+}
+
 std::string CanioBus::axis_last_error(std::size_t axis) const {
   if (axis >= options_.axes.size()) return {};
   const SdoNote n = notes_[axis].load();
@@ -110,6 +122,14 @@ std::string CanioBus::axis_last_error(std::size_t axis) const {
     case NoteKind::Checking:
       text =
           "checking the configuration after silence: register " + register_name(n.reg) + ": " + why;
+      break;
+    case NoteKind::Refused:
+      text =
+          "register " + register_name(n.reg) + " = " + std::to_string(n.value) + " refused: " + why;
+      break;
+    case NoteKind::Heartbeat:
+      text = "heartbeat producer time 0x1017 = " + std::to_string(n.value) + " ms: " + why +
+             " (no heartbeat watched)";
       break;
   }
   if (n.unverified_after > 0)
@@ -134,17 +154,10 @@ bool CanioBus::poll(RegisterResult& out) noexcept {
 // ---- The state machine (cycle thread) -----------------------------------------------------------
 
 void CanioBus::step_sdo(int64_t now) noexcept {
-  // The answer to the transfer in flight; anything else on the SDO port (a late answer to a
-  // transfer that timed out) is dropped here, before the next request goes out.
-  if (sdo_port_) {
-    for (;;) {
-      const ReceiveResult rr = sdo_port_->receive(sdo_rx_, 0);
-      for (std::size_t k = 0; k < rr.count; ++k)
-        if (auto o = sdo_client_.receive(sdo_rx_[k]))
-          transfer_done(now, o->error, o->value, o->size);
-      if (rr.error || rr.count < sdo_rx_.size()) break;
-    }
-  }
+  // The answer to the transfer in flight (and boot-up, heartbeat, EMCY); anything else on the
+  // SDO port (a late answer to a transfer that timed out) is dropped here, before the next
+  // request goes out.
+  drain_node_port(now);
   if (auto o = sdo_client_.tick(now))
     transfer_done(now, make_error_code(CanioBusError::kSdoTimeout), 0, 0);
 
@@ -186,7 +199,7 @@ bool CanioBus::next_job(int64_t now) noexcept {
     // disconnected) needs three reads; one that was power-cycled is configured anew. With
     // verify none nothing is read: the module is configured again.
     if (axis_counters_[i].configurations.load(std::memory_order_relaxed) > 0 &&
-        options_.bus.verify != CanVerify::None) {
+        options_.bus.verify != CanVerify::None && !a.fresh) {
       job_ = SdoJob{};
       job_.kind = SdoJobKind::Check;
       job_.stage = SdoStage::Read;
@@ -257,6 +270,8 @@ CanioBus::SdoOp CanioBus::current_op() const noexcept {
   switch (job_.kind) {
     case SdoJobKind::Configure: {
       if (job_.stage == SdoStage::Rescan) return {reg::kEnDatAck, 1, true, 0x02};
+      if (job_.stage == SdoStage::Heartbeat)
+        return {0, 2, true, nodes_[axis_node_[job_.axis]].heartbeat_ms, kHeartbeatProducerIndex, 0};
       const RegisterWrite& w = job_.writes[job_.step];
       return {w.reg, w.size, job_.stage == SdoStage::Write, w.value};
     }
@@ -280,7 +295,8 @@ bool CanioBus::issue(int64_t now) noexcept {
     transfer_done(now, make_error_code(CanioBusError::kNoAcyclicTransport), 0, 0);
     return false;
   }
-  const auto obj = sdo_mapping_.object_for(a.slot, op.reg);
+  auto obj = sdo_mapping_.object_for(a.slot, op.reg);
+  if (op.index != 0) obj = SdoObject{op.index, op.subindex};
   if (!obj) {
     transfer_done(now, make_error_code(CanioBusError::kNoSdoObject), 0, 0);
     return false;
@@ -325,45 +341,91 @@ void CanioBus::transfer_done(int64_t now, std::error_code ec, uint32_t value,
 
 void CanioBus::configure_step_done(int64_t now, std::error_code ec, uint32_t value) noexcept {
   const std::size_t axis = job_.axis;
-  const ModuleSettings& module = options_.axes[axis].module;
   if (job_.stage == SdoStage::Rescan) {
     // Datasheet §11.6.2.3: EnDatAck bit 1 (Rescan) makes the module read the encoder's
     // identification again. The module boots with EnDat disabled under function model 254, so
     // the identification is read only now; the daemon's identification reads (requests held
     // while the axis is configuring) follow.
     if (ec) {
-      note(axis, {NoteKind::Rescan, 0, 0, 0, ec});
-      finish_configure(now, ec, false);
+      note(axis, {NoteKind::Rescan, 0, reg::kEnDatAck, 0x02, ec});
+      if (transient(ec)) {
+        finish_configure(now, ec, false);
+        return;
+      }
+      // Refused: without a Rescan the module never reads its encoder.
+      unconfigurable(now, reg::kEnDatAck, 0x02, ec);
       return;
     }
     bump(axis_counters_[axis].rescans);
     finish_configure(now, job_.mismatch, true);
     return;
   }
+  if (job_.stage == SdoStage::Heartbeat) {
+    // The node's heartbeat producer time (0x1017): refused, the node is not watched by heartbeat
+    // (last_error says so); the axis does not depend on it.
+    const std::size_t k = axis_node_[axis];
+    node_counters_[k].heartbeat_watched.store(!ec, std::memory_order_relaxed);
+    if (ec && transient(ec)) {
+      note(axis, {NoteKind::Heartbeat, 0, 0, nodes_[k].heartbeat_ms, ec});
+      finish_configure(now, ec, false);
+      return;
+    }
+    if (ec) {
+      bump(axis_counters_[axis].write_aborts);
+      if (!job_.refused) {
+        job_.refused = ec;
+        job_.refused_reg = 0;
+        job_.refused_value = nodes_[k].heartbeat_ms;
+      }
+    }
+    job_.heartbeat_done = true;
+    after_writes(now);
+    return;
+  }
   const RegisterWrite& w = job_.writes[job_.step];
   if (job_.stage == SdoStage::Write) {
-    if (ec) {
-      // A write that is not acknowledged stops the configuration.
+    if (ec && transient(ec)) {
+      // No answer says nothing about the module: the attempt is repeated later.
       note(axis, {NoteKind::Configuring, 0, w.reg, w.value, ec});
       finish_configure(now, ec, false);
       return;
     }
-    if (options_.bus.verify != CanVerify::None) {
+    if (ec) {
+      // Refused (an abort, or an answer that is not an acknowledgement). EnDatMode is what the
+      // axis needs: without it the module never acquires a position — unconfigurable, retried
+      // with back-off. Any other register (prescaler, SinCos window, MTUs, ...) does not change
+      // whether positions arrive: the remaining registers, EnDatMode among them, are written
+      // all the same and the refusal is reported.
+      bump(axis_counters_[axis].write_aborts);
+      if (w.reg == reg::kEnDatMode) {
+        unconfigurable(now, w.reg, w.value, ec);
+        return;
+      }
+      if (!job_.refused) {
+        job_.refused = ec;
+        job_.refused_reg = w.reg;
+        job_.refused_value = w.value;
+      }
+    } else if (options_.bus.verify != CanVerify::None) {
       job_.stage = SdoStage::ReadBack;
       return;
     }
   } else {  // ReadBack
     std::error_code differs;
-    if (cannot_be_read(ec)) {
-      // The datasheet does not promise that configuration registers can be read: the write was
-      // acknowledged, it stays unverified.
+    if (ec && transient(ec)) {
+      note(axis, {NoteKind::Configuring, 0, w.reg, w.value, ec});
+      finish_configure(now, ec, false);
+      return;
+    }
+    if (cannot_be_read(ec) || (ec && sdo_abort_code(ec))) {
+      // The write was acknowledged; a read that is refused (write-only, unsupported access, or
+      // any other abort — "object does not exist" from a controller that maps writes only)
+      // cannot prove it: the write stays unverified, not failed.
       bump(axis_counters_[axis].unverified);
     } else if (ec == SdoFrameError::kSizeMismatch) {
       differs = make_error_code(CanioBusError::kReadBackSize);
     } else if (ec) {
-      note(axis, {NoteKind::Configuring, 0, w.reg, w.value, ec});
-      finish_configure(now, ec, false);
-      return;
+      differs = ec;  // an answer that is not this read's: definitive, the attempt is repeated
     } else if (value != w.value) {
       differs = make_error_code(CanioBusError::kReadBackMismatch);
     }
@@ -378,11 +440,39 @@ void CanioBus::configure_step_done(int64_t now, std::error_code ec, uint32_t val
   }
   job_.stage = SdoStage::Write;
   if (++job_.step < job_.writes.size()) return;
-  if (module.endat_enable) {
+  after_writes(now);
+}
+
+void CanioBus::after_writes(int64_t now) noexcept {
+  const std::size_t axis = job_.axis;
+  const std::size_t k = axis_node_[axis];
+  // The heartbeat producer time is the node's: written with its first axis.
+  const bool first_of_node =
+      std::find(axis_node_.begin(), axis_node_.end(), static_cast<uint16_t>(k)) ==
+      axis_node_.begin() + static_cast<std::ptrdiff_t>(axis);
+  if (!job_.heartbeat_done && nodes_[k].heartbeat_ms != 0 && first_of_node) {
+    job_.stage = SdoStage::Heartbeat;
+    return;
+  }
+  if (options_.axes[axis].module.endat_enable) {
     job_.stage = SdoStage::Rescan;
     return;
   }
   finish_configure(now, job_.mismatch, true);
+}
+
+void CanioBus::unconfigurable(int64_t now, uint16_t reg, uint32_t value,
+                              std::error_code ec) noexcept {
+  const std::size_t axis = job_.axis;
+  AxisSdo& a = axis_sdo_[axis];
+  note(axis, {NoteKind::Refused, 0, reg, value, ec});
+  axis_counters_[axis].unconfigurable.store(true, std::memory_order_relaxed);
+  bump(axis_counters_[axis].sdo_errors);
+  job_.kind = SdoJobKind::None;
+  // Bounded back-off: the refusal may be the node's state (it may need a restart, or a tool
+  // holds it); asking every 500 ms for ever would load the bus for nothing.
+  a.backoff_ns = a.backoff_ns == 0 ? kRetryConfigureNs : std::min(2 * a.backoff_ns, kMaxBackoffNs);
+  a.retry_at_ns = now + a.backoff_ns;
 }
 
 void CanioBus::finish_configure(int64_t now, std::error_code ec, bool completed) noexcept {
@@ -391,27 +481,33 @@ void CanioBus::finish_configure(int64_t now, std::error_code ec, bool completed)
   // Completed: every register written, `ec` the first read-back that differed (or none); the
   // note says so. Else the note already names the transfer that stopped it.
   const bool mismatch = completed && ec;
-  if (completed)
-    note(axis, mismatch ? SdoNote{NoteKind::Configuring, 0, job_.mismatch_reg, job_.mismatch_value,
-                                  job_.mismatch}
-                        : SdoNote{});
+  if (completed) {
+    if (job_.refused)
+      note(axis, {job_.refused_reg == 0 ? NoteKind::Heartbeat : NoteKind::Refused, 0,
+                  job_.refused_reg, job_.refused_value, job_.refused});
+    else if (mismatch)
+      note(axis, {NoteKind::Configuring, 0, job_.mismatch_reg, job_.mismatch_value, job_.mismatch});
+    else
+      note(axis, SdoNote{});
+  }
   job_.kind = SdoJobKind::None;
   if (!ec) {
     bump(axis_counters_[axis].configurations);
-    mark_configured(axis);
+    if (job_.refused) bump(axis_counters_[axis].sdo_errors);
+    mark_configured(axis, now);
     return;
   }
   bump(axis_counters_[axis].sdo_errors);
   a.retry_at_ns = now + kRetryConfigureNs;
-  // The node answers, but not as written (abort, another value or size): after a few attempts
-  // the axis goes up with the configuration unverified (last_error says why); the PosCycle gate
-  // keeps it Stale unless the module really delivers positions.
+  // The node answers, but not as written (another value or size): after a few attempts the axis
+  // goes up with the configuration unverified (last_error says why); the PosCycle gate keeps it
+  // Stale unless the module really delivers positions.
   if (!transient(ec) && ++a.definitive >= kDefinitiveAttempts) {
     SdoNote n = notes_[axis].load();
     n.unverified_after = static_cast<uint8_t>(std::min(a.definitive, 255U));
     note(axis, n);
     bump(axis_counters_[axis].configurations);
-    mark_configured(axis);
+    mark_configured(axis, now);
   }
 }
 
@@ -437,7 +533,7 @@ void CanioBus::check_step_done(int64_t now, std::error_code ec, uint32_t value,
   if (++job_.step < 3) return;
   note(axis, {});
   job_.kind = SdoJobKind::None;
-  mark_configured(axis);
+  mark_configured(axis, now);
 }
 
 void CanioBus::request_step_done(std::error_code ec, uint32_t value) noexcept {
@@ -463,12 +559,19 @@ void CanioBus::request_step_done(std::error_code ec, uint32_t value) noexcept {
   answer(r, ec, value);
 }
 
-void CanioBus::mark_configured(std::size_t axis) noexcept {
+void CanioBus::mark_configured(std::size_t axis, int64_t now) noexcept {
   AxisSdo& a = axis_sdo_[axis];
   a.definitive = 0;
   a.reconfigure = false;
+  a.fresh = false;
+  a.backoff_ns = 0;
+  axis_counters_[axis].unconfigurable.store(false, std::memory_order_relaxed);
+  // The configuration is the proof: the first samples after it (the node was silent while
+  // pre-operational) are not a return from silence that needs checking again.
+  axis_counters_[axis].last_sample_ns.store(0, std::memory_order_relaxed);
   bump(axis_counters_[axis].generation);
   axis_counters_[axis].configured.store(true, std::memory_order_release);
+  node_configured(axis, now);
 }
 
 void CanioBus::answer(const RegisterRequest& request, std::error_code ec, uint32_t value) noexcept {

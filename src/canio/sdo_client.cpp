@@ -42,7 +42,18 @@ std::optional<SdoOutcome> ExpeditedSdoClient::receive(const CanFrame& f) noexcep
   // a read of another size still reports what was answered.
   busy_ = false;
   SdoOutcome out;
-  auto m = match_sdo_response(node_, request_, f, 0);
+  auto m = match_sdo_response(node_, request_, f,
+                              request_.command == SdoCommand::UploadRequest ? expected_size_ : 0);
+  if (!m && m.error() == SdoFrameError::kSizeMismatch) {
+    // Another indicated size: reported with what was answered (the caller names it).
+    auto any = match_sdo_response(node_, request_, f, 0);
+    if (any) {
+      out.value = any->value;
+      out.size = any->size;
+    }
+    out.error = m.error();
+    return out;
+  }
   if (!m) {
     out.error = m.error();
     return out;

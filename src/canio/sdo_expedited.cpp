@@ -49,7 +49,10 @@ Result<CanFrame> build(uint8_t node, bool from_server, const SdoMessage& m) noex
         return SdoFrameError::kCommandMismatch;
       if (m.size < 1 || m.size > 4) return SdoFrameError::kInvalidSize;
       const uint8_t cs = m.command == SdoCommand::DownloadRequest ? kCcsDownload : kScsUpload;
-      return sdo_frame(cob, expedited_specifier(cs, m.size), m, masked(m.value, m.size));
+      // "Size not indicated" (e = 1, s = 0, n = 0): the 4 data bytes go out as they are.
+      const uint8_t spec = m.size_indicated ? expedited_specifier(cs, m.size)
+                                            : static_cast<uint8_t>((cs << 5) | kExpedited);
+      return sdo_frame(cob, spec, m, masked(m.value, m.size));
     }
     case SdoCommand::UploadRequest:
       if (from_server) return SdoFrameError::kCommandMismatch;
@@ -139,6 +142,7 @@ Result<SdoMessage> parse_sdo(uint8_t node, bool from_server, const CanFrame& f) 
       if (!expedited) return SdoFrameError::kSegmentedNotSupported;
       m.command = SdoCommand::DownloadRequest;
       m.size = size;
+      m.size_indicated = size_indicated;
       m.value = masked(payload, size);
       return m;
     }
@@ -156,6 +160,7 @@ Result<SdoMessage> parse_sdo(uint8_t node, bool from_server, const CanFrame& f) 
     if (!expedited) return SdoFrameError::kSegmentedNotSupported;
     m.command = SdoCommand::UploadResponse;
     m.size = size;
+    m.size_indicated = size_indicated;
     m.value = masked(payload, size);
     return m;
   }
@@ -166,7 +171,12 @@ Result<SdoMessage> match_sdo_response(uint8_t node, const SdoMessage& request,
                                       const CanFrame& response, uint8_t expected_size) noexcept {
   auto parsed = parse_sdo(node, true, response);
   if (!parsed) return parsed.error();
-  const SdoMessage& r = *parsed;
+  SdoMessage& r = parsed.value();
+  if (r.command == SdoCommand::UploadResponse && !r.size_indicated && expected_size != 0) {
+    // "Size not indicated": the server leaves the size open; the register's size says it.
+    r.size = expected_size;
+    r.value = masked(r.value, expected_size);
+  }
   // An abort names the object it refers to; one for another object is not this transfer's answer.
   if (r.index != request.index) return SdoFrameError::kIndexMismatch;
   if (r.subindex != request.subindex) return SdoFrameError::kSubindexMismatch;

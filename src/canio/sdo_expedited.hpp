@@ -37,6 +37,10 @@ struct SdoMessage {
   uint8_t subindex = 0;
   uint8_t size = 0;    // data bytes 1..4 for DownloadRequest / UploadResponse, else 0
   uint32_t value = 0;  // data (little endian in the frame) or abort code
+  // UploadResponse / DownloadRequest: false when the frame said "expedited, size not indicated"
+  // (CiA 301: e = 1, s = 0; the data is up to 4 bytes, `size` is then 4). The client takes such
+  // an answer by the size it expects (match_sdo_response()).
+  bool size_indicated = true;
   friend bool operator==(const SdoMessage&, const SdoMessage&) = default;
 };
 
@@ -72,6 +76,8 @@ enum class SdoFrameError : int {
 // response message (UploadResponse with the value, or DownloadResponse). An abort from the
 // server for the same index/subindex is the abort code as error (core/sdo_abort.hpp); anything
 // else that does not match is an SdoFrameError naming why. expected_size 0: any 1..4 accepted.
+// An upload response with "size not indicated" is taken by expected_size (its low bytes; CiA 301
+// allows the server to leave the size open in an expedited transfer).
 [[nodiscard]] Result<SdoMessage> match_sdo_response(uint8_t node, const SdoMessage& request,
                                                     const CanFrame& response,
                                                     uint8_t expected_size = 0) noexcept;

@@ -95,6 +95,25 @@ void parse_canio(Section s, CanioBusConfig& c) {
     parse_sdo_objects(acyclic, "sdo_objects", c.sdo_overrides);
     acyclic.finish();
   }
+  s.choice("nmt", c.nmt, {{"start", CanNmt::Start}, {"none", CanNmt::None}});
+  for (auto& item : s.list("nodes")) {
+    Section n(s.diag(), item.node, item.path, item.at);
+    CanioNodeOptions o;
+    n.integer("node", o.node, 1, 127, "(CANopen node id of the bus controller)");
+    n.integer("heartbeat_ms", o.heartbeat_ms, 0, 65535,
+              "ms (object 0x1017 is 16 bit; 0: no heartbeat watched)");
+    n.integer("heartbeat_timeout_ms", o.heartbeat_timeout_ms, 0, 65535 * 2,
+              "ms (0: 1.5 × heartbeat_ms)");
+    n.finish();
+    if (std::any_of(c.nodes.begin(), c.nodes.end(),
+                    [&](const CanioNodeOptions& x) { return x.node == o.node; }))
+      n.error("node", "node " + std::to_string(o.node) + " is listed twice in canio.nodes");
+    else
+      c.nodes.push_back(o);
+  }
+  s.integer("stall_limit", c.stall_limit, 0, 100000,
+            "cycles (0: derived from the EnDat cycle and the period)");
+  s.boolean("allow_manual_restart", c.allow_manual_restart);
   s.text("virtual_bus", c.virtual_bus, 200);
   s.finish();
 }
@@ -136,15 +155,21 @@ void check_canio(const BusDocument& d) {
                    "stuffing): the minimum is " + std::to_string(timing.min_window_us) +
                    " µs; leave it out (0) to use " + std::to_string(timing.derived_window_us) +
                    " µs (wire time + node_reaction_us " + std::to_string(k.node_reaction_us) + ")");
-  } else if (k.bitrate > 0 && timing.window_us >= c.cycle.period_us &&
+  } else if (k.bitrate > 0 && timing.window_us + timing.after_window_us >= c.cycle.period_us &&
              timing.load <= k.max_bus_load) {  // else the bus-load error below says it
+    // The SDO request goes out after the window and its answer follows: both must be on the
+    // wire before the next SYNC.
     diag.error(locate(doc, {k.response_timeout_us != 0 ? "canio" : "cycle",
                             k.response_timeout_us != 0 ? "response_timeout_us" : "period_us"}),
                k.response_timeout_us != 0 ? "canio.response_timeout_us" : "cycle.period_us",
-               "the response window (" + std::to_string(timing.window_us) +
-                   " µs) must be shorter than cycle.period_us (" +
-                   std::to_string(c.cycle.period_us) + "): use period_us > " +
-                   std::to_string(timing.window_us) + ", fewer modules or a higher bit rate");
+               "the response window (" + std::to_string(timing.window_us) + " µs)" +
+                   (timing.after_window_us > 0 ? " and the SDO request and answer after it (" +
+                                                     std::to_string(timing.after_window_us) + " µs)"
+                                               : std::string()) +
+                   " must fit into cycle.period_us (" + std::to_string(c.cycle.period_us) +
+                   "): use period_us > " +
+                   std::to_string(timing.window_us + timing.after_window_us) +
+                   ", fewer modules or a higher bit rate");
   }
 
   // Every identifier on the bus, with who uses it, to name both ends of a collision.
@@ -218,7 +243,8 @@ void check_canio(const BusDocument& d) {
       const uint32_t mid = lo + (hi - lo) / 2;
       (canio_timing(k, c.axes.size(), mid).load <= k.max_bus_load ? hi : lo) = mid;
     }
-    const uint32_t need_us = hi;
+    // ... and in which the response window and the SDO answer after it fit.
+    const uint32_t need_us = std::max(hi, timing.window_us + timing.after_window_us + 1);
     std::ostringstream pct;
     pct << std::fixed << std::setprecision(0) << timing.load * 100.0;
     std::ostringstream max_pct;
@@ -277,6 +303,15 @@ void dump_canio(std::ostream& o, const CanioBusConfig& c) {
       o << "      - {register: " << reg << ", index: 0x" << std::hex << std::uppercase << obj.first
         << ", subindex: 0x" << int(obj.second) << std::dec << "}\n";
   }
+  o << "  nmt: " << (c.nmt == CanNmt::None ? "none" : "start") << "\n";
+  if (!c.nodes.empty()) {
+    o << "  nodes:\n";
+    for (const CanioNodeOptions& n : c.nodes)
+      o << "    - {node: " << int(n.node) << ", heartbeat_ms: " << n.heartbeat_ms
+        << ", heartbeat_timeout_ms: " << n.heartbeat_timeout_ms << "}\n";
+  }
+  o << "  stall_limit: " << c.stall_limit << (c.stall_limit == 0 ? "  # derived\n" : "\n")
+    << "  allow_manual_restart: " << (c.allow_manual_restart ? "true" : "false") << "\n";
   if (!c.virtual_bus.empty()) o << "  virtual_bus: \"" << c.virtual_bus << "\"\n";
 }
 

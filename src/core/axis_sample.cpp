@@ -29,6 +29,23 @@ AxisSample decode_axis(const AxisIo& io, const AxisDecodeParams& params, const N
     s.time_source = TimeSource::RxTimestamp;
   }
   s.new_position = !state.have_last || state.last_pos_cycle != in.pos_cycle;
+  if (s.time_source == TimeSource::NetTime && state.have_last && !s.new_position &&
+      in.pos_time_us != state.last_pos_time) {
+    // PosCycle wrapped onto the same value, or the module stamps a new acquisition: PosTime moved.
+    s.new_position = true;
+  }
+  if (!s.new_position && state.have_last) {
+    // A repeat of the last position: never new, stamped when it first arrived (with NetTime its
+    // PosTime is that stamp already), stale once the repeats exceed the limit.
+    s.repeated = true;
+    if (s.time_source == TimeSource::RxTimestamp) s.pos_time_ns = state.first_stamp_ns;
+    ++state.repeats;
+    if (params.stall_limit > 0 && state.repeats > params.stall_limit) {
+      s.fresh = false;
+      s.stalled = true;
+    }
+    return s;
+  }
   if (s.new_position && s.time_source == TimeSource::NetTime && params.max_stamp_age_ns > 0 &&
       net_time.monotonic_ns - s.pos_time_ns > params.max_stamp_age_ns) {
     // Not this cycle's position: the decoder keeps its PosCycle, so the next on-time sample
@@ -39,6 +56,9 @@ AxisSample decode_axis(const AxisIo& io, const AxisDecodeParams& params, const N
     return s;
   }
   state.last_pos_cycle = in.pos_cycle;
+  state.last_pos_time = in.pos_time_us;
+  state.first_stamp_ns = s.pos_time_ns;
+  state.repeats = 0;
   state.have_last = true;
   return s;
 }

@@ -25,12 +25,22 @@ struct AxisSample {
   // cycle's reference: the late answer to an earlier cycle's request, taken for this one. Not
   // fresh (published as stale), counted apart.
   bool stamp_too_old = false;
+  // The acquisition stalled: more than AxisDecodeParams::stall_limit samples in a row repeated
+  // the last position (PosCycle unchanged; with PosTime: PosTime unchanged). Not fresh (stale)
+  // until a new position arrives.
+  bool stalled = false;
+  // A repeat of the last new position (not new): stamped with the cycle in which that position
+  // first arrived, so its age grows.
+  bool repeated = false;
 };
 
 // What the decoder remembers between cycles for one axis.
 struct AxisDecodeState {
   int8_t last_pos_cycle = 0;
   bool have_last = false;
+  uint32_t last_pos_time = 0;  // PosTime of the last new position (NetTime source)
+  int64_t first_stamp_ns = 0;  // when the last new position first arrived (RX-stamp source)
+  uint32_t repeats = 0;        // fresh samples in a row without a new position
 };
 
 struct AxisDecodeParams {
@@ -41,6 +51,11 @@ struct AxisDecodeParams {
   // no cycle number, so a PRes delayed past the next PReq is indistinguishable from the answer to
   // it; its PosTime tells. A module that stopped acquiring (same PosCycle) is not affected.
   int64_t max_stamp_age_ns = 0;
+  // > 0: after this many repeated samples in a row (datasheet §11.5.5: PosCycle counts new
+  // positions only — a module whose acquisition stalls resends the same position and PosCycle;
+  // under POWERLINK the same PosTime) the sample is stale (AxisSample::stalled) until a new
+  // position arrives. 0: off.
+  uint32_t stall_limit = 0;
 };
 
 // The stamp age beyond which a new position cannot be this cycle's: the module's acquisition lies

@@ -4,6 +4,7 @@
 #include <array>
 #include <limits>
 
+#include "canio/canopen_nmt.hpp"
 #include "canio/object_codec.hpp"
 #include "canio/sdo_expedited.hpp"
 #include "core/clock.hpp"
@@ -38,7 +39,8 @@ CanioNode::CanioNode(CanioNodeConfig config, canio::CanPort& port)
     : config_(std::move(config)),
       port_(port),
       mapping_(config_.sdo_overrides),
-      rng_(config_.faults.seed) {
+      rng_(config_.faults.seed),
+      heartbeat_ms_(config_.heartbeat_ms) {
   for (const CanioNodeModule& m : config_.modules) {
     // An encoder file that does not load was refused by the configuration already.
     auto encoder = load_encoder(m.sim);
@@ -46,6 +48,8 @@ CanioNode::CanioNode(CanioNodeConfig config, canio::CanPort& port)
         FunctionModel::BusController, m.sim,
         encoder.description ? std::move(*encoder.description) : default_encoder_description()));
   }
+  last_inputs_.resize(modules_.size());
+  have_last_.assign(modules_.size(), false);
 }
 
 CanioNode::~CanioNode() = default;
@@ -55,11 +59,90 @@ std::error_code CanioNode::open() {
   if (config_.sync_enabled) ids.push_back({config_.sync_id, false});
   for (const CanioNodeModule& m : config_.modules) ids.push_back({m.ids.output, false});
   ids.push_back({canio::kSdoRequestBase + config_.node, false});
-  return port_.set_filters(ids);
+  ids.push_back({canio::kNmtCobId, false});
+  if (auto ec = port_.set_filters(ids)) return ec;
+  boot();  // the modules are in their power-up state
+  return {};
 }
 
 void CanioNode::power_up() {
   for (auto& m : modules_) m->power_up();
+  have_last_.assign(modules_.size(), false);
+  heartbeat_ms_ = config_.heartbeat_ms;
+  // A reset drops what the controller had queued.
+  tx_head_ = 0;
+  tx_count_ = 0;
+  boot();
+}
+
+void CanioNode::boot() {
+  ++counters_.boot_ups;
+  nmt_.store(canio::NmtState::PreOperational);
+  if (auto f = canio::build_error_control(config_.node, canio::NmtState::BootUp))
+    if (!silent_) send(*f);
+  next_heartbeat_ns_ = now() + int64_t{heartbeat_ms_} * 1'000'000;
+  if (config_.self_start) nmt_.store(canio::NmtState::Operational);
+}
+
+void CanioNode::request_emcy(uint16_t error_code, uint8_t error_register,
+                             std::array<uint8_t, 5> vendor) noexcept {
+  uint64_t w = uint64_t{error_code} | (uint64_t{error_register} << 16);
+  for (std::size_t k = 0; k < vendor.size(); ++k) w |= uint64_t{vendor[k]} << (24 + 8 * k);
+  emcy_word_.store(w);
+  emcy_requested_.store(true);
+}
+
+void CanioNode::on_nmt(const canio::NmtMessage& m) {
+  using canio::NmtCommand;
+  using canio::NmtState;
+  if (!canio::addresses(m, config_.node)) return;
+  ++counters_.nmt_commands;
+  switch (m.command) {
+    case NmtCommand::Start:
+      if (starts_ignored_ < config_.faults.ignore_nmt_starts) {
+        ++starts_ignored_;
+        return;
+      }
+      nmt_.store(NmtState::Operational);
+      return;
+    case NmtCommand::Stop:
+      nmt_.store(NmtState::Stopped);
+      tx_count_ = 0;  // a stopped node sends no process data, queued or not
+      return;
+    case NmtCommand::EnterPreOperational:
+      nmt_.store(NmtState::PreOperational);
+      tx_count_ = 0;
+      return;
+    case NmtCommand::ResetNode:
+      power_up();  // application and communication parameters back to their power-up values
+      return;
+    case NmtCommand::ResetCommunication:
+      // Communication parameters only (the heartbeat time among them); the modules keep theirs.
+      heartbeat_ms_ = config_.heartbeat_ms;
+      tx_head_ = 0;
+      tx_count_ = 0;
+      boot();
+      return;
+  }
+}
+
+void CanioNode::service_faults() {
+  if (reset_requested_.exchange(false)) power_up();
+  if (emcy_requested_.exchange(false)) {
+    const uint64_t w = emcy_word_.load();
+    canio::Emcy e;
+    e.node = config_.node;
+    e.error_code = static_cast<uint16_t>(w & 0xFFFF);
+    e.error_register = static_cast<uint8_t>((w >> 16) & 0xFF);
+    for (std::size_t k = 0; k < e.vendor.size(); ++k)
+      e.vendor[k] = static_cast<uint8_t>((w >> (24 + 8 * k)) & 0xFF);
+    // EMCY is produced in pre-operational and operational, not when stopped (CiA 301).
+    if (nmt_.load() != canio::NmtState::Stopped)
+      if (auto f = canio::build_emcy(e)) {
+        ++counters_.emcys;
+        if (!silent_) send(*f);
+      }
+  }
 }
 
 void CanioNode::send(const canio::CanFrame& f) {
@@ -86,11 +169,21 @@ void CanioNode::queue(const canio::CanFrame& f, int64_t due_ns) {
 }
 
 int64_t CanioNode::next_due_ns() const noexcept {
-  return tx_count_ == 0 ? std::numeric_limits<int64_t>::max() : tx_[tx_head_].due_ns;
+  const int64_t hb = heartbeat_ms_ != 0 ? next_heartbeat_ns_ : std::numeric_limits<int64_t>::max();
+  return std::min(tx_count_ == 0 ? std::numeric_limits<int64_t>::max() : tx_[tx_head_].due_ns, hb);
 }
 
 void CanioNode::send_due() {
   const int64_t t = now();
+  if (heartbeat_ms_ != 0 && t >= next_heartbeat_ns_) {
+    // Heartbeat producer (CiA 301 §7.2.8.3.2.2): the NMT state every producer time.
+    if (auto f = canio::build_error_control(config_.node, nmt_.load())) {
+      ++counters_.heartbeats;
+      if (!silent_) send(*f);
+    }
+    const int64_t period = int64_t{heartbeat_ms_} * 1'000'000;
+    next_heartbeat_ns_ = std::max(next_heartbeat_ns_ + period, t + 1);
+  }
   while (tx_count_ > 0 && tx_[tx_head_].due_ns <= t) {
     if (!silent_) send(tx_[tx_head_].frame);
     tx_head_ = (tx_head_ + 1) % tx_.size();
@@ -100,8 +193,18 @@ void CanioNode::send_due() {
 
 void CanioNode::answer(std::size_t i, int64_t time_ns) {
   Ds1928Module& m = *modules_[i];
-  m.tick(time_ns, static_cast<uint64_t>(time_ns / 1000));
-  const ModuleInputs in = m.inputs();
+  ModuleInputs in;
+  if (stalled_ && have_last_[i]) {
+    // The acquisition stalled: the module keeps answering SYNC with its last position and
+    // PosCycle (datasheet §11.5.5: PosCycle counts new positions only).
+    in = last_inputs_[i];
+    ++counters_.stalled_answers;
+  } else {
+    m.tick(time_ns, static_cast<uint64_t>(time_ns / 1000));
+    in = m.inputs();
+    last_inputs_[i] = in;
+    have_last_[i] = true;
+  }
   if (on_inputs) on_inputs(i, time_ns, in);
   if (on_answer) on_answer(counters_.syncs, i, in);
   const CanioNodeModule& cfg = config_.modules[i];
@@ -146,6 +249,23 @@ void CanioNode::serve_sdo(const canio::CanFrame& f) {
     reply.size = 0;
     reply.value = code;
   };
+  if (request->index == canio::kHeartbeatProducerIndex && request->subindex == 0) {
+    // The node's own object: the heartbeat producer time (u16, ms).
+    if (request->command == SdoCommand::UploadRequest) {
+      reply.command = SdoCommand::UploadResponse;
+      reply.size = 2;
+      reply.value = heartbeat_ms_;
+    } else if (request->command == SdoCommand::DownloadRequest && request->size == 2) {
+      reply.command = SdoCommand::DownloadResponse;
+      heartbeat_ms_ = static_cast<uint16_t>(request->value);
+      next_heartbeat_ns_ = now() + int64_t{heartbeat_ms_} * 1'000'000;
+    } else {
+      abort(request->command == SdoCommand::DownloadRequest ? sdo_abort::kTypeLength
+                                                            : sdo_abort::kGeneral);
+    }
+    if (auto frame = canio::build_sdo_response(config_.node, reply)) send(*frame);
+    return;
+  }
   const auto where = mapping_.register_for({request->index, request->subindex});
   Ds1928Module* module = nullptr;
   if (where) {
@@ -153,8 +273,14 @@ void CanioNode::serve_sdo(const canio::CanFrame& f) {
       if (config_.modules[i].slot == where->slot) module = modules_[i].get();
   }
   const uint8_t size = where ? register_size(where->reg).value_or(0) : uint8_t{0};
+  const bool injected =
+      config_.faults.abort_code != 0 && where && where->reg == config_.faults.abort_register &&
+      (request->command == SdoCommand::UploadRequest ? config_.faults.abort_on_read
+                                                     : config_.faults.abort_on_write);
   if (!module || size == 0) {
     abort(sdo_abort::kNoObject);
+  } else if (injected) {
+    abort(config_.faults.abort_code);
   } else if (request->command == SdoCommand::UploadRequest) {
     uint32_t value = 0;
     const RegisterInfo* info = find_register(where->reg);
@@ -166,6 +292,10 @@ void CanioNode::serve_sdo(const canio::CanFrame& f) {
       reply.command = SdoCommand::UploadResponse;
       reply.size = config_.faults.widen_sdo_reads && size == 1 ? uint8_t{4} : size;
       reply.value = value;
+      if (config_.faults.upload_size_not_indicated) {
+        reply.size = 4;
+        reply.size_indicated = false;
+      }
     }
   } else if (request->command == SdoCommand::DownloadRequest) {
     if (request->size != size) {
@@ -182,13 +312,23 @@ void CanioNode::serve_sdo(const canio::CanFrame& f) {
 }
 
 std::size_t CanioNode::service(int64_t deadline_ns) {
+  service_faults();
   send_due();
   std::array<canio::CanFrame, 32> rx{};
   const canio::ReceiveResult r = port_.receive(rx, std::min(deadline_ns, next_due_ns()));
   for (std::size_t k = 0; k < r.count; ++k) {
     const canio::CanFrame& f = rx[k];
     if (f.error || f.extended || silent_) continue;
+    if (f.id == canio::kNmtCobId) {
+      if (auto m = canio::parse_nmt(f)) on_nmt(*m);
+      continue;
+    }
+    const canio::NmtState state = nmt_.load();
     if (config_.sync_enabled && f.id == config_.sync_id) {
+      if (state != canio::NmtState::Operational) {
+        ++counters_.ignored_not_operational;  // no PDO outside OPERATIONAL (CiA 301)
+        continue;
+      }
       ++counters_.syncs;
       for (std::size_t i = 0; i < modules_.size(); ++i) answer(i, f.rx_time_ns);
       if (config_.faults.unexpected_id != 0) {
@@ -201,11 +341,17 @@ std::size_t CanioNode::service(int64_t deadline_ns) {
       uint32_t drops = sdo_drops_.load();
       while (drops > 0 && !sdo_drops_.compare_exchange_weak(drops, drops - 1)) {
       }
-      if (config_.faults.answer_sdo && drops == 0) serve_sdo(f);
+      // SDO is served in pre-operational and operational, not when stopped (CiA 301).
+      if (config_.faults.answer_sdo && drops == 0 && state != canio::NmtState::Stopped)
+        serve_sdo(f);
       continue;
     }
     for (std::size_t i = 0; i < modules_.size(); ++i) {
       if (f.id != config_.modules[i].ids.output) continue;
+      if (state != canio::NmtState::Operational) {
+        ++counters_.ignored_not_operational;
+        break;
+      }
       ModuleOutputs out;
       if (!canio::unpack_output_object(f.payload(), out)) break;
       ++counters_.outputs;

@@ -1,13 +1,19 @@
 // Simulated CAN-I/O node: a bus controller with simulated X20DS1928 modules in function model 254
-// on a CanPort (SocketCAN or the virtual test bus). It answers the master's SYNC with every
+// on a CanPort (SocketCAN or the virtual test bus), a strict CANopen node (CiA 301): it boots
+// pre-operational and announces it with a boot-up message (0x700 + node, 0x00), sends and takes
+// no process data until NMT Start, honours Stop / Enter Pre-Operational / Reset Node / Reset
+// Communication, and produces a heartbeat once the master sets object 0x1017. In OPERATIONAL it
+// answers the master's SYNC with every
 // module's two input objects (without SYNC: a module's output object triggers its answer), takes
 // the output objects, and serves expedited SDO (0x600 + node → 0x580 + node) on the register →
 // index/subindex scheme the daemon uses. Single-threaded: the owner calls service() in a loop.
 // Faults for tests: random loss of its frames, wrong lengths, foreign identifiers, silence, object
-// 2 sent late. The answers to a SYNC go out `sync_reaction_ns` after it (the bus controller's
-// reaction); like a real controller the node sends its answers in order and never sends an answer
-// to an older SYNC after it has queued the answers to a newer one (an object 2 still waiting when
-// the next SYNC's answers are due is sent first).
+// 2 sent late, a reset by itself (brown-out: the modules' settings lost), a stalled acquisition
+// (the same position and PosCycle resent), EMCY messages. The answers to a SYNC go out
+// `sync_reaction_ns` after it (the bus controller's reaction); like a real controller the node
+// sends its answers in order and never sends an answer to an older SYNC after it has queued the
+// answers to a newer one (an object 2 still waiting when the next SYNC's answers are due is sent
+// first).
 #pragma once
 
 #include <array>
@@ -22,6 +28,7 @@
 
 #include "can/canio_options.hpp"
 #include "canio/can_port.hpp"
+#include "canio/canopen_nmt.hpp"
 #include "sim/ds1928_module.hpp"
 #include "sim/sim_options.hpp"
 #include "x20ds1928/sdo_mapping.hpp"
@@ -43,9 +50,19 @@ struct CanioNodeFaults {
   int64_t late_object2_ns = 0;      // how late (after the node's reaction)
   // SDO: answer a 1-byte register read with 4 bytes (a peer that widens small registers).
   bool widen_sdo_reads = false;
-  // SDO: configuration registers answer reads with 0x06010001 "write only" (what the register
-  // table's single access mark may mean).
-  bool config_write_only = false;
+  // SDO: configuration registers answer reads with 0x06010001 "write only": the FM254 register
+  // table lists them with write access only (the strict reading, the default). false: they can
+  // be read back (a test that needs a verified configuration asks for it).
+  bool config_write_only = true;
+  // SDO: this register answers with this CiA 301 abort code (0: off), on writes and/or reads.
+  uint16_t abort_register = 0;
+  uint32_t abort_code = 0;
+  bool abort_on_write = true;
+  bool abort_on_read = true;
+  // NMT: the first n Start commands addressed to the node are lost (a node that misses them).
+  uint32_t ignore_nmt_starts = 0;
+  // SDO: upload responses say "size not indicated" (CiA 301 e = 1, s = 0; 4 data bytes).
+  bool upload_size_not_indicated = false;
   uint64_t seed = 1;
 };
 
@@ -60,6 +77,12 @@ struct CanioNodeConfig {
   // ASSUMPTION (docs/canio.md): the bus controller queues its answers this long after the SYNC's
   // end of frame (the stamp it received it with).
   int64_t sync_reaction_ns = 0;
+  // CiA 301 strict: after its boot-up the node waits pre-operational for NMT Start. true: a bus
+  // controller that starts by itself (CiA 302 "self-starting"): operational right after the
+  // boot-up message.
+  bool self_start = false;
+  // Heartbeat producer time at power-up (object 0x1017, ms; 0: none until the master sets it).
+  uint16_t heartbeat_ms = 0;
   // The node's clock (CLOCK_MONOTONIC ns; tests pass the virtual bus' fake clock). Empty: the
   // real CLOCK_MONOTONIC.
   std::function<int64_t()> clock;
@@ -81,6 +104,12 @@ struct CanioNodeCounters {
   uint64_t send_failures = 0;
   uint64_t sdo_requests = 0;
   uint64_t sdo_aborts = 0;
+  uint64_t nmt_commands = 0;  // NMT commands addressed to this node
+  uint64_t boot_ups = 0;      // boot-up messages sent (power-up, resets)
+  uint64_t heartbeats = 0;
+  uint64_t emcys = 0;
+  uint64_t stalled_answers = 0;          // answers that repeated the last position (stall fault)
+  uint64_t ignored_not_operational = 0;  // SYNC / output objects ignored outside OPERATIONAL
 };
 
 class CanioNode {
@@ -90,7 +119,7 @@ class CanioNode {
   CanioNode(const CanioNode&) = delete;
   CanioNode& operator=(const CanioNode&) = delete;
 
-  // Filters on the port (SYNC, output objects, SDO requests).
+  // Filters on the port (NMT, SYNC, output objects, SDO requests), then the boot-up message.
   [[nodiscard]] std::error_code open();
   // Sends the answers that are due, then handles what arrives until `deadline_ns` or the next
   // answer is due (one receive call; a deadline in the past polls). Returns the frames handled.
@@ -100,8 +129,21 @@ class CanioNode {
   // When the next queued answer is due (INT64_MAX: none).
   [[nodiscard]] int64_t next_due_ns() const noexcept;
 
-  // Power-cycle: every module back to its bus-controller defaults (EnDat disabled).
+  // Power-cycle (Reset Node): every module back to its bus-controller defaults (EnDat disabled),
+  // the heartbeat time back to its power-up value, boot-up message, pre-operational (operational
+  // with self_start). Owner's thread.
   void power_up();
+  // Any thread: the node resets by itself at its next service() (brown-out, watchdog) — the
+  // object store is lost, as power_up().
+  void request_reset() noexcept { reset_requested_.store(true); }
+  // Any thread: while true the modules' acquisition is stalled — every answer repeats the last
+  // position and PosCycle sent.
+  void set_stalled(bool stalled) noexcept { stalled_.store(stalled); }
+  // Any thread: the node sends this EMCY at its next service().
+  void request_emcy(uint16_t error_code, uint8_t error_register,
+                    std::array<uint8_t, 5> vendor = {}) noexcept;
+  [[nodiscard]] canio::NmtState nmt_state() const noexcept { return nmt_.load(); }
+  [[nodiscard]] uint16_t heartbeat_ms() const noexcept { return heartbeat_ms_; }
   // No answers at all while true (a node that lost power or its bus connection).
   void set_silent(bool silent) noexcept { silent_.store(silent); }
   // The next `n` SDO requests go unanswered, the objects are still sent (an SDO server that
@@ -121,6 +163,10 @@ class CanioNode {
  private:
   void answer(std::size_t module, int64_t time_ns);
   void serve_sdo(const canio::CanFrame& f);
+  void on_nmt(const canio::NmtMessage& m);
+  // Boot-up message, pre-operational (operational with self_start).
+  void boot();
+  void service_faults();
   void send(const canio::CanFrame& f);
   void queue(const canio::CanFrame& f, int64_t due_ns);
   [[nodiscard]] int64_t now() const;
@@ -133,6 +179,16 @@ class CanioNode {
   std::mt19937_64 rng_;
   std::atomic<bool> silent_{false};  // set from another thread (tests, the simulator main)
   std::atomic<uint32_t> sdo_drops_{0};
+  std::atomic<canio::NmtState> nmt_{canio::NmtState::PreOperational};
+  std::atomic<bool> reset_requested_{false};
+  std::atomic<bool> stalled_{false};
+  std::atomic<bool> emcy_requested_{false};
+  std::atomic<uint64_t> emcy_word_{0};  // error code | register << 16 | vendor << 24
+  uint16_t heartbeat_ms_ = 0;           // object 0x1017
+  int64_t next_heartbeat_ns_ = 0;
+  std::vector<ModuleInputs> last_inputs_;  // per module: the last answer (stall fault)
+  std::vector<bool> have_last_;
+  uint32_t starts_ignored_ = 0;
   uint64_t position_objects_ = 0;
   // Answers waiting for their time, in the order they go out (fixed size: no allocation).
   struct Queued {

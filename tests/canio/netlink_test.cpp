@@ -69,6 +69,7 @@ std::vector<uint8_t> can_link(unsigned flags, const char* kind, uint32_t state, 
                               uint32_t restart_ms) {
   MessageBuilder b(flags, 7);
   b.attr(IFLA_IFNAME, "can0", 5);
+  b.attr(IFLA_TXQLEN, uint32_t{10});
   const auto li = b.begin(IFLA_LINKINFO);
   b.attr(IFLA_INFO_KIND, kind, std::strlen(kind) + 1);
   if (std::strcmp(kind, "can") == 0) {
@@ -79,6 +80,9 @@ std::vector<uint8_t> can_link(unsigned flags, const char* kind, uint32_t state, 
     b.attr(IFLA_CAN_BITTIMING, bt);
     b.attr(IFLA_CAN_STATE, state);
     b.attr(IFLA_CAN_RESTART_MS, restart_ms);
+    can_ctrlmode cm{CAN_CTRLMODE_ONE_SHOT | CAN_CTRLMODE_BERR_REPORTING,
+                    restart_ms == 0 ? 0u : unsigned{CAN_CTRLMODE_ONE_SHOT}};
+    b.attr(IFLA_CAN_CTRLMODE, cm);
     can_berr_counter bc{12, 3};
     b.attr(IFLA_CAN_BERR_COUNTER, bc);
     b.end(data);
@@ -106,6 +110,9 @@ TEST_CASE("an RTM_NEWLINK of a CAN interface parses to state, bit rate, restart-
   CHECK(link->info.error_counters_valid);
   CHECK(link->info.tx_error_count == 12);
   CHECK(link->info.rx_error_count == 3);
+  CHECK(link->info.txqueuelen == 10);  // what a stale replay after a silence is bounded by
+  CHECK(link->info.one_shot);
+  CHECK_FALSE(parse_link_message(can_link(IFF_UP, "can", 0, 500'000, 0))->info.one_shot);
   CHECK(parse_link_message(can_link(IFF_UP, "can", CAN_STATE_BUS_OFF, 1'000'000, 0))->info.state ==
         CanState::BusOff);
   CHECK(parse_link_message(can_link(0, "can", CAN_STATE_STOPPED, 500'000, 0))->info.state ==

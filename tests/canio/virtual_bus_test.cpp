@@ -83,7 +83,12 @@ TEST_CASE("filters pass exactly the listed identifiers, error frames only when s
   REQUIRE(rx->inject_error(prot));
   CHECK(drain(*rx).empty());  // not subscribed
   CHECK(rx->counters().protocol_errors == 1);
+  // The default mask leaves protocol violations out: the kernel reports every bus error as
+  // CAN_ERR_PROT | CAN_ERR_BUSERROR, and they must not wake the cycle.
   REQUIRE_FALSE(rx->set_error_mask(kDefaultErrorMask));
+  REQUIRE(rx->inject_error(prot));
+  CHECK(drain(*rx).empty());
+  REQUIRE_FALSE(rx->set_error_mask(kDefaultErrorMask | err_class::kProtocol));
   REQUIRE(rx->inject_error(prot));
   got = drain(*rx);
   REQUIRE(got.size() == 1);

@@ -65,17 +65,24 @@ TEST_CASE("canio: the bus-load budget includes the SDO share and keeps a margin"
           "[canio][config]") {
   // 1 module at 500 kbit/s: 920 µs cyclic + 162 µs SDO share = 1082 µs. At 1500 µs that is 72 %:
   // it would fit the period (the old check accepted up to 100 %), but not the 70 % budget.
+  // The period must also hold the response window (1390 µs) and the SDO request and answer
+  // that follow it (2 × 135 bits = 540 µs): 1931 µs at least.
   const std::string e = errors_of(canio_yaml("", "1500"));
   INFO(e);
   CHECK_THAT(e, Catch::Contains("cycle.period_us") &&
                     Catch::Contains("1500 µs loads the CAN-I/O bus to 72 %") &&
                     Catch::Contains("above canio.max_bus_load 70 %") &&
                     Catch::Contains("the SDO transfers' share") &&
-                    Catch::Contains("use period_us ≥ 1555"));
-  CHECK(errors_of(canio_yaml("", "1555")).empty());
-  CHECK_FALSE(errors_of(canio_yaml("", "1554")).empty());
-  // A higher share may be configured; 100 % is accepted only when asked for.
-  CHECK(errors_of(canio_yaml("  max_bus_load: 0.8\n", "1500")).empty());
+                    Catch::Contains("use period_us ≥ 1931"));
+  CHECK(errors_of(canio_yaml("", "1931")).empty());
+  // Below that the load fits, but the SDO answer after the window does not (before: accepted,
+  // the answer then collided with the next SYNC's window).
+  const std::string w = errors_of(canio_yaml("", "1930"));
+  CHECK_THAT(w, Catch::Contains("the response window (1390 µs) and the SDO request and answer "
+                                "after it (540 µs) must fit into cycle.period_us (1930)"));
+  // A higher share may be configured (the load error goes; the window's remains).
+  CHECK_THAT(errors_of(canio_yaml("  max_bus_load: 0.8\n", "1500")),
+             !Catch::Contains("loads the CAN-I/O bus") && Catch::Contains("must fit into"));
   CHECK_THAT(errors_of(canio_yaml("  max_bus_load: 1.5\n")), Catch::Contains("max_bus_load"));
   // Without SDO (transport none is refused at start, not here) only the cyclic frames count.
   CanioBusConfig c;

@@ -32,8 +32,13 @@ struct SimulatedNodeThread {
     auto p = bus->open_port({});
     if (!p) throw std::runtime_error("virtual port: " + p.error().message());
     port = std::move(p.value());
-    node = std::make_unique<sim::CanioNode>(
-        sim::canio_node_from_config(config.canio, config.axes, config.simulated, 1), *port);
+    sim::CanioNodeConfig nc =
+        sim::canio_node_from_config(config.canio, config.axes, config.simulated, 1);
+    // Readable configuration registers: a node thread starved for input_timeout_ms on a loaded
+    // machine is checked by read-back, not configured anew (which would restart the Flatstream
+    // channel under an EnDat command this test is waiting for).
+    nc.faults.config_write_only = false;
+    node = std::make_unique<sim::CanioNode>(nc, *port);
     if (node->open()) throw std::runtime_error("node filters");
     thread = std::thread([this] {
       while (!stop.load()) (void)node->service(test::Rig::monotonic() + 2'000'000);

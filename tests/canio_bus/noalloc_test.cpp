@@ -67,7 +67,10 @@ ProofResult run_proof(std::size_t capture_ring) {
       return capturing;
     };
   // Instant bus: 2 modules + SYNC need ~1.5 ms of wire at 500 kbit/s, more than this 1 ms cycle.
-  test::Rig rig(config, false, false, test::BusMode::Instant, wrap);
+  // The register traffic reads EnDatMode: a module whose configuration registers can be read.
+  test::Rig rig(
+      config, false, false, [](sim::CanioNodeConfig& nc) { nc.faults.config_write_only = false; },
+      test::BusMode::Instant, wrap);
   REQUIRE(taps.size() == (capture_ring > 0 ? 2u : 0u));
   REQUIRE_FALSE(rig.canio->start());
   shm::Publisher publisher;
@@ -102,6 +105,8 @@ ProofResult run_proof(std::size_t capture_ring) {
   // Two requests to node 1 are lost: transfers in flight until sdo_timeout_ms, inside the count.
   rig.nodes[0]->drop_sdo_requests(2);
   const auto sdo_before = sdo_totals();
+  // Samples in the counted cycles only: the strict node sends none before its NMT Start.
+  const uint64_t samples_before = rig.canio->axis_counters(0).samples.load();
   task.arm();
 
   const auto read =
@@ -135,7 +140,7 @@ ProofResult run_proof(std::size_t capture_ring) {
     w.tap = nullptr;
   }
   result.counts = task.result();
-  result.samples = rig.canio->axis_counters(0).samples.load();
+  result.samples = rig.canio->axis_counters(0).samples.load() - samples_before;
   return result;
 }
 
@@ -165,7 +170,11 @@ void check_clean(const ProofResult& r, const char* what) {
   CHECK(traffic.register_results > 20);
   CHECK(r.sdo_transfers > 20);  // SDO in flight during the counted cycles
   CHECK(r.sdo_errors >= 2);     // the two lost requests timed out on the cycle thread
-  CHECK(r.samples > kCounted / 2);
+  // Whole samples inside the counted cycles (the strict node sends none before its NMT Start, so
+  // the count no longer includes the configuration's cycles): 1 ms on the real clock against a
+  // node thread on a loaded 2-core host gives about half the cycles whole; a quarter proves the
+  // positions flow while the proof runs.
+  CHECK(r.samples > kCounted / 4);
 }
 
 }  // namespace

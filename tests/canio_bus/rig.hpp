@@ -128,6 +128,9 @@ struct Rig {
       sim::CanioNodeConfig nc =
           sim::canio_node_from_config(config.canio, config.axes, config.simulated, a.node);
       if (stepped) nc.clock = [] { return fake_now(); };
+      // A driver that configures nothing sends no NMT either: such a rig's nodes start by
+      // themselves (the strict CANopen node waits for NMT Start otherwise).
+      if (assume_configured) nc.self_start = true;
       if (tweak) tweak(nc);
       nodes.push_back(std::make_unique<sim::CanioNode>(nc, *node_ports.back()));
       (void)nodes.back()->open();

@@ -47,8 +47,10 @@ TEST_CASE(
   // Before: after a silence the read-back check failed forever (85 SDO errors in 8 s, the axis
   // never published again). Now another size is a definitive answer: configured again, and after
   // three such answers the axis goes up unverified; the PosCycle gate decides.
-  Rig rig(canio_config(1), false, false,
-          [](sim::CanioNodeConfig& nc) { nc.faults.widen_sdo_reads = true; });
+  Rig rig(canio_config(1), false, false, [](sim::CanioNodeConfig& nc) {
+    nc.faults.widen_sdo_reads = true;
+    nc.faults.config_write_only = false;  // readable, but with another size
+  });
   REQUIRE_FALSE(rig.canio->start());
   uint64_t c = 0;
   REQUIRE(run_until(rig, c, [&] { return rig.io[0].inputs_fresh; }));

@@ -16,7 +16,7 @@
 namespace sim = ds1928::sim;
 namespace canio = ds1928::canio;
 
-int run_canio(const CanioOptions& o, const std::atomic<bool>& stop) {
+int run_canio(const CanioOptions& o, const std::atomic<bool>& stop, std::atomic<bool>& reset) {
   sim::CanioNodeConfig node;
   uint32_t bitrate = o.bitrate;
   uint32_t period_us = 2000;
@@ -63,6 +63,9 @@ int run_canio(const CanioOptions& o, const std::atomic<bool>& stop) {
   node.faults.late_object2_ns =
       int64_t{o.late_object2_us != 0 ? o.late_object2_us : period_us} * 1000;
   node.sync_reaction_ns = int64_t{o.sync_reaction_us} * 1000;
+  node.self_start = o.self_start;
+  node.heartbeat_ms = static_cast<uint16_t>(o.heartbeat_ms);
+  node.faults.config_write_only = !o.config_readable;
 
   std::shared_ptr<canio::VirtualCanBus> vbus;
   std::unique_ptr<canio::CanPort> port;
@@ -139,6 +142,16 @@ int run_canio(const CanioOptions& o, const std::atomic<bool>& stop) {
   const int64_t silent_at =
       o.silent_after_s > 0 ? start + static_cast<int64_t>(o.silent_after_s * 1e9) : 0;
   const int64_t silent_until = silent_at + static_cast<int64_t>(o.silent_for_ms) * 1'000'000;
+  auto at = [start](double s) { return s > 0 ? start + static_cast<int64_t>(s * 1e9) : 0; };
+  int64_t reset_at = at(o.reset_after_s);
+  int64_t emcy_at = at(o.emcy_after_s);
+  const int64_t stall_at = at(o.stall_after_s);
+  const int64_t stall_until = stall_at + static_cast<int64_t>(o.stall_for_ms) * 1'000'000;
+  bool was_stalled = false;
+  auto say = [start](int64_t now, const char* what) {
+    std::printf("%10.6f node %s\n", static_cast<double>(now - start) / 1e9, what);
+    std::fflush(stdout);
+  };
   bool was_silent = false;
   while (!stop.load(std::memory_order_relaxed)) {
     (void)n.service(ds1928::rt::now_ns() + 20'000'000);
@@ -153,19 +166,41 @@ int run_canio(const CanioOptions& o, const std::atomic<bool>& stop) {
                   silent ? "silent" : "answering again");
       std::fflush(stdout);
     }
+    if ((reset_at != 0 && now >= reset_at) || reset.exchange(false)) {
+      reset_at = 0;
+      n.request_reset();
+      say(now, "resets by itself (brown-out: boot-up, pre-operational, settings lost)");
+    }
+    if (emcy_at != 0 && now >= emcy_at) {
+      emcy_at = 0;
+      n.request_emcy(static_cast<uint16_t>(o.emcy_code), 0x81, {0, 0, 0, 0, 0});
+      say(now, "sends EMCY");
+    }
+    const bool stalled =
+        stall_at != 0 && now >= stall_at && (o.stall_for_ms == 0 || now < stall_until);
+    if (stalled != was_stalled) {
+      was_stalled = stalled;
+      n.set_stalled(stalled);
+      say(now, stalled ? "acquisition stalled" : "acquisition running again");
+    }
     if (stop_at != 0 && now >= stop_at) break;
   }
   if (answer_log) std::fclose(answer_log);
   const auto& c = n.counters();
   std::printf(
       "canio node %d stats: sync=%llu outputs=%llu inputs_sent=%llu dropped=%llu sdo=%llu "
-      "sdo_aborts=%llu send_failures=%llu late_object2=%llu\n",
+      "sdo_aborts=%llu send_failures=%llu late_object2=%llu nmt=%llu boot_ups=%llu "
+      "heartbeats=%llu emcy=%llu not_operational=%llu stalled=%llu\n",
       o.node, static_cast<unsigned long long>(c.syncs), static_cast<unsigned long long>(c.outputs),
       static_cast<unsigned long long>(c.inputs_sent),
       static_cast<unsigned long long>(c.inputs_dropped),
       static_cast<unsigned long long>(c.sdo_requests),
       static_cast<unsigned long long>(c.sdo_aborts),
       static_cast<unsigned long long>(c.send_failures),
-      static_cast<unsigned long long>(c.inputs_late));
+      static_cast<unsigned long long>(c.inputs_late),
+      static_cast<unsigned long long>(c.nmt_commands), static_cast<unsigned long long>(c.boot_ups),
+      static_cast<unsigned long long>(c.heartbeats), static_cast<unsigned long long>(c.emcys),
+      static_cast<unsigned long long>(c.ignored_not_operational),
+      static_cast<unsigned long long>(c.stalled_answers));
   return 0;
 }

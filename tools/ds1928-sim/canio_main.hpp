@@ -26,8 +26,18 @@ struct CanioOptions {
   double silent_after_s = 0.0;
   uint32_t silent_for_ms = 0;
   bool power_cycle_when_back = false;
+  // Strict CANopen node (docs/canio.md): boots pre-operational; these loosen or fault it.
+  bool self_start = false;       // operational right after the boot-up (no NMT Start needed)
+  uint32_t heartbeat_ms = 0;     // heartbeat producer time at power-up (0x1017)
+  bool config_readable = false;  // configuration registers answer reads (FM254: write-only)
+  double reset_after_s = 0.0;    // reset by itself (brown-out: settings lost) after S seconds
+  double stall_after_s = 0.0;    // acquisition stalls after S seconds ...
+  uint32_t stall_for_ms = 0;     // ... for this long (0: for good)
+  double emcy_after_s = 0.0;     // send one EMCY after S seconds
+  uint32_t emcy_code = 0x7300;   // its error code (CiA 301: 0x73xx sensor)
   uint64_t seed = 1;
   double duration_s = 0.0;
 };
 
-int run_canio(const CanioOptions& options, const std::atomic<bool>& stop);
+// `reset`: set (SIGUSR1) to make the node reset by itself; taken back to false here.
+int run_canio(const CanioOptions& options, const std::atomic<bool>& stop, std::atomic<bool>& reset);

@@ -9,7 +9,10 @@
 // SIGINT/SIGTERM stop.
 //   ds1928-sim canio (--iface IF | --virtual NAME) [--node N] [--modules K] [--config FILE]
 //                    [--drop P] [--wrong-length-every N] [--unexpected-id ID] [--no-sdo]
-//                    [--sync-reaction-us US] [--late-object2 P [--late-object2-us US]] ...
+//                    [--sync-reaction-us US] [--late-object2 P [--late-object2-us US]]
+//                    [--self-start] [--heartbeat-ms MS] [--reset-after S] [--stall-after S]
+//                    [--emcy-after S] ...
+// (SIGUSR1: the CAN-I/O node resets by itself, as --reset-after.)
 // runs a CAN-I/O bus controller with simulated X20DS1928 modules (function model 254) on
 // SocketCAN or on the cross-process virtual test bus (docs/canio.md).
 #include <sched.h>
@@ -401,6 +404,25 @@ int main(int argc, char** argv) {
   can->add_option("--silent-for-ms", co.silent_for_ms, "... for this long (0: for good)");
   can->add_flag("--power-cycle-when-back", co.power_cycle_when_back,
                 "modules come back with their bus-controller defaults (EnDat disabled)");
+  can->add_flag("--self-start", co.self_start,
+                "operational right after the boot-up message (default: a strict CANopen node "
+                "waits pre-operational for NMT Start)");
+  can->add_option("--heartbeat-ms", co.heartbeat_ms,
+                  "heartbeat producer time at power-up (object 0x1017; default 0: until the "
+                  "master sets it)")
+      ->check(CLI::Range(0, 65535));
+  can->add_flag("--config-readable", co.config_readable,
+                "configuration registers answer reads (default: write-only, as the FM254 "
+                "register table lists them)");
+  can->add_option("--reset-after", co.reset_after_s,
+                  "reset by itself after S seconds (brown-out: boot-up, pre-operational, the "
+                  "modules' settings lost)");
+  can->add_option("--stall-after", co.stall_after_s,
+                  "the acquisition stalls after S seconds (same position and PosCycle resent)");
+  can->add_option("--stall-for-ms", co.stall_for_ms, "... for this long (0: for good)");
+  can->add_option("--emcy-after", co.emcy_after_s, "send one EMCY after S seconds");
+  can->add_option("--emcy-code", co.emcy_code, "its error code (default 0x7300)")
+      ->check(CLI::Range(0, 65535));
   can->add_option("--seed", co.seed, "fault injection random seed");
   can->add_option("--duration", co.duration_s, "stop after S seconds (0: until SIGTERM)");
 
@@ -423,6 +445,7 @@ int main(int argc, char** argv) {
     apply_profile(o, given);
     return run_powerlink(o);
   }
-  if (can->parsed()) return run_canio(co, g_stop);
+  // SIGUSR1 power-cycles the CAN-I/O node too (a reset by itself: boot-up, settings lost).
+  if (can->parsed()) return run_canio(co, g_stop, g_power_cycle);
   return 1;
 }

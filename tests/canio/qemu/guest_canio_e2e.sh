@@ -174,7 +174,8 @@ for line in "${fil[@]}"; do
   [[ $mask == *7ff ]] || fail "can0 filter for id $(printf 0x%X $id) has mask $mask, not an exact 11-bit match"
   ids+=("$id")
 done
-want=("$in_id0" "$in_id1" "$sdo_rx")
+# The node port also takes the node's boot-up / heartbeat (0x700 + node) and EMCY (0x080 + node).
+want=("$in_id0" "$in_id1" "$sdo_rx" "$((0x700 + node))" "$((0x80 + node))")
 for w in "${want[@]}"; do
   [[ " ${ids[*]} " == *" $w "* ]] || fail "no can0 filter for id $(printf 0x%X "$w"): $(printf '%s\n' "${fil[@]}")"
 done
@@ -182,7 +183,7 @@ for id in "${ids[@]}"; do
   [[ " ${want[*]} " == *" $id "* ]] || fail "can0 filter for id $(printf 0x%X "$id"), which the daemon does not use"
 done
 printf '  %s\n' "${fil[@]}" | grep -E "can0|device" | head -n 8
-pass "can0 receive filters are exactly the daemon's identifiers: $(printf '0x%X ' "${want[@]}")(inputs, SDO response)"
+pass "can0 receive filters are exactly the daemon's identifiers: $(printf '0x%X ' "${want[@]}")(inputs, SDO response, error control, EMCY)"
 file_has /proc/net/can/rcvlist_err "^ +can0 +[0-9a-f]+ +[0-9a-f]*[1-9a-f][0-9a-f]* " ||
   fail "no error-frame subscription on can0: $(cat /proc/net/can/rcvlist_err)"
 pass "error-frame subscription on can0: $(grep -E '^ +can0 ' /proc/net/can/rcvlist_err | tr -s ' ' | head -n 2 | tr '\n' ';')"

@@ -7,7 +7,8 @@ Usage: status_vars.py STATUS_JSON_FILE [AXIS]
                                  the TCG guest costs seconds, for the whole test)
 Prints bus_kind, bus_state, transport, interface, can_state, bitrate, restart_ms, the bus counters
 (c_<name>), and for the axis' node: configured (1/0), silent, in_id0, in_id1, out_id (decimal) and
-its counters (n_<name>), last_error. Unknown or missing fields print empty values, so a check on
+its counters (n_<name>), last_error, and its CANopen node's fields (cn_<name>: nmt_state,
+nmt_starts, boot_ups, heartbeats, ...). Unknown or missing fields print empty values, so a check on
 them fails with the status in the log rather than here.
 """
 import json
@@ -43,6 +44,7 @@ def assignments(path: str, axis: int) -> list:
         out.update({
             "node": node.get("node", ""),
             "configured": 1 if node.get("configured") else 0,
+            "n_state": node.get("state", ""),
             "silent": 1 if node.get("silent") else 0,
             "in_id0": ids[0],
             "in_id1": ids[1] if len(ids) > 1 else "",
@@ -52,6 +54,15 @@ def assignments(path: str, axis: int) -> list:
         for k, v in node.items():
             if isinstance(v, int) and not isinstance(v, bool) and k not in ("axis", "node", "output_id"):
                 out[f"n_{k}"] = v
+    # The CANopen node of that axis (NMT, boot-up, heartbeat, EMCY): cn_<name>.
+    cns = bus.get("canopen_nodes") or []
+    cn = next((c for c in cns if node is not None and c.get("node") == node.get("node")), None)
+    if cn is not None:
+        for k, v in cn.items():
+            if isinstance(v, bool):
+                out[f"cn_{k}"] = 1 if v else 0
+            elif isinstance(v, (int, str)) and k != "node":
+                out[f"cn_{k}"] = v
     return [f"{k}={shlex.quote(str(v))}" for k, v in out.items()]
 
 
