@@ -312,7 +312,9 @@ void ManagingNode::on_state_wait_operational(Cn& cn, NmtState s) noexcept {
 
 void ManagingNode::on_enter_operational(Cn& cn) noexcept {
   ++cn.st->boots;
-  cn.st->last_error = {};
+  // A PRC fall-back stays said while it lasts (the node runs, but not as configured).
+  cn.st->last_error =
+      cn.st->prc_fallback ? make_error_code(MnError::kPrcNotSupported) : std::error_code{};
 }
 void ManagingNode::on_state_operational(Cn& cn, NmtState s) noexcept {
   // A CN that falls back (power-cycle, own error) is booted again from the start.

@@ -9,6 +9,7 @@
 
 #include "powerlink/link.hpp"
 #include "powerlink/powerlink_bus.hpp"
+#include "powerlink/sync_frames.hpp"
 #include "sim/powerlink_cn.hpp"
 
 namespace pl = ds1928::powerlink;
@@ -245,6 +246,7 @@ TEST_CASE("A CN that does not answer its SyncRequests is reset (PRC set-up faile
   // The CN advertises PRC but a fault drops its answers: here, by unplugging it from the wire
   // right after its identification.
   Setup s({{1, true, true}});
+  (void)s.step();
   for (int i = 0; i < 4000 && s.node(1).boot != pl::CnBootState::kConfigure; ++i) (void)s.step();
   REQUIRE(s.node(1).boot == pl::CnBootState::kConfigure);
   s.wire.nodes.clear();

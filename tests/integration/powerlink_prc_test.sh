@@ -39,10 +39,16 @@ axes:
   - {name: a3, node: 3, slot: 1}
 YAML
 
-ip netns exec "$ns_mn" tshark -n -i plp_mn -w "$tmp/prc.pcapng" >"$tmp/tshark.log" 2>&1 &
+# A sender's own frames do not show on its interface (PACKET_QDISC_BYPASS): the MN's frames are
+# captured at the CN's end, the CNs' at the MN's (one clock: one machine).
+ip netns exec "$ns_mn" tshark -n -i plp_mn -w "$tmp/mn_end.pcapng" >"$tmp/tshark.log" 2>&1 &
 tshark_pid=$!
 pids+=($tshark_pid)
+ip netns exec "$ns_cn" tshark -n -i plp_cn -w "$tmp/cn_end.pcapng" >"$tmp/tshark_cn.log" 2>&1 &
+tshark_cn_pid=$!
+pids+=($tshark_cn_pid)
 wait_for "$tmp/tshark.log" "Capturing on" 30 || fail "tshark did not start"
+wait_for "$tmp/tshark_cn.log" "Capturing on" 30 || fail "tshark at the CN's end did not start"
 ip netns exec "$ns_cn" "$sim" powerlink --iface plp_cn --node 1 --count 3 --config "$tmp/prc.yaml" \
     >"$tmp/sim.log" 2>&1 &
 sim_pid=$!
@@ -51,8 +57,8 @@ ip netns exec "$ns_mn" "$mn" --iface plp_mn --config "$tmp/prc.yaml" --rt-priori
     --warmup 1 --duration "$hold" --boot-timeout 30 >"$tmp/mn.log" 2>&1
 rc=$?
 sleep 0.2
-kill -INT "$tshark_pid"
-wait "$tshark_pid" 2>/dev/null
+kill -INT "$tshark_pid" "$tshark_cn_pid"
+wait "$tshark_pid" "$tshark_cn_pid" 2>/dev/null
 kill -TERM "$sim_pid"
 wait "$sim_pid" 2>/dev/null
 grep '^RESULT' "$tmp/mn.log" >"$tmp/result.log" || { cat "$tmp/mn.log"; fail "no RESULT from the MN (exit $rc)"; }
@@ -67,8 +73,11 @@ overruns=$(field "$tmp/result.log" overruns)
 pass "mixed PRC + PReq/PRes cycle held $measured cycles at 1 ms: 0 resets, $overruns overruns; $(grep '^LATENCY' "$tmp/mn.log")"
 
 tshark() { command tshark --disable-protocol opensafety "$@"; }
-tshark -r "$tmp/prc.pcapng" -T fields -e frame.time_epoch -e epl.mtyp -e epl.src -e epl.dest \
-    -e epl.soa.svid -e epl.asnd.svid >"$tmp/frames.txt" 2>/dev/null || fail "tshark could not read the capture"
+for end in mn_end cn_end; do
+  tshark -r "$tmp/$end.pcapng" -Y epl -T fields -e frame.time_epoch -e epl.mtyp -e epl.src \
+      -e epl.dest -e epl.soa.svid -e epl.asnd.svid 2>/dev/null ||
+    fail "tshark could not read $end.pcapng"
+done | sort -t$'\t' -k1,1n >"$tmp/frames.txt"
 read -r socs pres_mn preq12 preq3 syncreq syncres pres1 pres2 < <(python3 - "$tmp/frames.txt" <<'PY'
 import sys
 socs = pres_mn = preq12 = preq3 = syncreq = syncres = 0
@@ -108,8 +117,10 @@ PY
 [ $((preq3 + 1)) -ge "$socs" ] || fail "only $preq3 PReq to node 3 for $socs SoCs"
 [ $((pres1 + 1)) -ge "$pres_mn" ] && [ $((pres2 + 1)) -ge "$pres_mn" ] ||
   fail "PRes of node 1: $pres1, node 2: $pres2 for $pres_mn PResMN"
-tshark -r "$tmp/prc.pcapng" -Y "_ws.malformed || _ws.expert.severity >= 0x00600000" \
-    -T fields -e frame.number -e epl.src -e epl.mtyp -e _ws.expert.message >"$tmp/expert.txt" 2>/dev/null
+for end in mn_end cn_end; do
+  tshark -r "$tmp/$end.pcapng" -Y "_ws.malformed || _ws.expert.severity >= 0x00600000" \
+      -T fields -e frame.number -e epl.src -e epl.mtyp -e _ws.expert.message 2>/dev/null
+done >"$tmp/expert.txt"
 [ -s "$tmp/expert.txt" ] && { head "$tmp/expert.txt"; fail "Wireshark finds malformed frames or expert errors"; }
 pass "on the wire: $socs SoCs, $pres_mn PResMN, PRes node 1 $pres1 / node 2 $pres2, $preq3 PReq to node 3, none to 1 and 2; $syncreq SyncRequests, $syncres SyncResponses; Wireshark clean"
 
