@@ -243,7 +243,8 @@ void apply_mn_cdc(Section& n, PowerlinkNodeConfig& node, std::span<const powerli
   };
   // NMT_NodeAssignment (0x1F81/node) bit 14: PollResponse Chaining (the YAML's prc wins).
   if (!n.has("prc"))
-    if (const auto* e = find_cdc_entry(mn, powerlink::kObjNodeAssignment, id); e && e->as_unsigned())
+    if (const auto* e = find_cdc_entry(mn, powerlink::kObjNodeAssignment, id);
+        e && e->as_unsigned())
       node.prc = (*e->as_unsigned() & powerlink::kNodeAssignmentPrc) != 0;
   if (!node.device_type) node.device_type = value(0x1F84);
   if (!node.vendor_id) node.vendor_id = value(0x1F85);
@@ -316,8 +317,9 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
       }
     }
     if (node.prc && node.multiplex > 1) {
-      n.error("multiplex", "a PollResponse Chaining node (prc) answers the PResMN every cycle: "
-                           "PRC has no multiplexed slots; remove multiplex or prc");
+      n.error("multiplex",
+              "a PollResponse Chaining node (prc) answers the PResMN every cycle: "
+              "PRC has no multiplexed slots; remove multiplex or prc");
     }
     if (have_id) {
       if (const auto prev = sites.nodes.find(node.node_id); prev != sites.nodes.end()) {
@@ -384,9 +386,8 @@ static void check_cycle_budget(Diagnostics& diag, const DaemonConfig& c,
     b.pres_payload = n.pres_size.value_or(static_cast<uint16_t>(std::min<std::size_t>(pres, 1490)));
     nodes.push_back(b);
   }
-  const powerlink::CycleBudget b =
-      powerlink::cycle_budget(nodes, c.powerlink.wait_soc_preq_us, c.powerlink.async_timeout_us,
-                              c.powerlink.pres_mn_size);
+  const powerlink::CycleBudget b = powerlink::cycle_budget(
+      nodes, c.powerlink.wait_soc_preq_us, c.powerlink.async_timeout_us, c.powerlink.pres_mn_size);
   const double period = c.cycle.period_us;
   if (b.total_us() <= period) return;
   char text[512];

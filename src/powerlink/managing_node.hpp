@@ -327,9 +327,9 @@ class ManagingNode {
   RequestedService soa_service_ = RequestedService::kNone;
   uint8_t soa_target_ = 0;
   bool awaiting_asnd_ = false;
-  Cn* mn_asnd_from_ = nullptr;  // whose outbox the MN sends after the SoA
-  Cn* prc_sync_from_ = nullptr; // whose PRC set-up this cycle's SyncRequest serves
-  std::size_t async_rr_ = 0;    // round-robin position among the CNs
+  Cn* mn_asnd_from_ = nullptr;   // whose outbox the MN sends after the SoA
+  Cn* prc_sync_from_ = nullptr;  // whose PRC set-up this cycle's SyncRequest serves
+  std::size_t async_rr_ = 0;     // round-robin position among the CNs
   std::array<SdoRegisterResult, 64> results_{};
   std::size_t results_head_ = 0;
   std::size_t results_count_ = 0;

@@ -80,9 +80,9 @@ struct ManagingNode::Cn {
   std::array<uint8_t, 4> op_value{};  // value of a ValueSource other than kData
   MnErrorSignalling errsig;
   PrcStep prc_step = PrcStep::kOff;
-  bool prc_wait = false;       // SyncRequest sent, SyncResponse awaited
-  uint8_t prc_failures = 0;    // SyncResponses missed or wrong in a row
-  uint8_t prc_measured_to = 0; // the predecessor the last SyncRequest pair was for
+  bool prc_wait = false;        // SyncRequest sent, SyncResponse awaited
+  uint8_t prc_failures = 0;     // SyncResponses missed or wrong in a row
+  uint8_t prc_measured_to = 0;  // the predecessor the last SyncRequest pair was for
   bool configuring = false;
   std::array<SdoRegisterOp, kOpQueueDepth> ops{};
   std::size_t ops_head = 0;

@@ -198,13 +198,14 @@ void ManagingNode::update_prc_slot() noexcept {
   for (std::size_t i = 0; i < prc_count_; ++i) {
     const Cn* cn = find(prc_list_[i]);
     if (!cn) continue;
-    last_end = std::max<uint64_t>(last_end, uint64_t{cn->st->prc_pres_time_ns} +
-                                                prc_frame_time_ns(expected_pres_size(*cn)));
+    last_end = std::max<uint64_t>(
+        last_end, uint64_t{cn->st->prc_pres_time_ns} + prc_frame_time_ns(expected_pres_size(*cn)));
     timeout_us = std::max(timeout_us, cn->cfg.pres_timeout_us);
   }
-  prc_slot_ns_ = prc_count_ == 0 ? 0
-                                 : static_cast<int64_t>(prc_frame_time_ns(config_.bus.pres_mn_size) +
-                                                        last_end + uint64_t{timeout_us} * 1000);
+  prc_slot_ns_ = prc_count_ == 0
+                     ? 0
+                     : static_cast<int64_t>(prc_frame_time_ns(config_.bus.pres_mn_size) + last_end +
+                                            uint64_t{timeout_us} * 1000);
 }
 
 }  // namespace ds1928::powerlink

@@ -263,7 +263,8 @@ ExchangeResult PowerlinkBus::exchange(std::span<AxisIo> axes, int64_t cycle_star
   return result;
 }
 
-void PowerlinkBus::note_pres(uint8_t node, int64_t t, int64_t sent_ns, std::size_t n_axes) noexcept {
+void PowerlinkBus::note_pres(uint8_t node, int64_t t, int64_t sent_ns,
+                             std::size_t n_axes) noexcept {
   for (std::size_t i = 0; i < n_axes; ++i)
     if (axis_map_[i].node == node) rx_time_[i] = t;
   if (NodeRaw* nr = raw(node)) {

@@ -42,7 +42,7 @@ struct PowerlinkNodeConfig {
   // DLL_MNCNLossPResThreshold (0x1C09/node); unset: powerlink.thresholds.loss_of_pres.
   std::optional<uint32_t> loss_of_pres_threshold;
   bool mandatory = true;
-  uint32_t multiplex = 0;             // 0 = continuous, n = polled every n-th cycle
+  uint32_t multiplex = 0;  // 0 = continuous, n = polled every n-th cycle
   // PollResponse Chaining (EPSG DS 302-C): the CN sends its PRes at an assigned time after the
   // MN's PResMN instead of after a PReq (NodeAssignment 0x1F81/node bit 14 of the MN's CDC).
   // A CN without the PRC feature flag is polled with PReq/PRes instead (reported).

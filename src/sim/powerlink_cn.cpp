@@ -364,7 +364,8 @@ void PowerlinkCn::soc_cycling(const pl::Soc& soc, int64_t now_ns) noexcept {
   note_soc_timing(soc, now_ns);
   tick_modules(now_ns);
   check_prc_fallback(now_ns);
-  // Loss of PReq (in PRC mode: of the PResMN): polled before (interval learned) but not within that interval this time.
+  // Loss of PReq (in PRC mode: of the PResMN): polled before (interval learned) but not within that
+  // interval this time.
   if (loss_of_preq_counter_ > 0) --loss_of_preq_counter_;
   if (preq_interval_ != 0) {
     ++cycles_since_preq_;

@@ -258,8 +258,8 @@ class PowerlinkCn {
   uint32_t pres_fallback_timeout_ns_ = 0;
   bool pres_mn_since_soc_ = false;  // a PResMN came since the last SoC
   int64_t prc_missing_ns_ = 0;      // cycles without a PResMN, in a row
-  uint8_t sync_prev_node_ = 0;  // target of the last SyncRequest to another node ...
-  int64_t sync_prev_ns_ = 0;    // ... and when it arrived
+  uint8_t sync_prev_node_ = 0;      // target of the last SyncRequest to another node ...
+  int64_t sync_prev_ns_ = 0;        // ... and when it arrived
   uint32_t sync_node_number_ = 0;
   uint32_t sync_delay_ns_ = 0;
   // Delayed PRes.

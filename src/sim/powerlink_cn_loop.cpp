@@ -76,7 +76,8 @@ bool PowerlinkCnLoop::run_once() noexcept {
       const std::span<const uint8_t> frame(rx_.data(), r.length);
       // The node a SoA invites answers after every other node saw the SoA, as on the wire: the
       // others time a SyncResponse from the end of its SyncRequest (PollResponse Chaining).
-      const bool soa = r.length > 21 && rx_[12] == 0x88 && rx_[13] == 0xAB && (rx_[14] & 0x7F) == 0x05;
+      const bool soa =
+          r.length > 21 && rx_[12] == 0x88 && rx_[13] == 0xAB && (rx_[14] & 0x7F) == 0x05;
       const uint8_t invited = soa ? rx_[21] : 0;
       PowerlinkCn* last = nullptr;
       for (PowerlinkCn* n : nodes_) {

@@ -48,15 +48,15 @@ void PowerlinkCn::on_sync_request(std::span<const uint8_t> frame, int64_t now_ns
     }
   }
   pl::SyncResponse res;
-  res.sync_status = (pres_time_first_ns_ != 0 || prc_mode_ ? pl::sync_status::kPResTimeFirstValid
-                                                           : 0u) |
-                    (prc_mode_ ? pl::sync_status::kPResModeStatus : 0u);
+  res.sync_status =
+      (pres_time_first_ns_ != 0 || prc_mode_ ? pl::sync_status::kPResTimeFirstValid : 0u) |
+      (prc_mode_ ? pl::sync_status::kPResModeStatus : 0u);
   res.latency_ns = config_.response_time_ns;
   res.sync_node_number = sync_node_number_;
   res.sync_delay_ns = sync_delay_ns_;
   res.pres_time_first_ns = pres_time_first_ns_;
-  auto len = pl::build_sync_response(
-      tx_, pl::asnd_header(config_.mac, config_.node_id, pl::kNodeMn), res);
+  auto len =
+      pl::build_sync_response(tx_, pl::asnd_header(config_.mac, config_.node_id, pl::kNodeMn), res);
   if (!len) return;
   emit({tx_.data(), *len});
   ++stats_.asnd_sent;

@@ -36,6 +36,11 @@ use_trees "$1" "$2"
 period_us=${3:?period in us}
 placement=${4:?pinned or unpinned}
 hold=${HOLD_SECONDS:-20}
+# PRC=1: node 1 configured for PollResponse Chaining — the demo CN has no PRC on Linux (its
+# IdentResponse lacks the feature flag), so the MN must fall back to PReq/PRes, say so, and hold
+# it. MULTIPLEX=n: node 1 polled every n-th cycle.
+prc=${PRC:-0}
+mux=${MULTIPLEX:-0}
 # The demo pins its threads to CPU 1 (on a 1-CPU machine there is only CPU 0 to share).
 cn_cpu=$(($(nproc) > 1 ? 1 : 0))
 
@@ -78,6 +83,8 @@ powerlink:
   nodes:
     - node_id: 1
       pres_timeout_us: $pres_timeout_us
+      prc: $([ "$prc" = 1 ] && echo true || echo false)
+      multiplex: $mux
 shm:
   name: /ds1928d_plo_$tag
 socket:
@@ -229,11 +236,28 @@ if [ "$resets" = 0 ]; then
   [ "$other" = 0 ] || fail "$other PRes of node 1 after OPERATIONAL carry another NMT state"
   # Each SoC of the window is answered by a PRes in it unless the MN counted that PRes lost (the
   # MN's count covers the whole run: it bounds the window's losses from above).
-  [ "$total" -ge $((socs - lost)) ] ||
-    fail "only $total OPERATIONAL PRes on the wire for $socs SoCs in the same window and $lost lost"
+  polled=$socs
+  [ "$mux" -gt 1 ] && polled=$((socs / mux))
+  [ "$total" -ge $((polled - lost)) ] ||
+    fail "only $total OPERATIONAL PRes on the wire for $socs SoCs ($polled polling node 1) in the same window and $lost lost"
+  if [ "$mux" -gt 1 ]; then
+    # Polled only every n-th cycle: at most one PRes per n SoCs (+1 at the window's edges).
+    [ "$total" -le $((socs / mux + 1)) ] ||
+      fail "$total PRes of node 1 for $socs SoCs: not polled every ${mux}th cycle only"
+  fi
 fi
 tshark -r "$tmp/cn_frames.pcapng" -Y "_ws.malformed || _ws.expert.severity >= 0x00600000" \
     -T fields -e frame.number -e epl.src -e epl.mtyp -e _ws.expert.message >"$tmp/expert.txt" 2>/dev/null
 [ -s "$tmp/expert.txt" ] && { head "$tmp/expert.txt"; fail "Wireshark finds malformed CN frames or expert errors"; }
 pass "on the wire: $total PRes of node 1 since its first OPERATIONAL one for $socs SoCs, $other in another state; longest CN silence $gap_ms ms; Wireshark clean"
+if [ "$prc" = 1 ]; then
+  n=$(node1 "$(status)")
+  [ "$(jq -r .prc.configured <<<"$n")" = true ] && [ "$(jq -r .prc.fallback <<<"$n")" = true ] &&
+    [ "$(jq -r .prc.active <<<"$n")" = false ] || fail "PRC fall-back not reported: $(jq -c .prc <<<"$n")"
+  grep -q "node 1: configured for PollResponse Chaining but its IdentResponse has no PRC feature flag" \
+    "$tmp/daemon.log" || fail "the daemon's log does not say the PRC fall-back"
+  pres_mn=$(tshark -r "$tmp/mn_frames.pcapng" -Y "epl.src == 240 && epl.mtyp == 4" 2>/dev/null | wc -l)
+  [ "$pres_mn" = 0 ] || fail "$pres_mn PResMN sent though no node chains"
+  pass "PRC fall-back: $(jq -c .prc <<<"$n"), said in the log, polled with PReq/PRes, no PResMN"
+fi
 echo "PASS"

@@ -77,8 +77,8 @@ class Wire final : public pl::Link {
 
 struct NodeSpec {
   uint8_t id;
-  bool prc;          // configured for PRC at the MN
-  bool capable;      // the CN advertises the PRC feature
+  bool prc;      // configured for PRC at the MN
+  bool capable;  // the CN advertises the PRC feature
 };
 
 struct Setup {

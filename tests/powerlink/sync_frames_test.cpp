@@ -1,5 +1,7 @@
 // PollResponse Chaining frames: SyncRequest (SoA service 6) and SyncResponse (ASnd service 6),
 // byte for byte, truncation, randomized round trips, and Wireshark's decoding of both.
+#include "powerlink/sync_frames.hpp"
+
 #include <unistd.h>
 
 #include <catch2/catch.hpp>
@@ -8,7 +10,6 @@
 #include <vector>
 
 #include "pcap_util.hpp"
-#include "powerlink/sync_frames.hpp"
 
 namespace pl = ds1928::powerlink;
 

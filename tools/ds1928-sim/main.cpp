@@ -314,9 +314,10 @@ int run_powerlink(const PowerlinkOptions& o) {
         static_cast<unsigned long long>(s.loss_of_preq), static_cast<unsigned long long>(s.resets),
         static_cast<unsigned long long>(s.bad_frames),
         static_cast<unsigned long long>(s.short_frames),
-        static_cast<unsigned long long>(s.sync_requests), static_cast<unsigned long long>(s.pres_mn),
-        n->prc_mode() ? "yes" : "no", static_cast<unsigned long long>(s.prc_fallbacks),
-        n->pres_time_first_ns(), std::string(pl::to_string(n->nmt_state())).c_str());
+        static_cast<unsigned long long>(s.sync_requests),
+        static_cast<unsigned long long>(s.pres_mn), n->prc_mode() ? "yes" : "no",
+        static_cast<unsigned long long>(s.prc_fallbacks), n->pres_time_first_ns(),
+        std::string(pl::to_string(n->nmt_state())).c_str());
   }
   return 0;
 }
