@@ -130,6 +130,9 @@ read -r preq1 syncreq syncres socs pres_mn pres1 < <(python3 - "$tmp/frames.txt"
 import sys
 rows = [l.rstrip("\n").split("\t") for l in open(sys.argv[1])]
 rows = [r + [""] * (7 - len(r)) for r in rows if len(r) >= 3 and r[1]]
+# tshark prints some fields in hex (0x06): numbers compared as numbers.
+num = lambda v: str(int(v, 0)) if v else ""
+rows = [[r[0]] + [num(v) for v in r[1:7]] for r in rows]
 hold = float(sys.argv[2])
 preq1 = sum(1 for r in rows if r[1] == "3" and r[3] == "1")
 syncreq = sum(1 for r in rows if r[1] == "5" and r[4] == "6" and r[5] == "1")
