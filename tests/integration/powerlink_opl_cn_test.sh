@@ -72,6 +72,18 @@ cpu_line=""
 # 200 µs of the demo's CDC would count its late answers as lost PRes and reset it in bursts. What a
 # user sets for such a CN: half the cycle at 1 ms, 1 ms at 10 ms (PRES_TIMEOUT_US overrides).
 pres_timeout_us=${PRES_TIMEOUT_US:-$((period_us >= 10000 ? 1000 : period_us / 2))}
+# Multiplexed: the CN is told its multiplexed cycle (NMT_CycleTiming.MultiplCycleCnt 0x1F98/7),
+# and its loss-of-PReq threshold (DLL_CNLossPReq 0x1C0D/3) is switched off: openPOWERLINK's CN
+# counts its own multiplexed cycle from an arbitrary start (it ignores the SoC's MC flag:
+# "$$$ check multiplexed cycle restart" in dllkstatemachine.c) and expects its PReq in its own
+# cycle 0, and it never decrements that counter (errhndk.c decrementCnCounters()), so a CN polled
+# in another slot would count a lost PReq every multiplexed cycle until its threshold.
+mux_writes=""
+if [ "$mux" -gt 1 ]; then
+  mux_writes="      sdo_writes:
+        - {index: 0x1F98, subindex: 7, u8: $mux}
+        - {index: 0x1C0D, subindex: 3, u32: 0}"
+fi
 cat >"$tmp/opl.yaml" <<YAML
 bus: powerlink
 cycle:
@@ -85,6 +97,7 @@ powerlink:
       pres_timeout_us: $pres_timeout_us
       prc: $([ "$prc" = 1 ] && echo true || echo false)
       multiplex: $mux
+$mux_writes
 shm:
   name: /ds1928d_plo_$tag
 socket:
@@ -154,9 +167,15 @@ summary="PRes lost $lost (late $(jq .late_pres.events <<<"$n"), stale dropped $(
 kill -INT "$tshark_pid" "$tshark_cn_pid"
 wait "$tshark_pid" "$tshark_cn_pid" 2>/dev/null
 tshark() { command tshark --disable-protocol opensafety "$@"; }
-tshark -r "$tmp/cn_frames.pcapng" -Y "(epl.src == 1 && epl.mtyp == 4) || epl.mtyp == 1" -T fields \
-    -e frame.time_epoch -e epl.mtyp -e epl.pres.stat >"$tmp/pres.txt" 2>"$tmp/tshark_read.log" ||
-  fail "tshark could not read the capture"
+# The CN's PRes as the MN's end got them, the MN's SoCs as the CN's end got them (a sender's own
+# frames do not show at its end); one clock, merged by time.
+{
+  tshark -r "$tmp/cn_frames.pcapng" -Y "epl.src == 1 && epl.mtyp == 4" -T fields \
+      -e frame.time_epoch -e epl.mtyp -e epl.pres.stat 2>"$tmp/tshark_read.log" ||
+    fail "tshark could not read the capture at the MN's end"
+  tshark -r "$tmp/mn_frames.pcapng" -Y "epl.mtyp == 1" -T fields -e frame.time_epoch -e epl.mtyp \
+      2>>"$tmp/tshark_read.log" || fail "tshark could not read the capture at the CN's end"
+} | sort -n -k1,1 >"$tmp/pres.txt"
 # From node 1's first OPERATIONAL PRes on: how many PRes, how many in another NMT state, the
 # longest silence of the CN between two OPERATIONAL PRes (ms) — the CN's host stalled; a silence
 # that spans a reset (the CN re-booting) is not one — and the SoCs in the same window: those after
