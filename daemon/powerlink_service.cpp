@@ -96,6 +96,16 @@ void PowerlinkService::status_extra(nlohmann::json& j) const {
                      {"boots", n.boots},
                      {"resets", n.resets},
                      {"sdo_errors", n.sdo_errors},
+                     {"prc",
+                      {{"configured", n.prc_configured},
+                       {"active", n.prc},
+                       {"fallback", n.prc_fallback},
+                       {"pres_time_ns", n.prc_pres_time_ns},
+                       {"predecessor", n.prc_predecessor},
+                       {"sync_delay_ns", n.prc_sync_delay_ns},
+                       {"propagation_ns", n.prc_propagation_ns},
+                       {"latency_ns", n.prc_latency_ns},
+                       {"sync_responses", n.sync_responses}}},
                      {"nmt_requests", n.nmt_requests},
                      {"nmt_requests_refused", n.nmt_requests_refused},
                      {"last_error", n.last_error ? n.last_error.message() : std::string()},
@@ -147,6 +157,13 @@ void PowerlinkService::watch(std::vector<BusEvent>& events, bool first,
                                "follow ER within {} StatusRequests); the node runs without it, "
                                "EN toggles are still fetched",
                                n.node, powerlink::MnErrorSignalling::kMaxAttempts)});
+      }
+      if (n.prc_fallback && !seen.prc_fallback_said) {
+        seen.prc_fallback_said = true;
+        events.push_back({true, fmt::format("powerlink node {}: configured for PollResponse "
+                                            "Chaining but its IdentResponse has no PRC feature "
+                                            "flag: polled with PReq/PRes instead",
+                                            n.node)});
       }
       if (n.resets > seen.resets) {
         std::string reason =

@@ -33,6 +33,7 @@ class PowerlinkService final : public BusService {
     uint32_t object_failures = 0;
     uint32_t error_entries = 0;        // CnStatus::status_error_entries said
     bool errsig_gave_up_said = false;  // "no error signalling" is said once per node
+    bool prc_fallback_said = false;    // "polled with PReq/PRes instead of PRC", once per node
     SaidCounter late_pres;
     SaidCounter nmt_refused;
   };

@@ -241,6 +241,11 @@ void apply_mn_cdc(Section& n, PowerlinkNodeConfig& node, std::span<const powerli
     if (!v || *v == 0) return std::nullopt;  // 0: "do not check" in the MN's lists
     return static_cast<uint32_t>(*v);
   };
+  // NMT_NodeAssignment (0x1F81/node) bit 14: PollResponse Chaining (the YAML's prc wins).
+  if (!n.has("prc"))
+    if (const auto* e = find_cdc_entry(mn, powerlink::kObjNodeAssignment, id);
+        e && e->as_unsigned())
+      node.prc = (*e->as_unsigned() & powerlink::kNodeAssignmentPrc) != 0;
   if (!node.device_type) node.device_type = value(0x1F84);
   if (!node.vendor_id) node.vendor_id = value(0x1F85);
   if (!node.product_code) node.product_code = value(0x1F86);
@@ -291,6 +296,7 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
     n.optional_integer("loss_of_pres_threshold", node.loss_of_pres_threshold, 0, kU32);
     n.boolean("mandatory", node.mandatory);
     n.integer("multiplex", node.multiplex, 0, 255, "(0 = every cycle)");
+    n.boolean("prc", node.prc);
     n.optional_integer("preq_size", node.preq_size, 0, 1490);
     n.optional_integer("pres_size", node.pres_size, 0, 1490);
     for (auto& w : n.list("sdo_writes"))
@@ -309,6 +315,11 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
       } else {
         *size = from;
       }
+    }
+    if (node.prc && node.multiplex > 1) {
+      n.error("multiplex",
+              "a PollResponse Chaining node (prc) answers the PResMN every cycle: "
+              "PRC has no multiplexed slots; remove multiplex or prc");
     }
     if (have_id) {
       if (const auto prev = sites.nodes.find(node.node_id); prev != sites.nodes.end()) {
@@ -338,6 +349,11 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
   s.integer("async_slot_timeout_us", p.async_timeout_us, 1, 100000, "µs");
   s.integer("async_timeout_us", p.async_timeout_us, 1, 100000, "µs");
   s.integer("wait_soc_preq_us", p.wait_soc_preq_us, 0, 100000, "µs");
+  // PResMN payload: the key, else the MN's CDC (NMT_CycleTiming_REC.PResActPayloadLimit_U16).
+  if (!s.has("pres_mn_size") && !mn_cdc.empty())
+    if (const auto* e = powerlink::find_cdc_entry(mn_cdc, 0x1F98, 5); e && e->as_unsigned())
+      p.pres_mn_size = static_cast<uint16_t>(std::min<uint64_t>(*e->as_unsigned(), 1490));
+  s.integer("pres_mn_size", p.pres_mn_size, 0, 1490, "bytes");
   s.choice("rx_wait", p.rx_wait,
            {{"block", RxWait::Block}, {"spin", RxWait::Spin}, {"busy_poll", RxWait::BusyPoll}});
   s.integer("rx_spin_us", p.rx_spin_us, 0, 100000, "µs");
@@ -359,6 +375,7 @@ static void check_cycle_budget(Diagnostics& diag, const DaemonConfig& c,
     b.node_id = n.node_id;
     b.pres_timeout_us = n.pres_timeout_us;
     b.multiplex = n.multiplex;
+    b.prc = n.prc;
     std::size_t preq = 0, pres = 0;
     for (const AxisConfig& a : c.axes) {
       if (a.node != n.node_id) continue;
@@ -369,18 +386,20 @@ static void check_cycle_budget(Diagnostics& diag, const DaemonConfig& c,
     b.pres_payload = n.pres_size.value_or(static_cast<uint16_t>(std::min<std::size_t>(pres, 1490)));
     nodes.push_back(b);
   }
-  const powerlink::CycleBudget b =
-      powerlink::cycle_budget(nodes, c.powerlink.wait_soc_preq_us, c.powerlink.async_timeout_us);
+  const powerlink::CycleBudget b = powerlink::cycle_budget(
+      nodes, c.powerlink.wait_soc_preq_us, c.powerlink.async_timeout_us, c.powerlink.pres_mn_size);
   const double period = c.cycle.period_us;
   if (b.total_us() <= period) return;
   char text[512];
   std::snprintf(text, sizeof text,
                 "the POWERLINK cycle does not fit cycle.period_us %u: its worst case on the wire "
-                "takes %.1f us, %.1f us more (SoC %.1f, WaitSoCPReq %.1f, %zu PReq/PRes with their "
-                "PRes timeouts %.1f, SoA + async slot timeout + longest ASnd %.1f); lengthen the "
-                "period or shorten pres_timeout_us / async_slot_timeout_us",
+                "takes %.1f us, %.1f us more (SoC %.1f, WaitSoCPReq %.1f, PRC slot of %zu node(s) "
+                "%.1f, %zu PReq/PRes with their PRes timeouts %.1f, SoA + async slot timeout + "
+                "longest ASnd %.1f); lengthen the period or shorten pres_timeout_us / "
+                "async_slot_timeout_us",
                 c.cycle.period_us, b.total_us(), b.total_us() - period, b.soc_us,
-                b.wait_soc_preq_us, b.polled_in_worst_cycle, b.isochronous_us, b.async_us);
+                b.wait_soc_preq_us, b.prc_nodes, b.prc_us, b.polled_in_worst_cycle,
+                b.isochronous_us, b.async_us);
   diag.error(sites.async_timeout_at, "powerlink", text);
 }
 
@@ -441,6 +460,7 @@ void dump_powerlink(std::ostream& o, const PowerlinkBusConfig& p) {
       << "      mandatory: " << yes(n.mandatory) << "\n"
       << "      loss_of_pres_threshold: " << opt_dec(n.loss_of_pres_threshold) << "\n"
       << "      multiplex: " << n.multiplex << "\n"
+      << "      prc: " << yes(n.prc) << "\n"
       << "      preq_size: " << opt_dec(n.preq_size) << "\n"
       << "      pres_size: " << opt_dec(n.pres_size) << "\n";
     // The YAML writes as items; the concise DCF's objects (loaded again from `cdc` when this is
@@ -471,6 +491,7 @@ void dump_powerlink(std::ostream& o, const PowerlinkBusConfig& p) {
     << "    status_request_every: " << p.nmt.status_request_every << "\n"
     << "  async_slot_timeout_us: " << p.async_timeout_us << "\n"
     << "  wait_soc_preq_us: " << p.wait_soc_preq_us << "\n"
+    << "  pres_mn_size: " << p.pres_mn_size << "\n"
     << "  rx_wait: "
     << (p.rx_wait == RxWait::Block  ? "block"
         : p.rx_wait == RxWait::Spin ? "spin"

@@ -16,7 +16,10 @@
 namespace ds1928::powerlink {
 
 inline constexpr uint16_t kObjConciseDcfList = 0x1F22;  // per-node concise DCF (domain)
-inline constexpr std::size_t kCdcEntryHeaderSize = 7;   // index, subindex, size
+// NMT_NodeAssignment (0x1F81/node) bit 14: the node is polled by PollResponse Chaining.
+inline constexpr uint16_t kObjNodeAssignment = 0x1F81;
+inline constexpr uint32_t kNodeAssignmentPrc = 0x00004000;
+inline constexpr std::size_t kCdcEntryHeaderSize = 7;  // index, subindex, size
 
 struct CdcEntry {
   uint16_t index = 0;

@@ -1,7 +1,10 @@
 // Does a POWERLINK cycle fit its period? The worst case on the wire at 100 Mbit/s (seed 001):
 // SoC, WaitSoCPReq, then per polled CN its PReq, PResTimeout and PRes, then SoA and the
 // asynchronous slot (AsyncSlotTimeout plus the longest ASnd). Multiplexed CNs count in the
-// cycles that poll them (slot = node % multiplex); the worst cycle is what must fit.
+// cycles that poll them (slot = node % multiplex); the worst cycle is what must fit. PRC nodes
+// (PollResponse Chaining) take the PRC slot instead: the PResMN, each PRC node's PRes with an
+// inter-frame gap before it (the propagation delay the MN assigns, at least that), and the
+// longest PRes timeout among them (how long the MN waits past the last PRes time).
 // Header-only and pure: the configuration check and the benchmarks use it.
 #pragma once
 
@@ -25,23 +28,35 @@ struct BudgetNode {
   uint16_t pres_payload = 0;
   uint32_t pres_timeout_us = 0;
   uint32_t multiplex = 0;  // 0/1 = every cycle
+  bool prc = false;        // PollResponse Chaining: in the PRC slot, not polled with PReq
 };
 
 struct CycleBudget {
   double soc_us = 0;
   double wait_soc_preq_us = 0;
+  double prc_us = 0;  // PResMN + the PRC nodes' PRes + their longest PRes timeout (0: no PRC)
+  std::size_t prc_nodes = 0;
   double isochronous_us = 0;  // PReq + PResTimeout + PRes of the CNs of the worst cycle
   std::size_t polled_in_worst_cycle = 0;
   double async_us = 0;  // SoA + AsyncSlotTimeout + longest ASnd (1514 bytes)
   [[nodiscard]] double total_us() const noexcept {
-    return soc_us + wait_soc_preq_us + isochronous_us + async_us;
+    return soc_us + wait_soc_preq_us + prc_us + isochronous_us + async_us;
   }
 };
 
 [[nodiscard]] inline CycleBudget cycle_budget(std::span<const BudgetNode> nodes,
                                               uint32_t wait_soc_preq_us,
-                                              uint32_t async_slot_timeout_us) noexcept {
+                                              uint32_t async_slot_timeout_us,
+                                              uint16_t pres_mn_payload = 36) noexcept {
   CycleBudget b;
+  uint32_t prc_timeout_us = 0;
+  for (const BudgetNode& n : nodes) {
+    if (!n.prc) continue;
+    b.prc_us += wire_time_us(24u + n.pres_payload) + 0.96;  // PRes + inter-frame gap
+    prc_timeout_us = std::max(prc_timeout_us, n.pres_timeout_us);
+    ++b.prc_nodes;
+  }
+  if (b.prc_nodes > 0) b.prc_us += wire_time_us(24u + pres_mn_payload) + prc_timeout_us;
   b.soc_us = wire_time_us(36);
   b.wait_soc_preq_us = wait_soc_preq_us;
   b.async_us = wire_time_us(23) + async_slot_timeout_us + wire_time_us(1514);
@@ -54,6 +69,7 @@ struct CycleBudget {
     double iso = 0;
     std::size_t polled = 0;
     for (const BudgetNode& n : nodes) {
+      if (n.prc) continue;
       if (n.multiplex > 1 && cycle % n.multiplex != n.node_id % n.multiplex) continue;
       iso += wire_time_us(24u + n.preq_payload) + n.pres_timeout_us +
              wire_time_us(24u + n.pres_payload);

@@ -50,6 +50,10 @@ class FrameCategory final : public std::error_category {
         return "StatusResponse truncated: it needs 32 bytes up to its static error field";
       case FrameError::kSdoTruncated:
         return "SDO truncated: sequence layer missing or command layer header incomplete";
+      case FrameError::kSyncRequestTruncated:
+        return "SyncRequest truncated: its fields need 54 bytes (to DestMacAddress)";
+      case FrameError::kSyncResponseTruncated:
+        return "SyncResponse truncated: its fields need 44 bytes (to PResTimeSecond)";
     }
     return "unknown frame error";
   }
@@ -117,6 +121,11 @@ class MnCategory final : public std::error_category {
       case MnError::kIdentityCheckFailed:
         return "identity check failed (0x1000/0x1018 differ from the configuration or cannot be "
                "read)";
+      case MnError::kPrcNotSupported:
+        return "node does not support PollResponse Chaining (no PRC feature flag): polled with "
+               "PReq/PRes";
+      case MnError::kPrcSyncFailed:
+        return "PollResponse Chaining set-up failed (no or wrong SyncResponse)";
     }
     return "unknown MN error";
   }

@@ -36,6 +36,8 @@ enum class FrameError : int {
   kIdentResponseTruncated,   // IdentResponse shorter than 176 bytes
   kStatusResponseTruncated,  // StatusResponse shorter than 32 bytes (up to the static error field)
   kSdoTruncated,             // SDO without its sequence layer, or a partial command header
+  kSyncRequestTruncated,     // SyncRequest (SoA, service 6) shorter than 54 bytes (to DestMac)
+  kSyncResponseTruncated,    // SyncResponse shorter than 44 bytes (to PResTimeSecond)
 };
 
 // SDO transfer outcome not expressed by an abort code from the peer.
@@ -68,6 +70,10 @@ enum class MnError : int {
   kNmtRequestRefused,          // an NMTRequest this MN does not serve (see docs/powerlink.md)
   kIdentityCheckFailed,  // reset reason: 0x1000/0x1018 read by SDO differs from the configuration
                          // or cannot be read
+  kPrcNotSupported,      // a CN configured for PollResponse Chaining lacks the PRC feature flag:
+                         // polled with PReq/PRes instead
+  kPrcSyncFailed,        // reset reason: PRC set-up (SyncRequest/SyncResponse) failed twice, or
+                         // the CN reports another PRes time than assigned
 };
 
 [[nodiscard]] const std::error_category& frame_category() noexcept;

@@ -93,6 +93,7 @@ ManagingNode::ManagingNode(const MnConfig& config)
     : config_(config), mapping_(config.bus.sdo_overrides) {
   status_view_.reserve(config_.bus.nodes.size());
   iso_list_.resize(config_.bus.nodes.size());
+  prc_list_.resize(config_.bus.nodes.size());
   for (const PowerlinkNodeConfig& nc : config_.bus.nodes) {
     if (nc.node_id < 1 || nc.node_id > kNodeMaxCn)
       throw std::system_error(make_error_code(MnError::kNodeNotConfigured), "node id");
@@ -117,6 +118,7 @@ ManagingNode::ManagingNode(const MnConfig& config)
     cn->st = &status_view_.back();
     cn->st->node = nc.node_id;
     cn->st->loss_of_pres_threshold = cn->loss_threshold;
+    cn->st->prc_configured = nc.prc;
     std::vector<ModuleSpec> specs;
     for (const AxisConfig& a : config_.axes) {
       if (a.node != nc.node_id) continue;
@@ -253,6 +255,9 @@ void ManagingNode::queue_nmt(Cn& cn, NmtCommandId command) noexcept {
 void ManagingNode::on_enter_identify(Cn& cn) noexcept {
   cn.st->in_isochronous = false;
   cn.st->identified = false;
+  cn.st->prc = false;
+  cn.prc_step = PrcStep::kOff;
+  cn.prc_wait = false;
 }
 void ManagingNode::on_state_identify(Cn&, NmtState) noexcept {}
 
@@ -269,7 +274,11 @@ void ManagingNode::on_state_wait_preop2(Cn& cn, NmtState s) noexcept {
 }
 
 void ManagingNode::on_enter_configure(Cn& cn) noexcept {
-  cn.st->in_isochronous = true;
+  // A PRC node joins the isochronous phase by its SyncRequests (managing_node_prc.cpp).
+  cn.st->in_isochronous = !uses_prc(cn);
+  cn.prc_step = uses_prc(cn) ? PrcStep::kMeasurePredecessor : PrcStep::kOff;
+  cn.prc_failures = 0;
+  cn.prc_wait = false;
   cn.object_next = 0;
   cn.st->last_failure_count = 0;
   cn.boot_next = 0;
@@ -303,7 +312,9 @@ void ManagingNode::on_state_wait_operational(Cn& cn, NmtState s) noexcept {
 
 void ManagingNode::on_enter_operational(Cn& cn) noexcept {
   ++cn.st->boots;
-  cn.st->last_error = {};
+  // A PRC fall-back stays said while it lasts (the node runs, but not as configured).
+  cn.st->last_error =
+      cn.st->prc_fallback ? make_error_code(MnError::kPrcNotSupported) : std::error_code{};
 }
 void ManagingNode::on_state_operational(Cn& cn, NmtState s) noexcept {
   // A CN that falls back (power-cycle, own error) is booted again from the start.
@@ -313,6 +324,9 @@ void ManagingNode::on_state_operational(Cn& cn, NmtState s) noexcept {
 void ManagingNode::on_enter_reset(Cn& cn) noexcept {
   cn.st->in_isochronous = false;
   cn.st->identified = false;
+  cn.st->prc = false;
+  cn.prc_step = PrcStep::kOff;
+  cn.prc_wait = false;
   ++cn.st->resets;
   cn.outbox_count = 0;
   cn.configuring = false;
@@ -352,7 +366,9 @@ void ManagingNode::begin_cycle(int64_t now_ns) noexcept {
   soa_target_ = 0;
   awaiting_asnd_ = false;
   mn_asnd_from_ = nullptr;
+  prc_sync_from_ = nullptr;
   iso_count_ = 0;
+  prc_count_ = 0;
   // SoC MC: toggled when the last cycle of a multiplexed cycle has ended (EPSG DS 301), so a CN
   // can tell where the multiplexed cycle starts.
   if (mux_cycle_len_ > 1 && counters_.cycles > 0 && counters_.cycles % mux_cycle_len_ == 0)
@@ -360,10 +376,15 @@ void ManagingNode::begin_cycle(int64_t now_ns) noexcept {
   for (auto& cn : cns_) {
     cn->polled = cn->pres_seen = cn->pres_usable = cn->timed_out = cn->late = false;
     if (!full_cycle() || !cn->st->in_isochronous) continue;
+    if (cn->st->prc) {
+      prc_list_[prc_count_++] = cn->cfg.node_id;
+      continue;
+    }
     const uint32_t mux = cn->cfg.multiplex;
     if (mux > 1 && counters_.cycles % mux != cn->cfg.node_id % mux) continue;
     iso_list_[iso_count_++] = cn->cfg.node_id;
   }
+  update_prc_slot();
 }
 
 void ManagingNode::stamp_soc(int64_t send_ns, NetTime net_time) noexcept {
@@ -411,6 +432,11 @@ std::span<const uint8_t> ManagingNode::pres_payload(uint8_t node) const noexcept
 bool ManagingNode::pres_fresh(uint8_t node) const noexcept {
   const Cn* cn = find(node);
   return cn && cn->pres_usable;
+}
+
+bool ManagingNode::pres_seen(uint8_t node) const noexcept {
+  const Cn* cn = find(node);
+  return cn && cn->pres_seen;
 }
 
 uint32_t ManagingNode::pres_timeout_us(uint8_t node) const noexcept {

@@ -101,6 +101,19 @@ struct CnStatus {
   uint32_t boots = 0;              // times the CN reached OPERATIONAL
   uint32_t resets = 0;             // NMTResetNode sent
   uint32_t sdo_errors = 0;
+  // PollResponse Chaining (docs/powerlink.md §PollResponse Chaining): configured for it, in it
+  // (PRes after the PResMN), polled with PReq/PRes because the CN lacks the PRC feature flag;
+  // the PRes time assigned (ns after the PResMN's end), the SyncDelay the CN measured to its
+  // predecessor, the relative propagation delay used, the CN's latency from its SyncResponse.
+  bool prc_configured = false;
+  bool prc = false;
+  bool prc_fallback = false;
+  uint32_t prc_pres_time_ns = 0;
+  uint8_t prc_predecessor = 0;
+  uint32_t prc_sync_delay_ns = 0;
+  uint32_t prc_propagation_ns = 0;
+  uint32_t prc_latency_ns = 0;
+  uint32_t sync_responses = 0;
   uint32_t nmt_requests = 0;          // NMTRequests received from the CN
   uint32_t nmt_requests_refused = 0;  // ... of them not served
   std::error_code last_error;
@@ -185,6 +198,12 @@ class ManagingNode {
   [[nodiscard]] Result<std::size_t> build_soc(std::span<uint8_t> out) const noexcept;
   // Nodes to poll this cycle (continuous and the multiplexed ones due), in node order.
   [[nodiscard]] std::span<const uint8_t> isochronous_nodes() const noexcept;
+  // PollResponse Chaining: the nodes that answer the PResMN this cycle (none: no PResMN), the
+  // PResMN (marks them polled), and how long after the PResMN is sent their slot ends: the
+  // PResMN's wire time, the last PRes time plus that PRes, and the longest PRes timeout of them.
+  [[nodiscard]] std::span<const uint8_t> prc_nodes() const noexcept;
+  [[nodiscard]] Result<std::size_t> build_pres_mn(std::span<uint8_t> out) noexcept;
+  [[nodiscard]] int64_t prc_slot_ns() const noexcept { return prc_slot_ns_; }
   [[nodiscard]] Result<std::size_t> build_preq(uint8_t node, std::span<uint8_t> out) noexcept;
   [[nodiscard]] uint32_t pres_timeout_us(uint8_t node) const noexcept;
   // The PRes of `node` did not arrive in time.
@@ -205,6 +224,8 @@ class ManagingNode {
   [[nodiscard]] std::span<const uint8_t> pres_payload(uint8_t node) const noexcept;
   // The PRes of `node` arrived in this cycle (with a usable size).
   [[nodiscard]] bool pres_fresh(uint8_t node) const noexcept;
+  // The PRes of `node` arrived in this cycle (whatever its size).
+  [[nodiscard]] bool pres_seen(uint8_t node) const noexcept;
   [[nodiscard]] const NodeImageLayout* layout(uint8_t node) const noexcept;
   // NetTime of this cycle's SoC (RelativeTime µs + offset), µs.
   [[nodiscard]] uint64_t net_time_us() const noexcept;
@@ -249,6 +270,18 @@ class ManagingNode {
   void start_object_op(Cn& cn) noexcept;  // the op at cn.object_next
   void object_done(Cn& cn, std::error_code ec, std::span<const uint8_t> data) noexcept;
   void update_mn_state() noexcept;
+  // PollResponse Chaining set-up (managing_node_prc.cpp).
+  [[nodiscard]] bool uses_prc(const Cn& cn) const noexcept;
+  [[nodiscard]] bool prc_setup_pending(const Cn& cn) const noexcept;
+  [[nodiscard]] bool prc_wants_sync_request(const Cn& cn) const noexcept;
+  [[nodiscard]] Result<std::size_t> build_prc_sync_request(Cn& cn, std::span<uint8_t> out) noexcept;
+  void on_sync_response(Cn& cn, std::span<const uint8_t> data) noexcept;
+  void on_sync_timeout(Cn& cn) noexcept;
+  void prc_failed(Cn& cn) noexcept;
+  [[nodiscard]] const Cn* prc_predecessor(const Cn& cn) const noexcept;
+  [[nodiscard]] uint32_t prc_time_of(const Cn& cn) const noexcept;
+  [[nodiscard]] uint16_t expected_pres_size(const Cn& cn) const noexcept;
+  void update_prc_slot() noexcept;
   [[nodiscard]] int64_t ms(uint32_t v) const noexcept {
     return static_cast<int64_t>(v) * 1'000'000;
   }
@@ -277,6 +310,9 @@ class ManagingNode {
   std::vector<CnStatus> status_view_;
   std::vector<uint8_t> iso_list_;
   std::size_t iso_count_ = 0;
+  std::vector<uint8_t> prc_list_;
+  std::size_t prc_count_ = 0;
+  int64_t prc_slot_ns_ = 0;
   NmtState mn_state_ = NmtState::kPreOperational1;
   int64_t now_ns_ = 0;
   int64_t start_ns_ = -1;
@@ -291,8 +327,9 @@ class ManagingNode {
   RequestedService soa_service_ = RequestedService::kNone;
   uint8_t soa_target_ = 0;
   bool awaiting_asnd_ = false;
-  Cn* mn_asnd_from_ = nullptr;  // whose outbox the MN sends after the SoA
-  std::size_t async_rr_ = 0;    // round-robin position among the CNs
+  Cn* mn_asnd_from_ = nullptr;   // whose outbox the MN sends after the SoA
+  Cn* prc_sync_from_ = nullptr;  // whose PRC set-up this cycle's SyncRequest serves
+  std::size_t async_rr_ = 0;     // round-robin position among the CNs
   std::array<SdoRegisterResult, 64> results_{};
   std::size_t results_head_ = 0;
   std::size_t results_count_ = 0;

@@ -5,6 +5,7 @@
 
 #include "powerlink/managing_node.hpp"
 #include "powerlink/managing_node_cn.hpp"
+#include "powerlink/sync_frames.hpp"
 
 namespace ds1928::powerlink {
 
@@ -38,6 +39,12 @@ Result<std::size_t> ManagingNode::build_soa(std::span<uint8_t> out) noexcept {
           soa_target_ = cn.cfg.node_id;
           return true;
         default:
+          if (prc_wants_sync_request(cn)) {
+            prc_sync_from_ = &cn;  // the SoA is the SyncRequest (build_prc_sync_request)
+            soa_service_ = RequestedService::kSyncRequest;
+            soa_target_ = cn.cfg.node_id;
+            return true;
+          }
           if (cn.st->boot == CnBootState::kIdentify) {
             soa_service_ = RequestedService::kIdentRequest;
           } else if (cn.errsig.status_request_due() && cn.st->boot != CnBootState::kReset) {
@@ -64,6 +71,13 @@ Result<std::size_t> ManagingNode::build_soa(std::span<uint8_t> out) noexcept {
     for (int i = 0; i < 3; ++i)
       if (pick((first + i) % 3)) break;
     async_rr_ = (async_rr_ + 1) % n;
+  }
+  if (soa_service_ == RequestedService::kSyncRequest && prc_sync_from_ != nullptr) {
+    Cn& cn = *prc_sync_from_;
+    prc_sync_from_ = nullptr;
+    auto len = build_prc_sync_request(cn, out);  // may address the CN's predecessor
+    awaiting_asnd_ = true;
+    return len;
   }
   awaiting_asnd_ = soa_service_ != RequestedService::kNone && soa_target_ != kNodeMn;
   SoA soa;
@@ -96,6 +110,9 @@ Result<std::size_t> ManagingNode::build_mn_asnd(std::span<uint8_t> out) noexcept
 }
 
 void ManagingNode::on_async_timeout() noexcept {
+  if (awaiting_asnd_ && soa_service_ == RequestedService::kSyncRequest) {
+    if (Cn* cn = find(soa_target_)) on_sync_timeout(*cn);
+  }
   if (awaiting_asnd_) {
     const bool mandatory = soa_service_ == RequestedService::kIdentRequest ||
                            soa_service_ == RequestedService::kStatusRequest;
@@ -134,6 +151,11 @@ void ManagingNode::handle_asnd(const FrameHeader& h, const Asnd& asnd) noexcept 
       cn->st->pres_size =
           c.pres_size.value_or(ident->poll_in_size ? ident->poll_in_size : cn->layout.pres_size);
       cn->st->preq_size = std::min<uint16_t>(cn->st->preq_size, kMaxIsoPayload);
+      // PRC needs the CN's feature (EPSG DS 302-C): without it the CN is polled with PReq/PRes,
+      // and says so in status (openPOWERLINK's MN handles such a CN as async-only instead).
+      const bool fallback = c.prc && (ident->feature_flags & kFeatureFlagPrc) == 0;
+      if (fallback) cn->st->last_error = make_error_code(MnError::kPrcNotSupported);
+      cn->st->prc_fallback = fallback;
       std::fill(cn->preq.begin(), cn->preq.end(), 0);
       // Error signalling starts afresh: ER=1 until EC=1, then ER=0 until EC=0.
       cn->errsig.restart();
@@ -157,8 +179,10 @@ void ManagingNode::handle_asnd(const FrameHeader& h, const Asnd& asnd) noexcept 
     cn->sdo->receive(*sdo, now_ns_);
   } else if (const auto* request = std::get_if<NmtRequest>(&asnd.body)) {
     handle_nmt_request(*cn, *request);
+  } else if (asnd.service == AsndService::kSyncResponse) {
+    on_sync_response(*cn, std::get<AsndRaw>(asnd.body).data);
   } else {
-    // Services this MN does not use (SyncResponse, manufacturer-specific): accepted, and the
+    // Services this MN does not use (manufacturer-specific): accepted, and the
     // invitation is not repeated until the CN announces a request again.
     cn->rs = 0;
   }

@@ -33,6 +33,15 @@ struct ObjectOp {
   std::size_t data_offset = 0;
   std::size_t data_size = 0;
 };
+// PollResponse Chaining set-up of a CN (managing_node_prc.cpp), one SyncRequest per step.
+enum class PrcStep : uint8_t {
+  kOff,                 // polled with PReq/PRes (or not in the isochronous phase)
+  kMeasurePredecessor,  // SyncRequest to the predecessor: the CN times its SyncResponse
+  kMeasure,             // SyncRequest to the CN: its SyncDelay to the predecessor, its latency
+  kAdd,                 // SyncRequest with PResModeSet and the PRes time
+  kVerify,              // SyncRequest: the CN reports the PRes time it took
+  kActive,
+};
 }  // namespace mn_detail
 using namespace mn_detail;
 
@@ -70,6 +79,10 @@ struct ManagingNode::Cn {
   OpKind op_kind = OpKind::kRegister;
   std::array<uint8_t, 4> op_value{};  // value of a ValueSource other than kData
   MnErrorSignalling errsig;
+  PrcStep prc_step = PrcStep::kOff;
+  bool prc_wait = false;        // SyncRequest sent, SyncResponse awaited
+  uint8_t prc_failures = 0;     // SyncResponses missed or wrong in a row
+  uint8_t prc_measured_to = 0;  // the predecessor the last SyncRequest pair was for
   bool configuring = false;
   std::array<SdoRegisterOp, kOpQueueDepth> ops{};
   std::size_t ops_head = 0;

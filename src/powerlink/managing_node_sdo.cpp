@@ -45,6 +45,8 @@ void ManagingNode::start_next_sdo(Cn& cn) noexcept {
       cn.op_internal = true;
       cn.op_kind = OpKind::kRegister;
     } else if (cn.configuring) {
+      // A PRC node is configured once its chain set-up is done too (managing_node_prc.cpp).
+      if (prc_setup_pending(cn)) return;
       cn.configuring = false;
       enter(cn, CnBootState::kWaitReadyToOperate);
       continue;

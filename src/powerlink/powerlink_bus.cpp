@@ -190,8 +190,10 @@ ExchangeResult PowerlinkBus::exchange(std::span<AxisIo> axes, int64_t cycle_star
     send(mn_.build_soc(tx_));
     // WaitSoCPReq: the CNs get this long to take the SoC before the first PReq; frames that come
     // meanwhile (late ASnds) are served, and the wait is the link's (blocking by default).
-    if (config_.bus.wait_soc_preq_us > 0 && !mn_.isochronous_nodes().empty())
+    if (config_.bus.wait_soc_preq_us > 0 &&
+        (!mn_.isochronous_nodes().empty() || !mn_.prc_nodes().empty()))
       drain(soc_ns + static_cast<int64_t>(config_.bus.wait_soc_preq_us) * 1000);
+    if (!mn_.prc_nodes().empty()) prc_slot(result, n_axes);
   }
   for (uint8_t node : mn_.isochronous_nodes()) {
     const CnStatus* st = mn_.node(node);
@@ -218,15 +220,7 @@ ExchangeResult PowerlinkBus::exchange(std::span<AxisIo> axes, int64_t cycle_star
       }
       (void)mn_.on_frame(std::span<const uint8_t>(rx_.data(), r.length));
       if (st->pres_received != before) {
-        const int64_t t = r.rx_time_ns ? r.rx_time_ns : clock_();
-        for (std::size_t i = 0; i < n_axes; ++i)
-          if (axis_map_[i].node == node) rx_time_[i] = t;
-        if (nr) {
-          pres_latency_[static_cast<std::size_t>(nr - raw_.data())].record(t - preq_ns);
-          nr->pres_fresh = nr->pres_received = true;
-          nr->pres_rx_ns = t;
-          nr->pres_cycle = mn_.counters().cycles;
-        }
+        note_pres(node, r.rx_time_ns ? r.rx_time_ns : clock_(), preq_ns, n_axes);
         break;
       }
     }
@@ -267,6 +261,47 @@ ExchangeResult PowerlinkBus::exchange(std::span<AxisIo> axes, int64_t cycle_star
                std::memory_order_relaxed);
   publish_status();
   return result;
+}
+
+void PowerlinkBus::note_pres(uint8_t node, int64_t t, int64_t sent_ns,
+                             std::size_t n_axes) noexcept {
+  for (std::size_t i = 0; i < n_axes; ++i)
+    if (axis_map_[i].node == node) rx_time_[i] = t;
+  if (NodeRaw* nr = raw(node)) {
+    pres_latency_[static_cast<std::size_t>(nr - raw_.data())].record(t - sent_ns);
+    nr->pres_fresh = nr->pres_received = true;
+    nr->pres_rx_ns = t;
+    nr->pres_cycle = mn_.counters().cycles;
+  }
+}
+
+void PowerlinkBus::prc_slot(ExchangeResult& result, std::size_t n_axes) noexcept {
+  // PollResponse Chaining: one PResMN, then every PRC node's PRes at its own time after it, no
+  // PReq. The slot ends when all came or at its end (the last PRes time, its PRes on the wire and
+  // the longest PRes timeout); a PRes still missing then is lost.
+  const std::span<const uint8_t> nodes = mn_.prc_nodes();
+  drain(0);  // a PRes found now answered an earlier PResMN
+  const int64_t sent_ns = clock_();
+  send(mn_.build_pres_mn(tx_));
+  const int64_t deadline = sent_ns + mn_.prc_slot_ns();
+  std::size_t pending = nodes.size();
+  while (pending > 0) {
+    Received r = link_.receive(rx_, deadline);
+    if (r.length == 0 || r.error) break;
+    const uint8_t src = r.length > 16 ? rx_[16] : 0;
+    const CnStatus* st = mn_.node(src);
+    const uint32_t before = st ? st->pres_received : 0;
+    (void)mn_.on_frame(std::span<const uint8_t>(rx_.data(), r.length));
+    if (st && st->pres_received != before && st->prc) {
+      note_pres(src, r.rx_time_ns ? r.rx_time_ns : clock_(), sent_ns, n_axes);
+      --pending;
+    }
+  }
+  for (uint8_t node : nodes) {
+    if (mn_.pres_seen(node)) continue;
+    mn_.on_pres_timeout(node);
+    ++result.frames_lost;
+  }
 }
 
 void PowerlinkBus::publish_status() noexcept {

@@ -129,6 +129,8 @@ class PowerlinkBus final : public BusDriver {
   void apply_preq_writes() noexcept;
   void send(Result<std::size_t> len) noexcept;
   void drain(int64_t deadline_ns) noexcept;
+  void prc_slot(ExchangeResult& result, std::size_t n_axes) noexcept;
+  void note_pres(uint8_t node, int64_t t, int64_t sent_ns, std::size_t n_axes) noexcept;
   void publish_status() noexcept;
 
   MnConfig config_;

@@ -42,7 +42,11 @@ struct PowerlinkNodeConfig {
   // DLL_MNCNLossPResThreshold (0x1C09/node); unset: powerlink.thresholds.loss_of_pres.
   std::optional<uint32_t> loss_of_pres_threshold;
   bool mandatory = true;
-  uint32_t multiplex = 0;             // 0 = continuous, n = polled every n-th cycle
+  uint32_t multiplex = 0;  // 0 = continuous, n = polled every n-th cycle
+  // PollResponse Chaining (EPSG DS 302-C): the CN sends its PRes at an assigned time after the
+  // MN's PResMN instead of after a PReq (NodeAssignment 0x1F81/node bit 14 of the MN's CDC).
+  // A CN without the PRC feature flag is polled with PReq/PRes instead (reported).
+  bool prc = false;
   std::optional<uint16_t> preq_size;  // default: from IdentResponse PollOutSize / module list
   std::optional<uint16_t> pres_size;  // default: from IdentResponse PollInSize / module list
 };
@@ -91,6 +95,9 @@ struct PowerlinkBusConfig {
   // WaitSoCPReq (0x1F8A/1): pause between the SoC and the first PReq, for CNs that need time to
   // take the SoC (a software CN) before they can answer a PReq.
   uint32_t wait_soc_preq_us = 0;
+  // PResMN payload (NMT_CycleTiming PResActPayloadLimit, 0x1F98/5 of the MN): the MN's PRes after
+  // the SoC when PRC nodes are present; 36 bytes fill the minimum frame.
+  uint16_t pres_mn_size = 36;
   RxWait rx_wait = RxWait::Block;
   uint32_t rx_spin_us = 0;  // Block: poll the ring this long before blocking
   uint32_t sdo_timeout_ms = 500;

@@ -9,6 +9,7 @@
 #include <cstring>
 
 #include "core/sdo_abort.hpp"
+#include "powerlink/sync_frames.hpp"
 #include "sim/sim_error.hpp"
 
 namespace ds1928::sim {
@@ -231,6 +232,10 @@ void PowerlinkCn::reset(pl::NmtCommandId command, int64_t now_ns) noexcept {
   preq_interval_ = 0;
   loss_of_preq_counter_ = 0;
   pres_pending_ = false;
+  leave_prc();
+  sync_prev_node_ = 0;
+  sync_node_number_ = 0;
+  sync_delay_ns_ = 0;
   // EC=1 after every reset: the MN sees the reboot and initialises the signalling again.
   errsig_.reset();
   enter(NmtState::kNotActive, now_ns);
@@ -242,6 +247,7 @@ void PowerlinkCn::power_cycle(int64_t now_ns) noexcept {
   powered_ = false;
   power_on_at_ns_ = now_ns + config_.power_off_ns;
   pres_pending_ = false;
+  leave_prc();
   enter(NmtState::kOff, now_ns);
 }
 
@@ -305,12 +311,24 @@ void PowerlinkCn::receive(std::span<const uint8_t> frame, int64_t now_ns) noexce
   } else if (const auto* soa = std::get_if<pl::SoA>(&f.message)) {
     ++stats_.soa;
     (this->*h.on_soa)(*soa, now_ns);
-  } else if (std::holds_alternative<pl::Asnd>(f.message)) {
+    if (soa->service == pl::RequestedService::kSyncRequest && state_ != NmtState::kNotActive)
+      on_sync_request(frame, now_ns);
+  } else if (const auto* pres = std::get_if<pl::PRes>(&f.message)) {
+    // The PResMN: in PRC mode this node's trigger, in the states that answer a PReq.
+    if (f.header.src_node == pl::kNodeMn && prc_mode_ && h.on_preq == &PowerlinkCn::preq_answer) {
+      (void)pres;
+      on_pres_mn(now_ns);
+    }
+  } else if (const auto* asnd = std::get_if<pl::Asnd>(&f.message)) {
+    if (asnd->service == pl::AsndService::kSyncResponse && f.header.src_node != config_.node_id) {
+      on_foreign_sync_response(f.header.src_node, now_ns);
+      return;
+    }
     if (f.header.dst_node != config_.node_id && f.header.dst_node != pl::kNodeBroadcast) return;
     if (f.header.src_node != pl::kNodeMn) return;
     on_asnd(f, now_ns);
   }
-  // PRes of other nodes: nothing to consume.
+  // PRes of the other CNs: nothing to consume.
 }
 
 // ---- SoC ----------------------------------------------------------------------------------
@@ -345,7 +363,9 @@ void PowerlinkCn::soc_pre_op1(const pl::Soc& soc, int64_t now_ns) noexcept {
 void PowerlinkCn::soc_cycling(const pl::Soc& soc, int64_t now_ns) noexcept {
   note_soc_timing(soc, now_ns);
   tick_modules(now_ns);
-  // Loss of PReq: polled before (interval learned) but not within that interval this time.
+  check_prc_fallback(now_ns);
+  // Loss of PReq (in PRC mode: of the PResMN): polled before (interval learned) but not within that
+  // interval this time.
   if (loss_of_preq_counter_ > 0) --loss_of_preq_counter_;
   if (preq_interval_ != 0) {
     ++cycles_since_preq_;
@@ -364,13 +384,17 @@ void PowerlinkCn::soc_cycling(const pl::Soc& soc, int64_t now_ns) noexcept {
 
 // ---- PReq / PRes ----------------------------------------------------------------------------
 
-void PowerlinkCn::preq_answer(const pl::PReq& preq, int64_t now_ns) noexcept {
+void PowerlinkCn::note_polled() noexcept {
   if (preq_interval_ == 0 || cycles_since_preq_ == 0) {
     preq_interval_ = std::max<uint32_t>(1, cycles_since_preq_);
   } else {
     preq_interval_ = cycles_since_preq_;
   }
   cycles_since_preq_ = 0;
+}
+
+void PowerlinkCn::preq_answer(const pl::PReq& preq, int64_t now_ns) noexcept {
+  note_polled();
   errsig_.on_preq(preq.exception_acknowledge);
   // Outputs are applied only when the MN says they are valid and the node is operational.
   if (preq.ready && state_ == NmtState::kOperational) {
@@ -396,7 +420,7 @@ int64_t PowerlinkCn::software_response_delay(int64_t now_ns) noexcept {
   return delay;
 }
 
-void PowerlinkCn::send_pres(int64_t now_ns) noexcept {
+void PowerlinkCn::send_pres(int64_t now_ns, int64_t offset_ns) noexcept {
   tick_modules(now_ns);
   const PowerlinkCnFaults& faults = config_.faults;
   if (faults.drop_pres > 0.0 && uniform_(rng_) < faults.drop_pres) {
@@ -425,11 +449,11 @@ void PowerlinkCn::send_pres(int64_t now_ns) noexcept {
   pres.payload = std::span<const uint8_t>(payload.data(), size);
   auto len = pl::build_pres(tx_, pl::pres_header(config_.mac, config_.node_id), pres);
   if (!len) return;
-  int64_t due = now_ns + software_response_delay(now_ns);
+  int64_t due = now_ns + offset_ns + software_response_delay(now_ns);
   if (faults.delay_pres > 0.0 && faults.delay_pres_ns > 0 && uniform_(rng_) < faults.delay_pres)
     due += faults.delay_pres_ns;
   if (due > now_ns) {
-    ++stats_.pres_delayed;
+    if (due - offset_ns > now_ns) ++stats_.pres_delayed;
     std::memcpy(pres_frame_.data(), tx_.data(), *len);
     pres_pending_len_ = *len;
     pres_due_ns_ = due;
@@ -550,8 +574,9 @@ void PowerlinkCn::send_ident_response() noexcept {
   ident.serial_no = config_.serial_no;
   ident.verify_conf_date = comm_.configuration_date();
   ident.verify_conf_time = comm_.configuration_time();
-  // Feature flags: SDO by ASnd (bit 2) and NMT Info services (bit 3) — no PDO over SDO, no PRC.
-  ident.feature_flags = (1u << 2) | (1u << 3);
+  // Feature flags: SDO by ASnd (bit 2) and NMT Info services (bit 3), PRC (bit 18) when
+  // configured — no PDO over SDO.
+  ident.feature_flags = (1u << 2) | (1u << 3) | (config_.prc_capable ? pl::kFeatureFlagPrc : 0u);
   ident.ip_address =
       192u | (168u << 8) | (100u << 16) | (static_cast<uint32_t>(config_.node_id) << 24);
   ident.subnet_mask = 0x00FFFFFF;

@@ -91,6 +91,9 @@ struct PowerlinkCnConfig {
   int64_t power_off_ns = 300'000'000;    // how long a power cycle keeps the node silent
   PowerlinkCnFaults faults;
   PowerlinkCnResponse response;
+  // PollResponse Chaining (EPSG DS 302-C): advertised in the IdentResponse's feature flags; an MN
+  // may then switch the node to PRC with SyncRequests (powerlink_cn_prc.cpp).
+  bool prc_capable = true;
 };
 
 struct PowerlinkCnStats {
@@ -111,6 +114,9 @@ struct PowerlinkCnStats {
   uint64_t errors_raised = 0;  // error entries queued (raise_error, DLL errors)
   uint64_t bad_frames = 0;     // rejected by the codec
   uint64_t short_frames = 0;   // accepted although shorter than 60 bytes (unpadded sender)
+  uint64_t sync_requests = 0;  // SyncRequests to this node (answered with a SyncResponse)
+  uint64_t pres_mn = 0;        // PResMN seen while in PRC mode (each answered with the PRes)
+  uint64_t prc_fallbacks = 0;  // PRC mode left for PReq/PRes: no PResMN within the fallback time
 };
 
 class PowerlinkCn {
@@ -154,6 +160,9 @@ class PowerlinkCn {
   [[nodiscard]] Ds1928Module& module(std::size_t i) noexcept { return *modules_[i].module; }
   // Learned SoC period (0 until two SoCs arrived).
   [[nodiscard]] int64_t cycle_period_ns() const noexcept { return period_ns_; }
+  // PRC: in PRC mode (PRes after the PResMN instead of after a PReq), and the PRes time assigned.
+  [[nodiscard]] bool prc_mode() const noexcept { return prc_mode_; }
+  [[nodiscard]] uint32_t pres_time_first_ns() const noexcept { return pres_time_first_ns_; }
   void set_state_listener(StateListener listener) { listener_ = std::move(listener); }
 
  private:
@@ -187,11 +196,19 @@ class PowerlinkCn {
   void soa_ignore(const powerlink::SoA&, int64_t) noexcept {}
 
   void on_asnd(const powerlink::Frame& frame, int64_t now_ns) noexcept;
+  // PollResponse Chaining (powerlink_cn_prc.cpp).
+  void on_sync_request(std::span<const uint8_t> frame, int64_t now_ns) noexcept;
+  void on_foreign_sync_response(uint8_t src_node, int64_t now_ns) noexcept;
+  void on_pres_mn(int64_t now_ns) noexcept;
+  void check_prc_fallback(int64_t now_ns) noexcept;
+  void leave_prc() noexcept;
+  void note_polled() noexcept;  // a PReq (or, in PRC mode, a PResMN) polled this node
   void on_nmt_command(uint8_t command, int64_t now_ns) noexcept;
   void note_soc_timing(const powerlink::Soc& soc, int64_t now_ns) noexcept;
   void tick_modules(int64_t now_ns) noexcept;
   [[nodiscard]] uint64_t net_time_us_at(int64_t now_ns) const noexcept;
-  void send_pres(int64_t now_ns) noexcept;
+  // `offset_ns`: PRC's PRes time after the PResMN (0: answer a PReq at once).
+  void send_pres(int64_t now_ns, int64_t offset_ns = 0) noexcept;
   void send_ident_response() noexcept;
   void send_status_response() noexcept;
   void queue_async(std::span<const uint8_t> frame) noexcept;
@@ -235,6 +252,16 @@ class PowerlinkCn {
   // Power.
   bool powered_ = true;
   int64_t power_on_at_ns_ = 0;
+  // PollResponse Chaining.
+  bool prc_mode_ = false;
+  uint32_t pres_time_first_ns_ = 0;
+  uint32_t pres_fallback_timeout_ns_ = 0;
+  bool pres_mn_since_soc_ = false;  // a PResMN came since the last SoC
+  int64_t prc_missing_ns_ = 0;      // cycles without a PResMN, in a row
+  uint8_t sync_prev_node_ = 0;      // target of the last SyncRequest to another node ...
+  int64_t sync_prev_ns_ = 0;        // ... and when it arrived
+  uint32_t sync_node_number_ = 0;
+  uint32_t sync_delay_ns_ = 0;
   // Delayed PRes.
   bool pres_pending_ = false;
   int64_t pres_due_ns_ = 0;

@@ -74,7 +74,20 @@ bool PowerlinkCnLoop::run_once() noexcept {
     }
     if (r.length > 14) {
       const std::span<const uint8_t> frame(rx_.data(), r.length);
-      for (PowerlinkCn* n : nodes_) n->receive(frame, now);
+      // The node a SoA invites answers after every other node saw the SoA, as on the wire: the
+      // others time a SyncResponse from the end of its SyncRequest (PollResponse Chaining).
+      const bool soa =
+          r.length > 21 && rx_[12] == 0x88 && rx_[13] == 0xAB && (rx_[14] & 0x7F) == 0x05;
+      const uint8_t invited = soa ? rx_[21] : 0;
+      PowerlinkCn* last = nullptr;
+      for (PowerlinkCn* n : nodes_) {
+        if (invited != 0 && n->node_id() == invited) {
+          last = n;
+          continue;
+        }
+        n->receive(frame, now);
+      }
+      if (last != nullptr) last->receive(frame, now);
       if (rx_[12] == 0x88 && rx_[13] == 0xAB) {
         const uint8_t type = rx_[14] & 0x7F;
         if (type == 0x01) soc_.note(now);

@@ -235,3 +235,58 @@ TEST_CASE("A cycle that does not fit the period is refused, saying by how much",
   INFO(ok.error_report());
   CHECK(ok.errors().empty());
 }
+
+TEST_CASE("PollResponse Chaining: prc per node, from the MN's CDC, and what it cannot be",
+          "[config][powerlink][prc]") {
+  TempDir dir;
+  // The MN's CDC: NodeAssignment of node 1 with the PRC bit (0x4000 | exists 0x1 | CN 0x2),
+  // node 2 without it; PResActPayloadLimit 0x1F98/5 = 40.
+  const std::vector<CdcEntry> mn_cdc = {
+      {0x1F81, 1, le(0x4003, 4)},
+      {0x1F81, 2, le(0x0003, 4)},
+      {0x1F98, 5, le(40, 2)},
+  };
+  dir.write("mnobd.cdc", powerlink::encode_cdc(mn_cdc));
+  const std::string cfg = (dir.path / "ds1928d.yaml").string();
+  const std::string head =
+      "bus: powerlink\npowerlink:\n  interface: eth1\n  cdc: mnobd.cdc\n  nodes:\n";
+  ConfigResult r =
+      from(head + "    - node_id: 1\n    - node_id: 2\n    - {node_id: 3, prc: true}\n", cfg);
+  INFO(r.error_report());
+  REQUIRE(r.ok());
+  CHECK(r.config().powerlink.nodes[0].prc);
+  CHECK_FALSE(r.config().powerlink.nodes[1].prc);
+  CHECK(r.config().powerlink.nodes[2].prc);
+  CHECK(r.config().powerlink.pres_mn_size == 40);
+  // The YAML wins over the CDC.
+  r = from(head + "    - {node_id: 1, prc: false}\n  pres_mn_size: 0\n", cfg);
+  INFO(r.error_report());
+  REQUIRE(r.ok());
+  CHECK_FALSE(r.config().powerlink.nodes[0].prc);
+  CHECK(r.config().powerlink.pres_mn_size == 0);
+  CHECK_THAT(dump_config(r.config()), Catch::Contains("prc: false"));
+  // A PRC node answers every PResMN: no multiplexed slot.
+  CHECK_THAT(one_error("bus: powerlink\npowerlink:\n  interface: eth1\n  nodes:\n"
+                       "    - {node_id: 1, prc: true, multiplex: 2}\n"),
+             Catch::Contains("PRC has no multiplexed slots"));
+}
+
+TEST_CASE("The cycle budget counts PRC nodes in the PRC slot", "[config][powerlink][prc][timing]") {
+  // Two nodes with PRes timeout 200: PReq/PRes needs 663.4 µs (above); in PRC the PResMN and the
+  // two PRes with their gaps share one timeout: 6.72 + 2 × (6.72 + 0.96) + 200 = 222.08, plus SoC
+  // 6.72 and SoA + async 229.76 = 458.56 µs, which fits 500.
+  const ConfigResult ok = from(
+      "bus: powerlink\ncycle: {period_us: 500}\npowerlink:\n  interface: eth1\n  nodes:\n"
+      "    - {node_id: 1, pres_timeout_us: 200, prc: true}\n"
+      "    - {node_id: 2, pres_timeout_us: 200, prc: true}\n");
+  INFO(ok.error_report());
+  CHECK(ok.errors().empty());
+  // Mixed, at 400: PRC slot of node 1 (6.72 + 7.68 + 200) + node 2's PReq/PRes (213.44) no longer
+  // fits; the message names the PRC slot.
+  const std::string e = one_error(
+      "bus: powerlink\ncycle: {period_us: 400}\npowerlink:\n  interface: eth1\n  nodes:\n"
+      "    - {node_id: 1, pres_timeout_us: 200, prc: true}\n"
+      "    - {node_id: 2, pres_timeout_us: 200}\n");
+  CHECK_THAT(e, Catch::Contains("PRC slot of 1 node(s) 214.4"));
+  CHECK_THAT(e, Catch::Contains("1 PReq/PRes"));
+}

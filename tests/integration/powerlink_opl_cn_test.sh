@@ -36,6 +36,11 @@ use_trees "$1" "$2"
 period_us=${3:?period in us}
 placement=${4:?pinned or unpinned}
 hold=${HOLD_SECONDS:-20}
+# PRC=1: node 1 configured for PollResponse Chaining — the demo CN has no PRC on Linux (its
+# IdentResponse lacks the feature flag), so the MN must fall back to PReq/PRes, say so, and hold
+# it. MULTIPLEX=n: node 1 polled every n-th cycle.
+prc=${PRC:-0}
+mux=${MULTIPLEX:-0}
 # The demo pins its threads to CPU 1 (on a 1-CPU machine there is only CPU 0 to share).
 cn_cpu=$(($(nproc) > 1 ? 1 : 0))
 
@@ -67,6 +72,18 @@ cpu_line=""
 # 200 µs of the demo's CDC would count its late answers as lost PRes and reset it in bursts. What a
 # user sets for such a CN: half the cycle at 1 ms, 1 ms at 10 ms (PRES_TIMEOUT_US overrides).
 pres_timeout_us=${PRES_TIMEOUT_US:-$((period_us >= 10000 ? 1000 : period_us / 2))}
+# Multiplexed: the CN is told its multiplexed cycle (NMT_CycleTiming.MultiplCycleCnt 0x1F98/7),
+# and its loss-of-PReq threshold (DLL_CNLossPReq 0x1C0D/3) is switched off: openPOWERLINK's CN
+# counts its own multiplexed cycle from an arbitrary start (it ignores the SoC's MC flag:
+# "$$$ check multiplexed cycle restart" in dllkstatemachine.c) and expects its PReq in its own
+# cycle 0, and it never decrements that counter (errhndk.c decrementCnCounters()), so a CN polled
+# in another slot would count a lost PReq every multiplexed cycle until its threshold.
+mux_writes=""
+if [ "$mux" -gt 1 ]; then
+  mux_writes="      sdo_writes:
+        - {index: 0x1F98, subindex: 7, u8: $mux}
+        - {index: 0x1C0D, subindex: 3, u32: 0}"
+fi
 cat >"$tmp/opl.yaml" <<YAML
 bus: powerlink
 cycle:
@@ -78,6 +95,9 @@ powerlink:
   nodes:
     - node_id: 1
       pres_timeout_us: $pres_timeout_us
+      prc: $([ "$prc" = 1 ] && echo true || echo false)
+      multiplex: $mux
+$mux_writes
 shm:
   name: /ds1928d_plo_$tag
 socket:
@@ -147,24 +167,44 @@ summary="PRes lost $lost (late $(jq .late_pres.events <<<"$n"), stale dropped $(
 kill -INT "$tshark_pid" "$tshark_cn_pid"
 wait "$tshark_pid" "$tshark_cn_pid" 2>/dev/null
 tshark() { command tshark --disable-protocol opensafety "$@"; }
-tshark -r "$tmp/cn_frames.pcapng" -Y "epl.src == 1 && epl.mtyp == 4" -T fields -e frame.time_epoch \
-    -e epl.pres.stat >"$tmp/pres.txt" 2>"$tmp/tshark_read.log" || fail "tshark could not read the capture"
-# From node 1's first OPERATIONAL PRes on: how many PRes, how many in another NMT state, and the
+# The CN's PRes as the MN's end got them, the MN's SoCs as the CN's end got them (a sender's own
+# frames do not show at its end); one clock, merged by time.
+{
+  tshark -r "$tmp/cn_frames.pcapng" -Y "epl.src == 1 && epl.mtyp == 4" -T fields \
+      -e frame.time_epoch -e epl.mtyp -e epl.pres.stat 2>"$tmp/tshark_read.log" ||
+    fail "tshark could not read the capture at the MN's end"
+  tshark -r "$tmp/mn_frames.pcapng" -Y "epl.mtyp == 1" -T fields -e frame.time_epoch -e epl.mtyp \
+      2>>"$tmp/tshark_read.log" || fail "tshark could not read the capture at the CN's end"
+} | sort -n -k1,1 >"$tmp/pres.txt"
+# From node 1's first OPERATIONAL PRes on: how many PRes, how many in another NMT state, the
 # longest silence of the CN between two OPERATIONAL PRes (ms) — the CN's host stalled; a silence
-# that spans a reset (the CN re-booting) is not one.
-read -r total other gap_ms < <(python3 - "$tmp/pres.txt" <<'PY'
+# that spans a reset (the CN re-booting) is not one — and the SoCs in the same window: those after
+# the first OPERATIONAL PRes up to the last PRes of the capture (a SoC after the last PRes may have
+# its PRes cut off by the capture's end). PRes and SoCs are counted over one window of one capture;
+# the daemon's cycle count covers another (status read before the capture stops) and is not
+# compared with them.
+read -r total other gap_ms socs < <(python3 - "$tmp/pres.txt" <<'PY'
 import sys
 seen, total, other, gap, last = False, 0, 0, 0.0, None
+soc_times, last_pres = [], None
 for line in open(sys.argv[1]):
     f = line.split()
     if len(f) < 2:
         continue
-    t, st = float(f[0]), int(f[1], 0)
+    t, mtyp = float(f[0]), int(f[1], 0)
+    if mtyp == 1:
+        if seen:
+            soc_times.append(t)
+        continue
+    if len(f) < 3:
+        continue
+    st = int(f[2], 0)
     if st == 0xFD:
         seen = True
     if not seen:
         continue
     total += 1
+    last_pres = t
     if st != 0xFD:
         other += 1
     if st != 0xFD:
@@ -173,7 +213,8 @@ for line in open(sys.argv[1]):
     if last is not None:
         gap = max(gap, (t - last) * 1000)
     last = t
-print(total, other, int(gap))
+socs = sum(1 for t in soc_times if last_pres is not None and t <= last_pres)
+print(total, other, int(gap), socs)
 PY
 )
 [ "${total:-0}" -gt 0 ] || fail "no OPERATIONAL PRes of node 1 in the capture"
@@ -212,10 +253,30 @@ pass "the demo CN's log: OPERATIONAL entered $entered time(s), left $left time(s
 # Every PRes since the first OPERATIONAL one is OPERATIONAL (the CN never fell back without a reset).
 if [ "$resets" = 0 ]; then
   [ "$other" = 0 ] || fail "$other PRes of node 1 after OPERATIONAL carry another NMT state"
-  [ "$total" -ge $((ran - lost)) ] || fail "only $total OPERATIONAL PRes on the wire for $ran cycles and $lost lost"
+  # Each SoC of the window is answered by a PRes in it unless the MN counted that PRes lost (the
+  # MN's count covers the whole run: it bounds the window's losses from above).
+  polled=$socs
+  [ "$mux" -gt 1 ] && polled=$((socs / mux))
+  [ "$total" -ge $((polled - lost)) ] ||
+    fail "only $total OPERATIONAL PRes on the wire for $socs SoCs ($polled polling node 1) in the same window and $lost lost"
+  if [ "$mux" -gt 1 ]; then
+    # Polled only every n-th cycle: at most one PRes per n SoCs (+1 at the window's edges).
+    [ "$total" -le $((socs / mux + 1)) ] ||
+      fail "$total PRes of node 1 for $socs SoCs: not polled every ${mux}th cycle only"
+  fi
 fi
 tshark -r "$tmp/cn_frames.pcapng" -Y "_ws.malformed || _ws.expert.severity >= 0x00600000" \
     -T fields -e frame.number -e epl.src -e epl.mtyp -e _ws.expert.message >"$tmp/expert.txt" 2>/dev/null
 [ -s "$tmp/expert.txt" ] && { head "$tmp/expert.txt"; fail "Wireshark finds malformed CN frames or expert errors"; }
-pass "on the wire: $total PRes of node 1 since its first OPERATIONAL one, $other in another state; longest CN silence $gap_ms ms; Wireshark clean"
+pass "on the wire: $total PRes of node 1 since its first OPERATIONAL one for $socs SoCs, $other in another state; longest CN silence $gap_ms ms; Wireshark clean"
+if [ "$prc" = 1 ]; then
+  n=$(node1 "$(status)")
+  [ "$(jq -r .prc.configured <<<"$n")" = true ] && [ "$(jq -r .prc.fallback <<<"$n")" = true ] &&
+    [ "$(jq -r .prc.active <<<"$n")" = false ] || fail "PRC fall-back not reported: $(jq -c .prc <<<"$n")"
+  grep -q "node 1: configured for PollResponse Chaining but its IdentResponse has no PRC feature flag" \
+    "$tmp/daemon.log" || fail "the daemon's log does not say the PRC fall-back"
+  pres_mn=$(tshark -r "$tmp/mn_frames.pcapng" -Y "epl.src == 240 && epl.mtyp == 4" 2>/dev/null | wc -l)
+  [ "$pres_mn" = 0 ] || fail "$pres_mn PResMN sent though no node chains"
+  pass "PRC fall-back: $(jq -c .prc <<<"$n"), said in the log, polled with PReq/PRes, no PResMN"
+fi
 echo "PASS"

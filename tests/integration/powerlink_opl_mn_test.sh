@@ -14,13 +14,20 @@
 #     in the MN's log after OPERATIONAL;
 #  3. tshark decodes the capture (MN side of the veth) without a malformed frame or an expert
 #     warning/error.
+# With MODE prc (third argument) the MN's CDC makes node 1 a PollResponse Chaining node
+# (tests/peers/opl_cdc.py --prc-node 1: NodeAssignment bit 14, and the MN's own PRes); then also
+#  4. the MN set node 1 up with SyncRequests (SyncResponses from node 1 in the capture), never
+#     sent it a PReq, and sent a PResMN in every cycle of the hold, each answered by node 1's PRes;
+#     the simulator ends in PRC mode at the time the MN assigned. Hold 60 s by default.
 # The openPOWERLINK archive (../shared/peers) is built once into a cache (tests/peers/
 # openpowerlink.sh); a missing archive FAILS this test, it never passes silently.
-# Usage: powerlink_opl_mn_test.sh BUILD_DIR SOURCE_DIR   (root; 77 = skipped)
+# Usage: powerlink_opl_mn_test.sh BUILD_DIR SOURCE_DIR [plain|prc]   (root; 77 = skipped)
 set -u
 . "${2:?source dir}/tests/lib/netns.sh"
 use_trees "$1" "$2"
-hold=${OPL_MN_HOLD_SECONDS:-20}
+mode=${3:-plain}
+case $mode in plain | prc) ;; *) echo "FAIL: mode must be plain or prc"; exit 1 ;; esac
+if [ "$mode" = prc ]; then hold=${OPL_MN_HOLD_SECONDS:-60}; else hold=${OPL_MN_HOLD_SECONDS:-20}; fi
 boot_limit=40
 
 require_root "network namespaces, veth, raw sockets"
@@ -51,11 +58,18 @@ wait_for "$tmp/tshark_cn.log" "Capturing on" 60 || fail "tshark did not start ca
 # timeout (0x1F8A/2: 500 µs) for an IdentResponse or StatusResponse.
 ip netns exec "$ns_cn" "$sim" powerlink --iface "$if_cn" --node 1 --modules 0 \
   --cpu 0 >"$tmp/sim.log" 2>&1 &
-pids+=($!)
+sim_pid=$!
+pids+=($sim_pid)
 wait_for "$tmp/sim.log" "node 1: 0 module" 10 || fail "ds1928-sim did not start"
 
+cdc=$OPL_MNOBD_CDC
+if [ "$mode" = prc ]; then
+  cdc=$tmp/mnobd_prc.cdc
+  "$src/tests/peers/opl_cdc.py" "$OPL_MNOBD_CDC" "$cdc" --prc-node 1 ||
+    fail "cannot write the demo's concise DCF with node 1 as a PRC node"
+fi
 start=$(date +%s.%N)
-"$src/tests/peers/opl_run.sh" "$ns_mn" -- "$OPL_DEMO_MN" -d "$if_mn" -c "$OPL_MNOBD_CDC" \
+"$src/tests/peers/opl_run.sh" "$ns_mn" -- "$OPL_DEMO_MN" -d "$if_mn" -c "$cdc" \
   >"$tmp/opl_mn.log" 2>&1 &
 mn_pid=$!
 pids+=($mn_pid)
@@ -107,4 +121,39 @@ error_resets=$(grep -c "NMTResetNode (E_" "$tmp/nmt.txt")
 node_errors=$(grep -c "Node=  1, NmtNodeEventError" "$tmp/opl_mn.log")
 echo "whole run: NMT commands to node 1: $(sed 's/.*(NMT_COMMAND) //' "$tmp/nmt.txt" | tr '\n' ';')"
 echo "whole run: resets of node 1 for an error: $error_resets, MN node error events: $node_errors"
+[ "$mode" = prc ] || exit 0
+
+# ---- 4. PollResponse Chaining, as the capture and the simulator show it ----------------------
+tshark -r "$tmp/mn.pcapng" -Y epl -T fields -e frame.time_epoch -e epl.mtyp -e epl.src -e epl.dest \
+  -e epl.soa.svid -e epl.soa.svtg -e epl.asnd.svid >"$tmp/frames.txt" 2>/dev/null
+read -r preq1 syncreq syncres socs pres_mn pres1 < <(python3 - "$tmp/frames.txt" "$hold" <<'PY'
+import sys
+rows = [l.rstrip("\n").split("\t") for l in open(sys.argv[1])]
+rows = [r + [""] * (7 - len(r)) for r in rows if len(r) >= 3 and r[1]]
+# tshark prints some fields in hex (0x06): numbers compared as numbers.
+num = lambda v: str(int(v, 0)) if v else ""
+rows = [[r[0]] + [num(v) for v in r[1:7]] for r in rows]
+hold = float(sys.argv[2])
+preq1 = sum(1 for r in rows if r[1] == "3" and r[3] == "1")
+syncreq = sum(1 for r in rows if r[1] == "5" and r[4] == "6" and r[5] == "1")
+syncres = sum(1 for r in rows if r[1] == "6" and r[6] == "6" and r[2] == "1")
+# The hold: the last `hold` seconds before the capture's last SoA (complete cycles only).
+end = max(float(r[0]) for r in rows if r[1] == "5")
+win = [r for r in rows if end - hold <= float(r[0]) <= end]
+socs = sum(1 for r in win if r[1] == "1")
+pres_mn = sum(1 for r in win if r[1] == "4" and r[2] == "240")
+pres1 = sum(1 for r in win if r[1] == "4" and r[2] == "1")
+print(preq1, syncreq, syncres, socs, pres_mn, pres1)
+PY
+)
+[ "${preq1:-1}" = 0 ] || fail "openPOWERLINK's MN sent $preq1 PReq to the PRC node 1"
+[ "${syncres:-0}" -ge 2 ] || fail "only $syncres SyncResponses of node 1 ($syncreq SyncRequests to it)"
+[ "${socs:-0}" -gt 0 ] && [ $((socs - pres_mn)) -le 1 ] ||
+  fail "$socs SoCs but $pres_mn PResMN in the hold"
+[ $((pres1 + 1)) -ge "$pres_mn" ] || fail "only $pres1 PRes of node 1 for $pres_mn PResMN in the hold"
+kill -TERM "$sim_pid" 2>/dev/null
+wait "$sim_pid" 2>/dev/null
+stats=$(grep "^node 1 stats" "$tmp/sim.log")
+grep -q "prc=yes" <<<"$stats" || fail "ds1928-sim not in PRC mode at the end: $stats"
+pass "PRC: no PReq to node 1, $syncreq SyncRequests / $syncres SyncResponses, in the last $hold s $socs SoCs, $pres_mn PResMN, $pres1 PRes of node 1; sim: $(grep -o 'sync_req=[0-9]* pres_mn=[0-9]* prc=yes prc_fallbacks=[0-9]* pres_time_first_ns=[0-9]*' <<<"$stats")"
 exit 0

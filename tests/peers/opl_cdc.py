@@ -1,13 +1,17 @@
 #!/usr/bin/env python3
-"""Copies openPOWERLINK's demo concise DCF (mnobd.cdc) with another cycle time.
+"""Copies openPOWERLINK's demo concise DCF (mnobd.cdc) with another cycle time (and PRC).
 
-  opl_cdc.py IN.cdc OUT.cdc --cycle-us N [--list]
+  opl_cdc.py IN.cdc OUT.cdc [--cycle-us N] [--prc-node N ...] [--list]
 
 The demo's CDC (openCONFIGURATOR project Demo_3CN) sets NMT_CycleLen_U32 (0x1006) to 50 ms, for
 the MN and, inside each CN's concise DCF (0x1F22/node), for the CNs. Both MNs under test — ds1928d
 (`powerlink.cdc`) and openPOWERLINK's demo MN (`-c`) — boot the demo CN from the same file, so the
 cycle is changed in both places and nothing else; every other entry (mapping, PRes timeouts,
 loss-of-frame tolerance, payload limits) stays as openCONFIGURATOR wrote it.
+--prc-node N makes node N a PollResponse Chaining node for openPOWERLINK's MN (EPSG DS 302-C):
+bit 14 (PRES_CHAINING, 0x4000) in every NMT_NodeAssignment 0x1F81/N of the MN, and an
+assignment 0x1F81/240 = NODE_EXISTS | MN_PRES | VALID (0x80001001) appended, so that the MN sends
+its PResMN (its payload limit 0x1F8D/240 and 0x1F98/5 keep the object dictionary's 36 bytes).
 --list prints the entries (nested ones indented) instead of writing.
 """
 import argparse
@@ -16,9 +20,13 @@ import sys
 
 CYCLE_LEN = 0x1006
 CN_DCF = 0x1F22
+NODE_ASSIGNMENT = 0x1F81
+PRES_CHAINING = 0x4000
+MN_PRES_ASSIGNMENT = 0x80001001  # VALID | MN_PRES | NODE_EXISTS
+MN_NODE = 240
 
 
-def rewrite(data, cycle_us, depth, out_lines):
+def rewrite(data, cycle_us, depth, out_lines, prc_nodes=()):
     if len(data) < 4:
         raise ValueError("concise DCF shorter than its entry count")
     count = struct.unpack_from("<I", data, 0)[0]
@@ -36,11 +44,18 @@ def rewrite(data, cycle_us, depth, out_lines):
             value = rewrite(value, cycle_us, depth + 1, out_lines)
         elif index == CYCLE_LEN and sub == 0 and size == 4 and cycle_us is not None:
             value = struct.pack("<I", cycle_us)
+        elif depth == 0 and index == NODE_ASSIGNMENT and sub in prc_nodes and size == 4:
+            value = struct.pack("<I", struct.unpack("<I", value)[0] | PRES_CHAINING)
         if index != CN_DCF or size < 4:
             out_lines.append("%s%04X/%d = 0x%s" % ("  " * depth, index, sub,
                                                    bytes(reversed(value)).hex() or "-"))
         out += struct.pack("<HBI", index, sub, len(value)) + value
         off += 7 + size
+    if depth == 0 and prc_nodes:
+        value = struct.pack("<I", MN_PRES_ASSIGNMENT)
+        out += struct.pack("<HBI", NODE_ASSIGNMENT, MN_NODE, 4) + value
+        out[0:4] = struct.pack("<I", count + 1)
+        out_lines.append("%04X/%d = 0x%08x" % (NODE_ASSIGNMENT, MN_NODE, MN_PRES_ASSIGNMENT))
     return bytes(out)
 
 
@@ -49,17 +64,18 @@ def main():
     ap.add_argument("input")
     ap.add_argument("output", nargs="?")
     ap.add_argument("--cycle-us", type=int)
+    ap.add_argument("--prc-node", type=int, action="append", default=[])
     ap.add_argument("--list", action="store_true")
     a = ap.parse_args()
     with open(a.input, "rb") as f:
         data = f.read()
     lines = []
-    out = rewrite(data, a.cycle_us, 0, lines)
+    out = rewrite(data, a.cycle_us, 0, lines, tuple(a.prc_node))
     if a.list:
         print("\n".join(lines))
         return 0
-    if not a.output or a.cycle_us is None:
-        ap.error("OUT.cdc and --cycle-us are needed unless --list")
+    if not a.output or (a.cycle_us is None and not a.prc_node):
+        ap.error("OUT.cdc and --cycle-us or --prc-node are needed unless --list")
     with open(a.output, "wb") as f:
         f.write(out)
     return 0

@@ -77,6 +77,7 @@ struct PowerlinkOptions {
   uint32_t guard_us = 80;
   double duration_s = 0.0;
   bool quiet = false;
+  bool no_prc = false;
   // Software response path (--profile software-cn and the --pres-latency-* options).
   std::string profile = "hardware";
   double pres_latency_us = -1;  // -1: from the profile
@@ -206,8 +207,19 @@ int run_powerlink(const PowerlinkOptions& o) {
     cn.response.pres_latency_sigma = o.pres_latency_sigma;
     cn.response.pres_latency_max_ns = static_cast<int64_t>(o.pres_latency_max_us * 1000);
     cn.response.ready_after_soc_ns = static_cast<int64_t>(o.ready_after_soc_us * 1000);
+    cn.prc_capable = !o.no_prc;
+    // The wire shows every node's frames to the others; a socket does not return its own, so a
+    // SyncResponse (which the other nodes time for PollResponse Chaining) is handed to the other
+    // nodes of this process here.
     auto node = std::make_unique<sim::PowerlinkCn>(
-        cn, [&link](std::span<const uint8_t> frame) { (void)link.send(frame); });
+        cn, [&link, &node_ptrs, node_id](std::span<const uint8_t> frame) {
+          (void)link.send(frame);
+          if (frame.size() > 17 && frame[14] == 0x06 && frame[17] == 0x06) {
+            const int64_t now = ds1928::rt::now_ns();
+            for (sim::PowerlinkCn* other : node_ptrs)
+              if (other->node_id() != node_id) other->receive(frame, now);
+          }
+        });
     if (!o.quiet) {
       node->set_state_listener([node_id, start](pl::NmtState from, pl::NmtState to, int64_t t) {
         std::printf("%10.6f node %u: %s -> %s\n",
@@ -292,7 +304,8 @@ int run_powerlink(const PowerlinkOptions& o) {
     std::printf(
         "node %u stats: soc=%llu preq=%llu pres=%llu dropped=%llu delayed=%llu soa=%llu "
         "asnd=%llu nmt=%llu sdo_in=%llu loss_soc=%llu loss_preq=%llu resets=%llu "
-        "bad=%llu short=%llu state=%s\n",
+        "bad=%llu short=%llu sync_req=%llu pres_mn=%llu prc=%s prc_fallbacks=%llu "
+        "pres_time_first_ns=%u state=%s\n",
         n->node_id(), static_cast<unsigned long long>(s.soc),
         static_cast<unsigned long long>(s.preq), static_cast<unsigned long long>(s.pres_sent),
         static_cast<unsigned long long>(s.pres_dropped),
@@ -304,6 +317,9 @@ int run_powerlink(const PowerlinkOptions& o) {
         static_cast<unsigned long long>(s.loss_of_preq), static_cast<unsigned long long>(s.resets),
         static_cast<unsigned long long>(s.bad_frames),
         static_cast<unsigned long long>(s.short_frames),
+        static_cast<unsigned long long>(s.sync_requests),
+        static_cast<unsigned long long>(s.pres_mn), n->prc_mode() ? "yes" : "no",
+        static_cast<unsigned long long>(s.prc_fallbacks), n->pres_time_first_ns(),
         std::string(pl::to_string(n->nmt_state())).c_str());
   }
   return 0;
@@ -348,6 +364,9 @@ int main(int argc, char** argv) {
   plk->add_option("--guard-us", o.guard_us, "start polling this long before the next SoC");
   plk->add_option("--duration", o.duration_s, "stop after S seconds (0: until SIGTERM)");
   plk->add_flag("--quiet", o.quiet, "do not print NMT state changes");
+  plk->add_flag("--no-prc", o.no_prc,
+                "no PollResponse Chaining: the PRC feature flag is not advertised and an MN's "
+                "SyncRequests do not switch the node to PRC");
   plk->add_option("--profile", o.profile,
                   "hardware (PRes at once, polling) | software-cn (blocking responder at FIFO 50, "
                   "PRes latency with a long tail, readiness delay after SoC)")

@@ -1,0 +1,260 @@
+// PollResponse Chaining between the Managing Node (PowerlinkBus) and simulated CNs
+// (sim::PowerlinkCn) in one process, on simulated time: a mixed cycle (PRC nodes first, then
+// PReq/PRes), the SyncRequest set-up, the fall-back of a CN without the PRC feature, and the
+// loss of a PRC CN's PRes (reset, then set up again).
+#include <catch2/catch.hpp>
+#include <deque>
+#include <map>
+#include <vector>
+
+#include "powerlink/link.hpp"
+#include "powerlink/powerlink_bus.hpp"
+#include "powerlink/sync_frames.hpp"
+#include "sim/powerlink_cn.hpp"
+
+namespace pl = ds1928::powerlink;
+namespace sim = ds1928::sim;
+
+namespace {
+
+int64_t g_now_ns = 1'000'000'000;
+int64_t fake_clock() noexcept {
+  return g_now_ns;
+}
+constexpr int64_t kCycleNs = 1'000'000;
+constexpr int64_t kWireNs = 1'000;
+
+// Every frame the MN sends reaches every CN (the invited one last, as PowerlinkCnLoop does);
+// the CNs' frames queue for the MN and reach the other CNs (a SyncResponse is timed by them).
+// receive() runs the CNs' timers up to its deadline, so a PRes due after the PResMN leaves then.
+class Wire final : public pl::Link {
+ public:
+  std::vector<sim::PowerlinkCn*> nodes;
+  std::deque<std::vector<uint8_t>> to_mn;
+  std::map<uint8_t, uint64_t> preq_to;  // PReqs per destination node
+  uint64_t pres_mn = 0;
+
+  std::error_code send(std::span<const uint8_t> frame) noexcept override {
+    g_now_ns += kWireNs;
+    const uint8_t type = frame[14] & 0x7F;
+    if (type == 0x03) ++preq_to[frame[15]];
+    if (type == 0x04 && frame[16] == pl::kNodeMn) ++pres_mn;
+    const uint8_t invited = type == 0x05 ? frame[21] : 0;
+    sim::PowerlinkCn* last = nullptr;
+    for (auto* n : nodes) {
+      if (n->node_id() == invited) {
+        last = n;
+        continue;
+      }
+      n->receive(frame, g_now_ns);
+    }
+    if (last) last->receive(frame, g_now_ns);
+    return {};
+  }
+  pl::Received receive(std::span<uint8_t> buffer, int64_t deadline_ns) noexcept override {
+    for (;;) {
+      if (!to_mn.empty()) {
+        auto f = std::move(to_mn.front());
+        to_mn.pop_front();
+        const std::size_t n = std::min(f.size(), buffer.size());
+        std::copy_n(f.begin(), n, buffer.begin());
+        g_now_ns += kWireNs;
+        return {n, g_now_ns, {}};
+      }
+      int64_t next = INT64_MAX;
+      for (auto* n : nodes) next = std::min(next, n->next_deadline_ns());
+      if (next > deadline_ns) {
+        if (deadline_ns > g_now_ns) g_now_ns = deadline_ns;
+        return {};
+      }
+      g_now_ns = std::max(g_now_ns, next);
+      for (auto* n : nodes) n->tick(g_now_ns);
+    }
+  }
+  bool link_up() const noexcept override { return true; }
+  pl::MacAddress mac() const noexcept override { return {0x02, 0, 0, 0, 0, 0xF0}; }
+};
+
+struct NodeSpec {
+  uint8_t id;
+  bool prc;      // configured for PRC at the MN
+  bool capable;  // the CN advertises the PRC feature
+};
+
+struct Setup {
+  Wire wire;
+  std::vector<std::unique_ptr<sim::PowerlinkCn>> cns;
+  std::unique_ptr<pl::PowerlinkBus> mn;
+  std::vector<ds1928::AxisIo> io;
+  uint64_t cycle = 0;
+
+  explicit Setup(const std::vector<NodeSpec>& specs) {
+    pl::MnConfig config;
+    config.cycle_us = 1000;
+    config.mac = wire.mac();
+    config.bus.thresholds.loss_of_pres = 15;
+    for (const NodeSpec& s : specs) {
+      ds1928::PowerlinkNodeConfig node;
+      node.node_id = s.id;
+      node.pres_timeout_us = 100;
+      node.prc = s.prc;
+      config.bus.nodes.push_back(node);
+      ds1928::AxisConfig axis;
+      axis.node = s.id;
+      axis.slot = 1;
+      config.axes.push_back(axis);
+      sim::PowerlinkCnConfig c;
+      c.node_id = s.id;
+      c.mac = {0x02, 0, 0, 0, 0x19, s.id};
+      c.prc_capable = s.capable;
+      c.power_off_ns = 50'000'000;
+      const uint8_t me = s.id;
+      cns.push_back(std::make_unique<sim::PowerlinkCn>(c, [this, me](std::span<const uint8_t> f) {
+        wire.to_mn.emplace_back(f.begin(), f.end());
+        for (auto* other : wire.nodes)
+          if (other->node_id() != me) other->receive(f, g_now_ns);
+      }));
+      wire.nodes.push_back(cns.back().get());
+    }
+    mn = std::make_unique<pl::PowerlinkBus>(config, wire);
+    mn->set_clock(&fake_clock);
+    REQUIRE_FALSE(mn->start());
+    io.resize(config.axes.size());
+  }
+  ds1928::ExchangeResult step() {
+    const int64_t start = (g_now_ns / kCycleNs + 1) * kCycleNs;
+    g_now_ns = start;
+    for (auto& c : cns) c->tick(g_now_ns);
+    auto r = mn->exchange(io, start, cycle++);
+    for (auto& c : cns) c->tick(g_now_ns);
+    return r;
+  }
+  bool run_until_operational(int limit) {
+    for (int i = 0; i < limit; ++i)
+      if (step().bus_up) return true;
+    return false;
+  }
+  const pl::CnStatus& node(uint8_t id) {
+    static pl::CnStatus none;
+    const auto st = mn->status();
+    for (std::size_t i = 0; i < st.node_count; ++i)
+      if (st.nodes[i].node == id) {
+        none = st.nodes[i];
+        return none;
+      }
+    FAIL("node not in status");
+    return none;
+  }
+};
+
+}  // namespace
+
+TEST_CASE("A mixed cycle: PRC nodes answer the PResMN, the others their PReq", "[powerlink][prc]") {
+  Setup s({{1, true, true}, {2, true, true}, {3, false, true}});
+  REQUIRE(s.run_until_operational(4000));
+  // Set up by SyncRequests: both in PRC mode, node 2 after node 1 by at least node 1's PRes on
+  // the wire and an inter-frame gap.
+  CHECK(s.cns[0]->prc_mode());
+  CHECK(s.cns[1]->prc_mode());
+  CHECK_FALSE(s.cns[2]->prc_mode());
+  const pl::CnStatus n1 = s.node(1);
+  const pl::CnStatus n2 = s.node(2);
+  CHECK(n1.prc);
+  CHECK(n2.prc);
+  CHECK(n1.prc_pres_time_ns == 0);
+  CHECK(n2.prc_predecessor == 1);
+  CHECK(n2.prc_pres_time_ns >= pl::prc_frame_time_ns(n1.pres_size) + pl::kInterFrameGapNs);
+  CHECK(s.cns[1]->pres_time_first_ns() == n2.prc_pres_time_ns);
+  CHECK(n1.sync_responses >= 2);
+  CHECK_FALSE(s.node(3).prc);
+  // From now on: one PResMN per cycle, no PReq to the PRC nodes, every PRes in its slot.
+  const auto preq1 = s.wire.preq_to[1];
+  const auto preq2 = s.wire.preq_to[2];
+  const auto preq3 = s.wire.preq_to[3];
+  const auto pres_mn = s.wire.pres_mn;
+  const uint32_t rx1 = n1.pres_received, rx2 = n2.pres_received, rx3 = s.node(3).pres_received;
+  const int kCycles = 500;
+  int fresh = 0;
+  for (int i = 0; i < kCycles; ++i) {
+    auto r = s.step();
+    REQUIRE(r.bus_up);
+    REQUIRE(r.frames_lost == 0);
+    fresh += s.io[0].inputs_fresh && s.io[1].inputs_fresh && s.io[2].inputs_fresh;
+  }
+  CHECK(fresh == kCycles);
+  CHECK(s.wire.preq_to[1] == preq1);
+  CHECK(s.wire.preq_to[2] == preq2);
+  CHECK(s.wire.preq_to[3] == preq3 + kCycles);
+  CHECK(s.wire.pres_mn == pres_mn + kCycles);
+  CHECK(s.node(1).pres_received == rx1 + kCycles);
+  CHECK(s.node(2).pres_received == rx2 + kCycles);
+  CHECK(s.node(3).pres_received == rx3 + kCycles);
+  CHECK(s.node(1).loss_of_pres.events == 0);
+  CHECK(s.node(2).late_pres.events == 0);
+}
+
+TEST_CASE("A CN without the PRC feature is polled with PReq/PRes and the fall-back reported",
+          "[powerlink][prc]") {
+  Setup s({{1, true, false}, {2, true, true}});
+  REQUIRE(s.run_until_operational(4000));
+  const pl::CnStatus n1 = s.node(1);
+  CHECK(n1.prc_configured);
+  CHECK(n1.prc_fallback);
+  CHECK_FALSE(n1.prc);
+  CHECK(n1.last_error == make_error_code(pl::MnError::kPrcNotSupported));
+  CHECK_FALSE(s.cns[0]->prc_mode());
+  // Node 2 is the first (and only) node of the chain: right after the PResMN.
+  CHECK(s.node(2).prc);
+  CHECK(s.node(2).prc_pres_time_ns == 0);
+  const auto preq1 = s.wire.preq_to[1];
+  for (int i = 0; i < 200; ++i) REQUIRE(s.step().bus_up);
+  CHECK(s.wire.preq_to[1] == preq1 + 200);
+  CHECK(s.wire.preq_to[2] == 0);
+}
+
+TEST_CASE("A PRC CN whose PRes stop is reset at its threshold and chained again",
+          "[powerlink][prc]") {
+  Setup s({{1, true, true}, {2, true, true}});
+  REQUIRE(s.run_until_operational(4000));
+  const uint32_t resets = s.node(2).resets;
+  const uint32_t boots = s.node(2).boots;
+  sim::PowerlinkCnFaults drop;
+  drop.drop_pres = 1.0;
+  s.cns[1]->set_faults(drop);
+  // Threshold 15: two losses in a row reset it; node 1 keeps its slot meanwhile.
+  bool reset_seen = false;
+  for (int i = 0; i < 10 && !reset_seen; ++i) {
+    (void)s.step();
+    reset_seen = s.node(2).resets > resets;
+  }
+  REQUIRE(reset_seen);
+  CHECK(s.node(2).last_reset_reason == make_error_code(pl::MnError::kLossOfPresThreshold));
+  CHECK_FALSE(s.node(2).prc);
+  CHECK(s.node(1).prc);
+  CHECK(s.node(1).loss_of_pres.events == 0);
+  s.cns[1]->set_faults({});
+  bool back = false;
+  for (int i = 0; i < 4000 && !back; ++i) back = s.step().bus_up && s.node(2).boots > boots;
+  REQUIRE(back);
+  CHECK(s.node(2).prc);
+  CHECK(s.cns[1]->prc_mode());
+  CHECK(s.wire.preq_to[2] == 0);
+}
+
+TEST_CASE("A CN that does not answer its SyncRequests is reset (PRC set-up failed)",
+          "[powerlink][prc]") {
+  // The CN advertises PRC but a fault drops its answers: here, by unplugging it from the wire
+  // right after its identification.
+  Setup s({{1, true, true}});
+  (void)s.step();
+  for (int i = 0; i < 4000 && s.node(1).boot != pl::CnBootState::kConfigure; ++i) (void)s.step();
+  REQUIRE(s.node(1).boot == pl::CnBootState::kConfigure);
+  s.wire.nodes.clear();
+  bool reset = false;
+  for (int i = 0; i < 2000 && !reset; ++i) {
+    (void)s.step();
+    reset = s.node(1).resets > 0;
+  }
+  REQUIRE(reset);
+  CHECK(s.node(1).last_reset_reason == make_error_code(pl::MnError::kPrcSyncFailed));
+}

@@ -1,0 +1,157 @@
+#!/bin/bash
+# PollResponse Chaining on the wire: the MN (pl_mn_runner: PowerlinkBus on a RawLink) with a mixed
+# cycle — nodes 1 and 2 configured `prc: true`, node 3 polled with PReq/PRes — against ds1928-sim
+# hosting the three nodes, over a veth pair between two network namespaces.
+#  1. all three OPERATIONAL, then held HOLD_SECONDS (default 15) at 1 ms: 0 resets (overruns
+#     reported: they measure the machine's load, which make stress raises on purpose);
+#  2. the capture (tshark's POWERLINK dissector): SyncRequests and SyncResponses exchanged, one
+#     PResMN per SoC in the hold, never a PReq to node 1 or 2, PReqs to node 3, each PRC node's
+#     PRes after the PResMN in as many cycles, no malformed frame;
+#  3. the simulator's own view: nodes 1 and 2 in PRC mode at their assigned times, node 3 not.
+# Usage: powerlink_prc_test.sh BUILD_DIR SOURCE_DIR   (root; 77 = skipped)
+set -u
+. "${2:?source dir}/tests/lib/netns.sh"
+use_trees "$1" "$2"
+hold=${HOLD_SECONDS:-15}
+
+require_root "network namespaces, veth, raw sockets, SCHED_FIFO"
+require_programs "$sim" "$mn"
+require_tools tshark python3
+
+test_init powerlink_prc
+ns_mn=plp_mn_$tag
+ns_cn=plp_cn_$tag
+netns_add "$ns_mn" "$ns_cn"
+veth_pair "$ns_mn" plp_mn "$ns_cn" plp_cn
+
+cat >"$tmp/prc.yaml" <<YAML
+bus: powerlink
+cycle:
+  period_us: 1000
+powerlink:
+  interface: plp_mn
+  nodes:
+    - {node_id: 1, prc: true}
+    - {node_id: 2, prc: true}
+    - {node_id: 3}
+axes:
+  - {name: a1, node: 1, slot: 1}
+  - {name: a2, node: 2, slot: 1}
+  - {name: a3, node: 3, slot: 1}
+YAML
+
+# A sender's own frames do not show on its interface (PACKET_QDISC_BYPASS): the MN's frames are
+# captured at the CN's end, the CNs' at the MN's (one clock: one machine).
+ip netns exec "$ns_mn" tshark -n -i plp_mn -w "$tmp/mn_end.pcapng" >"$tmp/tshark.log" 2>&1 &
+tshark_pid=$!
+pids+=($tshark_pid)
+ip netns exec "$ns_cn" tshark -n -i plp_cn -w "$tmp/cn_end.pcapng" >"$tmp/tshark_cn.log" 2>&1 &
+tshark_cn_pid=$!
+pids+=($tshark_cn_pid)
+wait_for "$tmp/tshark.log" "Capturing on" 30 || fail "tshark did not start"
+wait_for "$tmp/tshark_cn.log" "Capturing on" 30 || fail "tshark at the CN's end did not start"
+ip netns exec "$ns_cn" "$sim" powerlink --iface plp_cn --node 1 --count 3 --config "$tmp/prc.yaml" \
+    >"$tmp/sim.log" 2>&1 &
+sim_pid=$!
+pids+=($sim_pid)
+ip netns exec "$ns_mn" "$mn" --iface plp_mn --config "$tmp/prc.yaml" --rt-priority 80 \
+    --warmup 1 --duration "$hold" --boot-timeout 30 >"$tmp/mn.log" 2>&1
+rc=$?
+sleep 0.2
+kill -INT "$tshark_pid" "$tshark_cn_pid"
+wait "$tshark_pid" "$tshark_cn_pid" 2>/dev/null
+kill -TERM "$sim_pid"
+wait "$sim_pid" 2>/dev/null
+grep '^RESULT' "$tmp/mn.log" >"$tmp/result.log" || { cat "$tmp/mn.log"; fail "no RESULT from the MN (exit $rc)"; }
+measured=$(field "$tmp/result.log" measured_cycles)
+fired=$(field "$tmp/result.log" measured_threshold_fired)
+resets=$(field "$tmp/result.log" resets)
+overruns=$(field "$tmp/result.log" overruns)
+[ "$rc" = 0 ] || fail "MN exit $rc (3: wrong position or stamp, 4: boot timeout): $(cat "$tmp/result.log")"
+[ "${measured:-0}" -ge $((hold * 1000 * 9 / 10)) ] || fail "only $measured cycles measured in ${hold}s"
+[ "$fired" = 0 ] && [ "$resets" = 0 ] || fail "$resets resets ($fired while measured): $(cat "$tmp/result.log")"
+pass "mixed PRC + PReq/PRes cycle held $measured cycles at 1 ms: 0 resets, $overruns overruns; $(grep '^LATENCY' "$tmp/mn.log")"
+
+tshark() { command tshark --disable-protocol opensafety "$@"; }
+for end in mn_end cn_end; do
+  tshark -r "$tmp/$end.pcapng" -Y epl -T fields -e frame.time_epoch -e epl.mtyp -e epl.src \
+      -e epl.dest -e epl.soa.svid -e epl.asnd.svid 2>/dev/null ||
+    fail "tshark could not read $end.pcapng"
+done | sort -t$'\t' -k1,1n >"$tmp/frames.txt"
+read -r socs pres_mn preq12 preq3 syncreq syncres pres1 pres2 < <(python3 - "$tmp/frames.txt" <<'PY'
+import sys
+socs = pres_mn = preq12 = preq3 = syncreq = syncres = 0
+pres = {1: 0, 2: 0}
+rows = [l.rstrip("\n").split("\t") for l in open(sys.argv[1])]
+rows = [r + [""] * (6 - len(r)) for r in rows if len(r) >= 3 and r[1]]
+# tshark prints some fields in hex (0x06): numbers compared as numbers.
+num = lambda v: str(int(v, 0)) if v else ""
+rows = [[r[0]] + [num(v) for v in r[1:6]] for r in rows]
+# The hold: from the first PResMN on, up to the last SoC whose cycle is complete (its SoA seen).
+first = next((i for i, r in enumerate(rows) if r[1] == "4" and r[2] == "240"), len(rows))
+last_soa = max((i for i, r in enumerate(rows) if r[1] == "5"), default=-1)
+for i, r in enumerate(rows):
+    mtyp, src, dst, soa_svid, asnd_svid = r[1], r[2], r[3], r[4], r[5]
+    if mtyp == "3" and dst in ("1", "2"):
+        preq12 += 1  # anywhere in the capture, boot included
+    if mtyp == "5" and soa_svid == "6":
+        syncreq += 1
+    if mtyp == "6" and asnd_svid == "6":
+        syncres += 1
+    if i < first or i > last_soa:
+        continue
+    if mtyp == "1":
+        socs += 1
+    elif mtyp == "4" and src == "240":
+        pres_mn += 1
+    elif mtyp == "3" and dst == "3":
+        preq3 += 1
+    elif mtyp == "4" and src in ("1", "2"):
+        pres[int(src)] += 1
+print(socs, pres_mn, preq12, preq3, syncreq, syncres, pres[1], pres[2])
+PY
+)
+[ "$preq12" = 0 ] || fail "$preq12 PReq to the PRC nodes 1/2 on the wire"
+[ "${syncreq:-0}" -ge 6 ] && [ "${syncres:-0}" -ge 6 ] ||
+  fail "SyncRequests $syncreq, SyncResponses $syncres (two PRC nodes need at least 3 each)"
+# From the first PResMN on, every SoC is followed by one (the first PResMN's own SoC precedes the window).
+[ "${socs:-0}" -gt 1000 ] && [ $((socs - pres_mn)) -le 1 ] && [ $((pres_mn - socs)) -le 1 ] ||
+  fail "$socs SoCs but $pres_mn PResMN from the first PResMN on"
+[ $((preq3 + 1)) -ge "$socs" ] || fail "only $preq3 PReq to node 3 for $socs SoCs"
+# Each PResMN is answered by both PRC nodes unless the MN counted the PRes lost (its count covers
+# the whole run and all nodes: it bounds the window's losses from above).
+lost=$(field "$tmp/result.log" loss_of_pres_events)
+[ $((pres1 + pres2 + lost + 2)) -ge $((2 * pres_mn)) ] ||
+  fail "PRes of node 1: $pres1, node 2: $pres2 for $pres_mn PResMN and $lost counted lost"
+for end in mn_end cn_end; do
+  tshark -r "$tmp/$end.pcapng" -Y "_ws.malformed || _ws.expert.severity >= 0x00600000" \
+      -T fields -e frame.number -e epl.src -e epl.mtyp -e _ws.expert.message 2>/dev/null
+done >"$tmp/expert.txt"
+[ -s "$tmp/expert.txt" ] && { head "$tmp/expert.txt"; fail "Wireshark finds malformed frames or expert errors"; }
+pass "on the wire: $socs SoCs, $pres_mn PResMN, PRes node 1 $pres1 / node 2 $pres2 ($lost PRes counted lost by the MN, no threshold reached), $preq3 PReq to node 3, none to 1 and 2; $syncreq SyncRequests, $syncres SyncResponses; Wireshark clean"
+
+stats() { grep "^node $1 stats" "$tmp/sim.log"; }
+for n in 1 2; do
+  stats $n | grep -q "prc=yes" || fail "node $n not in PRC mode at the end: $(stats $n)"
+done
+stats 3 | grep -q "prc=no" || fail "node 3 in PRC mode: $(stats 3)"
+t2=$(stats 2 | sed -n 's/.*pres_time_first_ns=\([0-9]*\).*/\1/p')
+[ "${t2:-0}" -gt 0 ] || fail "node 2 has no PRes time after node 1's: $(stats 2)"
+pass "ds1928-sim: nodes 1, 2 in PRC mode (node 2's PRes $t2 ns after the PResMN), node 3 PReq/PRes"
+
+# ---- 4. the daemon's cycle work with a PRC slot allocates nothing ----------------------------
+# The whole cycle work (PowerlinkBus with the PResMN and the PRC slot, decoding, shared memory)
+# counted on the cycle thread for 3000 cycles once the bus is operational: no heap allocation, no
+# mutex.
+noalloc=$build/tests/daemon/powerlink_cycle_noalloc
+[ -x "$noalloc" ] || fail "$noalloc not built"
+ip netns exec "$ns_cn" "$sim" powerlink --iface plp_cn --node 1 --count 3 --config "$tmp/prc.yaml" \
+    >"$tmp/sim4.log" 2>&1 &
+sim_pid=$!
+pids+=($sim_pid)
+ip netns exec "$ns_mn" "$noalloc" "$tmp/prc.yaml" 3000 >"$tmp/noalloc.log" 2>&1
+rc=$?
+kill -TERM "$sim_pid"
+wait "$sim_pid" 2>/dev/null
+[ $rc = 0 ] || fail "cycle work with PRC (exit $rc): $(cat "$tmp/noalloc.log")"
+pass "cycle work with PRC: $(head -n1 "$tmp/noalloc.log" | sed 's/^counted //'); $(sed -n 2p "$tmp/noalloc.log")"
