@@ -98,6 +98,10 @@ check "the packages installed" \
   test "$(in_root dpkg-query -W -f='${db:Status-Status} ' ds1928d libds1928-dev python3-ds1928)" = "installed installed installed "
 [ -n "$hal_deb" ] && check "linuxcnc-ds1928 installed" \
   test "$(in_root dpkg-query -W -f='${db:Status-Status}' linuxcnc-ds1928)" = "installed"
+check "file /usr/lib/python3/dist-packages/ds1928/shm.py" \
+  test -f "$root/usr/lib/python3/dist-packages/ds1928/shm.py"
+[ -n "$hal_deb" ] && check "file /usr/lib/linuxcnc/modules/ds1928.so" \
+  test -f "$root/usr/lib/linuxcnc/modules/ds1928.so"
 
 # --- 3. files -----------------------------------------------------------------------------------
 for f in /usr/bin/ds1928d /usr/bin/ds1928ctl /usr/bin/ds1928-sim \
@@ -171,7 +175,8 @@ if [ -n "$pid" ]; then
     # by the reader as a LinuxCNC user would (rtapi_app is setuid root and reads files as the
     # user, with the user's groups); its socket in a directory the reader owns.
     in_root install -d -o reader /tmp/rtapi
-    hal=$(chroot "$root" unshare --ipc --pid --fork --mount-proc setpriv --reuid=reader \
+    hal=$(chroot "$root" unshare --ipc --pid --fork --mount-proc --propagation unchanged \
+            setpriv --reuid=reader \
             --regid=reader --init-groups env RTAPI_FIFO_PATH=/tmp/rtapi/fifo \
             sh -c '/usr/lib/linuxcnc/realtime start &&
               halcmd loadrt ds1928 && halcmd loadrt threads name1=servo period1=1000000 &&
