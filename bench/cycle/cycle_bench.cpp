@@ -254,9 +254,9 @@ int main(int argc, char** argv) {
       print_ratio("spin off", off, ct);
       print_ratio(spin_name, on, ct);
       const double r_off = ratio(off.quantile(0.99), ct.quantile(0.99));
-      const bool off_ok = off.quantile(0.99) <= 1.2 * ct.quantile(0.99);
+      const bool off_ok = off.quantile(0.99) <= 1.1 * ct.quantile(0.99);
       const bool on_ok = on.quantile(0.99) < ct.quantile(0.99);
-      std::printf("  goal spin off p99 <= 1.2 x cyclictest: %s (%.2f); spin on p99 lower: %s\n",
+      std::printf("  goal spin off p99 <= 1.1 x cyclictest: %s (%.2f); spin on p99 lower: %s\n",
                   off_ok ? "met" : "NOT met", r_off, on_ok ? "met" : "NOT met");
       goal_met = goal_met && off_ok && on_ok;
     }

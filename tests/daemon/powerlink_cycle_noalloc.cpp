@@ -139,6 +139,11 @@ int main(int argc, char** argv) {
   if (with_capture)
     std::printf("capture on: %llu frames captured, %llu dropped\n",
                 static_cast<unsigned long long>(drained), static_cast<unsigned long long>(dropped));
+  const auto faults = task.faults();
+  std::printf("page faults of the cycle thread: minor %ld, major %ld\n", faults.minor,
+              faults.major);
+  const bool no_faults = faults.minor == 0 && faults.major == 0;
+  if (!no_faults) std::printf("FAIL: the cycle thread took page faults in steady cycles\n");
   const bool captured = !with_capture || drained >= cycles;
   if (!captured) std::printf("FAIL: the capture took fewer frames than cycles\n");
   const bool clean =
@@ -148,5 +153,5 @@ int main(int argc, char** argv) {
   if (!ds1928::test::counts_mutexes())
     std::printf("TSan build: mutex locks are not counted; the mutex check is void\n");
   if (!traffic) std::printf("FAIL: too little traffic went through the counted cycles\n");
-  return clean && traffic && captured ? 0 : 1;
+  return clean && traffic && captured && no_faults ? 0 : 1;
 }
