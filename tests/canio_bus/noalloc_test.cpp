@@ -172,9 +172,10 @@ void check_clean(const ProofResult& r, const char* what) {
   CHECK(r.sdo_errors >= 2);     // the two lost requests timed out on the cycle thread
   // Whole samples inside the counted cycles (the strict node sends none before its NMT Start, so
   // the count no longer includes the configuration's cycles): 1 ms on the real clock against a
-  // node thread on a loaded 2-core host gives about half the cycles whole; a quarter proves the
-  // positions flow while the proof runs.
-  CHECK(r.samples > kCounted / 4);
+  // node thread gives about half the cycles whole on an idle 2-core host and 17-22 % with the
+  // other real-time tests of the suite beside it (ctest -j2); a tenth proves the positions flow
+  // while the proof runs.
+  CHECK(r.samples > kCounted / 10);
 }
 
 }  // namespace
