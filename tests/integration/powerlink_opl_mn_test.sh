@@ -14,8 +14,9 @@
 #     in the MN's log after OPERATIONAL;
 #  3. tshark decodes the capture (MN side of the veth) without a malformed frame or an expert
 #     warning/error.
-# The openPOWERLINK archive (../shared/peers) is built once into a cache (tests/peers/
-# openpowerlink.sh); a missing archive FAILS this test, it never passes silently.
+# The openPOWERLINK archive (DS1928_PEERS_DIR, ../shared/peers or fetched) is built once into a cache
+# (tests/peers/openpowerlink.sh); a missing archive SKIPS this test (77) with the command that gets
+# it, or FAILS it under CI=true or DS1928_REQUIRE_PEERS=1; it never passes silently.
 # Usage: powerlink_opl_mn_test.sh BUILD_DIR SOURCE_DIR   (root; 77 = skipped)
 set -u
 . "${2:?source dir}/tests/lib/netns.sh"
