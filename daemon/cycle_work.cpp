@@ -13,7 +13,12 @@ CycleWork::CycleWork(const DaemonConfig& config, BusDriver& bus, shm::Publisher&
       status_(config.axes.size()),
       ack_bits_(config.axes.size(), 0),
       ack_hold_(config.axes.size(), 0),
-      counters_(std::make_unique<AxisCounters[]>(config.axes.size())) {
+      counters_(std::make_unique<AxisCounters[]>(config.axes.size())),
+      // Every axis starts bus_down (nothing exchanged yet): that first state is no incident.
+      last_validity_(config.axes.size(), static_cast<uint8_t>(shm::AxisValidity::BusDown)),
+      overrun_burst_(config.flight_recorder.overrun_burst),
+      cycles_per_second_(
+          std::max<uint64_t>(1, 1000000 / std::max<uint32_t>(1, config.cycle.period_us))) {
   for (std::size_t i = 0; i < config.axes.size(); ++i) {
     const ModuleSettings& m = config.axes[i].module;
     flatstream::MasterConfig fc;
@@ -86,6 +91,13 @@ void CycleWork::run_cycle(const CycleContext& ctx) noexcept {
     }
     c.cycle.store(ctx.index, std::memory_order_relaxed);
     c.validity.store(static_cast<uint8_t>(st.validity), std::memory_order_relaxed);
+    if (const auto v = static_cast<uint8_t>(st.validity); v != last_validity_[i]) {
+      last_validity_[i] = v;
+      if (incidents_ != nullptr && st.validity == shm::AxisValidity::ModuleError)
+        incidents_->raise(IncidentKind::AxisError, -1, static_cast<int>(i), ctx.start_ns);
+      if (incidents_ != nullptr && st.validity == shm::AxisValidity::BusDown)
+        incidents_->raise(IncidentKind::AxisBusDown, -1, static_cast<int>(i), ctx.start_ns);
+    }
     if (const auto v = static_cast<std::size_t>(st.validity); v < c.published.size())
       bump(c.published[v]);
   }
@@ -96,6 +108,29 @@ void CycleWork::run_cycle(const CycleContext& ctx) noexcept {
     data_exchanges_.store(data_exchanges_.load(std::memory_order_relaxed) + 1,
                           std::memory_order_relaxed);
   publisher_.publish(ctx.index, status_);
+  watch_overruns(ctx);
+}
+
+// An overrun leaves grid slots out (CycleContext::index jumps): overruns_burst of them within one
+// second of cycles raise one incident for that second.
+void CycleWork::watch_overruns(const CycleContext& ctx) noexcept {
+  if (incidents_ == nullptr || overrun_burst_ == 0) return;
+  if (!have_index_) {
+    have_index_ = true;
+    last_index_ = burst_window_start_ = ctx.index;
+    return;
+  }
+  if (ctx.index - burst_window_start_ >= cycles_per_second_) {
+    burst_window_start_ = ctx.index;
+    burst_overruns_ = 0;
+    burst_raised_ = false;
+  }
+  if (ctx.index > last_index_ + 1) ++burst_overruns_;
+  last_index_ = ctx.index;
+  if (!burst_raised_ && burst_overruns_ >= overrun_burst_) {
+    burst_raised_ = true;
+    incidents_->raise(IncidentKind::OverrunBurst, -1, -1, ctx.start_ns);
+  }
 }
 
 }  // namespace ds1928

@@ -14,6 +14,7 @@
 #include "core/axis_sample.hpp"
 #include "core/bus.hpp"
 #include "core/cycle_engine.hpp"
+#include "core/incident.hpp"
 #include "core/spsc_queue.hpp"
 #include "flatstream/channel.hpp"
 #include "shm/publisher.hpp"
@@ -129,6 +130,10 @@ class CycleWork final : public CycleTask {
   }
   [[nodiscard]] bool bus_up() const noexcept { return bus_up_.load(std::memory_order_relaxed); }
 
+  // Normal thread, before the cycle thread starts: where the cycle work raises its incidents (an
+  // axis going to module_error or bus_down, a burst of overruns). nullptr: none.
+  void set_incident_sink(IncidentSink* sink) noexcept { incidents_ = sink; }
+
  private:
   struct Tunnel {
     explicit Tunnel(const flatstream::MasterConfig& c) : channel(c) {}
@@ -139,6 +144,7 @@ class CycleWork final : public CycleTask {
     flatstream::Message received;  // scratch, so the 512-byte message is not on the stack
   };
   void run_tunnel(std::size_t axis, uint64_t now_us) noexcept;
+  void watch_overruns(const CycleContext& ctx) noexcept;
 
   BusDriver& bus_;
   shm::Publisher& publisher_;
@@ -156,6 +162,16 @@ class CycleWork final : public CycleTask {
   std::atomic<uint64_t> data_exchanges_{0};
   std::atomic<uint64_t> frames_lost_{0};
   std::atomic<bool> bus_up_{false};
+  // Incidents (flight recorder): the last validity per axis, overruns in the current second.
+  IncidentSink* incidents_ = nullptr;
+  std::vector<uint8_t> last_validity_;
+  uint32_t overrun_burst_ = 0;
+  uint64_t cycles_per_second_ = 1;
+  bool have_index_ = false;
+  uint64_t last_index_ = 0;
+  uint64_t burst_window_start_ = 0;
+  uint32_t burst_overruns_ = 0;
+  bool burst_raised_ = false;
 };
 
 }  // namespace ds1928

@@ -65,6 +65,10 @@ std::error_code Daemon::start() {
     return std::make_error_code(std::errc::not_supported);
   }
   capture_ = std::make_unique<CaptureService>(io_, config_, bus_->capture_taps());
+  incidents_ =
+      std::make_unique<IncidentService>(config_, bus_->capture_taps(), std::string(bus().name()));
+  incidents_->open();
+  bus().set_incident_sink(&incidents_->sink());
   if (auto ec = publisher_.open(config_.shm, static_cast<uint32_t>(config_.axes.size()),
                                 uint64_t{config_.cycle.period_us} * 1000)) {
     spdlog::error("shared memory {}: {}", config_.shm.name, ec.message());
@@ -103,6 +107,7 @@ std::error_code Daemon::start() {
   socket_path_ = socket.path;
 
   work_ = std::make_unique<CycleWork>(config_, bus(), publisher_);
+  work_->set_incident_sink(&incidents_->sink());
   registers_ = std::make_unique<RegisterClient>(io_, bus());
   engine_ = std::make_unique<CycleEngine>(config_.cycle, *work_);
   auto started = engine_->start();
@@ -139,6 +144,7 @@ void Daemon::stop() noexcept {
   if (engine_) engine_->stop();
   if (registers_) registers_->stop();
   if (capture_) capture_->abort();
+  if (incidents_) incidents_->poll(0, true);  // the incidents still in their tail: written now
   if (server_) server_->stop();
   if (bus_) bus().stop();
   publisher_.close();
@@ -190,7 +196,11 @@ void Daemon::on_tick() {
     notifier_.ready(summary_line());
     spdlog::info("first data exchanged: ready");
   }
-  for (const BusEvent& e : bus_watch_.poll(*bus_)) log_bus_event(e, bus().name());
+  for (const BusEvent& e : bus_watch_.poll(*bus_)) {
+    log_bus_event(e, bus().name());
+    if (const auto kind = incident_of(e)) incidents_->raise(*kind, e.node, e.axis, e.text);
+  }
+  incidents_->poll();
   const auto now = std::chrono::steady_clock::now();
   if (now - last_log_ >= std::chrono::seconds(1)) {
     last_log_ = now;
@@ -315,6 +325,7 @@ json Daemon::status_json() const {
           {"shm", {{"name", config_.shm.name}, {"generation", publisher_.generation()}}},
           {"bus", bus_->status_json()},
           {"capture", capture_->status_json()},
+          {"flight_recorder", incidents_->status_json()},
           {"cycle",
            {{"period_us", config_.cycle.period_us},
             {"count", engine_->cycle_count()},
@@ -330,6 +341,7 @@ void Daemon::register_commands() {
   server_->add_command("status", [this](const Request&, Reply reply) { reply.ok(status_json()); });
   register_bus_commands(*server_, *bus_, config_);
   capture_->register_commands(*server_);
+  incidents_->register_commands(*server_);
   server_->add_command("axes", [this](const Request&, Reply reply) { reply.ok(axes_json()); });
   server_->add_command("stats", [this](const Request&, Reply reply) { reply.ok(stats_json()); });
   server_->add_command("stats-reset", [this](const Request&, Reply reply) {
@@ -363,6 +375,21 @@ void Daemon::register_commands() {
     }
     reply.ok({{"axis", axis}, {"bits", bits}});
   });
+}
+
+std::optional<IncidentKind> incident_of(const BusEvent& e) {
+  switch (e.event) {
+    case control::LogEvent::NodeReset:
+      // The MN's reasons (powerlink/errors.cpp): a CN dropping out of its state is "lost".
+      if (e.reason.find("loss of PRes threshold") != std::string::npos)
+        return IncidentKind::PresThreshold;
+      if (e.reason.find("not operational") != std::string::npos) return IncidentKind::NodeLost;
+      return IncidentKind::NodeReset;
+    case control::LogEvent::NodeSilent:
+      return IncidentKind::NodeLost;
+    default:
+      return std::nullopt;
+  }
 }
 
 }  // namespace ds1928

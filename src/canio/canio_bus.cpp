@@ -271,6 +271,8 @@ ExchangeResult CanioBus::exchange(std::span<AxisIo> axes, int64_t, uint64_t) noe
     // Bus-off or down: nothing goes out; the kernel (restart-ms) or the virtual bus restarts the
     // controller, the error frame "restarted" brings the state back.
     bump(counters_.bus_off_cycles);
+    if (can == CanState::BusOff && !bus_off_raised_) raise_incident(IncidentKind::BusOff);
+    bus_off_raised_ = can == CanState::BusOff;
     state_.store(BusState::Error, std::memory_order_relaxed);
     result.bus_up = false;
     result.frames_lost = static_cast<uint32_t>(2 * n);
@@ -278,6 +280,7 @@ ExchangeResult CanioBus::exchange(std::span<AxisIo> axes, int64_t, uint64_t) noe
     return result;
   }
 
+  bus_off_raised_ = false;
   for (std::size_t i = 0; i < n; ++i) track_[i].pairing.open();
   // The window opens before the SYNC is handed to the port: every answer to it is stamped later
   // (its end of frame follows the SYNC's on the wire).

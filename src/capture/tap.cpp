@@ -37,6 +37,10 @@ void Tap::record(Direction direction, int64_t time_ns, std::span<const uint8_t> 
   const uint64_t seq = seq_.load(std::memory_order_relaxed) + 1;
   seq_.store(seq, std::memory_order_seq_cst);
   bump(direction == Direction::Outbound ? tx_ : rx_);
+  if (flight_) {
+    if (time_ns == 0) time_ns = rt::now_ns();
+    flight_->record(direction, time_ns, bytes);
+  }
   if (active_.load(std::memory_order_seq_cst)) {
     const std::size_t head = head_.load(std::memory_order_relaxed);
     if (head - tail_.load(std::memory_order_acquire) == capacity_) {

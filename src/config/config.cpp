@@ -240,6 +240,19 @@ void parse_capture(Section s, CaptureConfig& c) {
   s.finish();
 }
 
+void parse_flight_recorder(Section s, FlightRecorderConfig& c) {
+  s.boolean("enabled", c.enabled);
+  s.integer("ring_bytes", c.ring_bytes, 65536, int64_t{256} << 20, "bytes");
+  s.integer("before_s", c.before_s, 1, 3600, "s");
+  s.integer("after_ms", c.after_ms, 0, 10000, "ms");
+  if (s.text("dir", c.dir, 1024) && !c.dir.empty() && c.dir.front() != '/')
+    s.error("dir", "'" + c.dir + "' is not an absolute path");
+  s.integer("max_files", c.max_files, 1, 100000, "files");
+  s.integer("max_total_bytes", c.max_total_bytes, 1048576, int64_t{1} << 40, "bytes");
+  s.integer("overrun_burst", c.overrun_burst, 0, 1000000, "overruns per second (0 = never)");
+  s.finish();
+}
+
 // ---------------------------------------------------------------------------------------------
 
 void check_cross_fields(Diagnostics& diag, const DaemonConfig& c, const std::vector<AxisSite>& axes,
@@ -347,6 +360,7 @@ DaemonConfig parse_document(Diagnostics& diag, const YAML::Node& doc, const std:
   parse_socket(root.section("socket"), c.socket);
   parse_metrics(root.section("metrics"), c.metrics);
   parse_capture(root.section("capture"), c.capture);
+  parse_flight_recorder(root.section("flight_recorder"), c.flight_recorder);
   root.finish();
 
   check_cross_fields(diag, c, axis_sites, locate(doc, {"cycle", "spin_us"}));
@@ -595,6 +609,16 @@ std::string dump_config(const DaemonConfig& c) {
     << "  ring_frames: " << cap.ring_frames << "\n"
     << "  max_duration_s: " << cap.max_duration_s << "\n"
     << "  max_bytes: " << cap.max_bytes << "\n";
+  const auto& fr = c.flight_recorder;
+  o << "flight_recorder:\n"
+    << "  enabled: " << (fr.enabled ? "true" : "false") << "\n"
+    << "  ring_bytes: " << fr.ring_bytes << "\n"
+    << "  before_s: " << fr.before_s << "\n"
+    << "  after_ms: " << fr.after_ms << "\n"
+    << "  dir: " << quote(fr.dir) << "\n"
+    << "  max_files: " << fr.max_files << "\n"
+    << "  max_total_bytes: " << fr.max_total_bytes << "\n"
+    << "  overrun_burst: " << fr.overrun_burst << "\n";
   return o.str();
 }
 

@@ -19,5 +19,7 @@ void add_endat_commands(CLI::App& app, Context& ctx);
 void add_powerlink_commands(CLI::App& app, Context& ctx);
 // `capture -w FILE [--duration S | --count N] [--format F]`, `capture-stop` (privileged).
 void add_capture_commands(CLI::App& app, Context& ctx);
+// `incidents`, `incident mark TEXT` (the flight recorder).
+void add_incident_commands(CLI::App& app, Context& ctx);
 
 }  // namespace ds1928::ctl

@@ -27,6 +27,7 @@ int main(int argc, char** argv) {
   add_endat_commands(app, ctx);
   add_powerlink_commands(app, ctx);
   add_capture_commands(app, ctx);
+  add_incident_commands(app, ctx);
 
   try {
     app.parse(argc, argv);
