@@ -31,6 +31,11 @@ CycleWork::CycleWork(const DaemonConfig& config, BusDriver& bus, shm::Publisher&
     params_[i].signed_format = config.axes[i].module.position_signed;
     params_[i].has_pos_time = config.axes[i].function_model == FunctionModel::Standard;
     params_[i].max_stamp_age_ns = default_max_stamp_age_ns(int64_t{config.cycle.period_us} * 1000);
+    const bool expected = config.axes[i].expected_encoder.any();
+    counters_[i].identity.store(
+        static_cast<uint8_t>(expected ? IdentityState::Pending : IdentityState::Unchecked),
+        std::memory_order_relaxed);
+    identity_gate_.push_back(expected && config.topology.refuse ? 1 : 0);
   }
 }
 
@@ -79,7 +84,12 @@ void CycleWork::run_cycle(const CycleContext& ctx) noexcept {
     st.sample = sample;
     st.endat_error = c.endat_error.load(std::memory_order_relaxed);
     st.endat_warning = c.endat_warning.load(std::memory_order_relaxed);
-    st.validity = shm::classify(sample, result.bus_up && io_[i].axis_up);
+    // An axis whose encoder is not (yet) the expected one is down: its positions would be another
+    // encoder's under this axis' name.
+    const bool identity_ok =
+        identity_gate_[i] == 0 || c.identity.load(std::memory_order_relaxed) ==
+                                      static_cast<uint8_t>(IdentityState::Confirmed);
+    st.validity = shm::classify(sample, result.bus_up && io_[i].axis_up && identity_ok);
     // A position that breaks the format is never published as valid.
     if (st.validity == shm::AxisValidity::Valid && !sample.fraction_valid)
       st.validity = shm::AxisValidity::ModuleError;

@@ -70,6 +70,16 @@ struct TunnelCounters {
   std::atomic<uint8_t> input_state{0};      // flatstream::ReceiverState
 };
 
+// Whether the encoder behind an axis is the one the configuration expects
+// (axes[].expected_encoder; the EnDat service compares at identification).
+enum class IdentityState : uint8_t {
+  Unchecked = 0,   // nothing expected
+  Pending = 1,     // expected, not identified yet
+  Confirmed = 2,   // identified and as expected
+  Mismatch = 3,    // identified and not as expected
+  Unreadable = 4,  // the identification failed
+};
+
 // Per-axis figures the normal thread reads for `status` (single writer: the cycle thread).
 struct AxisCounters {
   std::atomic<uint64_t> fresh_cycles{0};
@@ -88,6 +98,7 @@ struct AxisCounters {
   std::atomic<uint8_t> validity{0};        // shm::AxisValidity
   std::atomic<uint32_t> endat_error{0};    // written by the normal thread from acyclic reads
   std::atomic<uint32_t> endat_warning{0};  // idem
+  std::atomic<uint8_t> identity{0};        // IdentityState, written by the normal thread
   // Cycles published per shm::AxisValidity (the metrics endpoint's publications by validity).
   std::array<std::atomic<uint64_t>, 4> published{};
 };
@@ -164,6 +175,9 @@ class CycleWork final : public CycleTask {
   std::atomic<bool> bus_up_{false};
   // Incidents (flight recorder): the last validity per axis, overruns in the current second.
   IncidentSink* incidents_ = nullptr;
+  // Per axis: the axis is up only once its encoder is confirmed (expected_encoder set and
+  // topology.on_mismatch refuse).
+  std::vector<uint8_t> identity_gate_;
   std::vector<uint8_t> last_validity_;
   uint32_t overrun_burst_ = 0;
   uint64_t cycles_per_second_ = 1;

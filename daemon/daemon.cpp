@@ -119,6 +119,11 @@ std::error_code Daemon::start() {
   if (!started.warning.empty()) spdlog::warn("{}", started.warning);
   registers_->start(std::chrono::microseconds(std::max<uint32_t>(config_.cycle.period_us, 1000)));
   endat_ = std::make_unique<EnDatService>(io_, *work_, *registers_, config_);
+  topology_ = std::make_unique<Topology>(config_, *work_);
+  endat_->set_identified_hook(
+      [this](std::size_t axis, std::error_code ec, const endat::Identification* found) {
+        topology_->on_identified(axis, ec, found);
+      });
   endat_->register_commands(*server_);
   endat_->start();
   notifier_.supervise(
@@ -240,6 +245,12 @@ json Daemon::axis_json(std::size_t i, bool with_sample) const {
          {"error_info", c.error_info.load(std::memory_order_relaxed)},
          {"endat_error", c.endat_error.load(std::memory_order_relaxed)},
          {"endat_warning", c.endat_warning.load(std::memory_order_relaxed)}};
+  const auto identity = static_cast<IdentityState>(c.identity.load(std::memory_order_relaxed));
+  if (identity != IdentityState::Unchecked) {
+    j["identity"] = std::string(to_string(identity));
+    if (topology_)
+      if (const std::string why = topology_->reason(i); !why.empty()) j["identity_reason"] = why;
+  }
   if (!with_sample) return j;
   const uint64_t raw = c.position_raw.load(std::memory_order_relaxed);
   j["node"] = a.node;
@@ -342,6 +353,10 @@ void Daemon::register_commands() {
   register_bus_commands(*server_, *bus_, config_);
   capture_->register_commands(*server_);
   incidents_->register_commands(*server_);
+  server_->add_command("topology", [this](const Request&, Reply reply) {
+    if (!topology_) return reply.error("starting", "the daemon is still starting");
+    reply.ok(topology_->topology_json(endat_.get(), bus_->status_json()));
+  });
   server_->add_command("axes", [this](const Request&, Reply reply) { reply.ok(axes_json()); });
   server_->add_command("stats", [this](const Request&, Reply reply) { reply.ok(stats_json()); });
   server_->add_command("stats-reset", [this](const Request&, Reply reply) {

@@ -21,6 +21,7 @@
 #include "cycle_work.hpp"
 #include "endat_service.hpp"
 #include "incident_service.hpp"
+#include "topology.hpp"
 #include "metrics/http_server.hpp"
 #include "register_client.hpp"
 #include "shm/publisher.hpp"
@@ -91,6 +92,7 @@ class Daemon {
   std::unique_ptr<CycleEngine> engine_;
   std::unique_ptr<RegisterClient> registers_;
   std::unique_ptr<EnDatService> endat_;
+  std::unique_ptr<Topology> topology_;  // the expected topology: after work_, before endat_ runs
   std::unique_ptr<control::Server> server_;
   std::unique_ptr<metrics::HttpServer> metrics_;
   control::SystemdNotifier notifier_;

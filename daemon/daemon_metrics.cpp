@@ -129,6 +129,7 @@ std::string Daemon::metrics_text(metrics::Format format) const {
 
   bus_->append_metrics(out);
   incidents_->append_metrics(out);
+  if (topology_) topology_->append_metrics(out);
 
   // Per axis: what was published to shared memory, and the EnDat commands through Flatstream.
   const std::size_t axes = config_.axes.size();

@@ -176,6 +176,13 @@ void parse_axis(Section s, AxisConfig& a, const BusKindRules& bus, size_t index)
     }
     s.optional_integer(key, *field, 0, 1489);
   }
+  if (s.has("expected_encoder")) {
+    Section e = s.section("expected_encoder");
+    e.text("id_number", a.expected_encoder.id_number, 32);
+    e.text("serial_number", a.expected_encoder.serial_number, 32);
+    e.integer("position_bits", a.expected_encoder.position_bits, 1, 64);
+    e.finish();
+  }
   s.finish();
 }
 
@@ -361,6 +368,11 @@ DaemonConfig parse_document(Diagnostics& diag, const YAML::Node& doc, const std:
   parse_metrics(root.section("metrics"), c.metrics);
   parse_capture(root.section("capture"), c.capture);
   parse_flight_recorder(root.section("flight_recorder"), c.flight_recorder);
+  {
+    Section t = root.section("topology");
+    t.choice("on_mismatch", c.topology.refuse, {{"refuse", true}, {"warn", false}});
+    t.finish();
+  }
   root.finish();
 
   check_cross_fields(diag, c, axis_sites, locate(doc, {"cycle", "spin_us"}));
@@ -561,6 +573,12 @@ std::string dump_config(const DaemonConfig& c) {
       << "    flatstream_timeout_cycles: " << a.flatstream_timeout_cycles << "\n";
     if (a.pres_offset) o << "    pres_offset: " << *a.pres_offset << "\n";
     if (a.preq_offset) o << "    preq_offset: " << *a.preq_offset << "\n";
+    if (a.expected_encoder.any())
+      o << "    expected_encoder:\n"
+        << "      id_number: " << quote(a.expected_encoder.id_number) << "\n"
+        << "      serial_number: " << quote(a.expected_encoder.serial_number) << "\n";
+    if (a.expected_encoder.position_bits != 0)
+      o << "      position_bits: " << a.expected_encoder.position_bits << "\n";
     o << "    module:\n"
       << "      endat_enable: " << yes(m.endat_enable) << "\n"
       << "      position_signed: " << yes(m.position_signed) << "\n"
@@ -619,6 +637,8 @@ std::string dump_config(const DaemonConfig& c) {
     << "  max_files: " << fr.max_files << "\n"
     << "  max_total_bytes: " << fr.max_total_bytes << "\n"
     << "  overrun_burst: " << fr.overrun_burst << "\n";
+  o << "topology:\n"
+    << "  on_mismatch: " << (c.topology.refuse ? "refuse" : "warn") << "\n";
   return o.str();
 }
 

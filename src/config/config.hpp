@@ -59,6 +59,12 @@ struct FlightRecorderConfig {
   uint32_t overrun_burst = 10;  // overruns within one second that make an incident (0: never)
 };
 
+// What a difference between the expected topology (axes[].expected_encoder, powerlink.nodes[]
+// identity) and the bus does (docs/operations.md "Expected topology").
+struct TopologyConfig {
+  bool refuse = true;  // on_mismatch: refuse (the axis stays bus_down) | warn (logged only)
+};
+
 struct DaemonConfig {
   std::string source_file;  // where it was loaded from (for messages)
   CycleConfig cycle;
@@ -72,6 +78,7 @@ struct DaemonConfig {
   MetricsConfig metrics;
   CaptureConfig capture;
   FlightRecorderConfig flight_recorder;
+  TopologyConfig topology;
   std::string log_level = "info";
 };
 
