@@ -21,10 +21,10 @@
 #include "cycle_work.hpp"
 #include "endat_service.hpp"
 #include "incident_service.hpp"
-#include "topology.hpp"
 #include "metrics/http_server.hpp"
 #include "register_client.hpp"
 #include "shm/publisher.hpp"
+#include "topology.hpp"
 
 namespace ds1928 {
 

@@ -71,11 +71,15 @@ void Topology::on_identified(std::size_t axis, std::error_code error,
   if (error || found == nullptr) {
     differences_[axis] = "identification failed: " + (error ? error.message() : std::string("?"));
     state.store(static_cast<uint8_t>(IdentityState::Unreadable), std::memory_order_relaxed);
-    control::log_event(spdlog::level::warn,
-                       {control::LogEvent::IdentificationFailed, {}, a.node, static_cast<int>(axis),
-                        differences_[axis]},
-                       fmt::format("axis {} ({}): the expected encoder cannot be confirmed ({}); {}",
-                                   axis, a.name, differences_[axis], consequence));
+    control::log_event(
+        spdlog::level::warn,
+        {control::LogEvent::IdentificationFailed,
+         {},
+         a.node,
+         static_cast<int>(axis),
+         differences_[axis]},
+        fmt::format("axis {} ({}): the expected encoder cannot be confirmed ({}); {}", axis, a.name,
+                    differences_[axis], consequence));
     return;
   }
   const auto d = encoder_differences(a.expected_encoder, *found);
@@ -88,11 +92,14 @@ void Topology::on_identified(std::size_t axis, std::error_code error,
   }
   differences_[axis] = "encoder mismatch: " + join(d);
   state.store(static_cast<uint8_t>(IdentityState::Mismatch), std::memory_order_relaxed);
-  control::log_event(spdlog::level::err,
-                     {control::LogEvent::IdentificationFailed, {}, a.node, static_cast<int>(axis),
-                      differences_[axis]},
-                     fmt::format("axis {} ({}): {}; {}", axis, a.name, differences_[axis],
-                                 consequence));
+  control::log_event(
+      spdlog::level::err,
+      {control::LogEvent::IdentificationFailed,
+       {},
+       a.node,
+       static_cast<int>(axis),
+       differences_[axis]},
+      fmt::format("axis {} ({}): {}; {}", axis, a.name, differences_[axis], consequence));
 }
 
 std::string Topology::reason(std::size_t axis) const {
@@ -111,7 +118,8 @@ json Topology::topology_json(const EnDatService* endat, const json& bus_status) 
     json expected = nullptr;
     if (a.expected_encoder.any()) {
       expected = json::object();
-      if (!a.expected_encoder.id_number.empty()) expected["id_number"] = a.expected_encoder.id_number;
+      if (!a.expected_encoder.id_number.empty())
+        expected["id_number"] = a.expected_encoder.id_number;
       if (!a.expected_encoder.serial_number.empty())
         expected["serial_number"] = a.expected_encoder.serial_number;
       if (a.expected_encoder.position_bits != 0)
@@ -154,8 +162,7 @@ json Topology::topology_json(const EnDatService* endat, const json& bus_status) 
             difference = s["configuration"]["identity_mismatch"];
           // Refused at the IdentResponse: the MN's reason stays the node's last error.
           const std::string last = s.value("last_error", std::string());
-          if (difference.is_null() && last.find("identity") != std::string::npos)
-            difference = last;
+          if (difference.is_null() && last.find("identity") != std::string::npos) difference = last;
         }
       }
       nodes.push_back({{"node", n.node_id},

@@ -32,8 +32,7 @@ class Topology {
 
   // The EnDat service identified axis `axis` (or failed to): compare, set the axis' identity
   // state for the cycle, log. `found` nullptr when the identification failed.
-  void on_identified(std::size_t axis, std::error_code error,
-                     const endat::Identification* found);
+  void on_identified(std::size_t axis, std::error_code error, const endat::Identification* found);
 
   // Why the axis is held down ("" when it is not).
   [[nodiscard]] std::string reason(std::size_t axis) const;

@@ -15,8 +15,8 @@ namespace ds1928 {
 // The encoder expected behind a module (EnDat identification, docs/configuration.md
 // §axes[].expected_encoder). An empty field is not checked; with none set the axis is unchecked.
 struct ExpectedEncoder {
-  std::string id_number;      // "1080790-02": the ID number as the identification prints it
-  std::string serial_number;  // "S36845217"
+  std::string id_number;       // "1080790-02": the ID number as the identification prints it
+  std::string serial_number;   // "S36845217"
   unsigned position_bits = 0;  // 0: any
   [[nodiscard]] bool any() const noexcept {
     return !id_number.empty() || !serial_number.empty() || position_bits != 0;

@@ -183,9 +183,10 @@ TEST_CASE("bus canio: the cycle allocates nothing and locks no mutex", "[canio][
   check_clean(run_proof(0), "");
 }
 
-TEST_CASE("bus canio: with a capture running, its ring full and the flight recorder on, still no "
-          "allocation or mutex",
-          "[canio][daemon][rt][capture]") {
+TEST_CASE(
+    "bus canio: with a capture running, its ring full and the flight recorder on, still no "
+    "allocation or mutex",
+    "[canio][daemon][rt][capture]") {
   // 64 slots: a few cycles' frames (SYNC, 2 outputs, 4 inputs per cycle), so the ring is full
   // soon after the test stops draining it halfway through the counted cycles.
   const ProofResult r = run_proof(64);

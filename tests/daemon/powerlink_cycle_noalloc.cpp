@@ -146,7 +146,8 @@ int main(int argc, char** argv) {
   uint64_t flight = 0;
   for (const capture::Tap* tap : taps)
     if (tap->flight_ring() != nullptr) flight += tap->flight_ring()->counters().frames;
-  std::printf("flight recorder on: %llu frames recorded\n", static_cast<unsigned long long>(flight));
+  std::printf("flight recorder on: %llu frames recorded\n",
+              static_cast<unsigned long long>(flight));
   const bool recorded = taps.empty() || flight >= cycles;
   if (!recorded) std::printf("FAIL: the flight recorder took fewer frames than cycles\n");
   if (with_capture)

@@ -23,7 +23,8 @@ namespace {
 
 struct TopologyDaemon {
   explicit TopologyDaemon(bool refuse) {
-    const std::string tag = std::string(refuse ? "refuse" : "warn") + "-" + std::to_string(::getpid());
+    const std::string tag =
+        std::string(refuse ? "refuse" : "warn") + "-" + std::to_string(::getpid());
     dir = std::filesystem::temp_directory_path() / ("ds1928d-topology-" + tag);
     std::filesystem::create_directories(dir);
     DaemonConfig c;
@@ -88,8 +89,10 @@ TEST_CASE("topology: a wrong encoder serial keeps exactly that axis down with th
   CHECK(st["axes"][1]["identity_reason"] ==
         "encoder mismatch: serial_number: expected 'S99999999', found 'S36845217'");
   CHECK_FALSE(st["axes"][0].contains("identity_reason"));
-  CHECK(d.daemon->cycle_work().counters(1).published[static_cast<std::size_t>(
-            shm::AxisValidity::Valid)].load() == 0);  // never a position under the wrong name
+  CHECK(d.daemon->cycle_work()
+            .counters(1)
+            .published[static_cast<std::size_t>(shm::AxisValidity::Valid)]
+            .load() == 0);  // never a position under the wrong name
 
   const json t = d.request({{"cmd", "topology"}});
   REQUIRE(t.value("ok", false));
@@ -102,8 +105,10 @@ TEST_CASE("topology: a wrong encoder serial keeps exactly that axis down with th
   CHECK(t["axes"][1]["difference"].get<std::string>().find("serial_number") != std::string::npos);
 
   const std::string metrics = d.daemon->metrics_text(metrics::Format::Prometheus);
-  CHECK(metrics.find("ds1928_axis_identity_mismatch{axis=\"1\",name=\"y\"} 1") != std::string::npos);
-  CHECK(metrics.find("ds1928_axis_identity_mismatch{axis=\"0\",name=\"x\"} 0") != std::string::npos);
+  CHECK(metrics.find("ds1928_axis_identity_mismatch{axis=\"1\",name=\"y\"} 1") !=
+        std::string::npos);
+  CHECK(metrics.find("ds1928_axis_identity_mismatch{axis=\"0\",name=\"x\"} 0") !=
+        std::string::npos);
 }
 
 TEST_CASE("topology: on_mismatch warn publishes and still reports the difference",

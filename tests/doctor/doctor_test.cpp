@@ -1,13 +1,13 @@
 // `ds1928ctl doctor`'s checks on fake /proc and /sys roots (and fake ethtool / ip output): each
 // check's PASS and its WARN or FAIL, with the fix naming the cycle CPU or interface.
+#include "doctor.hpp"
+
 #include <unistd.h>
 
 #include <catch2/catch.hpp>
 #include <filesystem>
 #include <fstream>
 #include <map>
-
-#include "doctor.hpp"
 
 using namespace ds1928;
 using namespace ds1928::ctl;
@@ -84,7 +84,8 @@ TEST_CASE("doctor: isolation against cycle.cpu", "[doctor]") {
   Check c = check_isolation(r.in);
   CHECK(c.verdict == Verdict::Warn);
   CHECK(c.fix.find("isolcpus=1 nohz_full=1 rcu_nocbs=1") != std::string::npos);
-  r.put("/proc/cmdline", "root=/dev/sda1 isolcpus=managed_irq,domain,1-3 nohz_full=1-3 rcu_nocbs=2");
+  r.put("/proc/cmdline",
+        "root=/dev/sda1 isolcpus=managed_irq,domain,1-3 nohz_full=1-3 rcu_nocbs=2");
   c = check_isolation(r.in);
   CHECK(c.verdict == Verdict::Warn);
   CHECK(c.detail.find("rcu_nocbs") != std::string::npos);
@@ -131,7 +132,8 @@ TEST_CASE("doctor: IRQ affinity of the POWERLINK NIC against the cycle CPU", "[d
   can.in.config.bus = BusKind::Canio;
   can.in.config.canio.interface = "can0";
   can.put("/sys/class/net/can0/operstate", "up");
-  can.put("/proc/interrupts", "           CPU0       CPU1\n  42:      12     0   IO-APIC   42-fasteoi   can0\n");
+  can.put("/proc/interrupts",
+          "           CPU0       CPU1\n  42:      12     0   IO-APIC   42-fasteoi   can0\n");
   can.put("/proc/irq/42/smp_affinity_list", "0");
   CHECK(check_irq_affinity(can.in).verdict == Verdict::Warn);
 }
@@ -141,7 +143,8 @@ TEST_CASE("doctor: NIC coalescing and EEE from ethtool", "[doctor]") {
   r.in.config.bus = BusKind::Powerlink;
   r.in.config.powerlink.interface = "eth1";
   r.commands["ethtool -c eth1"] = "Coalesce parameters for eth1:\nrx-usecs: 50\nrx-frames: 0\n";
-  r.commands["ethtool --show-eee eth1"] = "EEE settings for eth1:\n\tEEE status: enabled - active\n";
+  r.commands["ethtool --show-eee eth1"] =
+      "EEE settings for eth1:\n\tEEE status: enabled - active\n";
   auto checks = check_nic(r.in);
   REQUIRE(checks.size() == 2);
   CHECK(checks[0].verdict == Verdict::Warn);
@@ -192,7 +195,8 @@ TEST_CASE("doctor: the unit's limits and CPUAffinity", "[doctor]") {
   CHECK(checks[0].verdict == Verdict::Fail);  // priority 80 > 50, no MEMLOCK
   CHECK(checks[1].verdict == Verdict::Pass);
   // An override in /etc wins over the package's unit.
-  r.put("/etc/systemd/system/ds1928d.service", "[Service]\nLimitRTPRIO=99\nLimitMEMLOCK=infinity\n");
+  r.put("/etc/systemd/system/ds1928d.service",
+        "[Service]\nLimitRTPRIO=99\nLimitMEMLOCK=infinity\n");
   checks = check_unit(r.in);
   CHECK(checks[0].verdict == Verdict::Pass);
   CHECK(checks[1].verdict == Verdict::Pass);

@@ -54,8 +54,10 @@ std::optional<std::string> cmdline_param(const std::string& cmdline, const std::
   std::string w;
   std::optional<std::string> found;
   while (words >> w) {
-    if (w == key) found = "";
-    else if (w.rfind(key + "=", 0) == 0) found = w.substr(key.size() + 1);
+    if (w == key)
+      found = "";
+    else if (w.rfind(key + "=", 0) == 0)
+      found = w.substr(key.size() + 1);
   }
   return found;
 }
@@ -64,7 +66,9 @@ bool contains(const std::vector<int>& v, int x) {
   return std::find(v.begin(), v.end(), x) != v.end();
 }
 
-int cycle_cpu(const DoctorInput& in) { return in.config.cycle.cpu; }
+int cycle_cpu(const DoctorInput& in) {
+  return in.config.cycle.cpu;
+}
 
 std::string cpu_dir(const DoctorInput& in) {
   return fmt::format("/sys/devices/system/cpu/cpu{}", std::max(cycle_cpu(in), 0));
@@ -145,12 +149,13 @@ Check check_governor(const DoctorInput& in) {
   const int cpu = std::max(cycle_cpu(in), 0);
   const auto gov = read_in(in, cpu_dir(in) + "/cpufreq/scaling_governor");
   if (!gov)
-    return pass("governor", fmt::format("CPU {}: no cpufreq (fixed frequency or a virtual machine)",
-                                        cpu));
+    return pass("governor",
+                fmt::format("CPU {}: no cpufreq (fixed frequency or a virtual machine)", cpu));
   if (*gov == "performance") return pass("governor", fmt::format("CPU {}: performance", cpu));
-  return warn("governor",
-              fmt::format("CPU {}: {} (the frequency follows the load: slower wake-ups)", cpu, *gov),
-              fmt::format("cpupower -c {} frequency-set -g performance", cpu));
+  return warn(
+      "governor",
+      fmt::format("CPU {}: {} (the frequency follows the load: slower wake-ups)", cpu, *gov),
+      fmt::format("cpupower -c {} frequency-set -g performance", cpu));
 }
 
 Check check_idle_states(const DoctorInput& in) {
@@ -163,13 +168,15 @@ Check check_idle_states(const DoctorInput& in) {
   for (const auto& e : fs::directory_iterator(dir, ec)) {
     const std::string n = e.path().filename().string();
     if (n.rfind("state", 0) != 0) continue;
-    const long latency = std::strtol(read_text(e.path() / "latency").value_or("0").c_str(), nullptr, 10);
+    const long latency =
+        std::strtol(read_text(e.path() / "latency").value_or("0").c_str(), nullptr, 10);
     const bool disabled = read_text(e.path() / "disable").value_or("0") == "1";
     if (!disabled && latency > 10)
       deep.push_back(fmt::format("{} ({} µs)", read_text(e.path() / "name").value_or(n), latency));
   }
   std::sort(deep.begin(), deep.end());
-  if (deep.empty()) return pass("idle_states", fmt::format("CPU {}: no enabled idle state deeper than 10 µs", cpu));
+  if (deep.empty())
+    return pass("idle_states", fmt::format("CPU {}: no enabled idle state deeper than 10 µs", cpu));
   std::string list;
   for (const auto& d : deep) list += (list.empty() ? "" : ", ") + d;
   if (in.config.cycle.hold_cpu_dma_latency)
@@ -177,21 +184,26 @@ Check check_idle_states(const DoctorInput& in) {
                 fmt::format("CPU {}: {} enabled; the daemon holds /dev/cpu_dma_latency at 0 "
                             "(cycle.hold_cpu_dma_latency), which keeps them unused",
                             cpu, list));
-  return warn("idle_states", fmt::format("CPU {}: {} enabled and cycle.hold_cpu_dma_latency off", cpu, list),
-              "set cycle.hold_cpu_dma_latency: true, or boot with processor.max_cstate=1 intel_idle.max_cstate=0");
+  return warn("idle_states",
+              fmt::format("CPU {}: {} enabled and cycle.hold_cpu_dma_latency off", cpu, list),
+              "set cycle.hold_cpu_dma_latency: true, or boot with processor.max_cstate=1 "
+              "intel_idle.max_cstate=0");
 }
 
 Check check_isolation(const DoctorInput& in) {
   const int cpu = cycle_cpu(in);
   if (cpu < 0)
-    return warn("isolation", "cycle.cpu is -1: the cycle thread may run on any CPU, next to everything else",
+    return warn("isolation",
+                "cycle.cpu is -1: the cycle thread may run on any CPU, next to everything else",
                 "set cycle.cpu to a CPU isolated with isolcpus= nohz_full= rcu_nocbs=");
   const std::string cmdline = read_in(in, "/proc/cmdline").value_or("");
   std::vector<std::string> missing, have;
   for (const char* key : {"isolcpus", "nohz_full", "rcu_nocbs"}) {
     const auto v = cmdline_param(cmdline, key);
-    if (v && contains(parse_cpu_list(*v), cpu)) have.push_back(key);
-    else missing.push_back(key);
+    if (v && contains(parse_cpu_list(*v), cpu))
+      have.push_back(key);
+    else
+      missing.push_back(key);
   }
   if (missing.empty())
     return pass("isolation", fmt::format("CPU {} in isolcpus, nohz_full and rcu_nocbs", cpu));
@@ -200,7 +212,8 @@ Check check_isolation(const DoctorInput& in) {
     m += (m.empty() ? "" : ", ") + k;
     fix += (fix.empty() ? "" : " ") + k + "=" + std::to_string(cpu);
   }
-  return warn("isolation", fmt::format("CPU {} (cycle.cpu) not in {} of the kernel command line", cpu, m),
+  return warn("isolation",
+              fmt::format("CPU {} (cycle.cpu) not in {} of the kernel command line", cpu, m),
               "add " + fix + " to GRUB_CMDLINE_LINUX in /etc/default/grub, update-grub, reboot");
 }
 
@@ -242,7 +255,8 @@ Check check_irq_affinity(const DoctorInput& in) {
   if (irqs.empty())
     return pass("irq_affinity", ifname + ": no hardware interrupt (a virtual interface)");
   if (cpu < 0)
-    return warn("irq_affinity", fmt::format("{}: {} interrupt(s); cycle.cpu is -1", ifname, irqs.size()),
+    return warn("irq_affinity",
+                fmt::format("{}: {} interrupt(s); cycle.cpu is -1", ifname, irqs.size()),
                 "set cycle.cpu, then put the interrupts on it");
   std::vector<int> elsewhere;
   for (int irq : irqs) {
@@ -267,7 +281,8 @@ std::vector<Check> check_nic(const DoctorInput& in) {
   const std::string ifname = in.config.powerlink.interface;
   const auto coal = in.run ? in.run("ethtool -c " + ifname) : std::nullopt;
   if (!coal) {
-    out.push_back(warn("coalescing", ifname + ": ethtool -c failed (ethtool missing, or the driver does not say)",
+    out.push_back(warn("coalescing",
+                       ifname + ": ethtool -c failed (ethtool missing, or the driver does not say)",
                        "apt install ethtool"));
   } else {
     long rx_usecs = -1, rx_frames = -1;
@@ -279,20 +294,23 @@ std::vector<Check> check_nic(const DoctorInput& in) {
     }
     if (rx_usecs > 0)
       out.push_back(warn("coalescing",
-                         fmt::format("{}: rx-usecs {}: each PRes waits up to {} µs in the NIC", ifname,
-                                     rx_usecs, rx_usecs),
+                         fmt::format("{}: rx-usecs {}: each PRes waits up to {} µs in the NIC",
+                                     ifname, rx_usecs, rx_usecs),
                          fmt::format("ethtool -C {} rx-usecs 0 rx-frames 1", ifname)));
     else
-      out.push_back(pass("coalescing", fmt::format("{}: rx-usecs {}{}", ifname,
-                                                   rx_usecs < 0 ? std::string("n/a") : std::to_string(rx_usecs),
-                                                   rx_frames > 1 ? fmt::format(", rx-frames {}", rx_frames) : "")));
+      out.push_back(
+          pass("coalescing",
+               fmt::format("{}: rx-usecs {}{}", ifname,
+                           rx_usecs < 0 ? std::string("n/a") : std::to_string(rx_usecs),
+                           rx_frames > 1 ? fmt::format(", rx-frames {}", rx_frames) : "")));
   }
   const auto eee = in.run ? in.run("ethtool --show-eee " + ifname) : std::nullopt;
   if (!eee) {
     out.push_back(pass("eee", ifname + ": no EEE support reported (ethtool --show-eee)"));
   } else if (eee->find("enabled - active") != std::string::npos ||
              eee->find("EEE status: enabled") != std::string::npos) {
-    out.push_back(warn("eee", ifname + ": Energy-Efficient Ethernet on: the link sleeps between frames",
+    out.push_back(warn("eee",
+                       ifname + ": Energy-Efficient Ethernet on: the link sleeps between frames",
                        fmt::format("ethtool --set-eee {} eee off", ifname)));
   } else {
     out.push_back(pass("eee", ifname + ": EEE off"));
@@ -317,33 +335,39 @@ std::vector<Check> check_can(const DoctorInput& in) {
                                   ? link["linkinfo"].value("info_data", nlohmann::json::object())
                                   : nlohmann::json::object();
   if (!link.is_object()) {
-    out.push_back(fail("can_bitrate", ifname + ": no such interface (ip -details link show)",
-                       fmt::format("ip link set {} type can bitrate {} restart-ms 100 && ip link set {} up",
-                                   ifname, in.config.canio.bitrate, ifname)));
+    out.push_back(
+        fail("can_bitrate", ifname + ": no such interface (ip -details link show)",
+             fmt::format("ip link set {} type can bitrate {} restart-ms 100 && ip link set {} up",
+                         ifname, in.config.canio.bitrate, ifname)));
     return out;
   }
   const uint32_t bitrate = info.contains("bittiming") ? info["bittiming"].value("bitrate", 0u) : 0u;
   if (bitrate == in.config.canio.bitrate)
     out.push_back(pass("can_bitrate", fmt::format("{}: {} bit/s as configured", ifname, bitrate)));
   else
-    out.push_back(fail("can_bitrate",
-                       fmt::format("{}: {} bit/s, canio.bitrate is {}", ifname, bitrate, in.config.canio.bitrate),
-                       fmt::format("ip link set {} down && ip link set {} type can bitrate {} && ip link set {} up",
-                                   ifname, ifname, in.config.canio.bitrate, ifname)));
+    out.push_back(fail(
+        "can_bitrate",
+        fmt::format("{}: {} bit/s, canio.bitrate is {}", ifname, bitrate, in.config.canio.bitrate),
+        fmt::format(
+            "ip link set {} down && ip link set {} type can bitrate {} && ip link set {} up",
+            ifname, ifname, in.config.canio.bitrate, ifname)));
   const uint32_t restart = info.value("restart_ms", 0u);
   if (restart > 0)
     out.push_back(pass("can_restart_ms", fmt::format("{}: restart-ms {}", ifname, restart)));
   else
-    out.push_back(warn("can_restart_ms",
-                       ifname + ": restart-ms 0: after a bus-off the controller stays off until restarted by hand",
-                       fmt::format("ip link set {} type can restart-ms 100", ifname)));
+    out.push_back(warn(
+        "can_restart_ms",
+        ifname + ": restart-ms 0: after a bus-off the controller stays off until restarted by hand",
+        fmt::format("ip link set {} type can restart-ms 100", ifname)));
   const uint32_t txq = link.value("txqlen", 0u);
   if (txq >= 100)
     out.push_back(pass("can_txqueuelen", fmt::format("{}: txqueuelen {}", ifname, txq)));
   else
-    out.push_back(warn("can_txqueuelen",
-                       fmt::format("{}: txqueuelen {}: the cycle's frames and SDO share it (ENOBUFS)", ifname, txq),
-                       fmt::format("ip link set {} txqueuelen 100", ifname)));
+    out.push_back(
+        warn("can_txqueuelen",
+             fmt::format("{}: txqueuelen {}: the cycle's frames and SDO share it (ENOBUFS)", ifname,
+                         txq),
+             fmt::format("ip link set {} txqueuelen 100", ifname)));
   return out;
 }
 
@@ -351,8 +375,9 @@ std::vector<Check> check_unit(const DoctorInput& in) {
   std::vector<Check> out;
   std::string unit = in.unit;
   if (unit.empty()) {
-    for (const char* p : {"/etc/systemd/system/ds1928d.service", "/lib/systemd/system/ds1928d.service",
-                          "/usr/lib/systemd/system/ds1928d.service"}) {
+    for (const char* p :
+         {"/etc/systemd/system/ds1928d.service", "/lib/systemd/system/ds1928d.service",
+          "/usr/lib/systemd/system/ds1928d.service"}) {
       if (fs::exists(path_in(in, p))) {
         unit = p;
         break;
@@ -370,48 +395,57 @@ std::vector<Check> check_unit(const DoctorInput& in) {
     const bool prio_ok = root || prio.rlim_cur >= static_cast<rlim_t>(in.config.cycle.rt_priority);
     const std::string d = fmt::format(
         "no ds1928d.service below {}: limits of this shell: RLIMIT_MEMLOCK {}, RLIMIT_RTPRIO {}{}",
-        in.root, mem.rlim_cur == RLIM_INFINITY ? std::string("unlimited") : std::to_string(mem.rlim_cur),
+        in.root,
+        mem.rlim_cur == RLIM_INFINITY ? std::string("unlimited") : std::to_string(mem.rlim_cur),
         prio.rlim_cur == RLIM_INFINITY ? std::string("unlimited") : std::to_string(prio.rlim_cur),
         root ? " (root: not binding)" : "");
-    out.push_back(mem_ok && prio_ok ? pass("limits", d)
-                                    : warn("limits", d, "LimitMEMLOCK=infinity and LimitRTPRIO=99 in the unit, or "
-                                                        "@ds1928d - memlock unlimited / rtprio 99 in /etc/security/limits.d/"));
+    out.push_back(
+        mem_ok && prio_ok
+            ? pass("limits", d)
+            : warn("limits", d,
+                   "LimitMEMLOCK=infinity and LimitRTPRIO=99 in the unit, or "
+                   "@ds1928d - memlock unlimited / rtprio 99 in /etc/security/limits.d/"));
     return out;
   }
   const std::string mem = unit_value(*text, "LimitMEMLOCK").value_or("");
   const std::string prio = unit_value(*text, "LimitRTPRIO").value_or("");
   const bool mem_ok = mem == "infinity" || (in.config.cycle.lock_memory == false);
   const bool prio_ok = !prio.empty() && std::atoi(prio.c_str()) >= in.config.cycle.rt_priority;
-  const std::string d = fmt::format("{}: LimitMEMLOCK={} LimitRTPRIO={} (cycle.rt_priority {})", unit,
-                                    mem.empty() ? "unset" : mem, prio.empty() ? "unset" : prio,
-                                    in.config.cycle.rt_priority);
-  if (mem_ok && prio_ok) out.push_back(pass("limits", d));
+  const std::string d = fmt::format("{}: LimitMEMLOCK={} LimitRTPRIO={} (cycle.rt_priority {})",
+                                    unit, mem.empty() ? "unset" : mem,
+                                    prio.empty() ? "unset" : prio, in.config.cycle.rt_priority);
+  if (mem_ok && prio_ok)
+    out.push_back(pass("limits", d));
   else
-    out.push_back(fail("limits", d,
-                       fmt::format("systemctl edit ds1928d: [Service] LimitMEMLOCK=infinity LimitRTPRIO={}",
-                                   std::max(in.config.cycle.rt_priority, 1))));
+    out.push_back(
+        fail("limits", d,
+             fmt::format("systemctl edit ds1928d: [Service] LimitMEMLOCK=infinity LimitRTPRIO={}",
+                         std::max(in.config.cycle.rt_priority, 1))));
   const auto aff = unit_value(*text, "CPUAffinity");
   const int cpu = cycle_cpu(in);
   if (!aff || aff->empty()) {
-    out.push_back(pass("cpu_affinity", unit + ": no CPUAffinity= (the cycle thread pins itself to cycle.cpu)"));
+    out.push_back(pass("cpu_affinity",
+                       unit + ": no CPUAffinity= (the cycle thread pins itself to cycle.cpu)"));
   } else {
     std::string list = *aff;
     std::replace(list.begin(), list.end(), ' ', ',');
     const auto cpus = parse_cpu_list(list);
     if (cpu < 0 || contains(cpus, cpu))
-      out.push_back(pass("cpu_affinity", fmt::format("{}: CPUAffinity={} includes cycle.cpu {}", unit, *aff, cpu)));
+      out.push_back(pass("cpu_affinity",
+                         fmt::format("{}: CPUAffinity={} includes cycle.cpu {}", unit, *aff, cpu)));
     else
-      out.push_back(fail("cpu_affinity",
-                         fmt::format("{}: CPUAffinity={} excludes cycle.cpu {}: the cycle thread cannot be pinned",
-                                     unit, *aff, cpu),
-                         fmt::format("systemctl edit ds1928d: [Service] CPUAffinity={} (or drop it)", cpu)));
+      out.push_back(fail(
+          "cpu_affinity",
+          fmt::format("{}: CPUAffinity={} excludes cycle.cpu {}: the cycle thread cannot be pinned",
+                      unit, *aff, cpu),
+          fmt::format("systemctl edit ds1928d: [Service] CPUAffinity={} (or drop it)", cpu)));
   }
   return out;
 }
 
 std::vector<Check> run_doctor(const DoctorInput& in) {
-  std::vector<Check> out{check_preemption(in), check_governor(in), check_idle_states(in),
-                         check_isolation(in), check_rt_throttling(in), check_irq_affinity(in)};
+  std::vector<Check> out{check_preemption(in), check_governor(in),      check_idle_states(in),
+                         check_isolation(in),  check_rt_throttling(in), check_irq_affinity(in)};
   for (auto* f : {&check_nic, &check_can, &check_unit})
     for (Check& c : (*f)(in)) out.push_back(std::move(c));
   return out;

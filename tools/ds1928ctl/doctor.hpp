@@ -17,7 +17,7 @@ enum class Verdict { Pass, Warn, Fail };
 [[nodiscard]] const char* to_string(Verdict v) noexcept;
 
 struct Check {
-  std::string name;    // "preemption", "governor", ...
+  std::string name;  // "preemption", "governor", ...
   Verdict verdict = Verdict::Pass;
   std::string detail;  // what was found
   std::string fix;     // the one-line fix ("" on PASS)
@@ -44,7 +44,8 @@ struct DoctorInput {
 [[nodiscard]] Check check_rt_throttling(const DoctorInput& in);
 [[nodiscard]] Check check_irq_affinity(const DoctorInput& in);
 [[nodiscard]] std::vector<Check> check_nic(const DoctorInput& in);  // coalescing, EEE
-[[nodiscard]] std::vector<Check> check_can(const DoctorInput& in);  // bitrate, restart-ms, txqueuelen
+[[nodiscard]] std::vector<Check> check_can(
+    const DoctorInput& in);  // bitrate, restart-ms, txqueuelen
 [[nodiscard]] std::vector<Check> check_unit(const DoctorInput& in);  // limits, CPUAffinity
 [[nodiscard]] std::vector<Check> run_doctor(const DoctorInput& in);
 

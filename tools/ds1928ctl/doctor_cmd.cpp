@@ -100,7 +100,8 @@ int run(const Context& ctx, const DoctorArgs& args) {
           s.wake_latency.p50_ns / 1000.0, s.wake_latency.p99_ns / 1000.0,
           s.wake_latency.max_ns / 1000.0);
   }
-  if (ctx.json) std::cout << j.dump() << std::endl;
+  if (ctx.json)
+    std::cout << j.dump() << std::endl;
   else
     std::printf("%zu checks: %zu pass, %d warn, %d fail\n", checks.size(),
                 checks.size() - fails - warns, warns, fails);

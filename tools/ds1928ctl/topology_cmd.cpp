@@ -39,8 +39,8 @@ void print_topology(const json& r) {
   }
   const json& nodes = r.value("nodes", json::array());
   if (nodes.empty()) return;
-  std::printf("  %-4s  %-10s %-10s  %-10s %-10s  %-10s %-10s  %s\n", "node", "exp vendor",
-              "found", "exp prod.", "found", "exp rev.", "exp serial", "boot");
+  std::printf("  %-4s  %-10s %-10s  %-10s %-10s  %-10s %-10s  %s\n", "node", "exp vendor", "found",
+              "exp prod.", "found", "exp rev.", "exp serial", "boot");
   for (const json& n : nodes) {
     const json& e = n.value("expected", json());
     const json& f = n.value("found", json());
