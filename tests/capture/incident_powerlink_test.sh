@@ -5,8 +5,8 @@
 # Checks:
 #  1. `ds1928ctl incident mark TEXT` writes a file after the tail, listed by `ds1928ctl incidents`
 #     (and --json) with its frames;
-#  2. killing the CN (SIGKILL) makes the MN reset node 1 (loss of PRes threshold): exactly one
-#     incident file of node 1 (kind pres_threshold, node_lost or node_reset), readable by tshark
+#  2. killing the CN (SIGKILL) makes the MN reset node 1 (loss of PRes threshold): an incident
+#     file of node 1 (kind pres_threshold, node_lost or node_reset), readable by tshark
 #     with 0 malformed frames, holding the CN's PRes frames from before the event (the CN is
 #     dead after it: no PRes can come later) and the MN's frames of the tail; the daemon's log
 #     line names the file; status counts the incident and the axis' bus_down incident;
@@ -78,34 +78,38 @@ sleep 2  # frames in the ring before the events
 
 # ---- 1: a manual mark --------------------------------------------------------------------------
 ctl incident mark "before the kill" >"$tmp/mark.log" 2>&1 || fail "incident mark: $(cat "$tmp/mark.log")"
-wait_for "$tmp/daemon.log" "incident 1: manual mark: before the kill; [0-9]+ frames around it in $tmp/incidents/" 10 ||
+# (On a loaded machine the software CN may have been reset before: those incidents are listed
+# too; the checks select by kind, node and time.)
+wait_for "$tmp/daemon.log" "incident [0-9]+: manual mark: before the kill; [0-9]+ frames around it in $tmp/incidents/" 10 ||
   fail "no log line for the manual incident"
 ctl --json incidents >"$tmp/list1.json" || fail "incidents --json"
-[ "$(jq '.incidents | length' "$tmp/list1.json")" = 1 ] &&
-  [ "$(jq -r '.incidents[0].kind' "$tmp/list1.json")" = manual ] &&
-  [ "$(jq '.incidents[0].frames' "$tmp/list1.json")" -gt 1000 ] ||
+manual=$(jq -c '[.incidents[] | select(.kind == "manual")]' "$tmp/list1.json")
+[ "$(jq 'length' <<<"$manual")" = 1 ] && [ "$(jq '.[0].frames' <<<"$manual")" -gt 1000 ] ||
   fail "incidents after the mark: $(cat "$tmp/list1.json")"
-mark_file=$(jq -r '.incidents[0].file' "$tmp/list1.json")
+mark_file=$(jq -r '.[0].file' <<<"$manual")
 [ -f "$mark_file" ] || fail "the listed file $mark_file does not exist"
 ctl incidents >"$tmp/list1.txt" || fail "incidents (table)"
 grep -q "manual" "$tmp/list1.txt" && grep -qF "$mark_file" "$tmp/list1.txt" || fail "table: $(cat "$tmp/list1.txt")"
-pass "manual mark: $(jq -c '.incidents[0] | {kind, frames, bytes}' "$tmp/list1.json")"
+pass "manual mark: $(jq -c '.[0] | {kind, frames, bytes}' <<<"$manual")"
 
 # ---- 2: the CN is killed -----------------------------------------------------------------------
+kill_ns=$(date +%s%N)  # before the kill: every incident it causes is later
 kill -KILL "$sim_pid"
 wait "$sim_pid" 2>/dev/null
-kill_real=$(date +%s.%N)
+kill_real=$(date +%s.%N)  # after it: no PRes of the CN can be later
 wait_for "$tmp/daemon.log" "incident [0-9]+: powerlink node 1: reset by the MN" 20 ||
   fail "no incident for node 1 after the kill"
 sleep 1  # the axis' incident and the tail
 ctl --json incidents >"$tmp/list2.json" || fail "incidents --json"
-node_incidents=$(jq -c '[.incidents[] | select(.node == 1)]' "$tmp/list2.json")
-[ "$(jq 'length' <<<"$node_incidents")" = 1 ] || fail "node 1 incidents: $node_incidents"
+# The first incident of node 1 after the kill (a dead CN may be reset again later, after boot
+# timeouts: those are incidents of their own).
+node_incidents=$(jq -c --argjson t "$kill_ns" '[.incidents[] | select(.node == 1 and .time_ns >= $t)]' "$tmp/list2.json")
+[ "$(jq 'length' <<<"$node_incidents")" -ge 1 ] || fail "no node 1 incident after the kill: $(cat "$tmp/list2.json")"
 kind=$(jq -r '.[0].kind' <<<"$node_incidents")
 case $kind in pres_threshold | node_lost | node_reset) ;; *) fail "node 1 incident of kind $kind" ;; esac
 f=$(jq -r '.[0].file' <<<"$node_incidents")
 [ -f "$f" ] || fail "node 1's incident file $f is missing"
-[ "$(ls "$tmp/incidents" | grep -c -- "-n1\.pcapng$")" = 1 ] || fail "files of node 1: $(ls "$tmp/incidents")"
+[ "$(jq 'length' <<<"$node_incidents")" = 1 ] || echo "NOTE: $(jq 'length' <<<"$node_incidents") incidents of node 1 within 1 s of the kill"
 grep -qF "$f" "$tmp/daemon.log" || fail "the log does not name $f"
 total=$(tshark -r "$f" 2>"$tmp/tshark.log" | wc -l)
 sed -i '/Running as user/d' "$tmp/tshark.log"
