@@ -22,6 +22,7 @@ if [ "$quick" = 1 ]; then
   run "$here/powerlink/run_cycle_bench.sh" "$build" --quick --nodes 1
   run "$build/bench/canio/canio_bench" --quick
   [ -f "$build/linuxcnc/ds1928.so" ] && run "$here/consumers/run_age_bench.sh" "$build" 1
+  run env BUILD_DIR="$build" "$here/capture/flight_recorder.sh" both 3 1
 else
   run env BUILD_DIR="$build" "$here/cycle/run.sh" --cycles 20000 --rounds 3
   run "$build/bench/shm/shm_bench"
@@ -31,5 +32,6 @@ else
   run "$here/powerlink/run_cycle_bench.sh" "$build" --nodes "1 4 16"
   run "$build/bench/canio/canio_bench"
   [ -f "$build/linuxcnc/ds1928.so" ] && run "$here/consumers/run_age_bench.sh" "$build" 3
+  run env BUILD_DIR="$build" "$here/capture/flight_recorder.sh" both 10 3
 fi
 exit $status

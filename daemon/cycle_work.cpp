@@ -15,7 +15,12 @@ CycleWork::CycleWork(const DaemonConfig& config, BusDriver& bus, shm::Publisher&
       ack_hold_(config.axes.size(), 0),
       counters_(std::make_unique<AxisCounters[]>(config.axes.size())),
       next_wake_offset_ns_((int64_t{config.cycle.period_us} - int64_t{config.cycle.spin_us}) *
-                           1000) {
+                           1000),
+      // Every axis starts bus_down (nothing exchanged yet): that first state is no incident.
+      last_validity_(config.axes.size(), static_cast<uint8_t>(shm::AxisValidity::BusDown)),
+      overrun_burst_(config.flight_recorder.overrun_burst),
+      cycles_per_second_(
+          std::max<uint64_t>(1, 1000000 / std::max<uint32_t>(1, config.cycle.period_us))) {
   for (std::size_t i = 0; i < config.axes.size(); ++i) {
     const ModuleSettings& m = config.axes[i].module;
     flatstream::MasterConfig fc;
@@ -34,6 +39,11 @@ CycleWork::CycleWork(const DaemonConfig& config, BusDriver& bus, shm::Publisher&
       params_[i].stall_limit =
           stall_limit_cycles(config.bus == BusKind::Canio ? config.canio.stall_limit : 0,
                              m.prescaler, config.cycle.period_us);
+    const bool expected = config.axes[i].expected_encoder.any();
+    counters_[i].identity.store(
+        static_cast<uint8_t>(expected ? IdentityState::Pending : IdentityState::Unchecked),
+        std::memory_order_relaxed);
+    identity_gate_.push_back(expected && config.topology.refuse ? 1 : 0);
   }
 }
 
@@ -84,7 +94,12 @@ void CycleWork::run_cycle(const CycleContext& ctx) noexcept {
     st.sample = sample;
     st.endat_error = c.endat_error.load(std::memory_order_relaxed);
     st.endat_warning = c.endat_warning.load(std::memory_order_relaxed);
-    st.validity = shm::classify(sample, result.bus_up && io_[i].axis_up);
+    // An axis whose encoder is not (yet) the expected one is down: its positions would be another
+    // encoder's under this axis' name.
+    const bool identity_ok =
+        identity_gate_[i] == 0 || c.identity.load(std::memory_order_relaxed) ==
+                                      static_cast<uint8_t>(IdentityState::Confirmed);
+    st.validity = shm::classify(sample, result.bus_up && io_[i].axis_up && identity_ok);
     // A position that breaks the format is never published as valid.
     if (st.validity == shm::AxisValidity::Valid && !sample.fraction_valid)
       st.validity = shm::AxisValidity::ModuleError;
@@ -96,6 +111,13 @@ void CycleWork::run_cycle(const CycleContext& ctx) noexcept {
     }
     c.cycle.store(ctx.index, std::memory_order_relaxed);
     c.validity.store(static_cast<uint8_t>(st.validity), std::memory_order_relaxed);
+    if (const auto v = static_cast<uint8_t>(st.validity); v != last_validity_[i]) {
+      last_validity_[i] = v;
+      if (incidents_ != nullptr && st.validity == shm::AxisValidity::ModuleError)
+        incidents_->raise(IncidentKind::AxisError, -1, static_cast<int>(i), ctx.start_ns);
+      if (incidents_ != nullptr && st.validity == shm::AxisValidity::BusDown)
+        incidents_->raise(IncidentKind::AxisBusDown, -1, static_cast<int>(i), ctx.start_ns);
+    }
     if (const auto v = static_cast<std::size_t>(st.validity); v < c.published.size())
       bump(c.published[v]);
   }
@@ -109,6 +131,29 @@ void CycleWork::run_cycle(const CycleContext& ctx) noexcept {
   // shared-memory wake-up thread, on the same CPU, wakes then too and runs once this thread
   // sleeps again.
   publisher_.publish(ctx.index, status_, ctx.start_ns + next_wake_offset_ns_);
+  watch_overruns(ctx);
+}
+
+// An overrun leaves grid slots out (CycleContext::index jumps): overruns_burst of them within one
+// second of cycles raise one incident for that second.
+void CycleWork::watch_overruns(const CycleContext& ctx) noexcept {
+  if (incidents_ == nullptr || overrun_burst_ == 0) return;
+  if (!have_index_) {
+    have_index_ = true;
+    last_index_ = burst_window_start_ = ctx.index;
+    return;
+  }
+  if (ctx.index - burst_window_start_ >= cycles_per_second_) {
+    burst_window_start_ = ctx.index;
+    burst_overruns_ = 0;
+    burst_raised_ = false;
+  }
+  if (ctx.index > last_index_ + 1) ++burst_overruns_;
+  last_index_ = ctx.index;
+  if (!burst_raised_ && burst_overruns_ >= overrun_burst_) {
+    burst_raised_ = true;
+    incidents_->raise(IncidentKind::OverrunBurst, -1, -1, ctx.start_ns);
+  }
 }
 
 }  // namespace ds1928

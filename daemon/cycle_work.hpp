@@ -14,6 +14,7 @@
 #include "core/axis_sample.hpp"
 #include "core/bus.hpp"
 #include "core/cycle_engine.hpp"
+#include "core/incident.hpp"
 #include "core/spsc_queue.hpp"
 #include "flatstream/channel.hpp"
 #include "shm/publisher.hpp"
@@ -69,6 +70,16 @@ struct TunnelCounters {
   std::atomic<uint8_t> input_state{0};      // flatstream::ReceiverState
 };
 
+// Whether the encoder behind an axis is the one the configuration expects
+// (axes[].expected_encoder; the EnDat service compares at identification).
+enum class IdentityState : uint8_t {
+  Unchecked = 0,   // nothing expected
+  Pending = 1,     // expected, not identified yet
+  Confirmed = 2,   // identified and as expected
+  Mismatch = 3,    // identified and not as expected
+  Unreadable = 4,  // the identification failed
+};
+
 // Per-axis figures the normal thread reads for `status` (single writer: the cycle thread).
 struct AxisCounters {
   std::atomic<uint64_t> fresh_cycles{0};
@@ -89,6 +100,7 @@ struct AxisCounters {
   std::atomic<uint8_t> validity{0};        // shm::AxisValidity
   std::atomic<uint32_t> endat_error{0};    // written by the normal thread from acyclic reads
   std::atomic<uint32_t> endat_warning{0};  // idem
+  std::atomic<uint8_t> identity{0};        // IdentityState, written by the normal thread
   // Cycles published per shm::AxisValidity (the metrics endpoint's publications by validity).
   std::array<std::atomic<uint64_t>, 4> published{};
 };
@@ -131,6 +143,10 @@ class CycleWork final : public CycleTask {
   }
   [[nodiscard]] bool bus_up() const noexcept { return bus_up_.load(std::memory_order_relaxed); }
 
+  // Normal thread, before the cycle thread starts: where the cycle work raises its incidents (an
+  // axis going to module_error or bus_down, a burst of overruns). nullptr: none.
+  void set_incident_sink(IncidentSink* sink) noexcept { incidents_ = sink; }
+
  private:
   struct Tunnel {
     explicit Tunnel(const flatstream::MasterConfig& c) : channel(c) {}
@@ -141,6 +157,7 @@ class CycleWork final : public CycleTask {
     flatstream::Message received;  // scratch, so the 512-byte message is not on the stack
   };
   void run_tunnel(std::size_t axis, uint64_t now_us) noexcept;
+  void watch_overruns(const CycleContext& ctx) noexcept;
 
   BusDriver& bus_;
   shm::Publisher& publisher_;
@@ -159,6 +176,19 @@ class CycleWork final : public CycleTask {
   std::atomic<uint64_t> data_exchanges_{0};
   std::atomic<uint64_t> frames_lost_{0};
   std::atomic<bool> bus_up_{false};
+  // Incidents (flight recorder): the last validity per axis, overruns in the current second.
+  IncidentSink* incidents_ = nullptr;
+  // Per axis: the axis is up only once its encoder is confirmed (expected_encoder set and
+  // topology.on_mismatch refuse).
+  std::vector<uint8_t> identity_gate_;
+  std::vector<uint8_t> last_validity_;
+  uint32_t overrun_burst_ = 0;
+  uint64_t cycles_per_second_ = 1;
+  bool have_index_ = false;
+  uint64_t last_index_ = 0;
+  uint64_t burst_window_start_ = 0;
+  uint32_t burst_overruns_ = 0;
+  bool burst_raised_ = false;
 };
 
 }  // namespace ds1928

@@ -65,6 +65,10 @@ std::error_code Daemon::start() {
     return std::make_error_code(std::errc::not_supported);
   }
   capture_ = std::make_unique<CaptureService>(io_, config_, bus_->capture_taps());
+  incidents_ =
+      std::make_unique<IncidentService>(config_, bus_->capture_taps(), std::string(bus().name()));
+  incidents_->open();
+  bus().set_incident_sink(&incidents_->sink());
   if (auto ec = publisher_.open(config_.shm, static_cast<uint32_t>(config_.axes.size()),
                                 uint64_t{config_.cycle.period_us} * 1000)) {
     spdlog::error("shared memory {}: {}", config_.shm.name, ec.message());
@@ -103,6 +107,7 @@ std::error_code Daemon::start() {
   socket_path_ = socket.path;
 
   work_ = std::make_unique<CycleWork>(config_, bus(), publisher_);
+  work_->set_incident_sink(&incidents_->sink());
   registers_ = std::make_unique<RegisterClient>(io_, bus());
   engine_ = std::make_unique<CycleEngine>(config_.cycle, *work_);
   auto started = engine_->start();
@@ -120,6 +125,11 @@ std::error_code Daemon::start() {
     spdlog::warn("shared memory wake-up thread: scheduling not applied ({})", rt::errno_text(rc));
   registers_->start(std::chrono::microseconds(std::max<uint32_t>(config_.cycle.period_us, 1000)));
   endat_ = std::make_unique<EnDatService>(io_, *work_, *registers_, config_);
+  topology_ = std::make_unique<Topology>(config_, *work_);
+  endat_->set_identified_hook(
+      [this](std::size_t axis, std::error_code ec, const endat::Identification* found) {
+        topology_->on_identified(axis, ec, found);
+      });
   endat_->register_commands(*server_);
   endat_->start();
   notifier_.supervise(
@@ -145,6 +155,7 @@ void Daemon::stop() noexcept {
   if (engine_) engine_->stop();
   if (registers_) registers_->stop();
   if (capture_) capture_->abort();
+  if (incidents_) incidents_->poll(0, true);  // the incidents still in their tail: written now
   if (server_) server_->stop();
   if (bus_) bus().stop();
   publisher_.close();
@@ -196,7 +207,11 @@ void Daemon::on_tick() {
     notifier_.ready(summary_line());
     spdlog::info("first data exchanged: ready");
   }
-  for (const BusEvent& e : bus_watch_.poll(*bus_)) log_bus_event(e, bus().name());
+  for (const BusEvent& e : bus_watch_.poll(*bus_)) {
+    log_bus_event(e, bus().name());
+    if (const auto kind = incident_of(e)) incidents_->raise(*kind, e.node, e.axis, e.text);
+  }
+  incidents_->poll();
   const auto now = std::chrono::steady_clock::now();
   if (now - last_log_ >= std::chrono::seconds(1)) {
     last_log_ = now;
@@ -240,6 +255,12 @@ json Daemon::axis_json(std::size_t i, bool with_sample) const {
          {"error_info", c.error_info.load(std::memory_order_relaxed)},
          {"endat_error", c.endat_error.load(std::memory_order_relaxed)},
          {"endat_warning", c.endat_warning.load(std::memory_order_relaxed)}};
+  const auto identity = static_cast<IdentityState>(c.identity.load(std::memory_order_relaxed));
+  if (identity != IdentityState::Unchecked) {
+    j["identity"] = std::string(to_string(identity));
+    if (topology_)
+      if (const std::string why = topology_->reason(i); !why.empty()) j["identity_reason"] = why;
+  }
   if (!with_sample) return j;
   const uint64_t raw = c.position_raw.load(std::memory_order_relaxed);
   j["node"] = a.node;
@@ -327,6 +348,7 @@ json Daemon::status_json() const {
           {"shm", {{"name", config_.shm.name}, {"generation", publisher_.generation()}}},
           {"bus", bus_->status_json()},
           {"capture", capture_->status_json()},
+          {"flight_recorder", incidents_->status_json()},
           {"cycle",
            {{"period_us", config_.cycle.period_us},
             {"count", engine_->cycle_count()},
@@ -342,6 +364,11 @@ void Daemon::register_commands() {
   server_->add_command("status", [this](const Request&, Reply reply) { reply.ok(status_json()); });
   register_bus_commands(*server_, *bus_, config_);
   capture_->register_commands(*server_);
+  incidents_->register_commands(*server_);
+  server_->add_command("topology", [this](const Request&, Reply reply) {
+    if (!topology_) return reply.error("starting", "the daemon is still starting");
+    reply.ok(topology_->topology_json(endat_.get(), bus_->status_json()));
+  });
   server_->add_command("axes", [this](const Request&, Reply reply) { reply.ok(axes_json()); });
   server_->add_command("stats", [this](const Request&, Reply reply) { reply.ok(stats_json()); });
   server_->add_command("stats-reset", [this](const Request&, Reply reply) {
@@ -375,6 +402,21 @@ void Daemon::register_commands() {
     }
     reply.ok({{"axis", axis}, {"bits", bits}});
   });
+}
+
+std::optional<IncidentKind> incident_of(const BusEvent& e) {
+  switch (e.event) {
+    case control::LogEvent::NodeReset:
+      // The MN's reasons (powerlink/errors.cpp): a CN dropping out of its state is "lost".
+      if (e.reason.find("loss of PRes threshold") != std::string::npos)
+        return IncidentKind::PresThreshold;
+      if (e.reason.find("not operational") != std::string::npos) return IncidentKind::NodeLost;
+      return IncidentKind::NodeReset;
+    case control::LogEvent::NodeSilent:
+      return IncidentKind::NodeLost;
+    default:
+      return std::nullopt;
+  }
 }
 
 }  // namespace ds1928

@@ -20,9 +20,11 @@
 #include "core/cycle_engine.hpp"
 #include "cycle_work.hpp"
 #include "endat_service.hpp"
+#include "incident_service.hpp"
 #include "metrics/http_server.hpp"
 #include "register_client.hpp"
 #include "shm/publisher.hpp"
+#include "topology.hpp"
 
 namespace ds1928 {
 
@@ -67,6 +69,7 @@ class Daemon {
   [[nodiscard]] BusService& bus_service() noexcept { return *bus_; }
   [[nodiscard]] boost::asio::io_context& io() noexcept { return io_; }
   [[nodiscard]] const std::string& socket_path() const noexcept { return socket_path_; }
+  [[nodiscard]] IncidentService& incidents() noexcept { return *incidents_; }
   // The OpenMetrics text of GET /metrics (daemon_metrics.cpp); the bound address or "off".
   [[nodiscard]] std::string metrics_text(metrics::Format format) const;
   [[nodiscard]] std::string metrics_address() const;
@@ -82,12 +85,14 @@ class Daemon {
   boost::asio::signal_set signals_;
   boost::asio::steady_timer tick_timer_;
   std::unique_ptr<BusService> bus_;
-  std::unique_ptr<CaptureService> capture_;  // uses the bus' capture points: after bus_
+  std::unique_ptr<CaptureService> capture_;     // uses the bus' capture points: after bus_
+  std::unique_ptr<IncidentService> incidents_;  // the flight recorder: idem
   shm::Publisher publisher_;
   std::unique_ptr<CycleWork> work_;
   std::unique_ptr<CycleEngine> engine_;
   std::unique_ptr<RegisterClient> registers_;
   std::unique_ptr<EnDatService> endat_;
+  std::unique_ptr<Topology> topology_;  // the expected topology: after work_, before endat_ runs
   std::unique_ptr<control::Server> server_;
   std::unique_ptr<metrics::HttpServer> metrics_;
   control::SystemdNotifier notifier_;
@@ -100,6 +105,10 @@ class Daemon {
   bool ready_sent_ = false;
   bool started_ = false;
 };
+
+// The incident a bus event is, if any (POWERLINK node reset/lost/threshold, CAN-I/O node silent;
+// bus-off comes from the driver itself, core/incident.hpp).
+[[nodiscard]] std::optional<IncidentKind> incident_of(const BusEvent& e);
 
 // Logs a bus event with its journal fields (DS1928_BUS = `bus`).
 void log_bus_event(const BusEvent& e, std::string_view bus);

@@ -128,6 +128,8 @@ std::string Daemon::metrics_text(metrics::Format format) const {
   out.sample({{"bus", bus_name}}, work_->frames_lost());
 
   bus_->append_metrics(out);
+  incidents_->append_metrics(out);
+  if (topology_) topology_->append_metrics(out);
 
   // Per axis: what was published to shared memory, and the EnDat commands through Flatstream.
   const std::size_t axes = config_.axes.size();

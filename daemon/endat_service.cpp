@@ -706,6 +706,7 @@ void EnDatService::identification_done(std::size_t index, std::error_code error)
                  a.ident->position_bits, a.ident->id.to_string(), a.ident->serial.to_string(),
                  a.ident_source);
   }
+  if (identified_hook_) identified_hook_(index, error, error ? nullptr : &*a.ident);
   auto waiters = std::move(a.ident_waiters);
   a.ident_waiters.clear();
   for (auto& w : waiters) w(error);

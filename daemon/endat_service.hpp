@@ -122,6 +122,11 @@ class EnDatService {
 
   // Identification of an axis, once known.
   [[nodiscard]] const std::optional<endat::Identification>& identification(std::size_t axis) const;
+  // Called after every identification of an axis (at start and on refresh), with the result:
+  // the expected topology compares it (topology.hpp). Normal thread.
+  using IdentifiedHook =
+      std::function<void(std::size_t axis, std::error_code, const endat::Identification*)>;
+  void set_identified_hook(IdentifiedHook hook) { identified_hook_ = std::move(hook); }
   // The `endat-ident` reply body: identification, raw words 4..47 with names, status words.
   [[nodiscard]] nlohmann::json identification_reply(std::size_t axis) const;
   [[nodiscard]] bool identifying(std::size_t axis) const;
@@ -171,6 +176,7 @@ class EnDatService {
 
   boost::asio::io_context& io_;
   CycleWork& work_;
+  IdentifiedHook identified_hook_;
   RegisterClient& registers_;
   const DaemonConfig& config_;
   boost::asio::steady_timer poll_timer_;

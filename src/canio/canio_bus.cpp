@@ -332,6 +332,8 @@ ExchangeResult CanioBus::exchange(std::span<AxisIo> axes, int64_t, uint64_t) noe
       push_event({CanioNodeEventKind::BusOff, 0, clock_(), {}, 0});
     }
     bump(counters_.bus_off_cycles);
+    if (can == CanState::BusOff && !bus_off_raised_) raise_incident(IncidentKind::BusOff);
+    bus_off_raised_ = can == CanState::BusOff;
     state_.store(BusState::Error, std::memory_order_relaxed);
     result.bus_up = false;
     result.frames_lost = static_cast<uint32_t>(2 * n);
@@ -356,6 +358,7 @@ ExchangeResult CanioBus::exchange(std::span<AxisIo> axes, int64_t, uint64_t) noe
   // Boot-up, heartbeat, EMCY and SDO answers that came in since the last cycle: a node that
   // announced a reset is down before this cycle's window.
   drain_node_port(clock_());
+  bus_off_raised_ = false;
   for (std::size_t i = 0; i < n; ++i) track_[i].pairing.open();
   // The window opens before the SYNC is handed to the port: every answer to it is stamped later
   // (its end of frame follows the SYNC's on the wire).

@@ -392,6 +392,7 @@ class CanioBus final : public BusDriver {
   int64_t sync_tx_ns_ = 0;  // this cycle's window
   int64_t deadline_ns_ = 0;
   std::atomic<BusState> state_{BusState::Down};
+  bool bus_off_raised_ = false;  // the bus-off incident of this bus-off is raised (cycle thread)
   Clock clock_;
   std::string start_error_;
 

@@ -38,6 +38,10 @@ void Tap::record(Direction direction, int64_t time_ns, std::span<const uint8_t> 
   const uint64_t seq = seq_.load(std::memory_order_relaxed) + 1;
   seq_.store(seq, std::memory_order_seq_cst);
   bump(direction == Direction::Outbound ? tx_ : rx_);
+  if (flight_) {
+    if (time_ns == 0) time_ns = rt::now_ns();
+    flight_->record(direction, time_ns, bytes);
+  }
   // ring_ is set before active_ turns true and freed only after release() saw every producer
   // that could have seen active_ true finish (both through the sequentially consistent pair).
   if (active_.load(std::memory_order_seq_cst) && ring_ != nullptr) {

@@ -26,6 +26,7 @@
 #include <span>
 #include <string>
 
+#include "capture/flight_ring.hpp"
 #include "capture/pcapng.hpp"
 
 namespace ds1928::capture {
@@ -63,9 +64,17 @@ class Tap {
   void set_description(std::string text) { description_ = std::move(text); }
   [[nodiscard]] const std::string& description() const noexcept { return description_; }
 
+  // The flight recorder's ring this point always records into (flight_ring.hpp), sized for its
+  // frames (max_frame()). Normal thread, before the producer starts; the tap owns it.
+  void attach_flight_ring(std::size_t bytes) {
+    flight_ = std::make_unique<FlightRing>(bytes, max_frame_);
+  }
+  [[nodiscard]] const FlightRing* flight_ring() const noexcept { return flight_.get(); }
+  [[nodiscard]] std::size_t max_frame() const noexcept { return max_frame_; }
+
   // ---- producer -------------------------------------------------------------------------------
-  // Counts the frame and, while active, copies it. `time_ns` 0: now (CLOCK_MONOTONIC), read only
-  // when the frame is kept.
+  // Counts the frame, records it in the flight ring (if any) and, while active, copies it.
+  // `time_ns` 0: now (CLOCK_MONOTONIC), read only when the frame is kept.
   void record(Direction direction, int64_t time_ns, std::span<const uint8_t> bytes) noexcept;
 
   // ---- consumer (one capture at a time) -------------------------------------------------------
@@ -118,6 +127,7 @@ class Tap {
   std::size_t capacity_;
   std::size_t slot_size_;
   std::unique_ptr<uint8_t[]> ring_;
+  std::unique_ptr<FlightRing> flight_;
 
   alignas(64) std::atomic<std::size_t> head_{0};  // producer
   std::atomic<uint64_t> seq_{0};

@@ -176,6 +176,13 @@ void parse_axis(Section s, AxisConfig& a, const BusKindRules& bus, size_t index)
     }
     s.optional_integer(key, *field, 0, 1489);
   }
+  if (s.has("expected_encoder")) {
+    Section e = s.section("expected_encoder");
+    e.text("id_number", a.expected_encoder.id_number, 32);
+    e.text("serial_number", a.expected_encoder.serial_number, 32);
+    e.integer("position_bits", a.expected_encoder.position_bits, 1, 64);
+    e.finish();
+  }
   s.finish();
 }
 
@@ -237,6 +244,19 @@ void parse_capture(Section s, CaptureConfig& c) {
     s.error("ring_frames", std::to_string(c.ring_frames) + " is not a power of two");
   s.integer("max_duration_s", c.max_duration_s, 1, 604800, "s");
   s.integer("max_bytes", c.max_bytes, 65536, int64_t{1} << 40, "bytes");
+  s.finish();
+}
+
+void parse_flight_recorder(Section s, FlightRecorderConfig& c) {
+  s.boolean("enabled", c.enabled);
+  s.integer("ring_bytes", c.ring_bytes, 65536, int64_t{256} << 20, "bytes");
+  s.integer("before_s", c.before_s, 1, 3600, "s");
+  s.integer("after_ms", c.after_ms, 0, 10000, "ms");
+  if (s.text("dir", c.dir, 1024) && !c.dir.empty() && c.dir.front() != '/')
+    s.error("dir", "'" + c.dir + "' is not an absolute path");
+  s.integer("max_files", c.max_files, 1, 100000, "files");
+  s.integer("max_total_bytes", c.max_total_bytes, 1048576, int64_t{1} << 40, "bytes");
+  s.integer("overrun_burst", c.overrun_burst, 0, 1000000, "overruns per second (0 = never)");
   s.finish();
 }
 
@@ -347,6 +367,12 @@ DaemonConfig parse_document(Diagnostics& diag, const YAML::Node& doc, const std:
   parse_socket(root.section("socket"), c.socket);
   parse_metrics(root.section("metrics"), c.metrics);
   parse_capture(root.section("capture"), c.capture);
+  parse_flight_recorder(root.section("flight_recorder"), c.flight_recorder);
+  {
+    Section t = root.section("topology");
+    t.choice("on_mismatch", c.topology.refuse, {{"refuse", true}, {"warn", false}});
+    t.finish();
+  }
   root.finish();
 
   check_cross_fields(diag, c, axis_sites, locate(doc, {"cycle", "spin_us"}));
@@ -547,6 +573,12 @@ std::string dump_config(const DaemonConfig& c) {
       << "    flatstream_timeout_cycles: " << a.flatstream_timeout_cycles << "\n";
     if (a.pres_offset) o << "    pres_offset: " << *a.pres_offset << "\n";
     if (a.preq_offset) o << "    preq_offset: " << *a.preq_offset << "\n";
+    if (a.expected_encoder.any())
+      o << "    expected_encoder:\n"
+        << "      id_number: " << quote(a.expected_encoder.id_number) << "\n"
+        << "      serial_number: " << quote(a.expected_encoder.serial_number) << "\n";
+    if (a.expected_encoder.position_bits != 0)
+      o << "      position_bits: " << a.expected_encoder.position_bits << "\n";
     o << "    module:\n"
       << "      endat_enable: " << yes(m.endat_enable) << "\n"
       << "      position_signed: " << yes(m.position_signed) << "\n"
@@ -595,6 +627,18 @@ std::string dump_config(const DaemonConfig& c) {
     << "  ring_frames: " << cap.ring_frames << "\n"
     << "  max_duration_s: " << cap.max_duration_s << "\n"
     << "  max_bytes: " << cap.max_bytes << "\n";
+  const auto& fr = c.flight_recorder;
+  o << "flight_recorder:\n"
+    << "  enabled: " << (fr.enabled ? "true" : "false") << "\n"
+    << "  ring_bytes: " << fr.ring_bytes << "\n"
+    << "  before_s: " << fr.before_s << "\n"
+    << "  after_ms: " << fr.after_ms << "\n"
+    << "  dir: " << quote(fr.dir) << "\n"
+    << "  max_files: " << fr.max_files << "\n"
+    << "  max_total_bytes: " << fr.max_total_bytes << "\n"
+    << "  overrun_burst: " << fr.overrun_burst << "\n";
+  o << "topology:\n"
+    << "  on_mismatch: " << (c.topology.refuse ? "refuse" : "warn") << "\n";
   return o.str();
 }
 

@@ -44,6 +44,27 @@ struct CaptureConfig {
   uint64_t max_bytes = 1024ULL * 1048576;  // ... or once this many bytes were written
 };
 
+// The flight recorder (docs/operations.md "Flight recorder"): an always-on ring of the frames the
+// capture points see, written around each incident to a pcapng file in `dir`.
+struct FlightRecorderConfig {
+  bool enabled = true;
+  uint64_t ring_bytes = 2 * 1048576;  // all capture points together (split evenly)
+  uint32_t before_s = 10;             // the window kept before the event (at most what fits)
+  uint32_t after_ms = 500;            // the tail after it
+  // "" : $STATE_DIRECTORY/incidents under systemd (StateDirectory=ds1928d: /var/lib/ds1928d/
+  // incidents); without systemd no files are written unless a directory is given.
+  std::string dir;
+  uint32_t max_files = 100;                     // oldest removed first
+  uint64_t max_total_bytes = 256ULL * 1048576;  // all files together, oldest removed first
+  uint32_t overrun_burst = 10;  // overruns within one second that make an incident (0: never)
+};
+
+// What a difference between the expected topology (axes[].expected_encoder, powerlink.nodes[]
+// identity) and the bus does (docs/operations.md "Expected topology").
+struct TopologyConfig {
+  bool refuse = true;  // on_mismatch: refuse (the axis stays bus_down) | warn (logged only)
+};
+
 struct DaemonConfig {
   std::string source_file;  // where it was loaded from (for messages)
   CycleConfig cycle;
@@ -56,6 +77,8 @@ struct DaemonConfig {
   SocketConfig socket;
   MetricsConfig metrics;
   CaptureConfig capture;
+  FlightRecorderConfig flight_recorder;
+  TopologyConfig topology;
   std::string log_level = "info";
 };
 

@@ -30,6 +30,7 @@ constexpr std::array<EventInfo, kLogEventCount> kEvents{{
     {"configuration_failed", "68354e098f86424180051be3dd5fc295"},
     {"identification_failed", "83c17cdff8bd4698868c621efd5a4fb6"},
     {"node_silent", "a087dc98f1514459aad81575e8f216ce"},
+    {"incident", "bd8f2cbbc56241e084502e014a44e6c9"},
 }};
 
 // syslog priorities (sd-journal's PRIORITY field).
@@ -88,6 +89,8 @@ void log_event(spdlog::level::level_enum level, const EventFields& f, std::strin
   if (f.axis >= 0) field("DS1928_AXIS", std::to_string(f.axis));
   if (!f.bus.empty()) field("DS1928_BUS", f.bus);
   if (!f.reason.empty()) field("DS1928_REASON", f.reason);
+  if (!f.incident.empty()) field("DS1928_INCIDENT", f.incident);
+  if (!f.incident_file.empty()) field("DS1928_INCIDENT_FILE", f.incident_file);
   payload += kTextMark;
   payload += text;
   spdlog::log(level, "{}", payload);

@@ -33,8 +33,9 @@ enum class LogEvent : uint8_t {
   ConfigurationFailed,
   IdentificationFailed,
   NodeSilent,
+  Incident,  // the flight recorder wrote the frames around an incident to a file
 };
-inline constexpr std::size_t kLogEventCount = 11;
+inline constexpr std::size_t kLogEventCount = 12;
 
 // The 128-bit id (32 lowercase hex digits, journald's form) of an event kind; empty for None.
 // Stable: tools and saved journalctl filters depend on them (docs/operations.md).
@@ -44,14 +45,23 @@ inline constexpr std::size_t kLogEventCount = 11;
 
 struct EventFields {
   EventFields(LogEvent event_, std::string_view bus_ = {}, int node_ = -1, int axis_ = -1,
-              std::string_view reason_ = {}) noexcept
-      : event(event_), node(node_), axis(axis_), bus(bus_), reason(reason_) {}
+              std::string_view reason_ = {}, std::string_view incident_ = {},
+              std::string_view incident_file_ = {}) noexcept
+      : event(event_),
+        node(node_),
+        axis(axis_),
+        bus(bus_),
+        reason(reason_),
+        incident(incident_),
+        incident_file(incident_file_) {}
 
   LogEvent event = LogEvent::None;
-  int node = -1;            // DS1928_NODE (POWERLINK node id / CAN-I/O node), -1: none
-  int axis = -1;            // DS1928_AXIS (axis index), -1: none
-  std::string_view bus;     // DS1928_BUS (powerlink, canio, simulated), empty: none
-  std::string_view reason;  // DS1928_REASON, empty: none
+  int node = -1;                   // DS1928_NODE (POWERLINK node id / CAN-I/O node), -1: none
+  int axis = -1;                   // DS1928_AXIS (axis index), -1: none
+  std::string_view bus;            // DS1928_BUS (powerlink, canio, simulated), empty: none
+  std::string_view reason;         // DS1928_REASON, empty: none
+  std::string_view incident;       // DS1928_INCIDENT (the incident's kind), empty: none
+  std::string_view incident_file;  // DS1928_INCIDENT_FILE (its pcapng file), empty: none
 };
 
 // Logs `text` at `level` with the fields when the journald sink is in use, else the text alone.
@@ -78,7 +88,7 @@ class JournalSink final : public spdlog::sinks::base_sink<std::mutex> {
 inline constexpr char kFieldMark = '\x1f';  // before each NAME=value
 inline constexpr char kTextMark = '\x1e';   // between the fields and the text
 struct SplitRecord {
-  std::array<std::string_view, 6> fields{};  // NAME=value
+  std::array<std::string_view, 8> fields{};  // NAME=value
   std::size_t field_count = 0;
   std::string_view text;
 };

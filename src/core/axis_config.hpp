@@ -12,6 +12,17 @@
 
 namespace ds1928 {
 
+// The encoder expected behind a module (EnDat identification, docs/configuration.md
+// §axes[].expected_encoder). An empty field is not checked; with none set the axis is unchecked.
+struct ExpectedEncoder {
+  std::string id_number;       // "1080790-02": the ID number as the identification prints it
+  std::string serial_number;   // "S36845217"
+  unsigned position_bits = 0;  // 0: any
+  [[nodiscard]] bool any() const noexcept {
+    return !id_number.empty() || !serial_number.empty() || position_bits != 0;
+  }
+};
+
 struct AxisConfig {
   std::string name;  // shown in status; default "axis<N>"
   uint8_t node = 1;  // POWERLINK CN node id / CAN-I/O node number / sim node
@@ -24,6 +35,7 @@ struct AxisConfig {
   // (0..1489); unset = the default packed layout (docs/powerlink.md §Process image).
   std::optional<uint16_t> pres_offset;
   std::optional<uint16_t> preq_offset;
+  ExpectedEncoder expected_encoder;
 };
 
 }  // namespace ds1928

@@ -7,6 +7,7 @@
 #include <string_view>
 #include <system_error>
 
+#include "core/incident.hpp"
 #include "core/module_image.hpp"
 
 namespace ds1928 {
@@ -100,6 +101,21 @@ class BusDriver {
   [[nodiscard]] virtual bool submit(const RegisterRequest& request) noexcept = 0;
   // Normal thread. True and fills `out` when a result is ready.
   [[nodiscard]] virtual bool poll(RegisterResult& out) noexcept = 0;
+
+  // Normal thread, before the cycle thread starts: where raise_incident() goes (the daemon's
+  // flight recorder, core/incident.hpp). nullptr: incidents are not recorded.
+  void set_incident_sink(IncidentSink* sink) noexcept { incident_sink_ = sink; }
+
+ protected:
+  // Cycle thread: an incident this driver saw (bus-off, a node's boot-up, a missed heartbeat...).
+  // Lock-free, no allocation; a no-op without a sink.
+  void raise_incident(IncidentKind kind, int node = -1, int axis = -1,
+                      int64_t time_ns = 0) noexcept {
+    if (incident_sink_ != nullptr) incident_sink_->raise(kind, node, axis, time_ns);
+  }
+
+ private:
+  IncidentSink* incident_sink_ = nullptr;
 };
 
 }  // namespace ds1928

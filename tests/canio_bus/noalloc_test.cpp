@@ -19,6 +19,7 @@
 #include "cycle_proof.hpp"
 #include "cycle_work.hpp"
 #include "endat/command.hpp"
+#include "incident_service.hpp"
 #include "rig.hpp"
 #include "shm/publisher.hpp"
 #include "support/wait.hpp"
@@ -46,6 +47,7 @@ struct ProofResult {
   uint64_t sdo_errors = 0;
   std::vector<CaptureWindow> windows;  // empty: no capture
   bool dropped_in_window = false;      // the ring overflowed before the counted cycles ended
+  uint64_t flight_frames = 0;          // recorded by the flight recorder's rings meanwhile
 };
 
 // Runs the cycle on a 2-node virtual bus for kCounted counted cycles. `capture_ring` 0: no
@@ -72,10 +74,15 @@ ProofResult run_proof(std::size_t capture_ring) {
       config, false, false, [](sim::CanioNodeConfig& nc) { nc.faults.config_write_only = false; },
       test::BusMode::Instant, wrap);
   REQUIRE(taps.size() == (capture_ring > 0 ? 2u : 0u));
+  // The flight recorder as the daemon runs it: every capture point records into its ring on the
+  // cycle thread, and the driver and the cycle work raise their incidents into the sink.
+  IncidentService incidents(config, taps, "canio");
+  rig.canio->set_incident_sink(&incidents.sink());
   REQUIRE_FALSE(rig.canio->start());
   shm::Publisher publisher;
   REQUIRE_FALSE(publisher.open(config.shm, 2, 1'000'000));
   CycleWork work(config, *rig.canio, publisher);
+  work.set_incident_sink(&incidents.sink());
   test::CountingTask task(work, kCounted, 0, false);  // armed once the modules are configured
   auto engine = std::make_unique<CycleEngine>(config.cycle, task);
   auto started = engine->start();
@@ -141,6 +148,8 @@ ProofResult run_proof(std::size_t capture_ring) {
   }
   result.counts = task.result();
   result.samples = rig.canio->axis_counters(0).samples.load() - samples_before;
+  for (const capture::Tap* t : taps)
+    if (t->flight_ring() != nullptr) result.flight_frames += t->flight_ring()->counters().frames;
   return result;
 }
 
@@ -184,8 +193,10 @@ TEST_CASE("bus canio: the cycle allocates nothing and locks no mutex", "[canio][
   check_clean(run_proof(0), "");
 }
 
-TEST_CASE("bus canio: with a capture running and its ring full, still no allocation or mutex",
-          "[canio][daemon][rt][capture]") {
+TEST_CASE(
+    "bus canio: with a capture running, its ring full and the flight recorder on, still no "
+    "allocation or mutex",
+    "[canio][daemon][rt][capture]") {
   // 64 slots: a few cycles' frames (SYNC, 2 outputs, 4 inputs per cycle), so the ring is full
   // soon after the test stops draining it halfway through the counted cycles.
   const ProofResult r = run_proof(64);
@@ -213,4 +224,8 @@ TEST_CASE("bus canio: with a capture running and its ring full, still no allocat
   CHECK(r.dropped_in_window);
   // The register reads went over the SDO port, through its capture point.
   CHECK(sdo.end - sdo.start >= 2 * r.traffic.register_results);
+  // The flight recorder's rings took every frame of both points, the counted cycles' included.
+  std::printf("  flight recorder: %llu frames recorded\n",
+              static_cast<unsigned long long>(r.flight_frames));
+  CHECK(r.flight_frames >= (cycle.end - cycle.start) + (sdo.end - sdo.start));
 }

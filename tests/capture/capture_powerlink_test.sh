@@ -186,7 +186,7 @@ if [ -x "$noalloc" ]; then
   rc=0
   mn "$noalloc" "$tmp/cap.yaml" 3000 capture >"$tmp/noalloc.log" 2>&1 || rc=$?
   [ $rc = 0 ] || fail "cycle work over POWERLINK with a capture (exit $rc): $(cat "$tmp/noalloc.log")"
-  pass "allocation proof with capture on: $(head -n1 "$tmp/noalloc.log" | sed 's/^counted //'); $(grep 'capture on' "$tmp/noalloc.log")"
+  pass "allocation proof with capture and flight recorder on: $(head -n1 "$tmp/noalloc.log" | sed 's/^counted //'); $(grep 'capture on' "$tmp/noalloc.log"); $(grep 'flight recorder on' "$tmp/noalloc.log")"
 else
   echo "NOTE: powerlink_cycle_noalloc not built: allocation proof with capture skipped"
 fi

@@ -8,7 +8,8 @@
 //
 // With `capture` a capture runs on every capture point of the bus through the counted cycles
 // (ds1928ctl capture: the cycle thread copies each frame into the tap's ring, this thread drains
-// it) and the frames it took must be there.
+// it) and the frames it took must be there. The flight recorder is on in both cases (every frame
+// into its ring, incidents into the sink), as in the daemon.
 //
 // Exit 0: zero allocations and mutex locks with the traffic really flowing; 1: something counted
 // or the traffic did not get through; 2: the bus did not come up (or a setup error).
@@ -28,6 +29,7 @@
 #include "cycle_work.hpp"
 #include "daemon.hpp"
 #include "endat/command.hpp"
+#include "incident_service.hpp"
 #include "shm/publisher.hpp"
 #include "support/alloc_counter.hpp"
 #include "support/wait.hpp"
@@ -56,6 +58,10 @@ int main(int argc, char** argv) {
     return 2;
   }
   BusDriver* bus = &service->driver();
+  // The flight recorder as the daemon runs it: the capture points record into their rings on the
+  // cycle thread, which raises its incidents into the sink.
+  IncidentService incidents(config, service->capture_taps(), "powerlink");
+  bus->set_incident_sink(&incidents.sink());
   if (auto ec = bus->start()) {
     std::fprintf(stderr, "bus start: %s\n", ec.message().c_str());
     return 2;
@@ -67,6 +73,7 @@ int main(int argc, char** argv) {
     return 2;
   }
   CycleWork work(config, *bus, publisher);
+  work.set_incident_sink(&incidents.sink());
   test::CountingTask task(work, cycles, 0, false);  // armed once the bus is operational
   auto engine = std::make_unique<CycleEngine>(config.cycle, task);
   if (auto started = engine->start(); !started) {
@@ -136,6 +143,13 @@ int main(int argc, char** argv) {
       static_cast<unsigned long long>(t.sent), static_cast<unsigned long long>(t.replies),
       static_cast<unsigned long long>(t.acks), static_cast<unsigned long long>(t.registers),
       static_cast<unsigned long long>(t.register_results));
+  uint64_t flight = 0;
+  for (const capture::Tap* tap : taps)
+    if (tap->flight_ring() != nullptr) flight += tap->flight_ring()->counters().frames;
+  std::printf("flight recorder on: %llu frames recorded\n",
+              static_cast<unsigned long long>(flight));
+  const bool recorded = taps.empty() || flight >= cycles;
+  if (!recorded) std::printf("FAIL: the flight recorder took fewer frames than cycles\n");
   if (with_capture)
     std::printf("capture on: %llu frames captured, %llu dropped\n",
                 static_cast<unsigned long long>(drained), static_cast<unsigned long long>(dropped));
@@ -153,5 +167,5 @@ int main(int argc, char** argv) {
   if (!ds1928::test::counts_mutexes())
     std::printf("TSan build: mutex locks are not counted; the mutex check is void\n");
   if (!traffic) std::printf("FAIL: too little traffic went through the counted cycles\n");
-  return clean && traffic && captured && no_faults ? 0 : 1;
+  return clean && traffic && captured && recorded && no_faults ? 0 : 1;
 }

@@ -19,8 +19,9 @@
 #  4. the MN set node 1 up with SyncRequests (SyncResponses from node 1 in the capture), never
 #     sent it a PReq, and sent a PResMN in every cycle of the hold, each answered by node 1's PRes;
 #     the simulator ends in PRC mode at the time the MN assigned. Hold 60 s by default.
-# The openPOWERLINK archive (../shared/peers) is built once into a cache (tests/peers/
-# openpowerlink.sh); a missing archive FAILS this test, it never passes silently.
+# The openPOWERLINK archive (DS1928_PEERS_DIR, ../shared/peers or fetched) is built once into a cache
+# (tests/peers/openpowerlink.sh); a missing archive SKIPS this test (77) with the command that gets
+# it, or FAILS it under CI=true or DS1928_REQUIRE_PEERS=1; it never passes silently.
 # Usage: powerlink_opl_mn_test.sh BUILD_DIR SOURCE_DIR [plain|prc]   (root; 77 = skipped)
 set -u
 . "${2:?source dir}/tests/lib/netns.sh"

@@ -7,7 +7,9 @@
 #                                     (ds1928-sim), daemon (ds1928d), ctl (ds1928ctl), mn
 #                                     (bench's pl_mn_runner)
 #   use_openpowerlink                 the openPOWERLINK peer's variables (OPL_*), built once into
-#                                     its cache by tests/peers/openpowerlink.sh; FAIL without it
+#                                     its cache by tests/peers/openpowerlink.sh; without its archive
+#                                     SKIP (77) with the command that gets it, but FAIL under CI=true
+#                                     or DS1928_REQUIRE_PEERS=1; FAIL when the build fails
 #   require_root WHY                  exit 77 (ctest: skipped) unless root
 #   require_programs FILE...          FAIL unless each is an executable file (built)
 #   require_tools COMMAND...          FAIL unless each is installed (jq, tshark: make deps-test)
@@ -43,9 +45,20 @@ use_trees() {
 }
 
 use_openpowerlink() {
-  local env
+  local env rc=0
   # Minutes the first time (the build), then read from the cache.
-  env=$("$src/tests/peers/openpowerlink.sh") || {
+  env=$("$src/tests/peers/openpowerlink.sh") || rc=$?
+  if ((rc == 3)); then
+    # The archive is nowhere (the message above says where it looked and how to get it).
+    if [ "${CI:-}" = true ] || [ "${DS1928_REQUIRE_PEERS:-0}" = 1 ]; then
+      echo "FAIL: the openPOWERLINK test peer archive is missing (required: CI=${CI:-} DS1928_REQUIRE_PEERS=${DS1928_REQUIRE_PEERS:-0})"
+      exit 1
+    fi
+    echo "SKIP: the openPOWERLINK test peer archive is missing; get it with:" \
+      "$src/tests/peers/openpowerlink.sh --fetch  (or set DS1928_PEERS_DIR, see the message above)"
+    exit 77
+  fi
+  ((rc == 0)) || {
     echo "FAIL: the openPOWERLINK test peer is not available (see the message above)"
     exit 1
   }

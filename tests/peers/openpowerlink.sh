@@ -4,11 +4,23 @@
 #
 #   tests/peers/openpowerlink.sh            build when needed, then print the env file's lines
 #   tests/peers/openpowerlink.sh --env-file build when needed, then print the path of the env file
+#   tests/peers/openpowerlink.sh --locate   find (or fetch) the archive only, print its path; no build
+#   tests/peers/openpowerlink.sh --fetch    fetch the pinned upstream commit now, print the archive's path
 #   eval "$(tests/peers/openpowerlink.sh)"  -> OPL_DEMO_MN, OPL_DEMO_CN, OPL_MNOBD_CDC, OPL_PEER_DIR
 #
-# Archive: $DS1928_PEERS_DIR/openPOWERLINK_V2-048650a.tar.gz, else ../shared/peers/ relative to the source
-# tree's parent (where the project keeps its shared material). A missing archive is an error (exit 2) that
-# names what is missing and every place looked at: the tests that need the peer FAIL then, never skip.
+# Archive openPOWERLINK_V2-048650a.tar.gz, looked for in this order:
+#   1. $DS1928_PEERS_DIR/
+#   2. ../shared/peers/ beside the checkout (where the project keeps its shared material)
+#   3. the cache (below), where an earlier fetch left it
+#   4. fetched: the pinned commit 048650a80db37fa372330c3a900d2c8edb327e47 (tag V2.7.2) from
+#      $DS1928_PEER_UPSTREAM (default https://github.com/OpenAutomationTechnologies/openPOWERLINK_V2),
+#      by its full hash (git checks every object against it, and the script checks the commit it got),
+#      then `git archive` of the subset the tests use, the same subset ../shared/peers holds. At most
+#      $DS1928_PEER_FETCH_TIMEOUT (120) seconds; DS1928_PEER_FETCH=0 never fetches.
+# Exit 3 when the archive is nowhere and cannot be fetched: the message names every place looked at and the
+# exact commands that get it. The tests (tests/lib/netns.sh use_openpowerlink) SKIP then (exit 77, counted by
+# ctest) — except under CI (CI=true or DS1928_REQUIRE_PEERS=1), where they FAIL naming what is missing.
+# Exit 2: Debian packages missing (not root); exit 1: the build failed.
 #
 # Cache: ${DS1928_PEER_CACHE:-/var/cache/ds1928-test}/openpowerlink-048650a, shared by every worktree and run.
 # The build holds an flock on <cache>.lock, so two runs starting at once build it once; it is rebuilt when the
@@ -22,6 +34,12 @@ set -euo pipefail
 
 readonly ARCHIVE_NAME=openPOWERLINK_V2-048650a.tar.gz
 readonly CACHE_NAME=openpowerlink-048650a
+# DS1928_PEER_TEST_COMMIT replaces the pin in tests/peers/peer_locate_test.sh only (a local upstream).
+readonly PINNED_COMMIT=${DS1928_PEER_TEST_COMMIT:-048650a80db37fa372330c3a900d2c8edb327e47}
+readonly UPSTREAM=${DS1928_PEER_UPSTREAM:-https://github.com/OpenAutomationTechnologies/openPOWERLINK_V2}
+# The subset of the upstream tree the tests build (the same as ../shared/peers/README.md lists).
+readonly SUBSET=(apps/common apps/demo_cn_console apps/demo_mn_console cmake contrib license.md readme.md
+  revision.md stack tools/linux)
 readonly PEER_DEPS=(cmake build-essential libpcap-dev)
 
 here=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
@@ -31,12 +49,14 @@ mode=print
 case "${1:-}" in
   "") ;;
   --env-file) mode=env-file ;;
+  --locate) mode=locate ;;
+  --fetch) mode=fetch ;;
   -h | --help)
-    sed -n '2,19p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'
+    sed -n '2,32p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'
     exit 0
     ;;
   *)
-    echo "openpowerlink.sh: unknown argument '$1' (use --env-file or nothing)" >&2
+    echo "openpowerlink.sh: unknown argument '$1' (use --env-file, --locate, --fetch or nothing)" >&2
     exit 64
     ;;
 esac
@@ -44,22 +64,73 @@ esac
 log() { echo "openpowerlink.sh: $*" >&2; }
 
 # --- the archive ------------------------------------------------------------------------------------------
+cache_parent=${DS1928_PEER_CACHE:-/var/cache/ds1928-test}
+fetched="$cache_parent/$ARCHIVE_NAME"
+
+# The pinned commit from upstream, by its full hash, into $fetched. Returns non-zero (with the reason on
+# stderr) when git is missing, the network does not answer, or what came is not the pinned commit.
+fetch_archive() {
+  local work got rc=0
+  command -v git >/dev/null || { log "cannot fetch: git is not installed (apt-get install git)"; return 1; }
+  mkdir -p "$cache_parent" || return 1
+  work=$(mktemp -d "$cache_parent/fetch.XXXXXX") || return 1
+  log "fetching openPOWERLINK $PINNED_COMMIT from $UPSTREAM"
+  {
+    git -C "$work" init -q &&
+      GIT_TERMINAL_PROMPT=0 timeout "${DS1928_PEER_FETCH_TIMEOUT:-120}" \
+        git -C "$work" fetch -q --depth 1 "$UPSTREAM" "$PINNED_COMMIT"
+  } >&2 || rc=1
+  if ((rc == 0)); then
+    got=$(git -C "$work" rev-parse --verify -q 'FETCH_HEAD^{commit}' || true)
+    if [[ "$got" != "$PINNED_COMMIT" ]]; then
+      log "REFUSED: $UPSTREAM gave commit '${got:-none}', not the pinned $PINNED_COMMIT"
+      rc=1
+    fi
+  fi
+  if ((rc == 0)); then
+    git -C "$work" archive --format=tar --prefix=openPOWERLINK_V2/ "$PINNED_COMMIT" "${SUBSET[@]}" |
+      gzip -n >"$work/$ARCHIVE_NAME" && mv "$work/$ARCHIVE_NAME" "$fetched" || rc=1
+  fi
+  rm -rf "$work"
+  ((rc == 0)) && log "fetched and checked: $fetched"
+  return $rc
+}
+
 candidates=()
 [[ -n "${DS1928_PEERS_DIR:-}" ]] && candidates+=("$DS1928_PEERS_DIR/$ARCHIVE_NAME")
-candidates+=("$(dirname "$source_root")/shared/peers/$ARCHIVE_NAME")
+candidates+=("$(dirname "$source_root")/shared/peers/$ARCHIVE_NAME" "$fetched")
 archive=""
-for c in "${candidates[@]}"; do
-  if [[ -f "$c" ]]; then
-    archive=$(readlink -f "$c")
-    break
-  fi
-done
+if [[ $mode != fetch ]]; then
+  for c in "${candidates[@]}"; do
+    if [[ -f "$c" ]]; then
+      archive=$(readlink -f "$c")
+      break
+    fi
+  done
+fi
+if [[ -z "$archive" && "${DS1928_PEER_FETCH:-1}" != 0 ]]; then
+  # One fetch at a time: the tests that need the peer may start together.
+  mkdir -p "$cache_parent"
+  exec 8>"$fetched.lock"
+  flock 8
+  if [[ $mode != fetch && -f "$fetched" ]] || fetch_archive; then archive=$fetched; fi
+  flock -u 8
+fi
 if [[ -z "$archive" ]]; then
-  log "MISSING test peer archive $ARCHIVE_NAME (openPOWERLINK V2.7.2, commit 048650a)."
+  log "MISSING test peer archive $ARCHIVE_NAME (openPOWERLINK V2.7.2, commit $PINNED_COMMIT)."
   log "Looked for it at:"
   for c in "${candidates[@]}"; do log "  $c"; done
-  log "Put the archive there or set DS1928_PEERS_DIR to the directory that holds it."
-  exit 2
+  [[ "${DS1928_PEER_FETCH:-1}" == 0 ]] && log "  (fetching from $UPSTREAM is off: DS1928_PEER_FETCH=0)"
+  log "Get it with one of:"
+  log "  DS1928_PEERS_DIR=/dir/holding/the/archive   (the archive from the project's shared/peers)"
+  log "  $here/openpowerlink.sh --fetch   (needs access to ${UPSTREAM%/*}/)"
+  log "  git clone $UPSTREAM opl && git -C opl archive --format=tar --prefix=openPOWERLINK_V2/ \\"
+  log "      $PINNED_COMMIT ${SUBSET[*]} | gzip -n >DIR/$ARCHIVE_NAME"
+  exit 3
+fi
+if [[ $mode == locate || $mode == fetch ]]; then
+  echo "$archive"
+  exit 0
 fi
 
 # --- Debian packages --------------------------------------------------------------------------------------
@@ -80,7 +151,6 @@ if ((${#missing[@]})); then
 fi
 
 # --- the cached build -------------------------------------------------------------------------------------
-cache_parent=${DS1928_PEER_CACHE:-/var/cache/ds1928-test}
 cache="$cache_parent/$CACHE_NAME"
 mkdir -p "$cache_parent"
 env_file="$cache/env.sh"

@@ -74,6 +74,9 @@ void print_axis_line(const json& a) {
               hex(get<uint64_t>(a, "error_info", 0), 2).c_str(),
               hex(get<uint64_t>(a, "endat_error", 0), 4).c_str(),
               hex(get<uint64_t>(a, "endat_warning", 0), 4).c_str());
+  if (a.contains("identity_reason"))
+    std::printf("        encoder %s: %s\n", get<std::string>(a, "identity", "").c_str(),
+                get<std::string>(a, "identity_reason", "").c_str());
 }
 
 void print_status(const json& r) {

@@ -19,5 +19,11 @@ void add_endat_commands(CLI::App& app, Context& ctx);
 void add_powerlink_commands(CLI::App& app, Context& ctx);
 // `capture -w FILE [--duration S | --count N] [--format F]`, `capture-stop` (privileged).
 void add_capture_commands(CLI::App& app, Context& ctx);
+// `incidents`, `incident mark TEXT` (the flight recorder).
+void add_incident_commands(CLI::App& app, Context& ctx);
+// `topology`: found vs expected (nodes, encoders).
+void add_topology_command(CLI::App& app, Context& ctx);
+// `doctor`: the machine's real-time settings against the configuration (no daemon needed).
+void add_doctor_command(CLI::App& app, Context& ctx);
 
 }  // namespace ds1928::ctl

@@ -27,6 +27,9 @@ int main(int argc, char** argv) {
   add_endat_commands(app, ctx);
   add_powerlink_commands(app, ctx);
   add_capture_commands(app, ctx);
+  add_incident_commands(app, ctx);
+  add_topology_command(app, ctx);
+  add_doctor_command(app, ctx);
 
   try {
     app.parse(argc, argv);
