@@ -85,8 +85,9 @@ class CanioService final : public BusService {
 
   // The one place the daemon hears of a CAN node's lifecycle events (boot-up, missed heartbeat,
   // EMCY, Start repeated, bus-off and restart): each is counted by the driver (status, metrics)
-  // and logged here with the node's journal fields. A hook for such events (e.g. a flight
-  // recorder dump) belongs here.
+  // and logged here with the node's journal fields. The daemon turns the boot-up and the missed
+  // heartbeat into flight-recorder incidents by their reason (incident_of() in daemon.cpp); the
+  // driver raises the bus-off itself on its cycle.
   void on_node_event(const canio::CanioNodeEvent& e, std::vector<BusEvent>& events) const {
     using K = canio::CanioNodeEventKind;
     const std::string why(canio::to_string(e.kind));

@@ -6,6 +6,7 @@
 #include <boost/asio/post.hpp>
 #include <cstdio>
 
+#include "canio/canio_bus.hpp"
 #include "config/config_loader.hpp"
 #include "control/journal.hpp"
 #include "control/socket_path.hpp"
@@ -407,12 +408,20 @@ void Daemon::register_commands() {
 std::optional<IncidentKind> incident_of(const BusEvent& e) {
   switch (e.event) {
     case control::LogEvent::NodeReset:
+      // A CAN-I/O node's boot-up message: it restarted by itself (canio_service.cpp).
+      if (e.reason == canio::to_string(canio::CanioNodeEventKind::BootUp))
+        return IncidentKind::NodeBootUp;
       // The MN's reasons (powerlink/errors.cpp): a CN dropping out of its state is "lost".
       if (e.reason.find("loss of PRes threshold") != std::string::npos)
         return IncidentKind::PresThreshold;
       if (e.reason.find("not operational") != std::string::npos) return IncidentKind::NodeLost;
       return IncidentKind::NodeReset;
     case control::LogEvent::NodeSilent:
+      if (e.reason == canio::to_string(canio::CanioNodeEventKind::HeartbeatMissed))
+        return IncidentKind::HeartbeatMissed;
+      // NMT Start sent again to a node that stayed silent after it: logged and counted, but it
+      // repeats with back-off while the node stays so; the node's loss was the incident.
+      if (e.reason == canio::to_string(canio::CanioNodeEventKind::StartRetry)) return std::nullopt;
       return IncidentKind::NodeLost;
     default:
       return std::nullopt;

@@ -293,4 +293,12 @@ TEST_CASE("incident: which bus events are incidents", "[daemon][incident]") {
   CHECK(incident_of(other) == IncidentKind::NodeReset);
   CHECK(incident_of(silent) == IncidentKind::NodeLost);
   CHECK_FALSE(incident_of(operational).has_value());
+  // CAN-I/O node lifecycle (canio_service.cpp): boot-up and a missed heartbeat have kinds of their
+  // own; NMT Start repeated to a silent node is no new incident.
+  const BusEvent boot_up(true, "t", control::LogEvent::NodeReset, 2, -1, "boot-up");
+  const BusEvent heartbeat(true, "t", control::LogEvent::NodeSilent, 2, -1, "heartbeat-missed");
+  const BusEvent start_retry(true, "t", control::LogEvent::NodeSilent, 2, -1, "start-retry");
+  CHECK(incident_of(boot_up) == IncidentKind::NodeBootUp);
+  CHECK(incident_of(heartbeat) == IncidentKind::HeartbeatMissed);
+  CHECK_FALSE(incident_of(start_retry).has_value());
 }
