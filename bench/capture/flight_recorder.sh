@@ -9,7 +9,7 @@
 #   bench/capture/flight_recorder.sh [both|powerlink|canio] [SECONDS] [ROUNDS]
 #
 # powerlink (root): ds1928d as MN and ds1928-sim as CN in two network namespaces over a veth
-# pair, 1 ms cycle, SCHED_FIFO, the recorder's default 2 MiB ring. canio: the CAN-I/O virtual
+# pair, 1 ms cycle, SCHED_FIFO, the recorder's default 1 MiB ring. canio: the CAN-I/O virtual
 # bus, 2 ms cycle. BUILD_DIR selects the build tree (default build/).
 set -u
 mode=${1:-both}

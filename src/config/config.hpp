@@ -48,7 +48,7 @@ struct CaptureConfig {
 // capture points see, written around each incident to a pcapng file in `dir`.
 struct FlightRecorderConfig {
   bool enabled = true;
-  uint64_t ring_bytes = 2 * 1048576;  // all capture points together (split evenly)
+  uint64_t ring_bytes = 1048576;  // all capture points together (split evenly)
   uint32_t before_s = 10;             // the window kept before the event (at most what fits)
   uint32_t after_ms = 500;            // the tail after it
   // "" : $STATE_DIRECTORY/incidents under systemd (StateDirectory=ds1928d: /var/lib/ds1928d/

@@ -260,7 +260,9 @@ TEST_CASE("CAN-I/O: modules configured over SDO with read-back, checked again af
           "[canio][bus][sdo]") {
   // Timed bus, window from the bit budget; a module whose configuration registers can be read
   // (the simulator's default is the FM254 table's write-only access).
-  Rig rig(canio_config(1), false, false,
+  // Stepped (fake clock, synchronous node): an SDO answer cannot miss its timeout because the
+  // machine paused the node's thread.
+  Rig rig(canio_config(1), true, false,
           [](sim::CanioNodeConfig& nc) { nc.faults.config_write_only = false; });
   REQUIRE_FALSE(rig.canio->start());
   uint64_t c = 0;
@@ -283,6 +285,7 @@ TEST_CASE("CAN-I/O: modules configured over SDO with read-back, checked again af
   RegisterResult r;
   REQUIRE(run_until([&] { return rig.canio->poll(r); }));
   CHECK(r.tag == 7);
+  INFO(r.error.message());
   CHECK_FALSE(r.error);
   // A write is verified by read-back: an out-of-range value is refused by the module (abort).
   REQUIRE(rig.canio->submit({8, 0, reg::kForward, 1, true, 9}));
