@@ -156,8 +156,16 @@ int main(int argc, char** argv) {
   const auto faults = task.faults();
   std::printf("page faults of the cycle thread: minor %ld, major %ld\n", faults.minor,
               faults.major);
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+  // Every sanitizer runtime intercepts mlockall and locks nothing (docs/testing.md): pages the
+  // cycle thread touches late fault there. The page-fault proof is the normal build's.
+  const bool no_faults = true;
+  if (faults.minor != 0 || faults.major != 0)
+    std::printf("sanitizer build: mlockall is intercepted, page faults are not judged\n");
+#else
   const bool no_faults = faults.minor == 0 && faults.major == 0;
   if (!no_faults) std::printf("FAIL: the cycle thread took page faults in steady cycles\n");
+#endif
   const bool captured = !with_capture || drained >= cycles;
   if (!captured) std::printf("FAIL: the capture took fewer frames than cycles\n");
   const bool clean =
