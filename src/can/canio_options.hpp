@@ -38,13 +38,27 @@ enum class CanVerify : uint8_t {
 // Start to it (and Enter Pre-Operational at stop); None: for bus controllers that start by
 // themselves, no NMT command is ever sent.
 enum class CanNmt : uint8_t { Start, None };
-// One CANopen node on the bus (canio.nodes[]): its error control.
+// The identity a CANopen node must report (CiA 301: 0x1000 device type, 0x1018/1..4 identity
+// object), checked by SDO before the node is started (docs/canio.md §Node identity). Unset:
+// not read.
+struct CanioExpectedIdentity {
+  std::optional<uint32_t> device_type;   // 0x1000/0
+  std::optional<uint32_t> vendor_id;     // 0x1018/1
+  std::optional<uint32_t> product_code;  // 0x1018/2
+  std::optional<uint32_t> revision_no;   // 0x1018/3
+  std::optional<uint32_t> serial_no;     // 0x1018/4
+  [[nodiscard]] bool any() const noexcept {
+    return device_type || vendor_id || product_code || revision_no || serial_no;
+  }
+};
+// One CANopen node on the bus (canio.nodes[]): its error control and identity.
 struct CanioNodeOptions {
   uint8_t node = 1;
   // Heartbeat producer time written to the node's object 0x1017 (ms, 0: no heartbeat watched).
   uint32_t heartbeat_ms = 0;
   // Consumer timeout (ms); 0: 1.5 × heartbeat_ms (an ASSUMPTION, docs/canio.md).
   uint32_t heartbeat_timeout_ms = 0;
+  CanioExpectedIdentity identity;
 };
 // One axis' objects on the bus (index = axes[i]).
 struct CanioAxisConfig {

@@ -62,6 +62,8 @@ std::string_view to_string(CanioAxisState s) noexcept {
       return "starting";
     case CanioAxisState::Unconfigurable:
       return "unconfigurable";
+    case CanioAxisState::IdentityMismatch:
+      return "identity_mismatch";
   }
   return "?";
 }
@@ -80,6 +82,8 @@ std::string_view reason(CanioAxisState s) noexcept {
       return "configured, NMT Start sent, no process data yet: Start repeated with back-off";
     case CanioAxisState::Unconfigurable:
       return "unconfigurable: a register the axis needs was refused; retried with back-off";
+    case CanioAxisState::IdentityMismatch:
+      return "its node's identity (0x1000 / 0x1018) is not the expected one: not started";
   }
   return "";
 }
@@ -142,10 +146,24 @@ CanioBus::CanioBus(CanioBusOptions options, std::unique_ptr<CanPort> cycle_port,
     t.heartbeat_ms = no.heartbeat_ms;
     t.consumer_ns =
         int64_t{heartbeat_consumer_ms(no.heartbeat_ms, no.heartbeat_timeout_ms)} * 1'000'000;
+    const std::array<const std::optional<uint32_t>*, 5> expected{
+        &no.identity.device_type, &no.identity.vendor_id, &no.identity.product_code,
+        &no.identity.revision_no, &no.identity.serial_no};
+    for (std::size_t f = 0; f < expected.size(); ++f) {
+      if (!*expected[f]) continue;
+      t.identity_mask = static_cast<uint8_t>(t.identity_mask | (1U << f));
+      t.identity_expected[f] = **expected[f];
+    }
+    t.identity_due = t.identity_mask != 0;
+    t.identity_state =
+        t.identity_mask != 0 ? NodeIdentityState::Pending : NodeIdentityState::Unchecked;
     nodes_.push_back(t);
   }
   node_counters_ = std::make_unique<CanioNodeCounters[]>(nodes_.size());
-  for (std::size_t k = 0; k < nodes_.size(); ++k) node_counters_[k].node = nodes_[k].node;
+  for (std::size_t k = 0; k < nodes_.size(); ++k) {
+    node_counters_[k].node = nodes_[k].node;
+    publish_identity(k);
+  }
   for (const CanioAxisPlan& a : options_.axes)
     axis_node_.push_back(static_cast<uint16_t>(node_index(a.node)));
   for (std::size_t i = 0; i < options_.axes.size(); ++i) {
@@ -442,7 +460,8 @@ ExchangeResult CanioBus::exchange(std::span<AxisIo> axes, int64_t, uint64_t) noe
       axes[i].axis_up = false;
       c.state.store(c.unconfigurable.load(std::memory_order_relaxed)
                         ? CanioAxisState::Unconfigurable
-                        : CanioAxisState::Configuring,
+                    : identity_refused(axis_node_[i]) ? CanioAxisState::IdentityMismatch
+                                                      : CanioAxisState::Configuring,
                     std::memory_order_relaxed);
       continue;
     }

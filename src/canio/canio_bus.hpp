@@ -79,6 +79,8 @@ enum class CanioAxisState : uint8_t {
   Silent = 3,            // configured, but no complete sample for input_timeout_ms: Stale
   Starting = 4,          // configured, NMT Start sent, no process data yet (Start repeated)
   Unconfigurable = 5,    // a register the axis needs was refused (abort): retried with back-off
+  IdentityMismatch = 6,  // its node's identity (0x1000 / 0x1018) is not the expected one:
+                         // not configured, not started; checked again with back-off
 };
 [[nodiscard]] std::string_view to_string(CanioAxisState s) noexcept;
 // Why an axis in this state is not Valid, for status (empty when Operational).
@@ -120,17 +122,65 @@ struct CanioNodeCounters {
   std::atomic<uint64_t> last_emcy{0};          // code | register << 16 | vendor << 24
   std::atomic<uint8_t> nmt_state{0xFF};        // last reported (canio::NmtState), 0xFF: none
   std::atomic<bool> heartbeat_watched{false};  // consumer armed (0x1017 written)
+  // The last identity check (canio_identity.cpp), published under a sequence counter (odd while
+  // it changes) by the cycle thread.
+  std::atomic<uint32_t> identity_seq{0};
+  std::atomic<uint8_t> identity_state{0};  // NodeIdentityState
+  std::atomic<uint8_t> identity_read{0}, identity_unreadable{0};
+  std::array<std::atomic<uint32_t>, 5> identity_found{};
+  std::atomic<int> identity_error{0};
+  std::atomic<const std::error_category*> identity_category{nullptr};
+  std::atomic<uint64_t> identity_checks{0};
+  std::atomic<uint64_t> identity_mismatches{0};
 };
+
+// The identity objects a node is checked by (CiA 301), in the order they are read: one table,
+// indexed by the positions of CanioNodeIdentity's arrays.
+struct IdentityField {
+  std::string_view key;  // the configuration key (canio.nodes[], powerlink.nodes[])
+  uint16_t index = 0;
+  uint8_t subindex = 0;
+};
+inline constexpr std::array<IdentityField, 5> kIdentityFields{{{"device_type", 0x1000, 0},
+                                                               {"vendor_id", 0x1018, 1},
+                                                               {"product_code", 0x1018, 2},
+                                                               {"revision_no", 0x1018, 3},
+                                                               {"serial_no", 0x1018, 4}}};
+enum class NodeIdentityState : uint8_t {
+  Unchecked = 0,   // no identity expected (canio.nodes[] without identity keys): not read
+  Pending = 1,     // expected, not read yet (since start or the node's last boot-up)
+  Confirmed = 2,   // every expected object read and equal
+  Mismatch = 3,    // an object differs
+  Unreadable = 4,  // an expected object could not be read (an SDO abort: no such object)
+};
+[[nodiscard]] std::string_view to_string(NodeIdentityState s) noexcept;
+// What the last identity check of a node found (normal thread: CanioBus::node_identity()).
+struct NodeIdentity {
+  NodeIdentityState state = NodeIdentityState::Unchecked;
+  uint8_t expected_mask = 0;    // bit f: kIdentityFields[f] is expected
+  uint8_t read_mask = 0;        // bit f: found[f] was read
+  uint8_t unreadable_mask = 0;  // bit f: the read was refused (error)
+  std::array<uint32_t, 5> expected{};
+  std::array<uint32_t, 5> found{};
+  std::error_code error;  // the first refused read's
+  uint64_t checks = 0;    // identity checks completed
+  uint64_t mismatches = 0;
+};
+// "identity: product_code 0x00002928, expected 0x00001928 (0x1018/2)", differences joined by
+// "; "; empty when as expected or not checked. Pure.
+[[nodiscard]] std::string describe_identity(const NodeIdentity& id);
 
 // A node event the daemon logs (and may hook, e.g. a flight recorder): queued by the cycle thread,
 // taken by the normal thread with CanioBus::poll_event().
 enum class CanioNodeEventKind : uint8_t {
-  BootUp,           // the node announced a reset: its axes are configured again
-  HeartbeatMissed,  // no heartbeat within the consumer timeout: its axes are down
-  Emcy,             // an emergency message (code, register, vendor bytes)
-  StartRetry,       // configured but silent after NMT Start: Start sent again
-  BusOff,           // the controller went bus-off (node 0: the whole bus)
-  BusRestarted,     // the controller is back: every axis is checked before it is trusted
+  BootUp,             // the node announced a reset: its axes are configured again
+  HeartbeatMissed,    // no heartbeat within the consumer timeout: its axes are down
+  Emcy,               // an emergency message (code, register, vendor bytes)
+  StartRetry,         // configured but silent after NMT Start: Start sent again
+  BusOff,             // the controller went bus-off (node 0: the whole bus)
+  BusRestarted,       // the controller is back: every axis is checked before it is trusted
+  IdentityMismatch,   // the node's identity differs (or cannot be read): node_identity()
+  IdentityConfirmed,  // ... and is as expected again
 };
 [[nodiscard]] std::string_view to_string(CanioNodeEventKind k) noexcept;
 struct CanioNodeEvent {
@@ -171,6 +221,9 @@ struct CanioBusOptions {
   std::vector<CanioAxisPlan> axes;
   uint32_t period_us = 2000;
   uint32_t response_window_us = 0;  // canio_timing(): configured or derived
+  // topology.on_mismatch: true (refuse): a node whose identity differs is not configured or
+  // started, its axes stay down; false (warn): reported, the node is configured all the same.
+  bool identity_refuse = true;
   // Tests that drive exchange() without a module to configure (the position-integrity test):
   // every axis counts as configured from the start.
   bool assume_configured = false;
@@ -223,6 +276,8 @@ class CanioBus final : public BusDriver {
   [[nodiscard]] const CanioNodeCounters& node_counters(std::size_t k) const noexcept {
     return node_counters_[k];
   }
+  // Normal thread: node k's expected identity and what its last check found.
+  [[nodiscard]] NodeIdentity node_identity(std::size_t k) const noexcept;
   // Normal thread: the next node event (boot-up, missed heartbeat, EMCY, Start repeated,
   // bus-off): false when none is queued.
   [[nodiscard]] bool poll_event(CanioNodeEvent& out) noexcept;
@@ -281,6 +336,17 @@ class CanioBus final : public BusDriver {
     int64_t next_start_ns = 0;
     int64_t start_backoff_ns = 0;
     bool trust_by_heartbeat = false;  // after a bus restart: OPERATIONAL heartbeat suffices
+    // Identity (canio_identity.cpp): expected objects (bit f: kIdentityFields[f]), checked before
+    // the node's modules are configured, again after each boot-up and silence.
+    uint8_t identity_mask = 0;
+    std::array<uint32_t, 5> identity_expected{};
+    bool identity_due = false;
+    NodeIdentityState identity_state = NodeIdentityState::Unchecked;
+    int64_t identity_backoff_ns = 0;
+    // The check in progress.
+    uint8_t id_read = 0, id_unreadable = 0;
+    std::array<uint32_t, 5> id_found{};
+    std::error_code id_error;
   };
   [[nodiscard]] std::size_t node_index(uint8_t node) const noexcept;
   // Frames on the node port: SDO answers, boot-up / heartbeat, EMCY.
@@ -296,7 +362,7 @@ class CanioBus final : public BusDriver {
 
   // ---- Register access over SDO (canio_sdo.cpp): one job at a time — a module's configuration,
   // its check after a silence, or one of the daemon's requests — made of expedited transfers.
-  enum class SdoJobKind : uint8_t { None, Configure, Check, Request };
+  enum class SdoJobKind : uint8_t { None, Configure, Check, Request, Identity };
   enum class SdoStage : uint8_t { Write, ReadBack, Heartbeat, Rescan, Read };
   struct SdoJob {
     SdoJobKind kind = SdoJobKind::None;
@@ -378,6 +444,13 @@ class CanioBus final : public BusDriver {
   void mark_configured(std::size_t axis, int64_t now) noexcept;
   void answer(const RegisterRequest& request, std::error_code ec, uint32_t value) noexcept;
   void note(std::size_t axis, const SdoNote& n) noexcept { notes_[axis].store(n); }
+  // ---- Node identity (canio_identity.cpp) ----
+  // Starts the identity check of axis' node; false when the node has nothing to check.
+  [[nodiscard]] bool start_identity(std::size_t axis) noexcept;
+  void identity_step_done(int64_t now, std::error_code ec, uint32_t value) noexcept;
+  void finish_identity(int64_t now) noexcept;
+  void publish_identity(std::size_t k) noexcept;
+  [[nodiscard]] bool identity_refused(std::size_t k) const noexcept;
 
   CanioBusOptions options_;
   std::unique_ptr<CanPort> cycle_port_;

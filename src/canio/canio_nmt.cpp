@@ -37,6 +37,10 @@ std::string_view to_string(CanioNodeEventKind k) noexcept {
       return "bus-off";
     case CanioNodeEventKind::BusRestarted:
       return "bus-restarted";
+    case CanioNodeEventKind::IdentityMismatch:
+      return "identity-mismatch";
+    case CanioNodeEventKind::IdentityConfirmed:
+      return "identity-confirmed";
   }
   return "?";
 }
@@ -98,9 +102,11 @@ void CanioBus::node_down(std::size_t k, bool fresh, int64_t now) noexcept {
       a.backoff_ns = 0;
       axis_counters_[i].unconfigurable.store(false, std::memory_order_relaxed);
     }
-    // A configuration or check in progress for this node is void: it restarts from the first
-    // register.
-    if ((job_.kind == SdoJobKind::Configure || job_.kind == SdoJobKind::Check) && job_.axis == i) {
+    // A configuration, check or identity read in progress for this node is void: it restarts
+    // from the first register.
+    if ((job_.kind == SdoJobKind::Configure || job_.kind == SdoJobKind::Check ||
+         job_.kind == SdoJobKind::Identity) &&
+        job_.axis == i) {
       sdo_client_.cancel();
       job_.kind = SdoJobKind::None;
     }
@@ -109,6 +115,16 @@ void CanioBus::node_down(std::size_t k, bool fresh, int64_t now) noexcept {
   t.started = false;
   t.heartbeat_deadline_ns = 0;
   t.trust_by_heartbeat = false;
+  // Who answers now is read again before its modules are configured or checked: a boot-up may
+  // be another node (replaced), a silence may end with another node on the cable.
+  t.identity_due = t.identity_mask != 0;
+  if (fresh && t.identity_mask != 0) {
+    t.identity_backoff_ns = 0;
+    if (t.identity_state == NodeIdentityState::Confirmed) {
+      t.identity_state = NodeIdentityState::Pending;
+      publish_identity(k);
+    }
+  }
 }
 
 void CanioBus::on_error_control(std::size_t k, NmtState state, int64_t now) noexcept {
@@ -128,8 +144,9 @@ void CanioBus::on_error_control(std::size_t k, NmtState state, int64_t now) noex
   if (options_.assume_configured) return;
   if (state == NmtState::Operational && t.trust_by_heartbeat) {
     // After a bus restart: an OPERATIONAL heartbeat proves the node did not reset (a reset
-    // sends boot-up and waits pre-operational).
+    // sends boot-up and waits pre-operational): the same node, its identity as last read.
     t.trust_by_heartbeat = false;
+    if (!identity_refused(k)) t.identity_due = false;
     for (std::size_t i = 0; i < axis_node_.size(); ++i) {
       if (axis_node_[i] != k || !axis_sdo_[i].reconfigure || axis_sdo_[i].fresh) continue;
       if (axis_counters_[i].configurations.load(std::memory_order_relaxed) == 0) continue;

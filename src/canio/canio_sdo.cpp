@@ -97,6 +97,10 @@ CanioBus::SdoNote CanioBus::NoteCell::load() const noexcept {
 std::string CanioBus::axis_reason(std::size_t axis) const {
   if (axis >= options_.axes.size()) return {};
   const CanioAxisState st = axis_counters_[axis].state.load(std::memory_order_relaxed);
+  if (st == CanioAxisState::IdentityMismatch)
+    return describe_identity(node_identity(axis_node_[axis])) +
+           "; the node is not started (topology.on_mismatch: refuse), checked again with "
+           "back-off (up to 30 s) and after its next boot-up";
   if (st != CanioAxisState::Unconfigurable) return std::string(reason(st));
   const SdoNote n = notes_[axis].load();
   // "unconfigurable: <register> <abort text>"
@@ -195,6 +199,9 @@ bool CanioBus::next_job(int64_t now) noexcept {
     AxisSdo& a = axis_sdo_[i];
     if (!a.reconfigure || now < a.retry_at_ns) continue;
     next_axis_ = (i + 1) % n;
+    // Who is there first: a node whose identity is due is read before any of its modules is
+    // configured or checked (canio_identity.cpp).
+    if (nodes_[axis_node_[i]].identity_due && start_identity(i)) return true;
     // Back after silence: a module that kept its configuration (the node was only late or
     // disconnected) needs three reads; one that was power-cycled is configured anew. With
     // verify none nothing is read: the module is configured again.
@@ -282,6 +289,10 @@ CanioBus::SdoOp CanioBus::current_op() const noexcept {
     case SdoJobKind::Request:
       return {job_.request.reg, job_.request.size, job_.stage == SdoStage::Write,
               job_.request.value};
+    case SdoJobKind::Identity: {
+      const IdentityField& f = kIdentityFields[job_.step];
+      return {0, 4, false, 0, f.index, f.subindex};
+    }
     case SdoJobKind::None:
       break;
   }
@@ -333,6 +344,9 @@ void CanioBus::transfer_done(int64_t now, std::error_code ec, uint32_t value,
       return;
     case SdoJobKind::Request:
       request_step_done(ec, value);
+      return;
+    case SdoJobKind::Identity:
+      identity_step_done(now, ec, value);
       return;
     case SdoJobKind::None:
       return;

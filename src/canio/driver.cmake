@@ -6,6 +6,7 @@ target_sources(ds1928_canio PRIVATE ${CMAKE_CURRENT_LIST_DIR}/object_codec.cpp
                                     ${CMAKE_CURRENT_LIST_DIR}/sync_pairing.cpp)
 add_library(ds1928_canio_bus STATIC ${CMAKE_CURRENT_LIST_DIR}/canio_bus.cpp
                                     ${CMAKE_CURRENT_LIST_DIR}/canio_nmt.cpp
-                                    ${CMAKE_CURRENT_LIST_DIR}/canio_sdo.cpp)
+                                    ${CMAKE_CURRENT_LIST_DIR}/canio_sdo.cpp
+                                    ${CMAKE_CURRENT_LIST_DIR}/canio_identity.cpp)
 target_link_libraries(ds1928_canio_bus PUBLIC ds1928_canio ds1928_od ds1928_core
   Threads::Threads)

@@ -104,6 +104,14 @@ void parse_canio(Section s, CanioBusConfig& c) {
               "ms (object 0x1017 is 16 bit; 0: no heartbeat watched)");
     n.integer("heartbeat_timeout_ms", o.heartbeat_timeout_ms, 0, 65535 * 2,
               "ms (0: 1.5 × heartbeat_ms)");
+    // The identity to expect (CiA 301 0x1000, 0x1018/1..4), the keys of powerlink.nodes[].
+    n.optional_integer("device_type", o.identity.device_type, 0, kU32);
+    if (n.optional_integer("vendor_id", o.identity.vendor_id, 0, kU32) && o.identity.vendor_id &&
+        *o.identity.vendor_id == 0)
+      n.error("vendor_id", "0 is not a vendor-ID (CiA 301: 0x00000000 marks an invalid one)");
+    n.optional_integer("product_code", o.identity.product_code, 0, kU32);
+    n.optional_integer("revision_no", o.identity.revision_no, 0, kU32);
+    n.optional_integer("serial_no", o.identity.serial_no, 0, kU32);
     n.finish();
     if (std::any_of(c.nodes.begin(), c.nodes.end(),
                     [&](const CanioNodeOptions& x) { return x.node == o.node; }))
@@ -233,6 +241,31 @@ void check_canio(const BusDocument& d) {
     }
   }
 
+  // An identity is read by SDO while the node's modules are configured: a node no axis uses is
+  // never configured, and without SDO nothing can be read.
+  const YAML::Node canio_nodes =
+      doc.IsMap() && doc["canio"].IsMap() ? doc["canio"]["nodes"] : YAML::Node();
+  for (std::size_t j = 0; j < k.nodes.size(); ++j) {
+    const CanioNodeOptions& n = k.nodes[j];
+    if (!n.identity.any()) continue;
+    const std::string key = "canio.nodes[" + std::to_string(j) + "]";
+    const Loc at = canio_nodes.IsSequence() && j < canio_nodes.size() && canio_nodes[j].IsMap()
+                       ? locate(canio_nodes[j], {"node"})
+                       : locate(doc, {"canio", "nodes"});
+    const bool used = std::any_of(c.axes.begin(), c.axes.end(),
+                                  [&](const AxisConfig& a) { return a.node == n.node; });
+    if (!used) {
+      diag.error(at, key + ".node",
+                 "node " + std::to_string(n.node) +
+                     " has an expected identity but no axis uses it: its identity would never be "
+                     "read (the node is checked while its modules are configured)");
+    } else if (k.acyclic == CanAcyclicTransport::None) {
+      diag.error(at, key,
+                 "node " + std::to_string(n.node) +
+                     ": an expected identity (0x1000 / 0x1018) is read by SDO, but "
+                     "canio.acyclic.transport is none");
+    }
+  }
   // Bits on the wire per cycle (worst-case stuffing) plus the daemon's own acyclic traffic
   // against the share of the period the bus may carry.
   if (k.bitrate > 0 && timing.load > k.max_bus_load) {
@@ -306,9 +339,21 @@ void dump_canio(std::ostream& o, const CanioBusConfig& c) {
   o << "  nmt: " << (c.nmt == CanNmt::None ? "none" : "start") << "\n";
   if (!c.nodes.empty()) {
     o << "  nodes:\n";
-    for (const CanioNodeOptions& n : c.nodes)
+    for (const CanioNodeOptions& n : c.nodes) {
       o << "    - {node: " << int(n.node) << ", heartbeat_ms: " << n.heartbeat_ms
-        << ", heartbeat_timeout_ms: " << n.heartbeat_timeout_ms << "}\n";
+        << ", heartbeat_timeout_ms: " << n.heartbeat_timeout_ms;
+      const auto hex = [&](const char* key, const std::optional<uint32_t>& v) {
+        if (v)
+          o << ", " << key << ": 0x" << std::hex << std::uppercase << std::setw(8)
+            << std::setfill('0') << *v << std::dec << std::setfill(' ');
+      };
+      hex("device_type", n.identity.device_type);
+      hex("vendor_id", n.identity.vendor_id);
+      hex("product_code", n.identity.product_code);
+      hex("revision_no", n.identity.revision_no);
+      hex("serial_no", n.identity.serial_no);
+      o << "}\n";
+    }
   }
   o << "  stall_limit: " << c.stall_limit << (c.stall_limit == 0 ? "  # derived\n" : "\n")
     << "  allow_manual_restart: " << (c.allow_manual_restart ? "true" : "false") << "\n";
