@@ -63,6 +63,20 @@ void append_canio_metrics(metrics::Exposition& out, const canio::CanioBus& bus) 
   out.sample({{"interface", port}, {"estimate", "nominal"}}, fit.load_nominal);
   out.sample({{"interface", port}, {"estimate", "worst_case"}}, fit.load_worst_case);
 
+  // Per CANopen node: its identity against canio.nodes[] (the expected topology).
+  out.family("ds1928_canio_node_identity_mismatch", Type::Gauge,
+             "1 while a CAN-I/O node's identity (0x1000 / 0x1018) differs from canio.nodes[] or "
+             "cannot be read.");
+  for (std::size_t k = 0; k < bus.node_count(); ++k) {
+    const auto s = static_cast<canio::NodeIdentityState>(
+        bus.node_counters(k).identity_state.load(std::memory_order_relaxed));
+    out.sample({{"node", std::to_string(bus.node_counters(k).node)}},
+               uint64_t{s == canio::NodeIdentityState::Mismatch ||
+                                s == canio::NodeIdentityState::Unreadable
+                            ? 1u
+                            : 0u});
+  }
+
   // Per node (one module per CAN-I/O node).
   const auto& axes = bus.options().axes;
   std::vector<std::string> node(axes.size()), axis(axes.size());

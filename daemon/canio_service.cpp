@@ -15,6 +15,31 @@ namespace {
 
 using canio::CanioBus;
 
+std::string hex32(uint32_t v) {
+  return fmt::format("0x{:08X}", v);
+}
+
+// A node's expected identity next to what its last check found (`status`, `topology`).
+nlohmann::json identity_json(const canio::NodeIdentity& id) {
+  nlohmann::json expected = nlohmann::json::object();
+  nlohmann::json found = nlohmann::json::object();
+  for (std::size_t f = 0; f < canio::kIdentityFields.size(); ++f) {
+    const std::string key(canio::kIdentityFields[f].key);
+    const unsigned bit = 1U << f;
+    expected[key] = (id.expected_mask & bit) ? nlohmann::json(hex32(id.expected[f])) : nullptr;
+    found[key] = (id.read_mask & bit)         ? nlohmann::json(hex32(id.found[f]))
+                 : (id.unreadable_mask & bit) ? nlohmann::json("unreadable")
+                                              : nullptr;
+  }
+  const std::string difference = canio::describe_identity(id);
+  return {{"state", std::string(canio::to_string(id.state))},
+          {"expected", std::move(expected)},
+          {"found", id.read_mask | id.unreadable_mask ? std::move(found) : nlohmann::json(nullptr)},
+          {"difference", difference.empty() ? nlohmann::json(nullptr) : nlohmann::json(difference)},
+          {"checks", id.checks},
+          {"mismatches", id.mismatches}};
+}
+
 class CanioService final : public BusService {
  public:
   CanioService(std::unique_ptr<CanioBus> bus, std::shared_ptr<canio::VirtualCanBus> vbus)
@@ -88,6 +113,12 @@ class CanioService final : public BusService {
   // and logged here with the node's journal fields. The daemon turns the boot-up and the missed
   // heartbeat into flight-recorder incidents by their reason (incident_of() in daemon.cpp); the
   // driver raises the bus-off itself on its cycle.
+  [[nodiscard]] std::size_t node_index(uint8_t node) const {
+    for (std::size_t k = 0; k < bus_->node_count(); ++k)
+      if (bus_->node_counters(k).node == node) return k;
+    return bus_->node_count();
+  }
+
   void on_node_event(const canio::CanioNodeEvent& e, std::vector<BusEvent>& events) const {
     using K = canio::CanioNodeEventKind;
     const std::string why(canio::to_string(e.kind));
@@ -121,6 +152,28 @@ class CanioService final : public BusService {
                                       "Start: Start sent again (next in {} ms)",
                                       e.node, e.detail),
                           control::LogEvent::NodeSilent, e.node, -1, why});
+        return;
+      case K::IdentityMismatch: {
+        // The node's reason in the journal (DS1928_REASON): what differs.
+        const std::size_t k = node_index(e.node);
+        const std::string what =
+            k < bus_->node_count() ? canio::describe_identity(bus_->node_identity(k)) : why;
+        events.push_back(
+            {true,
+             fmt::format("canio node {}: {}; {}", e.node, what,
+                         bus_->options().identity_refuse
+                             ? "the node is not started, its axes stay down (topology."
+                               "on_mismatch: refuse); checked again with back-off"
+                             : "configured and started anyway (topology.on_mismatch: warn)"),
+             control::LogEvent::IdentificationFailed, e.node, -1, what});
+        return;
+      }
+      case K::IdentityConfirmed:
+        events.push_back({false,
+                          fmt::format("canio node {}: identity as expected (canio.nodes[]): its "
+                                      "modules are configured",
+                                      e.node),
+                          control::LogEvent::NodeOperational, e.node, -1, why});
         return;
       case K::BusOff:
         return;  // the controller's state change is logged above (watch())
@@ -182,7 +235,8 @@ class CanioService final : public BusService {
           {"heartbeat_watched", nc.heartbeat_watched.load()},
           {"heartbeats", nc.heartbeats.load()},
           {"heartbeat_misses", nc.heartbeat_misses.load()},
-          {"emcys", nc.emcys.load()}};
+          {"emcys", nc.emcys.load()},
+          {"identity", identity_json(bus_->node_identity(k))}};
       if (nc.emcys.load() > 0)
         n["last_emcy"] = {{"error_code", emcy & 0xFFFF},
                           {"error_register", (emcy >> 16) & 0xFF},
@@ -235,8 +289,9 @@ class CanioService final : public BusService {
 }  // namespace
 
 std::unique_ptr<BusService> make_canio_service(const DaemonConfig& config, std::string& why_not) {
-  const canio::CanioBusOptions options =
+  canio::CanioBusOptions options =
       canio::make_canio_options(config.canio, config.axes, config.cycle.period_us);
+  options.identity_refuse = config.topology.refuse;
   std::unique_ptr<canio::CanPort> cycle_port;
   std::unique_ptr<canio::CanPort> sdo_port;
   std::shared_ptr<canio::VirtualCanBus> vbus;

@@ -176,6 +176,22 @@ json Topology::topology_json(const EnDatService* endat, const json& bus_status) 
                        {"difference", std::move(difference)}});
     }
   }
+  if (config_.bus == BusKind::Canio && bus_status.contains("canopen_nodes")) {
+    // CAN-I/O: the driver read each node's identity objects (canio.nodes[]) before configuring
+    // it; status carries expected and found (CanioService).
+    for (const auto& s : bus_status["canopen_nodes"]) {
+      const json id = s.value("identity", json::object());
+      const std::string state = id.value("state", std::string("unchecked"));
+      nodes.push_back({{"node", s.value("node", 0)},
+                       {"expected", id.value("expected", json())},
+                       {"found", id.value("found", json())},
+                       {"boot", s.value("nmt_state", std::string())},
+                       {"state", state},
+                       {"difference", id.value("difference", json())},
+                       {"held_down", config_.topology.refuse &&
+                                         (state == "mismatch" || state == "unreadable")}});
+    }
+  }
   return {{"on_mismatch", config_.topology.refuse ? "refuse" : "warn"},
           {"bus", std::string(to_string(config_.bus))},
           {"axes", std::move(axes)},

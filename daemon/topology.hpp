@@ -1,6 +1,7 @@
 // The expected topology (docs/operations.md "Expected topology"): per axis the encoder the
 // configuration expects (axes[].expected_encoder), per POWERLINK CN its identity (powerlink.nodes[]
-// vendor_id, product_code, revision_no, serial_no — checked by the MN, docs/powerlink.md), set
+// vendor_id, product_code, revision_no, serial_no — checked by the MN, docs/powerlink.md), per
+// CAN-I/O node its identity object (canio.nodes[], checked by the driver, docs/canio.md), set
 // against what the bus reports. An axis whose encoder differs stays bus_down with the reason
 // (topology.on_mismatch: refuse, the default; warn: logged only), so a swapped cable or a
 // replaced encoder never delivers positions under the wrong axis' name. Normal thread.
@@ -36,8 +37,9 @@ class Topology {
 
   // Why the axis is held down ("" when it is not).
   [[nodiscard]] std::string reason(std::size_t axis) const;
-  // `ds1928ctl topology`: per axis expected and found, per POWERLINK CN expected and found
-  // (`bus_status`: the bus' status_json(), whose nodes carry what the MN saw).
+  // `ds1928ctl topology`: per axis expected and found, per POWERLINK CN and per CAN-I/O node
+  // expected and found (`bus_status`: the bus' status_json(), whose nodes carry what the MN saw,
+  // whose canopen_nodes carry the identity the CAN-I/O driver read).
   [[nodiscard]] nlohmann::json topology_json(const EnDatService* endat,
                                              const nlohmann::json& bus_status) const;
   void append_metrics(metrics::Exposition& out) const;

@@ -23,6 +23,15 @@ CanioNodeConfig canio_node_from_config(const CanioBusConfig& canio,
   n.sync_enabled = canio.sync_enabled;
   n.sync_id = canio.sync_id;
   n.sdo_overrides = canio.sdo_overrides;
+  // The identity canio.nodes[] expects, where it says one: the simulator is the planned node.
+  for (const CanioNodeOptions& o : canio.nodes) {
+    if (o.node != node) continue;
+    if (o.identity.device_type) n.identity.device_type = *o.identity.device_type;
+    if (o.identity.vendor_id) n.identity.vendor_id = *o.identity.vendor_id;
+    if (o.identity.product_code) n.identity.product_code = *o.identity.product_code;
+    if (o.identity.revision_no) n.identity.revision_no = *o.identity.revision_no;
+    if (o.identity.serial_no) n.identity.serial_no = *o.identity.serial_no;
+  }
   for (std::size_t i = 0; i < axes.size(); ++i) {
     const AxisConfig& a = axes[i];
     if (a.node != node) continue;
@@ -249,6 +258,11 @@ void CanioNode::serve_sdo(const canio::CanFrame& f) {
     reply.size = 0;
     reply.value = code;
   };
+  if (uint32_t code = 0; serve_identity(*request, reply, code)) {
+    if (code != 0) abort(code);
+    if (auto frame = canio::build_sdo_response(config_.node, reply)) send(*frame);
+    return;
+  }
   if (request->index == canio::kHeartbeatProducerIndex && request->subindex == 0) {
     // The node's own object: the heartbeat producer time (u16, ms).
     if (request->command == SdoCommand::UploadRequest) {
@@ -309,6 +323,45 @@ void CanioNode::serve_sdo(const canio::CanFrame& f) {
     abort(sdo_abort::kGeneral);
   }
   if (auto frame = canio::build_sdo_response(config_.node, reply)) send(*frame);
+}
+
+bool CanioNode::serve_identity(const canio::SdoMessage& request, canio::SdoMessage& reply,
+                               uint32_t& abort_code) const {
+  using canio::SdoCommand;
+  if (request.index != 0x1000 && request.index != 0x1018) return false;
+  const CanioNodeIdentity& id = config_.identity;
+  // Strict (CiA 301): an object the node does not have, a subindex it does not have, a write to
+  // a read-only object: each with its own abort code.
+  if (!id.present) {
+    abort_code = sdo_abort::kNoObject;
+    return true;
+  }
+  const uint8_t highest = request.index == 0x1000 ? 0 : 4;
+  if (request.subindex > highest) {
+    abort_code = sdo_abort::kNoSubindex;
+    return true;
+  }
+  if (request.command == SdoCommand::DownloadRequest) {
+    abort_code = sdo_abort::kReadOnly;
+    return true;
+  }
+  if (request.command != SdoCommand::UploadRequest) {
+    abort_code = sdo_abort::kGeneral;
+    return true;
+  }
+  reply.command = SdoCommand::UploadResponse;
+  if (request.index == 0x1018 && request.subindex == 0) {
+    reply.size = 1;  // highest subindex supported
+    reply.value = 4;
+    return true;
+  }
+  reply.size = 4;
+  reply.value = request.index == 0x1000 ? id.device_type
+                : request.subindex == 1 ? id.vendor_id
+                : request.subindex == 2 ? id.product_code
+                : request.subindex == 3 ? id.revision_no
+                                        : id.serial_no;
+  return true;
 }
 
 std::size_t CanioNode::service(int64_t deadline_ns) {

@@ -29,6 +29,7 @@
 #include "can/canio_options.hpp"
 #include "canio/can_port.hpp"
 #include "canio/canopen_nmt.hpp"
+#include "canio/sdo_expedited.hpp"
 #include "sim/ds1928_module.hpp"
 #include "sim/sim_options.hpp"
 #include "x20ds1928/sdo_mapping.hpp"
@@ -66,8 +67,22 @@ struct CanioNodeFaults {
   uint64_t seed = 1;
 };
 
+// The bus controller's identity (CiA 301: 0x1000 device type, 0x1018/1..4 identity object),
+// read-only. B&R's documents at hand do not say what an X20 CAN bus controller reports: the
+// defaults are placeholders (ASSUMPTION, docs/canio.md §Node identity); canio_node_from_config()
+// takes the identity canio.nodes[] expects where it is given.
+struct CanioNodeIdentity {
+  bool present = true;  // false: 0x1000 and 0x1018 do not exist (every read: abort 0x06020000)
+  uint32_t device_type = 0x00000000;
+  uint32_t vendor_id = 0x0000001A;  // B&R's, as docs/powerlink.md uses it (ASSUMPTION for CAN)
+  uint32_t product_code = 0x00000001;
+  uint32_t revision_no = 0x00010000;
+  uint32_t serial_no = 0x00000001;
+};
+
 struct CanioNodeConfig {
   uint8_t node = 1;
+  CanioNodeIdentity identity;
   std::vector<CanioNodeModule> modules;
   bool little_endian = true;
   bool sync_enabled = true;
@@ -139,6 +154,9 @@ class CanioNode {
   // Any thread: while true the modules' acquisition is stalled — every answer repeats the last
   // position and PosCycle sent.
   void set_stalled(bool stalled) noexcept { stalled_.store(stalled); }
+  // Owner's thread: another bus controller on the cable from now on (a node replaced: call
+  // power_up() or request_reset() for its boot-up).
+  void set_identity(const CanioNodeIdentity& identity) noexcept { config_.identity = identity; }
   // Any thread: the node sends this EMCY at its next service().
   void request_emcy(uint16_t error_code, uint8_t error_register,
                     std::array<uint8_t, 5> vendor = {}) noexcept;
@@ -163,6 +181,9 @@ class CanioNode {
  private:
   void answer(std::size_t module, int64_t time_ns);
   void serve_sdo(const canio::CanFrame& f);
+  // 0x1000 / 0x1018: true when the request addressed them (`reply` filled, abort codes given).
+  bool serve_identity(const canio::SdoMessage& request, canio::SdoMessage& reply,
+                      uint32_t& abort_code) const;
   void on_nmt(const canio::NmtMessage& m);
   // Boot-up message, pre-operational (operational with self_start).
   void boot();

@@ -141,6 +141,7 @@ struct Rig {
     canio::CanioBusOptions options =
         canio::make_canio_options(config.canio, config.axes, config.cycle.period_us);
     options.assume_configured = assume_configured;
+    options.identity_refuse = config.topology.refuse;  // as the daemon tells the driver
     std::unique_ptr<canio::CanPort> cycle;
     if (stepped) {
       cycle = std::make_unique<SteppedPort>(

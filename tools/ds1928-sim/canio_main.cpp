@@ -66,6 +66,12 @@ int run_canio(const CanioOptions& o, const std::atomic<bool>& stop, std::atomic<
   node.self_start = o.self_start;
   node.heartbeat_ms = static_cast<uint16_t>(o.heartbeat_ms);
   node.faults.config_write_only = !o.config_readable;
+  if (o.device_type >= 0) node.identity.device_type = static_cast<uint32_t>(o.device_type);
+  if (o.vendor_id >= 0) node.identity.vendor_id = static_cast<uint32_t>(o.vendor_id);
+  if (o.product_code >= 0) node.identity.product_code = static_cast<uint32_t>(o.product_code);
+  if (o.revision_no >= 0) node.identity.revision_no = static_cast<uint32_t>(o.revision_no);
+  if (o.serial_no >= 0) node.identity.serial_no = static_cast<uint32_t>(o.serial_no);
+  node.identity.present = !o.no_identity;
 
   std::shared_ptr<canio::VirtualCanBus> vbus;
   std::unique_ptr<canio::CanPort> port;

@@ -35,6 +35,10 @@ struct CanioOptions {
   uint32_t stall_for_ms = 0;     // ... for this long (0: for good)
   double emcy_after_s = 0.0;     // send one EMCY after S seconds
   uint32_t emcy_code = 0x7300;   // its error code (CiA 301: 0x73xx sensor)
+  // The bus controller's identity (0x1000, 0x1018/1..4); -1: the config's canio.nodes[] entry,
+  // else the simulator's placeholder (docs/canio.md §Node identity).
+  int64_t device_type = -1, vendor_id = -1, product_code = -1, revision_no = -1, serial_no = -1;
+  bool no_identity = false;  // 0x1000 / 0x1018 do not exist (abort 0x06020000)
   uint64_t seed = 1;
   double duration_s = 0.0;
 };

@@ -26,6 +26,7 @@
 #include <cstdio>
 #include <memory>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "canio_main.hpp"
@@ -442,6 +443,18 @@ int main(int argc, char** argv) {
   can->add_option("--emcy-after", co.emcy_after_s, "send one EMCY after S seconds");
   can->add_option("--emcy-code", co.emcy_code, "its error code (default 0x7300)")
       ->check(CLI::Range(0, 65535));
+  for (auto [flag, field, what] :
+       {std::tuple{"--device-type", &co.device_type, "device type (object 0x1000)"},
+        std::tuple{"--vendor-id", &co.vendor_id, "vendor-ID (0x1018/1)"},
+        std::tuple{"--product-code", &co.product_code, "product code (0x1018/2)"},
+        std::tuple{"--revision-no", &co.revision_no, "revision number (0x1018/3)"},
+        std::tuple{"--serial-no", &co.serial_no, "serial number (0x1018/4)"}})
+    can->add_option(flag, *field,
+                    std::string("identity: ") + what +
+                        " (default: the config's canio.nodes[] entry, else a placeholder)")
+        ->check(CLI::Range(int64_t{0}, int64_t{0xFFFFFFFF}));
+  can->add_flag("--no-identity", co.no_identity,
+                "no identity objects: reads of 0x1000 / 0x1018 abort with 0x06020000");
   can->add_option("--seed", co.seed, "fault injection random seed");
   can->add_option("--duration", co.duration_s, "stop after S seconds (0: until SIGTERM)");
 

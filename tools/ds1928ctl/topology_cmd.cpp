@@ -39,18 +39,27 @@ void print_topology(const json& r) {
   }
   const json& nodes = r.value("nodes", json::array());
   if (nodes.empty()) return;
-  std::printf("  %-4s  %-10s %-10s  %-10s %-10s  %-10s %-10s  %s\n", "node", "exp vendor", "found",
-              "exp prod.", "found", "exp rev.", "exp serial", "boot");
+  // Per node (POWERLINK CN or CAN-I/O node): each identity object expected | found.
+  std::printf("  %-4s  %-10s %-10s  %-10s %-10s  %-10s %-10s  %-10s %-10s  %s\n", "node",
+              "exp vendor", "found", "exp prod.", "found", "exp rev.", "found", "exp serial",
+              "found", "state");
   for (const json& n : nodes) {
     const json& e = n.value("expected", json());
     const json& f = n.value("found", json());
     const bool diff = !n.value("difference", json()).is_null();
-    std::printf("%s %-4llu  %-10s %-10s  %-10s %-10s  %-10s %-10s  %s\n", diff ? "!" : " ",
-                static_cast<unsigned long long>(n.value("node", 0ULL)),
+    std::string state = n.value("state", std::string());
+    const std::string boot = n.value("boot", std::string());
+    if (state.empty())
+      state = boot;
+    else if (!boot.empty())
+      state += ", " + boot;
+    if (n.value("held_down", false)) state += " (held down)";
+    std::printf("%s %-4llu  %-10s %-10s  %-10s %-10s  %-10s %-10s  %-10s %-10s  %s\n",
+                diff ? "!" : " ", static_cast<unsigned long long>(n.value("node", 0ULL)),
                 field(e, "vendor_id").c_str(), field(f, "vendor_id").c_str(),
                 field(e, "product_code").c_str(), field(f, "product_code").c_str(),
-                field(e, "revision_no").c_str(), field(e, "serial_no").c_str(),
-                n.value("boot", std::string()).c_str());
+                field(e, "revision_no").c_str(), field(f, "revision_no").c_str(),
+                field(e, "serial_no").c_str(), field(f, "serial_no").c_str(), state.c_str());
     if (diff) std::cout << "      " << field(n, "difference") << "\n";
   }
 }
