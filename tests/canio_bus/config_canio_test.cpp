@@ -108,3 +108,61 @@ TEST_CASE("canio: verify is readback or none", "[canio][config]") {
   CHECK_THAT(errors_of(canio_yaml("  verify: maybe\n")),
              Catch::Contains("'maybe' is not allowed; expected one of: readback, none"));
 }
+
+TEST_CASE("canio: the identity a node must report (canio.nodes[], CiA 301 0x1000 / 0x1018)",
+          "[canio][config][topology]") {
+  const std::string nodes =
+      "  nodes:\n    - {node: 1, vendor_id: 0x1A, product_code: 0x1928, revision_no: 0x10000, "
+      "serial_no: 4711, device_type: 0x191}\n";
+  const ConfigResult r = load_config_from_string(canio_yaml(nodes), "t.yaml");
+  INFO(r.error_report());
+  REQUIRE(r.ok());
+  const CanioExpectedIdentity& id = r.config().canio.nodes.at(0).identity;
+  CHECK(id.vendor_id == 0x1Au);
+  CHECK(id.product_code == 0x1928u);
+  CHECK(id.revision_no == 0x10000u);
+  CHECK(id.serial_no == 4711u);
+  CHECK(id.device_type == 0x191u);
+  // The dump says it back, and reads back the same.
+  const std::string dumped = dump_config(r.config());
+  CHECK_THAT(dumped, Catch::Contains("vendor_id: 0x0000001A") &&
+                         Catch::Contains("product_code: 0x00001928") &&
+                         Catch::Contains("serial_no: 0x00001267"));
+  const ConfigResult again = load_config_from_string(dumped, "dump.yaml");
+  INFO(again.error_report());
+  REQUIRE(again.ok());
+  CHECK(again.config().canio.nodes.at(0).identity.serial_no == 4711u);
+  // Unset keys are not read.
+  const ConfigResult some = load_config_from_string(
+      canio_yaml("  nodes:\n    - {node: 1, product_code: 0x1928}\n"), "t.yaml");
+  REQUIRE(some.ok());
+  CHECK_FALSE(some.config().canio.nodes.at(0).identity.vendor_id);
+  CHECK(some.config().canio.nodes.at(0).identity.any());
+  CHECK_FALSE(load_config_from_string(canio_yaml(""), "t.yaml").config().canio.nodes.size());
+}
+
+TEST_CASE("canio: a wrong identity key is refused with what is wrong", "[canio][config]") {
+  const auto node = [](const std::string& keys) {
+    return canio_yaml("  nodes:\n    - {node: 1, " + keys + "}\n");
+  };
+  CHECK_THAT(errors_of(node("product_code: 0x100000000")),
+             Catch::Contains("canio.nodes[0].product_code") && Catch::Contains("0..4294967295"));
+  CHECK_THAT(errors_of(node("serial_no: -1")), Catch::Contains("canio.nodes[0].serial_no"));
+  CHECK_THAT(errors_of(node("revision_no: abc")), Catch::Contains("canio.nodes[0].revision_no"));
+  CHECK_THAT(
+      errors_of(node("vendor_id: 0")),
+      Catch::Contains("canio.nodes[0].vendor_id") &&
+          Catch::Contains("0 is not a vendor-ID (CiA 301: 0x00000000 marks an invalid one)"));
+  CHECK_THAT(errors_of(node("product: 0x1928")), Catch::Contains("canio.nodes[0].product"));
+  // A node no axis uses is never configured: its identity would never be read.
+  CHECK_THAT(errors_of(canio_yaml("  nodes:\n    - {node: 5, product_code: 0x1928}\n")),
+             Catch::Contains("canio.nodes[0].node") &&
+                 Catch::Contains("node 5 has an expected identity but no axis uses it"));
+  // ... and without SDO nothing can be read.
+  CHECK_THAT(errors_of(canio_yaml("  acyclic: {transport: none}\n  nodes:\n    - {node: 1, "
+                                  "vendor_id: 0x1A}\n")),
+             Catch::Contains("canio.nodes[0]") &&
+                 Catch::Contains("read by SDO, but canio.acyclic.transport is none"));
+  // Error control alone on a node without axis stays accepted (as before).
+  CHECK(errors_of(canio_yaml("  nodes:\n    - {node: 5, heartbeat_ms: 100}\n")).empty());
+}
