@@ -439,6 +439,9 @@ ExchangeResult CanioBus::exchange(std::span<AxisIo> axes, int64_t, uint64_t) noe
         // (EnDat disabled again). This axis publishes nothing until step_sdo() has checked it.
         c.configured.store(false, std::memory_order_release);
         axis_sdo_[i].reconfigure = true;
+        // ... and may be another node on the cable: who it is is read again first.
+        NodeTrack& node = nodes_[axis_node_[i]];
+        node.identity_due = node.identity_mask != 0;
       }
       c.silent.store(false, std::memory_order_relaxed);
       c.last_sample_ns.store(now, std::memory_order_relaxed);
