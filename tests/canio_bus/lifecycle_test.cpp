@@ -197,7 +197,7 @@ TEST_CASE(
     "consumer timeout",
     "[canio][nmt][heartbeat]") {
   DaemonConfig config = canio_config(1);
-  config.canio.nodes.push_back({1, 50, 0});  // consumer timeout 75 ms
+  config.canio.nodes.push_back({1, 50, 0, {}});  // consumer timeout 75 ms
   Rig rig(config, true, false);
   REQUIRE_FALSE(rig.canio->start());
   Run run(rig);
@@ -484,7 +484,7 @@ TEST_CASE("CAN-I/O NMT: a node put pre-operational by another master is started 
   // A configuration tool on the bus sends Enter Pre-Operational: the node keeps its settings but
   // sends no process data. Its heartbeat says so; the daemon starts it again (with back-off).
   DaemonConfig config = canio_config(1);
-  config.canio.nodes.push_back({1, 20, 0});
+  config.canio.nodes.push_back({1, 20, 0, {}});
   Rig rig(config, true, false);
   REQUIRE_FALSE(rig.canio->start());
   Run run(rig);
