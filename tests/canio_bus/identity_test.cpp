@@ -111,7 +111,7 @@ uint32_t endat_mode_of(sim::CanioNode& n) {
 
 TEST_CASE(
     "CAN-I/O topology: a node with the wrong product keeps exactly its axis down with the "
-    "reason; corrected, it recovers",
+    "reason, and recovers once corrected",
     "[canio][topology]") {
   Rig rig(two_nodes(), true, false, [](sim::CanioNodeConfig& nc) {
     nc.identity = identity(nc.node, nc.node == 2 ? kWrongProduct : kProduct);
@@ -224,5 +224,34 @@ TEST_CASE(
   CHECK_THAT(rig.canio->axis_reason(1),
              Catch::StartsWith("identity: vendor_id unreadable, expected 0x0000001A (0x1018/1: "));
   CHECK_THAT(rig.canio->axis_reason(1), Catch::Contains("0x06020000"));
+  CHECK(rig.canio->axis_counters(1).state.load() == canio::CanioAxisState::IdentityMismatch);
+}
+
+TEST_CASE(
+    "CAN-I/O topology: another node on the cable after a silence (no boot-up heard) is read "
+    "again before it delivers",
+    "[canio][topology]") {
+  // A self-starting node that keeps its settings: only the identity tells it from the first.
+  DaemonConfig config = two_nodes();
+  config.canio.nmt = CanNmt::None;
+  Rig rig(config, true, false, [](sim::CanioNodeConfig& nc) {
+    nc.identity = identity(nc.node);
+    nc.self_start = true;
+    nc.faults.config_write_only = false;  // the check after silence could pass on its registers
+  });
+  REQUIRE_FALSE(rig.canio->start());
+  Run run(rig);
+  REQUIRE(run.until([&] { return run.fresh[0] >= 200 && run.fresh[1] >= 200; }));
+  const uint64_t checks = rig.canio->node_identity(1).checks;
+  rig.nodes[1]->set_silent(true);
+  run.cycles(50);  // 100 ms: silent (input_timeout_ms 20)
+  rig.nodes[1]->set_identity(identity(2, kWrongProduct));
+  rig.nodes[1]->set_silent(false);
+  const uint64_t fresh1 = run.fresh[1];
+  run.cycles(2000);
+  CHECK(run.fresh[1] == fresh1);
+  CHECK(run.wrong == 0);
+  CHECK(rig.canio->node_identity(1).checks > checks);
+  CHECK(rig.canio->node_identity(1).state == canio::NodeIdentityState::Mismatch);
   CHECK(rig.canio->axis_counters(1).state.load() == canio::CanioAxisState::IdentityMismatch);
 }
