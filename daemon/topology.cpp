@@ -185,7 +185,9 @@ json Topology::topology_json(const EnDatService* endat, const json& bus_status) 
       nodes.push_back({{"node", s.value("node", 0)},
                        {"expected", id.value("expected", json())},
                        {"found", id.value("found", json())},
-                       {"boot", s.value("nmt_state", std::string())},
+                       {"boot", s.value("nmt_state", std::string()) == "unknown"
+                                    ? std::string()
+                                    : s.value("nmt_state", std::string())},
                        {"state", state},
                        {"difference", id.value("difference", json())},
                        {"held_down", config_.topology.refuse &&
