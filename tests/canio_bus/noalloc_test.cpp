@@ -48,6 +48,7 @@ struct ProofResult {
   std::vector<CaptureWindow> windows;  // empty: no capture
   bool dropped_in_window = false;      // the ring overflowed before the counted cycles ended
   uint64_t flight_frames = 0;          // recorded by the flight recorder's rings meanwhile
+  uint64_t identity_checks = 0;        // node 2's identity checks inside the counted cycles
 };
 
 // Runs the cycle on a 2-node virtual bus for kCounted counted cycles. `capture_ring` 0: no
@@ -59,6 +60,14 @@ ProofResult run_proof(std::size_t capture_ring) {
   config.canio.response_timeout_us = 500;
   config.cycle.hold_cpu_dma_latency = false;
   config.shm.name = "/ds1928d-canio-noalloc-" + std::to_string(::getpid());
+  // Node 2's identity is read at start and again after its boot-up inside the counted cycles
+  // (the simulated node reports what canio.nodes[] expects).
+  CanioNodeOptions node2;
+  node2.node = 2;
+  node2.identity.vendor_id = 0x0000001A;
+  node2.identity.product_code = 0x00001928;
+  node2.identity.serial_no = 0x00000202;
+  config.canio.nodes.push_back(node2);
   std::vector<capture::Tap*> taps;
   test::Rig::PortWrap wrap;
   if (capture_ring > 0)
@@ -112,9 +121,11 @@ ProofResult run_proof(std::size_t capture_ring) {
   // Two requests to node 1 are lost: transfers in flight until sdo_timeout_ms, inside the count.
   rig.nodes[0]->drop_sdo_requests(2);
   const auto sdo_before = sdo_totals();
+  const uint64_t identity_checks_before = rig.canio->node_identity(1).checks;
   // Samples in the counted cycles only: the strict node sends none before its NMT Start.
   const uint64_t samples_before = rig.canio->axis_counters(0).samples.load();
   task.arm();
+  rig.nodes[1]->request_reset();  // boot-up: node 2 down, its identity read again, reconfigured
 
   const auto read =
       endat::encode_request(endat::Request::read(0xA1, 13), endat::CommandSet::EnDat22);
@@ -148,6 +159,7 @@ ProofResult run_proof(std::size_t capture_ring) {
   }
   result.counts = task.result();
   result.samples = rig.canio->axis_counters(0).samples.load() - samples_before;
+  result.identity_checks = rig.canio->node_identity(1).checks - identity_checks_before;
   for (const capture::Tap* t : taps)
     if (t->flight_ring() != nullptr) result.flight_frames += t->flight_ring()->counters().frames;
   return result;
@@ -187,8 +199,9 @@ void check_clean(const ProofResult& r, const char* what) {
   if (!test::counts_mutexes()) WARN("sanitizer build: mutex locks are not counted");
   CHECK(traffic.replies > 20);
   CHECK(traffic.register_results > 20);
-  CHECK(r.sdo_transfers > 20);  // SDO in flight during the counted cycles
-  CHECK(r.sdo_errors >= 2);     // the two lost requests timed out on the cycle thread
+  CHECK(r.sdo_transfers > 20);    // SDO in flight during the counted cycles
+  CHECK(r.sdo_errors >= 2);       // the two lost requests timed out on the cycle thread
+  CHECK(r.identity_checks >= 1);  // node 2's identity read again after its boot-up
   // Whole samples inside the counted cycles (the strict node sends none before its NMT Start, so
   // the count no longer includes the configuration's cycles): 1 ms on the real clock against a
   // node thread gives about half the cycles whole on an idle 2-core host and 17-22 % with the
