@@ -12,7 +12,6 @@
 #include <cstdio>
 
 #include "canio/canio_bus.hpp"
-#include "core/sdo_abort.hpp"
 
 namespace ds1928::canio {
 namespace {

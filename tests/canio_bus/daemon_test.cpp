@@ -8,11 +8,13 @@
 
 #include <catch2/catch.hpp>
 #include <filesystem>
+#include <functional>
 #include <nlohmann/json.hpp>
 #include <thread>
 
 #include "../control/control_test_util.hpp"
 #include "canio/virtual_bus.hpp"
+#include "cycle_work.hpp"
 #include "rig.hpp"
 #include "support/unix_socket.hpp"
 #include "support/wait.hpp"
@@ -24,7 +26,8 @@ using json = nlohmann::json;
 namespace {
 
 struct SimulatedNodeThread {
-  SimulatedNodeThread(const DaemonConfig& config, const std::string& bus_name) {
+  SimulatedNodeThread(const DaemonConfig& config, const std::string& bus_name,
+                      const std::function<void(sim::CanioNodeConfig&)>& tweak = {}) {
     auto b = canio::VirtualCanBus::open_shared(bus_name,
                                                canio::virtual_bus_options(config.canio.bitrate));
     if (!b) throw std::runtime_error("virtual bus: " + b.error().message());
@@ -38,6 +41,7 @@ struct SimulatedNodeThread {
     // machine is checked by read-back, not configured anew (which would restart the Flatstream
     // channel under an EnDat command this test is waiting for).
     nc.faults.config_write_only = false;
+    if (tweak) tweak(nc);
     node = std::make_unique<sim::CanioNode>(nc, *port);
     if (node->open()) throw std::runtime_error("node filters");
     thread = std::thread([this] {
@@ -154,4 +158,82 @@ TEST_CASE("ds1928d on bus canio: configured at start, positions, status, EnDat c
   CHECK(v == endat_mode::kEnable);
   CHECK_FALSE(node.node->module(0).read_register(reg::kOutputMtu, 1, v));
   CHECK(v == 5);
+}
+
+TEST_CASE(
+    "ds1928d on bus canio: a node with the wrong product is held down, the reason in status, "
+    "topology and metrics",
+    "[canio][daemon][topology]") {
+  const std::string tag = std::to_string(::getpid());
+  const std::string bus_name = "ds1928d-topo-test-" + tag;
+  const auto dir = std::filesystem::temp_directory_path() / ("ds1928d-canio-topo-" + tag);
+  std::filesystem::create_directories(dir);
+  struct Cleanup {
+    std::filesystem::path dir;
+    std::string bus;
+    ~Cleanup() {
+      std::error_code ec;
+      std::filesystem::remove_all(dir, ec);
+      (void)canio::VirtualCanBus::remove_shared(bus);
+    }
+  } cleanup{dir, bus_name};
+
+  DaemonConfig c = test::canio_config(1, 2000);
+  c.canio.virtual_bus = bus_name;
+  c.canio.response_timeout_us = 1500;
+  CanioNodeOptions expected;
+  expected.node = 1;
+  expected.identity.vendor_id = 0x0000001A;
+  expected.identity.product_code = 0x00001928;
+  c.canio.nodes.push_back(expected);
+  c.cycle.hold_cpu_dma_latency = false;
+  c.cycle.lock_memory = false;
+  c.shm.name = "/ds1928d-canio-topo-" + tag;
+  c.socket.path = (dir / "control.sock").string();
+  c.metrics.listen.reset();
+  SimulatedNodeThread node(c, bus_name,
+                           [](sim::CanioNodeConfig& nc) { nc.identity.product_code = 0xBEEF; });
+
+  Daemon daemon(c);
+  std::thread t([&] { (void)daemon.run(); });
+  struct Join {
+    Daemon& d;
+    std::thread& t;
+    ~Join() {
+      d.request_stop();
+      t.join();
+    }
+  } join{daemon, t};
+  REQUIRE(test::wait_until([&] { return test::unix_socket_accepts(c.socket.path); }));
+
+  json status;
+  REQUIRE(test::wait_until([&] {
+    status = request(c.socket.path, {{"cmd", "status"}});
+    return status.value("ok", false) && status["bus"]["nodes"][0]["state"] == "identity_mismatch";
+  }));
+  INFO(status.dump(2));
+  CHECK_THAT(status["bus"]["nodes"][0]["reason"].get<std::string>(),
+             Catch::StartsWith("identity: product_code 0x0000BEEF, expected 0x00001928 "
+                               "(0x1018/2); the node is not started"));
+  CHECK(status["axes"][0]["state"] == "bus_down");
+  CHECK(status["bus"]["canopen_nodes"][0]["identity"]["found"]["product_code"] == "0x0000BEEF");
+  CHECK(node.node->nmt_state() == canio::NmtState::PreOperational);  // never started
+
+  const json topo = request(c.socket.path, {{"cmd", "topology"}});
+  INFO(topo.dump(2));
+  REQUIRE(topo.value("ok", false));
+  REQUIRE(topo["nodes"].size() == 1);
+  CHECK(topo["nodes"][0]["state"] == "mismatch");
+  CHECK(topo["nodes"][0]["held_down"] == true);
+  CHECK(topo["nodes"][0]["expected"]["product_code"] == "0x00001928");
+  CHECK(topo["nodes"][0]["found"]["product_code"] == "0x0000BEEF");
+  CHECK(topo["nodes"][0]["difference"] ==
+        "identity: product_code 0x0000BEEF, expected 0x00001928 (0x1018/2)");
+
+  const std::string metrics = daemon.metrics_text(metrics::Format::Prometheus);
+  CHECK_THAT(metrics, Catch::Contains("ds1928_canio_node_identity_mismatch{node=\"1\"} 1"));
+  CHECK(daemon.cycle_work()
+            .counters(0)
+            .published[static_cast<std::size_t>(shm::AxisValidity::Valid)]
+            .load() == 0);  // never a position from the wrong node
 }
