@@ -404,7 +404,7 @@ class CanioBus final : public BusDriver, private RegisterTarget {
   std::vector<AxisSdo> axis_sdo_;
   std::array<Deferred, kSdoQueueDepth> deferred_{};
   std::size_t deferred_count_ = 0;
-  int64_t offer_now_ = 0;  // the step's time while the register path offers a request
+  int64_t offer_now_ = 0;      // the step's time while the register path offers a request
   int64_t next_sdo_ns_ = 0;    // pacing: no transfer starts before
   std::size_t next_axis_ = 0;  // round robin over the axes to configure
   std::unique_ptr<NoteCell[]> notes_;

@@ -228,7 +228,8 @@ void apply_mn_cdc(Section& n, PowerlinkNodeConfig& node, std::span<const powerli
       auto decoded = powerlink::decode_cdc(dcf->data);
       if (!decoded.ok()) {
         n.error("node_id",
-                "powerlink.cdc: object " + powerlink::object_name(powerlink::obj::kConciseDcfList, id) +
+                "powerlink.cdc: object " +
+                    powerlink::object_name(powerlink::obj::kConciseDcfList, id) +
                     " (this node's concise DCF) is not valid: " + decoded.error->message);
       } else {
         for (auto& e : decoded.entries)
@@ -253,9 +254,11 @@ void apply_mn_cdc(Section& n, PowerlinkNodeConfig& node, std::span<const powerli
   if (!node.revision_no) node.revision_no = value(powerlink::obj::kMnRevisionNoList);
   if (!node.serial_no) node.serial_no = value(powerlink::obj::kMnSerialNoList);
   if (!node.preq_size)
-    if (const auto v = value(powerlink::obj::kMnPReqPayloadLimitList)) node.preq_size = static_cast<uint16_t>(std::min(*v, 1490u));
+    if (const auto v = value(powerlink::obj::kMnPReqPayloadLimitList))
+      node.preq_size = static_cast<uint16_t>(std::min(*v, 1490u));
   if (!node.pres_size)
-    if (const auto v = value(powerlink::obj::kPResPayloadLimitList)) node.pres_size = static_cast<uint16_t>(std::min(*v, 1490u));
+    if (const auto v = value(powerlink::obj::kPResPayloadLimitList))
+      node.pres_size = static_cast<uint16_t>(std::min(*v, 1490u));
 }
 
 }  // namespace
@@ -353,7 +356,8 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
   // PResMN payload: the key, else the MN's CDC (NMT_CycleTiming_REC.PResActPayloadLimit_U16).
   if (!s.has("pres_mn_size") && !mn_cdc.empty())
     if (const auto* e = powerlink::find_cdc_entry(mn_cdc, powerlink::obj::kCycleTiming,
-                                                   powerlink::obj::kCycleTimingPResActPayload); e && e->as_unsigned())
+                                                  powerlink::obj::kCycleTimingPResActPayload);
+        e && e->as_unsigned())
       p.pres_mn_size = static_cast<uint16_t>(std::min<uint64_t>(*e->as_unsigned(), 1490));
   s.integer("pres_mn_size", p.pres_mn_size, 0, 1490, "bytes");
   s.choice("rx_wait", p.rx_wait,

@@ -158,7 +158,8 @@ void ManagingNode::sdo_done(Cn& cn, std::error_code ec, std::span<const uint8_t>
     // A setting the bus controller refuses is reported (status) but does not stop the boot.
     ++cn.boot_next;
   } else if (results_count_ < results_.size()) {
-    results_[(results_head_ + results_count_++) % results_.size()] = {cn.current.request.tag, ec, value};
+    results_[(results_head_ + results_count_++) % results_.size()] = {cn.current.request.tag, ec,
+                                                                      value};
   }
   if (ec == SdoError::kConnectionLost) return;  // the node is being reset
   start_next_sdo(cn);

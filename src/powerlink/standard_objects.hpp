@@ -61,8 +61,8 @@ enum class ObjAccess : uint8_t {
   kRw,     // written by an MN's configuration manager
 };
 enum class ObjHolder : uint8_t {
-  kCn,    // a CN's object: the simulated CN serves it
-  kMn,    // the MN's own object (per-node lists in the MN's concise DCF)
+  kCn,  // a CN's object: the simulated CN serves it
+  kMn,  // the MN's own object (per-node lists in the MN's concise DCF)
 };
 
 struct StandardObject {

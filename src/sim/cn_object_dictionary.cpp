@@ -146,8 +146,8 @@ uint32_t CnObjectDictionary::write(uint16_t index, uint8_t sub,
     }
     return 0;
   }
-  if (index == obj::kCycleTiming && (sub == obj::kCycleTimingPReqActPayload ||
-                                     sub == obj::kCycleTimingPResActPayload)) {
+  if (index == obj::kCycleTiming &&
+      (sub == obj::kCycleTimingPReqActPayload || sub == obj::kCycleTimingPResActPayload)) {
     // The payload in use is at most the device's limit (/2 for the PReq, /1 for the PRes).
     if (v > value(obj::kCycleTiming, sub == obj::kCycleTimingPReqActPayload ? 2 : 1))
       return sdo_abort::kOutOfRange;

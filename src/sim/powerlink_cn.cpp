@@ -402,8 +402,8 @@ void PowerlinkCn::send_pres(int64_t now_ns, int64_t offset_ns) noexcept {
     return;
   }
   std::array<uint8_t, pl::kMaxIsoPayload> payload{};
-  // The size an MN configured (cycle timing /5, the TPDO mapping), else the modules' image; module bytes beyond
-  // a smaller configured size are left out.
+  // The size an MN configured (cycle timing /5, the TPDO mapping), else the modules' image; module
+  // bytes beyond a smaller configured size are left out.
   std::size_t size = comm_.pres_size(layout_.pres_size);
   for (const HostedModule& m : modules_) {
     if (m.mapping == nullptr) continue;

@@ -77,8 +77,10 @@ TEST_CASE("Truncated and garbage concise DCFs are refused with the place and the
   auto cut = decode_cdc(std::span(good).first(good.size() - 2));
   REQUIRE_FALSE(cut.ok());
   CHECK(cut.error->entry == 1);
-  CHECK_THAT(cut.error->message,
-             Catch::Equals("entry 1 (0x1C14/0 DLL_CNLossOfSocTolerance_U32) announces 4 data bytes, only 2 remain"));
+  CHECK_THAT(
+      cut.error->message,
+      Catch::Equals(
+          "entry 1 (0x1C14/0 DLL_CNLossOfSocTolerance_U32) announces 4 data bytes, only 2 remain"));
   CHECK(cut.entries.size() == 1);
   // Cut inside the second entry's header.
   cut = decode_cdc(std::span(good).first(4 + 11 + 3));
