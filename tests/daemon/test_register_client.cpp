@@ -44,7 +44,7 @@ class SteppedBus final : public BusDriver, private RegisterTarget {
 }  // namespace
 
 TEST_CASE(
-    "RegisterClient: a request the bus does not answer in time times out once; its late "
+    "RegisterClient: a request the bus does not answer in time times out once, its late "
     "result is dropped",
     "[daemon][register_path]") {
   boost::asio::io_context io;
