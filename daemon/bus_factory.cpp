@@ -1,5 +1,8 @@
 // The bus kinds the daemon knows, how each is created, and the parts of BusService every kind
-// shares. Adding a bus kind = one factory and one row in kKinds.
+// shares. Adding a bus kind = one driver (a BusDriver that serves register requests as a
+// RegisterTarget of its RegisterPath, core/register_path.hpp), one service in the shape of the
+// others (<kind>_service.hpp/.cpp with its factory, <kind>_metrics.cpp for its metric families)
+// and one row in kKinds.
 #include <fmt/format.h>
 
 #include <array>

@@ -1,16 +1,19 @@
-#include "canio_metrics.hpp"
-
+// The CAN-I/O bus' metric families (OpenMetrics endpoint): frames, controller state, bus-off,
+// the planned cyclic bus load, per node samples (complete, half, missing, late) and SDO figures.
+// Normal thread: reads the bus' atomics and its port counters, like `status`.
 #include <string>
 #include <vector>
 
 #include "can/bit_budget.hpp"
 #include "canio/can_state.hpp"
+#include "canio_service.hpp"
 
 namespace ds1928 {
 
 using metrics::Type;
 
-void append_canio_metrics(metrics::Exposition& out, const canio::CanioBus& bus) {
+void CanioService::append_metrics(metrics::Exposition& out) const {
+  const canio::CanioBus& bus = *bus_;
   const auto& c = bus.counters();
   const canio::CanPortCounters pc = bus.port_counters();
   const std::string port(bus.port_name());

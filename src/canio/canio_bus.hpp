@@ -69,7 +69,7 @@ enum class CanioBusError : int {
 
 inline constexpr std::size_t kMaxCanioAxes = 64;
 // Register requests the driver holds: submitted, waiting for their axis, results not polled.
-inline constexpr std::size_t kSdoQueueDepth = 64;
+inline constexpr std::size_t kSdoQueueDepth = kRegisterQueueDepth;
 
 // Where an axis stands (cycle thread writes, any thread reads).
 enum class CanioAxisState : uint8_t {
@@ -239,7 +239,7 @@ struct CanioBusOptions {
                                                  std::span<const AxisConfig> axes,
                                                  uint32_t period_us);
 
-class CanioBus final : public BusDriver {
+class CanioBus final : public BusDriver, private RegisterTarget {
  public:
   // `cycle_port` carries the cyclic objects, `sdo_port` the SDO transfers (both used by the cycle
   // thread only: two sockets so that SDO answers never wake the response window's receive); both
@@ -261,8 +261,6 @@ class CanioBus final : public BusDriver {
   [[nodiscard]] BusState state() const noexcept override {
     return state_.load(std::memory_order_relaxed);
   }
-  [[nodiscard]] bool submit(const RegisterRequest& request) noexcept override;
-  [[nodiscard]] bool poll(RegisterResult& out) noexcept override;
 
   // Normal thread: why start() failed, in words.
   [[nodiscard]] const std::string& start_error() const noexcept { return start_error_; }
@@ -431,6 +429,9 @@ class CanioBus final : public BusDriver {
   [[nodiscard]] bool next_job(int64_t now) noexcept;
   void start_configure(std::size_t axis) noexcept;
   void start_request(const RegisterRequest& request) noexcept;
+  // The daemon's next request, from the register path: started, answered at once (no such axis),
+  // kept for its axis being configured, or left queued while that waiting room is full.
+  Offer offer(const RegisterRequest& request) noexcept override;
   [[nodiscard]] SdoOp current_op() const noexcept;
   // Starts the job's next transfer; false when it ended without one (no SDO object).
   [[nodiscard]] bool issue(int64_t now) noexcept;
@@ -469,17 +470,14 @@ class CanioBus final : public BusDriver {
   Clock clock_;
   std::string start_error_;
 
-  // Register access (cycle thread, but for the two queues' other ends).
-  SpscQueue<RegisterRequest, kSdoQueueDepth> requests_;  // normal thread → cycle thread
-  SpscQueue<RegisterResult, kSdoQueueDepth> results_;    // cycle thread → normal thread
+  // Register access (cycle thread; the queues are the register path's, BusDriver::registers()).
   ExpeditedSdoClient sdo_client_;
   std::array<CanFrame, 16> sdo_rx_{};
   SdoJob job_;
   std::vector<AxisSdo> axis_sdo_;
   std::array<Deferred, kSdoQueueDepth> deferred_{};
   std::size_t deferred_count_ = 0;
-  RegisterResult unsent_{};  // a result the full results_ queue did not take yet
-  bool have_unsent_ = false;
+  int64_t offer_now_ = 0;      // the step's time while the register path offers a request
   int64_t next_sdo_ns_ = 0;    // pacing: no transfer starts before
   std::size_t next_axis_ = 0;  // round robin over the axes to configure
   std::unique_ptr<NoteCell[]> notes_;

@@ -142,19 +142,6 @@ std::string CanioBus::axis_last_error(std::size_t axis) const {
   return text;
 }
 
-// ---- The normal thread's side -------------------------------------------------------------------
-
-bool CanioBus::submit(const RegisterRequest& request) noexcept {
-  return requests_.try_push(request);
-}
-
-bool CanioBus::poll(RegisterResult& out) noexcept {
-  auto r = results_.try_pop();
-  if (!r) return false;
-  out = *r;
-  return true;
-}
-
 // ---- The state machine (cycle thread) -----------------------------------------------------------
 
 void CanioBus::step_sdo(int64_t now) noexcept {
@@ -166,10 +153,7 @@ void CanioBus::step_sdo(int64_t now) noexcept {
     transfer_done(now, make_error_code(CanioBusError::kSdoTimeout), 0, 0);
 
   for (int d = 0; d < kMaxDecisionsPerStep && !sdo_client_.busy(); ++d) {
-    if (have_unsent_) {
-      if (!results_.try_push(unsent_)) return;  // the normal thread polls it later
-      have_unsent_ = false;
-    }
+    if (!registers().flush()) return;  // a result waits: the normal thread polls it later
     if (job_.kind == SdoJobKind::None && !next_job(now)) return;
     if (job_.kind == SdoJobKind::None) continue;  // answered without a transfer
     // The job's next transfer, paced: at most one a step and one per max(period,
@@ -229,24 +213,22 @@ bool CanioBus::next_job(int64_t now) noexcept {
   }
   // The daemon's next request. One for an axis being configured waits (its identification needs
   // the Rescan first); while the waiting room is full it stays queued.
-  RegisterRequest* r = requests_.front();
-  if (r == nullptr) return false;
-  if (r->axis >= n) {
-    const RegisterRequest bad = *r;
-    requests_.drop_front();
-    answer(bad, make_error_code(CanioBusError::kNoSuchAxis), 0);
-    return true;
+  offer_now_ = now;
+  return registers().serve(*this, 1) == 1;
+}
+
+RegisterTarget::Offer CanioBus::offer(const RegisterRequest& request) noexcept {
+  if (request.axis >= options_.axes.size()) {
+    answer(request, make_error_code(CanioBusError::kNoSuchAxis), 0);
+    return Offer::kTaken;
   }
-  if (axis_sdo_[r->axis].reconfigure) {
-    if (deferred_count_ == deferred_.size()) return false;
-    deferred_[deferred_count_++] = {*r, now};
-    requests_.drop_front();
-    return true;
+  if (axis_sdo_[request.axis].reconfigure) {
+    if (deferred_count_ == deferred_.size()) return Offer::kWait;
+    deferred_[deferred_count_++] = {request, offer_now_};
+    return Offer::kTaken;
   }
-  const RegisterRequest req = *r;
-  requests_.drop_front();
-  start_request(req);
-  return true;
+  start_request(request);
+  return Offer::kTaken;
 }
 
 void CanioBus::start_configure(std::size_t axis) noexcept {
@@ -595,13 +577,9 @@ void CanioBus::answer(const RegisterRequest& request, std::error_code ec, uint32
   res.value = value;
   if (ec && request.axis < options_.axes.size() && ec != CanioBusError::kNotConfigured)
     bump(axis_counters_[request.axis].sdo_errors);
-  // step_sdo() decides nothing while a result is held, so this is the only one.
-  if (!results_.try_push(res)) {
-    // The normal thread has not polled for a while: held until the queue has room; no other
-    // job starts meanwhile.
-    unsent_ = res;
-    have_unsent_ = true;
-  }
+  // The normal thread has not polled for a while: the path holds it until the queue has room and
+  // step_sdo() starts no other job meanwhile (so it is the only one held).
+  (void)registers().complete(res);
 }
 
 }  // namespace ds1928::canio

@@ -216,18 +216,20 @@ void parse_sdo_write(Section o, std::vector<CnObjectWrite>& out) {
   if (have_index && given.size() == 1 && !w.data.empty()) out.push_back(std::move(w));
 }
 
-// The node's objects and identity from the MN's concise DCF (0x1F22/node, 0x1F84..0x1F88/node,
-// 0x1F8B/node, 0x1F8D/node); what the YAML gives wins.
+// The node's objects and identity from the MN's concise DCF (CFM_ConciseDcfList, the
+// NMT_MN*IdList identity lists, the PReq/PRes payload limit lists, each /node); what the YAML
+// gives wins.
 void apply_mn_cdc(Section& n, PowerlinkNodeConfig& node, std::span<const powerlink::CdcEntry> mn,
                   bool node_has_own_cdc) {
   using powerlink::find_cdc_entry;
   const uint8_t id = node.node_id;
   if (!node_has_own_cdc) {
-    if (const auto* dcf = find_cdc_entry(mn, powerlink::kObjConciseDcfList, id)) {
+    if (const auto* dcf = find_cdc_entry(mn, powerlink::obj::kConciseDcfList, id)) {
       auto decoded = powerlink::decode_cdc(dcf->data);
       if (!decoded.ok()) {
         n.error("node_id",
-                "powerlink.cdc: object 0x1F22/" + std::to_string(id) +
+                "powerlink.cdc: object " +
+                    powerlink::object_name(powerlink::obj::kConciseDcfList, id) +
                     " (this node's concise DCF) is not valid: " + decoded.error->message);
       } else {
         for (auto& e : decoded.entries)
@@ -241,20 +243,22 @@ void apply_mn_cdc(Section& n, PowerlinkNodeConfig& node, std::span<const powerli
     if (!v || *v == 0) return std::nullopt;  // 0: "do not check" in the MN's lists
     return static_cast<uint32_t>(*v);
   };
-  // NMT_NodeAssignment (0x1F81/node) bit 14: PollResponse Chaining (the YAML's prc wins).
+  // NMT_NodeAssignment/node bit 14: PollResponse Chaining (the YAML's prc wins).
   if (!n.has("prc"))
-    if (const auto* e = find_cdc_entry(mn, powerlink::kObjNodeAssignment, id);
+    if (const auto* e = find_cdc_entry(mn, powerlink::obj::kNodeAssignment, id);
         e && e->as_unsigned())
-      node.prc = (*e->as_unsigned() & powerlink::kNodeAssignmentPrc) != 0;
-  if (!node.device_type) node.device_type = value(0x1F84);
-  if (!node.vendor_id) node.vendor_id = value(0x1F85);
-  if (!node.product_code) node.product_code = value(0x1F86);
-  if (!node.revision_no) node.revision_no = value(0x1F87);
-  if (!node.serial_no) node.serial_no = value(0x1F88);
+      node.prc = (*e->as_unsigned() & powerlink::obj::kNodeAssignmentPrc) != 0;
+  if (!node.device_type) node.device_type = value(powerlink::obj::kMnDeviceTypeIdList);
+  if (!node.vendor_id) node.vendor_id = value(powerlink::obj::kMnVendorIdList);
+  if (!node.product_code) node.product_code = value(powerlink::obj::kMnProductCodeList);
+  if (!node.revision_no) node.revision_no = value(powerlink::obj::kMnRevisionNoList);
+  if (!node.serial_no) node.serial_no = value(powerlink::obj::kMnSerialNoList);
   if (!node.preq_size)
-    if (const auto v = value(0x1F8B)) node.preq_size = static_cast<uint16_t>(std::min(*v, 1490u));
+    if (const auto v = value(powerlink::obj::kMnPReqPayloadLimitList))
+      node.preq_size = static_cast<uint16_t>(std::min(*v, 1490u));
   if (!node.pres_size)
-    if (const auto v = value(0x1F8D)) node.pres_size = static_cast<uint16_t>(std::min(*v, 1490u));
+    if (const auto v = value(powerlink::obj::kPResPayloadLimitList))
+      node.pres_size = static_cast<uint16_t>(std::min(*v, 1490u));
 }
 
 }  // namespace
@@ -302,7 +306,7 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
     for (auto& w : n.list("sdo_writes"))
       parse_sdo_write(Section(n.diag(), w.node, w.path, w.at), node.object_writes);
     if (have_id && !mn_cdc.empty()) apply_mn_cdc(n, node, mn_cdc, own_cdc);
-    // Sizes the written objects define (0x1F98/4,5 or the PDO mappings), unless given.
+    // Sizes the written objects define (NMT_CycleTiming /4,5 or the PDO mappings), unless given.
     std::vector<powerlink::CdcEntry> written;
     for (const auto& w : node.object_writes) written.push_back({w.index, w.subindex, w.data});
     const auto sizes = powerlink::image_sizes_from_objects(written);
@@ -351,7 +355,9 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
   s.integer("wait_soc_preq_us", p.wait_soc_preq_us, 0, 100000, "µs");
   // PResMN payload: the key, else the MN's CDC (NMT_CycleTiming_REC.PResActPayloadLimit_U16).
   if (!s.has("pres_mn_size") && !mn_cdc.empty())
-    if (const auto* e = powerlink::find_cdc_entry(mn_cdc, 0x1F98, 5); e && e->as_unsigned())
+    if (const auto* e = powerlink::find_cdc_entry(mn_cdc, powerlink::obj::kCycleTiming,
+                                                  powerlink::obj::kCycleTimingPResActPayload);
+        e && e->as_unsigned())
       p.pres_mn_size = static_cast<uint16_t>(std::min<uint64_t>(*e->as_unsigned(), 1490));
   s.integer("pres_mn_size", p.pres_mn_size, 0, 1490, "bytes");
   s.choice("rx_wait", p.rx_wait,

@@ -9,6 +9,7 @@
 
 #include "core/incident.hpp"
 #include "core/module_image.hpp"
+#include "core/register_path.hpp"
 
 namespace ds1928 {
 
@@ -62,22 +63,6 @@ enum class BusState : uint8_t { Down = 0, Booting = 1, Operational = 2, Error = 
   return "?";
 }
 
-// Acyclic register access (configuration, identification, EnDatAck). Submitted and collected on
-// the normal thread; drivers that need the cycle thread for it (POWERLINK SDO) queue internally.
-struct RegisterRequest {
-  uint32_t tag = 0;  // caller's correlation id
-  uint16_t axis = 0;
-  uint16_t reg = 0;  // datasheet register number (module_image.hpp, namespace reg)
-  uint8_t size = 1;  // 1, 2 or 4 bytes
-  bool write = false;
-  uint32_t value = 0;  // for writes
-};
-struct RegisterResult {
-  uint32_t tag = 0;
-  std::error_code error;  // empty on success
-  uint32_t value = 0;     // for reads
-};
-
 class BusDriver {
  public:
   virtual ~BusDriver() = default;
@@ -97,16 +82,24 @@ class BusDriver {
   // Any thread.
   [[nodiscard]] virtual BusState state() const noexcept = 0;
 
-  // Normal thread. False when the driver's request queue is full.
-  [[nodiscard]] virtual bool submit(const RegisterRequest& request) noexcept = 0;
+  // Acyclic register access (configuration, identification, EnDatAck), normal thread: through
+  // the bus' RegisterPath (core/register_path.hpp), which hands the requests to the driver on
+  // the cycle thread. False when kRegisterQueueDepth requests wait already. Virtual only for
+  // test decorators that wrap another driver.
+  [[nodiscard]] virtual bool submit(const RegisterRequest& request) noexcept {
+    return !registers_.submit(request);
+  }
   // Normal thread. True and fills `out` when a result is ready.
-  [[nodiscard]] virtual bool poll(RegisterResult& out) noexcept = 0;
+  [[nodiscard]] virtual bool poll(RegisterResult& out) noexcept { return registers_.poll(out); }
 
   // Normal thread, before the cycle thread starts: where raise_incident() goes (the daemon's
   // flight recorder, core/incident.hpp). nullptr: incidents are not recorded.
   void set_incident_sink(IncidentSink* sink) noexcept { incident_sink_ = sink; }
 
  protected:
+  // Cycle thread: the driver serves the queued register requests through it (RegisterTarget).
+  [[nodiscard]] RegisterPath& registers() noexcept { return registers_; }
+
   // Cycle thread: an incident this driver saw (bus-off, a node's boot-up, a missed heartbeat...).
   // Lock-free, no allocation; a no-op without a sink.
   void raise_incident(IncidentKind kind, int node = -1, int axis = -1,
@@ -116,6 +109,7 @@ class BusDriver {
 
  private:
   IncidentSink* incident_sink_ = nullptr;
+  RegisterPath registers_;
 };
 
 }  // namespace ds1928

@@ -31,6 +31,23 @@ std::string object_name(uint16_t index, uint8_t subindex) {
   return buf.data();
 }
 
+std::string_view standard_name(uint16_t index, uint8_t subindex) noexcept {
+  const StandardObject* o = find_standard_object(index, subindex);
+  return o ? o->name : std::string_view{};
+}
+
+namespace {
+// "0x1C14/0 DLL_CNLossOfSocTolerance_U32", or "0x2000/1" for an object outside the table.
+std::string entry_name(uint16_t index, uint8_t subindex) {
+  std::string s = object_name(index, subindex);
+  if (const std::string_view n = standard_name(index, subindex); !n.empty()) {
+    s += ' ';
+    s += n;
+  }
+  return s;
+}
+}  // namespace
+
 CdcDecodeResult decode_cdc(std::span<const uint8_t> bytes) {
   CdcDecodeResult r;
   auto fail = [&r](std::size_t offset, std::size_t entry, std::string message) {
@@ -71,7 +88,7 @@ CdcDecodeResult decode_cdc(std::span<const uint8_t> bytes) {
     pos += kCdcEntryHeaderSize;
     if (size > bytes.size() - pos) {
       return fail(pos, i,
-                  "entry " + std::to_string(i) + " (" + object_name(e.index, e.subindex) +
+                  "entry " + std::to_string(i) + " (" + entry_name(e.index, e.subindex) +
                       ") announces " + std::to_string(size) + " data bytes, only " +
                       std::to_string(bytes.size() - pos) + " remain");
     }
@@ -133,15 +150,15 @@ std::optional<uint16_t> mapped_size(std::span<const CdcEntry> objects, uint16_t 
 ImageSizes image_sizes_from_objects(std::span<const CdcEntry> objects) noexcept {
   ImageSizes s;
   auto limit = [&](uint8_t sub) -> std::optional<uint16_t> {
-    const CdcEntry* e = find_cdc_entry(objects, kObjCycleTiming, sub);
+    const CdcEntry* e = find_cdc_entry(objects, obj::kCycleTiming, sub);
     const auto v = e ? e->as_unsigned() : std::nullopt;
     if (!v) return std::nullopt;
     return static_cast<uint16_t>(*v);
   };
-  s.preq_size = limit(4);
-  s.pres_size = limit(5);
-  if (!s.preq_size) s.preq_size = mapped_size(objects, kObjRxPdoMapping);
-  if (!s.pres_size) s.pres_size = mapped_size(objects, kObjTxPdoMapping);
+  s.preq_size = limit(obj::kCycleTimingPReqActPayload);
+  s.pres_size = limit(obj::kCycleTimingPResActPayload);
+  if (!s.preq_size) s.preq_size = mapped_size(objects, obj::kRxPdoMapping);
+  if (!s.pres_size) s.pres_size = mapped_size(objects, obj::kTxPdoMapping);
   return s;
 }
 

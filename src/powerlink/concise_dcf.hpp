@@ -1,8 +1,9 @@
 // Concise DCF (CDC): the binary object list a POWERLINK/CANopen configuration tool writes
 // (EPSG DS 301 / CiA 302; openCONFIGURATOR's mnobd.cdc). Little endian throughout:
 //   u32 number of entries, then per entry: u16 index | u8 subindex | u32 data size | data.
-// The MN's own file holds its objects, among them 0x1F22/<node>: a domain that is itself a
-// concise DCF, the objects the MN writes to that CN when it configures it.
+// The MN's own file holds its objects, among them CFM_ConciseDcfList/<node>: a domain that is
+// itself a concise DCF, the objects the MN writes to that CN when it configures it. The objects
+// it names are in standard_objects.hpp.
 // Pure codec: bytes in, entries out (and back); no I/O.
 #pragma once
 
@@ -13,12 +14,10 @@
 #include <string>
 #include <vector>
 
+#include "powerlink/standard_objects.hpp"
+
 namespace ds1928::powerlink {
 
-inline constexpr uint16_t kObjConciseDcfList = 0x1F22;  // per-node concise DCF (domain)
-// NMT_NodeAssignment (0x1F81/node) bit 14: the node is polled by PollResponse Chaining.
-inline constexpr uint16_t kObjNodeAssignment = 0x1F81;
-inline constexpr uint32_t kNodeAssignmentPrc = 0x00004000;
 inline constexpr std::size_t kCdcEntryHeaderSize = 7;  // index, subindex, size
 
 struct CdcEntry {
@@ -35,7 +34,7 @@ struct CdcEntry {
 struct CdcError {
   std::size_t offset = 0;  // byte offset in the file where the problem is
   std::size_t entry = 0;   // 0-based entry being read (or the count for a count problem)
-  std::string message;     // "entry 3 (0x1600/1) announces 8 data bytes, only 5 remain", ...
+  std::string message;     // "entry 3 (<index>/1) announces 8 data bytes, only 5 remain", ...
 };
 
 struct CdcDecodeResult {
@@ -57,18 +56,19 @@ struct CdcDecodeResult {
                                              uint8_t subindex) noexcept;
 
 // "0x1600/1" (for messages).
+// The standard object's name of index/subindex ("PDO_RxMappParam_00h_AU64.ObjectMapping"), or
+// empty when the table does not have it (a device's own object).
+[[nodiscard]] std::string_view standard_name(uint16_t index, uint8_t subindex) noexcept;
 [[nodiscard]] std::string object_name(uint16_t index, uint8_t subindex);
 
 }  // namespace ds1928::powerlink
 
 namespace ds1928::powerlink {
 
-// PDO mapping (0x1600.. RPDO = the CN's PReq payload, 0x1A00.. TPDO = its PRes payload):
+// PDO mapping (obj::kRxPdoMapping.. RPDO = the CN's PReq payload, obj::kTxPdoMapping.. TPDO =
+// its PRes payload):
 // sub 0 = number of entries; each entry u64 = length bits 63..48 | offset bits 47..32 |
 // reserved 31..24 | subindex 23..16 | index 15..0, offset and length in bits.
-inline constexpr uint16_t kObjRxPdoMapping = 0x1600;
-inline constexpr uint16_t kObjTxPdoMapping = 0x1A00;
-inline constexpr uint16_t kObjCycleTiming = 0x1F98;  // /4 PReqActPayloadLimit, /5 PRes...
 struct PdoMapEntry {
   uint16_t index = 0;
   uint8_t subindex = 0;
@@ -85,8 +85,8 @@ struct PdoMapEntry {
 };
 
 // What an object list written to a CN says about its process image: the payload sizes from
-// 0x1F98/4 and /5 when written, else from the end of the last mapped object of the first
-// 0x1600 / 0x1A00 (entries 1..sub 0); nullopt when the list says nothing about it.
+// NMT_CycleTiming /4 and /5 when written, else from the end of the last mapped object of the
+// first RPDO / TPDO mapping (entries 1..sub 0); nullopt when the list says nothing about it.
 struct ImageSizes {
   std::optional<uint16_t> preq_size;
   std::optional<uint16_t> pres_size;

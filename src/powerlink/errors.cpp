@@ -119,8 +119,8 @@ class MnCategory final : public std::error_category {
       case MnError::kNmtRequestRefused:
         return "NMTRequest refused (only a node's own reset is served)";
       case MnError::kIdentityCheckFailed:
-        return "identity check failed (0x1000/0x1018 differ from the configuration or cannot be "
-               "read)";
+        return "identity check failed (device type or identity object differs from the "
+               "configuration or cannot be read)";
       case MnError::kPrcNotSupported:
         return "node does not support PollResponse Chaining (no PRC feature flag): polled with "
                "PReq/PRes";

@@ -37,11 +37,8 @@ std::string describe(const ObjectAccessFailure& f) {
 }
 
 std::string describe(const IdentityMismatch& m) {
-  const char* what = m.index == 0x1000 ? "device type"
-                     : m.subindex == 1 ? "vendor id"
-                     : m.subindex == 2 ? "product code"
-                     : m.subindex == 3 ? "revision number"
-                                       : "serial number";
+  const StandardObject* o = find_standard_object(m.index, m.subindex);
+  const char* what = o ? o->meaning.data() : "?";
   std::array<char, 96> buf{};
   if (m.unreadable) {
     std::snprintf(buf.data(), buf.size(), " (%s): expected 0x%08X, cannot be read", what,
@@ -99,8 +96,9 @@ ManagingNode::ManagingNode(const MnConfig& config)
       throw std::system_error(make_error_code(MnError::kNodeNotConfigured), "node id");
     auto cn = std::make_unique<Cn>();
     cn->cfg = nc;
-    // Payload sizes the objects written to the CN define (0x1F98/4,5 or its PDO mappings), when
-    // the configuration gives none: the CN's IdentResponse predates its configuration.
+    // Payload sizes the objects written to the CN define (NMT_CycleTiming /4,5 or its PDO
+    // mappings), when the configuration gives none: the CN's IdentResponse predates its
+    // configuration.
     if (!nc.preq_size || !nc.pres_size) {
       std::vector<CdcEntry> written;
       for (const CnObjectWrite& w : nc.object_writes)
@@ -125,7 +123,7 @@ ManagingNode::ManagingNode(const MnConfig& config)
       specs.push_back(
           {a.slot, a.module.input_mtu, a.module.output_mtu, a.pres_offset, a.preq_offset});
       for (const RegisterWrite& w : startup_writes(a.module))
-        cn->boot_ops.push_back({0, nc.node_id, a.slot, w.reg, w.size, true, w.value});
+        cn->boot_ops.push_back({a.slot, RegisterRequest{0, 0, w.reg, w.size, true, w.value}});
     }
     LayoutIssue issue;
     auto layout = make_layout(specs, &issue);
@@ -158,15 +156,21 @@ ManagingNode::ManagingNode(const MnConfig& config)
         cn->object_ops.push_back(
             {OpKind::kIdentityRead, index, sub, ValueSource::kData, *expected, 0, 0});
     };
-    identity(0x1000, 0, nc.device_type);
-    identity(0x1018, 1, nc.vendor_id);
-    identity(0x1018, 2, nc.product_code);
-    identity(0x1018, 3, nc.revision_no);
-    identity(0x1018, 4, nc.serial_no);
+    identity(obj::kDeviceType, 0, nc.device_type);
+    identity(obj::kIdentity, 1, nc.vendor_id);
+    identity(obj::kIdentity, 2, nc.product_code);
+    identity(obj::kIdentity, 3, nc.revision_no);
+    identity(obj::kIdentity, 4, nc.serial_no);
     if (nc.cycle_objects) {
-      cn->object_ops.push_back({OpKind::kObjectWrite, 0x1006, 0, ValueSource::kCycleUs, 0, 0, 4});
-      cn->object_ops.push_back({OpKind::kObjectWrite, 0x1F98, 4, ValueSource::kPreqSize, 0, 0, 2});
-      cn->object_ops.push_back({OpKind::kObjectWrite, 0x1F98, 5, ValueSource::kPresSize, 0, 0, 2});
+      // Sizes as the table types them (NMT_CycleLen_U32, PReq/PResActPayloadLimit_U16).
+      auto cycle_object = [&](uint16_t index, uint8_t sub, ValueSource source) {
+        const StandardObject* o = find_standard_object(index, sub);
+        cn->object_ops.push_back(
+            {OpKind::kObjectWrite, index, sub, source, 0, 0, o ? type_size(o->type) : 4});
+      };
+      cycle_object(obj::kCycleLen, 0, ValueSource::kCycleUs);
+      cycle_object(obj::kCycleTiming, obj::kCycleTimingPReqActPayload, ValueSource::kPreqSize);
+      cycle_object(obj::kCycleTiming, obj::kCycleTimingPResActPayload, ValueSource::kPresSize);
     }
     for (const CnObjectWrite& w : nc.object_writes) {
       cn->object_ops.push_back({OpKind::kObjectWrite, w.index, w.subindex, ValueSource::kData, 0,
@@ -335,7 +339,7 @@ void ManagingNode::on_enter_reset(Cn& cn) noexcept {
   cn.sdo->reset();
   // Queued register requests cannot be served by a node that restarts.
   while (cn.ops_count > 0) {
-    const SdoRegisterOp& op = cn.ops[cn.ops_head];
+    const RegisterRequest& op = cn.ops[cn.ops_head].request;
     if (results_count_ < results_.size()) {
       results_[(results_head_ + results_count_++) % results_.size()] = {
           op.tag, make_error_code(SdoError::kConnectionLost), 0};

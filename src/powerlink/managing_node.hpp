@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "core/axis_config.hpp"
+#include "core/register_path.hpp"
 #include "powerlink/error_signalling.hpp"
 #include "powerlink/frames.hpp"
 #include "powerlink/powerlink_options.hpp"
@@ -159,22 +160,6 @@ struct MnConfig {
   MacAddress mac{};
 };
 
-// A register access the MN turns into an SDO transfer (configuration, identification, EnDatAck).
-struct SdoRegisterOp {
-  uint32_t tag = 0;
-  uint8_t node = 0;
-  uint8_t slot = 1;
-  uint16_t reg = 0;
-  uint8_t size = 1;
-  bool write = false;
-  uint32_t value = 0;
-};
-struct SdoRegisterResult {
-  uint32_t tag = 0;
-  std::error_code error;
-  uint32_t value = 0;
-};
-
 class ManagingNode {
  public:
   // Throws std::system_error (MnError::kInvalidLayout, kModuleBlocksOverlap,
@@ -234,11 +219,13 @@ class ManagingNode {
   [[nodiscard]] int64_t soc_time_ns() const noexcept { return soc_time_ns_; }
 
   // ---- Acyclic ----
-  // False when the node is unknown or its queue is full.
-  [[nodiscard]] bool submit(const SdoRegisterOp& op) noexcept;
+  // A register request of the module in `slot` of CN `node` (its axis resolved by the caller),
+  // as an SDO transfer. False when the node is unknown or its queue is full.
+  [[nodiscard]] bool submit(uint8_t node, uint8_t slot, const RegisterRequest& request) noexcept;
   // True when submit() for `node` would find room in the node's queue.
   [[nodiscard]] bool can_submit(uint8_t node) const noexcept;
-  [[nodiscard]] bool poll(SdoRegisterResult& out) noexcept;
+  // One result per request submitted, in completion order.
+  [[nodiscard]] bool poll(RegisterResult& out) noexcept;
 
   // ---- State ----
   [[nodiscard]] NmtState mn_state() const noexcept { return mn_state_; }
@@ -330,7 +317,7 @@ class ManagingNode {
   Cn* mn_asnd_from_ = nullptr;   // whose outbox the MN sends after the SoA
   Cn* prc_sync_from_ = nullptr;  // whose PRC set-up this cycle's SyncRequest serves
   std::size_t async_rr_ = 0;     // round-robin position among the CNs
-  std::array<SdoRegisterResult, 64> results_{};
+  std::array<RegisterResult, kRegisterQueueDepth> results_{};
   std::size_t results_head_ = 0;
   std::size_t results_count_ = 0;
 };

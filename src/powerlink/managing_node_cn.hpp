@@ -33,6 +33,11 @@ struct ObjectOp {
   std::size_t data_offset = 0;
   std::size_t data_size = 0;
 };
+// A register request routed to the module in `slot` of the CN.
+struct SlotRegister {
+  uint8_t slot = 1;
+  RegisterRequest request;
+};
 // PollResponse Chaining set-up of a CN (managing_node_prc.cpp), one SyncRequest per step.
 enum class PrcStep : uint8_t {
   kOff,                 // polled with PReq/PRes (or not in the isochronous phase)
@@ -74,7 +79,7 @@ struct ManagingNode::Cn {
   std::vector<ObjectOp> object_ops;
   std::vector<uint8_t> object_data;
   std::size_t object_next = 0;
-  std::vector<SdoRegisterOp> boot_ops;  // module configuration
+  std::vector<SlotRegister> boot_ops;  // module configuration
   std::size_t boot_next = 0;
   OpKind op_kind = OpKind::kRegister;
   std::array<uint8_t, 4> op_value{};  // value of a ValueSource other than kData
@@ -84,12 +89,12 @@ struct ManagingNode::Cn {
   uint8_t prc_failures = 0;     // SyncResponses missed or wrong in a row
   uint8_t prc_measured_to = 0;  // the predecessor the last SyncRequest pair was for
   bool configuring = false;
-  std::array<SdoRegisterOp, kOpQueueDepth> ops{};
+  std::array<SlotRegister, kOpQueueDepth> ops{};
   std::size_t ops_head = 0;
   std::size_t ops_count = 0;
   bool op_active = false;
   bool op_internal = false;
-  SdoRegisterOp current{};
+  SlotRegister current{};
 
   void push_outbox(std::span<const uint8_t> frame) noexcept {
     if (outbox_count == kOutboxDepth || frame.size() > kMaxFrameSize) {

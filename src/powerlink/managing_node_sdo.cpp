@@ -10,10 +10,10 @@ namespace ds1928::powerlink {
 // ---- SDO
 // ------------------------------------------------------------------------------------------
 
-bool ManagingNode::submit(const SdoRegisterOp& op) noexcept {
-  Cn* cn = find(op.node);
+bool ManagingNode::submit(uint8_t node, uint8_t slot, const RegisterRequest& request) noexcept {
+  Cn* cn = find(node);
   if (!cn || cn->ops_count == kOpQueueDepth) return false;
-  cn->ops[(cn->ops_head + cn->ops_count) % kOpQueueDepth] = op;
+  cn->ops[(cn->ops_head + cn->ops_count) % kOpQueueDepth] = {slot, request};
   ++cn->ops_count;
   start_next_sdo(*cn);
   return true;
@@ -24,7 +24,7 @@ bool ManagingNode::can_submit(uint8_t node) const noexcept {
   return cn != nullptr && cn->ops_count < kOpQueueDepth;
 }
 
-bool ManagingNode::poll(SdoRegisterResult& out) noexcept {
+bool ManagingNode::poll(RegisterResult& out) noexcept {
   if (results_count_ == 0) return false;
   out = results_[results_head_];
   results_head_ = (results_head_ + 1) % results_.size();
@@ -59,19 +59,19 @@ void ManagingNode::start_next_sdo(Cn& cn) noexcept {
     } else {
       return;
     }
-    const auto object = mapping_.object_for(cn.current.slot, cn.current.reg);
+    const auto object = mapping_.object_for(cn.current.slot, cn.current.request.reg);
     if (!object) {
       sdo_done(cn, make_error_code(SdoError::kNoMapping), {});
       continue;
     }
     cn.op_active = true;
     std::error_code ec;
-    if (cn.current.write) {
+    if (cn.current.request.write) {
       std::array<uint8_t, 4> bytes{};
-      store_le32(bytes.data(), cn.current.value);
+      store_le32(bytes.data(), cn.current.request.value);
       ec = cn.sdo->write(
           object->index, object->subindex,
-          std::span<const uint8_t>(bytes.data(), std::min<std::size_t>(cn.current.size, 4)),
+          std::span<const uint8_t>(bytes.data(), std::min<std::size_t>(cn.current.request.size, 4)),
           now_ns_);
     } else {
       ec = cn.sdo->read(object->index, object->subindex, now_ns_);
@@ -158,7 +158,8 @@ void ManagingNode::sdo_done(Cn& cn, std::error_code ec, std::span<const uint8_t>
     // A setting the bus controller refuses is reported (status) but does not stop the boot.
     ++cn.boot_next;
   } else if (results_count_ < results_.size()) {
-    results_[(results_head_ + results_count_++) % results_.size()] = {cn.current.tag, ec, value};
+    results_[(results_head_ + results_count_++) % results_.size()] = {cn.current.request.tag, ec,
+                                                                      value};
   }
   if (ec == SdoError::kConnectionLost) return;  // the node is being reset
   start_next_sdo(cn);

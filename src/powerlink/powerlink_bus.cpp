@@ -148,25 +148,9 @@ ExchangeResult PowerlinkBus::exchange(std::span<AxisIo> axes, int64_t cycle_star
     return result;
   }
   // Register requests from the normal thread become SDO transfers. One the node's SDO queue has
-  // no room for yet stays in the request queue (in order) until it has: a burst longer than the
-  // node's queue (the identification reads 44 registers) waits instead of failing.
-  while (RegisterRequest* req = requests_.front()) {
-    RegisterResult failed{req->tag, make_error_code(MnError::kNodeNotConfigured), 0};
-    if (req->axis >= axis_map_.size() || !axis_map_[req->axis].valid) {
-      requests_.drop_front();
-      (void)results_.try_push(failed);
-      continue;
-    }
-    const AxisMap& am = axis_map_[req->axis];
-    if (!mn_.can_submit(am.node)) break;
-    SdoRegisterOp op{req->tag,  am.node,    am.mapping.slot, req->reg,
-                     req->size, req->write, req->value};
-    requests_.drop_front();
-    if (!mn_.submit(op)) {
-      failed.error = make_error_code(MnError::kQueueFull);
-      (void)results_.try_push(failed);
-    }
-  }
+  // no room for yet stays queued (in order) until it has: a burst longer than the node's queue
+  // (the identification reads 44 registers) waits instead of failing.
+  registers().serve(*this);
 
   apply_preq_writes();
   for (NodeRaw& r : raw_) r.pres_fresh = false;
@@ -252,8 +236,8 @@ ExchangeResult PowerlinkBus::exchange(std::span<AxisIo> axes, int64_t cycle_star
       axes[i].rx_time_ns = rx_time_[i];
     }
   }
-  SdoRegisterResult r;
-  while (mn_.poll(r)) (void)results_.try_push({r.tag, r.error, r.value});
+  RegisterResult r;
+  while (registers().flush() && mn_.poll(r)) (void)registers().complete(r);
 
   result.net_time = {mn_.net_time_us(), mn_.soc_time_ns(), mn_.full_cycle()};
   result.bus_up = mn_.all_operational();
@@ -342,15 +326,16 @@ PowerlinkStatus PowerlinkBus::status() const {
   return snapshot_.read().status;
 }
 
-bool PowerlinkBus::submit(const RegisterRequest& request) noexcept {
-  return requests_.try_push(request);
-}
-
-bool PowerlinkBus::poll(RegisterResult& out) noexcept {
-  auto r = results_.try_pop();
-  if (!r) return false;
-  out = *r;
-  return true;
+RegisterTarget::Offer PowerlinkBus::offer(const RegisterRequest& request) noexcept {
+  if (request.axis >= axis_map_.size() || !axis_map_[request.axis].valid) {
+    (void)registers().complete({request.tag, make_error_code(MnError::kNodeNotConfigured), 0});
+    return Offer::kTaken;
+  }
+  const AxisMap& am = axis_map_[request.axis];
+  if (!mn_.can_submit(am.node)) return Offer::kWait;
+  if (!mn_.submit(am.node, am.mapping.slot, request))
+    (void)registers().complete({request.tag, make_error_code(MnError::kQueueFull), 0});
+  return Offer::kTaken;
 }
 
 }  // namespace ds1928::powerlink

@@ -61,7 +61,7 @@ inline constexpr std::array<int64_t, 12> kPresLatencyBoundsNs{
     300'000, 500'000, 750'000, 1'000'000, 2'000'000, 5'000'000};
 using PresLatencyHistogram = BucketHistogram<kPresLatencyBoundsNs>;
 
-class PowerlinkBus final : public BusDriver {
+class PowerlinkBus final : public BusDriver, private RegisterTarget {
  public:
   // `config.axes` are the axes in the order exchange() receives them. The link outlives the bus.
   PowerlinkBus(const MnConfig& config, Link& link);
@@ -75,8 +75,6 @@ class PowerlinkBus final : public BusDriver {
   [[nodiscard]] BusState state() const noexcept override {
     return state_.load(std::memory_order_relaxed);
   }
-  [[nodiscard]] bool submit(const RegisterRequest& request) noexcept override;
-  [[nodiscard]] bool poll(RegisterResult& out) noexcept override;
 
   // Normal thread (one thread: status(), pres_snapshot() and set_preq() share the reading side
   // of the snapshot): the latest status published by the cycle thread (at most one cycle old).
@@ -124,6 +122,9 @@ class PowerlinkBus final : public BusDriver {
     uint16_t length = 0;
     std::array<uint8_t, kMaxPreqWrite> bytes{};
   };
+  // A register request becomes an SDO transfer of the MN to the axis' CN; one the node's SDO
+  // queue has no room for yet waits in the register path (in order).
+  Offer offer(const RegisterRequest& request) noexcept override;
   [[nodiscard]] NodeRaw* raw(uint8_t node) noexcept;
   [[nodiscard]] const NodeRaw* raw(uint8_t node) const noexcept;
   void apply_preq_writes() noexcept;
@@ -142,8 +143,6 @@ class PowerlinkBus final : public BusDriver {
   std::array<uint8_t, kMaxFrameSize> tx_{};
   std::array<uint8_t, kMaxFrameSize> rx_{};
   std::atomic<BusState> state_{BusState::Down};
-  SpscQueue<RegisterRequest, 64> requests_;
-  SpscQueue<RegisterResult, 64> results_;
   std::vector<NodeRaw> raw_;
   std::unique_ptr<PresLatencyHistogram[]> pres_latency_;  // per raw_ entry
   SpscQueue<PreqWrite, 16> preq_writes_;

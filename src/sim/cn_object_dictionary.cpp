@@ -4,12 +4,38 @@
 #include <cstring>
 
 #include "core/sdo_abort.hpp"
+#include "powerlink/concise_dcf.hpp"
 
 namespace ds1928::sim {
 namespace {
 
+using powerlink::kStandardObjects;
+using powerlink::ObjAccess;
+using powerlink::ObjHolder;
+using powerlink::ObjType;
+using powerlink::StandardObject;
+namespace obj = powerlink::obj;
+
 constexpr uint32_t kSignatureSave = 0x65766173;  // "save", little-endian
 constexpr uint32_t kSignatureLoad = 0x64616F6C;  // "load"
+
+[[nodiscard]] constexpr bool stored(const StandardObject& o) noexcept {
+  return o.holder == ObjHolder::kCn && o.type != ObjType::kDomain;
+}
+[[nodiscard]] constexpr std::size_t entries(const StandardObject& o) noexcept {
+  return std::min<std::size_t>(o.sub_last - o.sub_first + 1u, CnObjectDictionary::kMaxMapped);
+}
+
+// The first slot of each row (rows not stored: unused).
+constexpr std::array<std::size_t, kStandardObjects.size()> kFirstSlot = [] {
+  std::array<std::size_t, kStandardObjects.size()> first{};
+  std::size_t n = 0;
+  for (std::size_t i = 0; i < kStandardObjects.size(); ++i) {
+    first[i] = n;
+    if (stored(kStandardObjects[i])) n += entries(kStandardObjects[i]);
+  }
+  return first;
+}();
 
 uint64_t le(std::span<const uint8_t> d) noexcept {
   uint64_t v = 0;
@@ -17,259 +43,192 @@ uint64_t le(std::span<const uint8_t> d) noexcept {
   return v;
 }
 
-// A value of `width` bytes into `out`.
-uint32_t put(std::span<uint8_t> out, std::size_t& size, uint64_t v, std::size_t width) noexcept {
-  if (out.size() < width) return sdo_abort::kGeneral;
-  for (std::size_t i = 0; i < width; ++i) out[i] = static_cast<uint8_t>(v >> (8 * i));
-  size = width;
-  return 0;
-}
-
-// Writes `data` of exactly `width` bytes into `field`.
-template <class T>
-uint32_t take(T& field, std::span<const uint8_t> data) noexcept {
-  if (data.size() != sizeof(T)) return sdo_abort::kTypeLength;
-  field = static_cast<T>(le(data));
-  return 0;
+// The CN row of index/subindex; `abort` says why there is none.
+const StandardObject* cn_row(uint16_t index, uint8_t sub, std::size_t& row_no,
+                             uint32_t& abort) noexcept {
+  abort = sdo_abort::kNoObject;
+  for (std::size_t i = 0; i < kStandardObjects.size(); ++i) {
+    const StandardObject& o = kStandardObjects[i];
+    if (o.index != index || o.holder != ObjHolder::kCn) continue;
+    abort = sdo_abort::kNoSubindex;
+    if (sub < o.sub_first || sub > o.sub_last) continue;
+    if (o.type != ObjType::kDomain && std::size_t{sub} - o.sub_first >= entries(o))
+      continue;  // beyond the simulated device's capacity
+    row_no = i;
+    abort = 0;
+    return &o;
+  }
+  return nullptr;
 }
 
 }  // namespace
 
-uint16_t CnObjectDictionary::Mapping::end_bytes() const noexcept {
-  uint32_t end_bits = 0;
-  for (std::size_t i = 0; i < count; ++i) {
-    const uint64_t e = entries[i];
-    const uint32_t offset = static_cast<uint16_t>(e >> 32);
-    const uint32_t length = static_cast<uint16_t>(e >> 48);
-    end_bits = std::max(end_bits, offset + length);
+CnObjectDictionary::CnObjectDictionary() noexcept {
+  for (std::size_t i = 0; i < kStandardObjects.size(); ++i) {
+    if (!stored(kStandardObjects[i])) continue;
+    for (std::size_t k = 0; k < entries(kStandardObjects[i]); ++k)
+      v_.slot[kFirstSlot[i] + k] = kStandardObjects[i].default_value;
   }
-  return static_cast<uint16_t>((end_bits + 7) / 8);
+  stored_ = v_;
 }
 
 bool CnObjectDictionary::handles(uint16_t index) noexcept {
-  switch (index) {
-    case 0x1006:
-    case 0x1010:
-    case 0x1011:
-    case 0x1020:
-    case 0x1C0B:
-    case 0x1C0C:
-    case 0x1C0D:
-    case 0x1C0F:
-    case 0x1C14:
-    case 0x1F98:
-    case 0x1400:
-    case 0x1800:
-    case 0x1600:
-    case 0x1A00:
-    case 0x1F22:
-      return true;
-    default:
-      return false;
-  }
+  return powerlink::has_standard_index(index, ObjHolder::kCn);
+}
+
+const uint64_t* CnObjectDictionary::find(uint16_t index, uint8_t sub, const StandardObject*& row,
+                                         uint32_t& abort) const noexcept {
+  std::size_t i = 0;
+  row = cn_row(index, sub, i, abort);
+  if (!row || row->type == ObjType::kDomain) return nullptr;
+  return &v_.slot[kFirstSlot[i] + (sub - row->sub_first)];
+}
+
+uint64_t CnObjectDictionary::value(uint16_t index, uint8_t sub) const noexcept {
+  const StandardObject* row = nullptr;
+  uint32_t abort = 0;
+  const uint64_t* v = find(index, sub, row, abort);
+  return v ? *v : 0;
+}
+
+void CnObjectDictionary::set(uint16_t index, uint8_t sub, uint64_t value) noexcept {
+  const StandardObject* row = nullptr;
+  uint32_t abort = 0;
+  if (const uint64_t* v = find(index, sub, row, abort)) *const_cast<uint64_t*>(v) = value;
 }
 
 uint32_t CnObjectDictionary::read(uint16_t index, uint8_t sub, std::span<uint8_t> out,
                                   std::size_t& size) const noexcept {
-  switch (index) {
-    case 0x1006:
-      return sub == 0 ? put(out, size, v_.cycle_len_us_, 4) : sdo_abort::kNoSubindex;
-    case 0x1010:
-    case 0x1011:
-      // Sub 1 (all parameters): bit 0 = the device saves (restores) on command.
-      if (sub == 0) return put(out, size, 1, 1);
-      return sub == 1 ? put(out, size, 1, 4) : sdo_abort::kNoSubindex;
-    case 0x1C0B:
-    case 0x1C0C:
-    case 0x1C0D:
-    case 0x1C0F: {
-      const LossCounter& c = loss_counter(index);
-      if (sub == 0) return put(out, size, 3, 1);
-      if (sub == 1) return put(out, size, c.cumulative, 4);
-      if (sub == 2) return put(out, size, c.threshold_count, 4);
-      if (sub == 3) return put(out, size, c.threshold, 4);
-      return sdo_abort::kNoSubindex;
-    }
-    case 0x1020:
-      if (sub == 0) return put(out, size, 2, 1);
-      return sub <= 2 ? put(out, size, v_.conf_date_time_[sub - 1], 4) : sdo_abort::kNoSubindex;
-    case 0x1C14:
-      return sub == 0 ? put(out, size, v_.lof_tolerance_ns_, 4) : sdo_abort::kNoSubindex;
-    case 0x1F98:
-      switch (sub) {
-        case 0:
-          return put(out, size, 9, 1);
-        case 1:
-          return put(out, size, v_.isochr_tx_max_payload_, 2);
-        case 2:
-          return put(out, size, v_.isochr_rx_max_payload_, 2);
-        case 3:
-          return put(out, size, v_.pres_max_latency_ns_, 4);
-        case 4:
-          return put(out, size, v_.preq_act_payload_, 2);
-        case 5:
-          return put(out, size, v_.pres_act_payload_, 2);
-        case 6:
-          return put(out, size, v_.asnd_max_latency_ns_, 4);
-        case 7:
-          return put(out, size, v_.multipl_cycle_cnt_, 1);
-        case 8:
-          return put(out, size, v_.async_mtu_, 2);
-        case 9:
-          return put(out, size, v_.prescaler_, 2);
-        default:
-          return sdo_abort::kNoSubindex;
-      }
-    case 0x1400:
-    case 0x1800: {
-      const PdoComm& c = index == 0x1400 ? v_.rx_comm_ : v_.tx_comm_;
-      if (sub == 0) return put(out, size, 2, 1);
-      if (sub == 1) return put(out, size, c.node_id, 1);
-      if (sub == 2) return put(out, size, c.mapping_version, 1);
-      return sdo_abort::kNoSubindex;
-    }
-    case 0x1600:
-    case 0x1A00: {
-      const Mapping& m = index == 0x1600 ? v_.rx_map_ : v_.tx_map_;
-      if (sub == 0) return put(out, size, m.count, 1);
-      if (sub > kMaxMapped) return sdo_abort::kNoSubindex;
-      return put(out, size, m.entries[sub - 1], 8);
-    }
-    case 0x1F22:
-      if (sub == 0) return put(out, size, 254, 1);
-      if (out.size() < v_.dcf_size_) return sdo_abort::kGeneral;
-      std::memcpy(out.data(), v_.dcf_.data(), v_.dcf_size_);
-      size = v_.dcf_size_;
-      return 0;
-    default:
-      return sdo_abort::kNoObject;
+  const StandardObject* row = nullptr;
+  uint32_t abort = 0;
+  const uint64_t* v = find(index, sub, row, abort);
+  if (!row) return abort;
+  if (row->type == ObjType::kDomain) {
+    if (out.size() < v_.dcf_size) return sdo_abort::kGeneral;
+    std::memcpy(out.data(), v_.dcf.data(), v_.dcf_size);
+    size = v_.dcf_size;
+    return 0;
   }
+  const std::size_t width = powerlink::type_size(row->type);
+  if (out.size() < width) return sdo_abort::kGeneral;
+  for (std::size_t i = 0; i < width; ++i) out[i] = static_cast<uint8_t>(*v >> (8 * i));
+  size = width;
+  return 0;
 }
 
 uint32_t CnObjectDictionary::write(uint16_t index, uint8_t sub,
                                    std::span<const uint8_t> data) noexcept {
-  switch (index) {
-    case 0x1006:
-      return sub == 0 ? take(v_.cycle_len_us_, data) : sdo_abort::kNoSubindex;
-    case 0x1010:
-    case 0x1011: {
-      if (sub == 0) return sdo_abort::kReadOnly;
-      if (sub != 1) return sdo_abort::kNoSubindex;
-      // Without the signature ("save" / "load") DS 301 answers "data cannot be transferred or
-      // stored".
-      uint32_t signature = 0;
-      if (const uint32_t a = take(signature, data)) return a;
-      if (index == 0x1010) {
-        if (signature != kSignatureSave) return sdo_abort::kCannotStore;
-        stored_ = v_;
-        has_stored_ = true;
-      } else {
-        // Defaults again from the next reset on (the values in use stay until then).
-        if (signature != kSignatureLoad) return sdo_abort::kCannotStore;
-        has_stored_ = false;
-      }
-      return 0;
-    }
-    case 0x1C0B:
-    case 0x1C0C:
-    case 0x1C0D:
-    case 0x1C0F: {
-      LossCounter& c = loss_counter(index);
-      if (sub == 0 || sub == 2) return sdo_abort::kReadOnly;
-      if (sub == 1) return take(c.cumulative, data);
-      if (sub == 3) return take(c.threshold, data);
-      return sdo_abort::kNoSubindex;
-    }
-    case 0x1020:
-      if (sub == 0) return sdo_abort::kReadOnly;
-      return sub <= 2 ? take(v_.conf_date_time_[sub - 1], data) : sdo_abort::kNoSubindex;
-    case 0x1C14:
-      return sub == 0 ? take(v_.lof_tolerance_ns_, data) : sdo_abort::kNoSubindex;
-    case 0x1F98:
-      switch (sub) {
-        case 0:
-        case 1:
-        case 2:
-        case 3:
-        case 6:
-          return sdo_abort::kReadOnly;  // the device's own limits
-        case 4:
-        case 5: {
-          uint16_t v = 0;
-          if (const uint32_t a = take(v, data)) return a;
-          const uint16_t limit = sub == 4 ? v_.isochr_rx_max_payload_ : v_.isochr_tx_max_payload_;
-          if (v > limit) return sdo_abort::kOutOfRange;
-          (sub == 4 ? v_.preq_act_payload_ : v_.pres_act_payload_) = v;
-          return 0;
-        }
-        case 7:
-          return take(v_.multipl_cycle_cnt_, data);
-        case 8:
-          return take(v_.async_mtu_, data);
-        case 9:
-          return take(v_.prescaler_, data);
-        default:
-          return sdo_abort::kNoSubindex;
-      }
-    case 0x1400:
-    case 0x1800: {
-      PdoComm& c = index == 0x1400 ? v_.rx_comm_ : v_.tx_comm_;
-      if (sub == 0) return sdo_abort::kReadOnly;
-      if (sub == 1) return take(c.node_id, data);
-      if (sub == 2) return take(c.mapping_version, data);
-      return sdo_abort::kNoSubindex;
-    }
-    case 0x1600:
-    case 0x1A00: {
-      Mapping& m = index == 0x1600 ? v_.rx_map_ : v_.tx_map_;
-      if (sub == 0) {
-        uint8_t count = 0;
-        if (const uint32_t a = take(count, data)) return a;
-        if (count > kMaxMapped) return sdo_abort::kOutOfRange;
-        m.count = count;
-        return 0;
-      }
-      if (sub > kMaxMapped) return sdo_abort::kNoSubindex;
-      // Mapping written while enabled (sub 0 ≠ 0): DS 301 wants it disabled first.
-      if (m.count != 0) return sdo_abort::kDeviceState;
-      uint64_t v = 0;
-      if (const uint32_t a = take(v, data)) return a;
-      m.entries[sub - 1] = v;
-      return 0;
-    }
-    case 0x1F22:
-      if (sub == 0) return sdo_abort::kReadOnly;
-      if (data.size() > kMaxStoredDcf) return sdo_abort::kOutOfRange;
-      std::memcpy(v_.dcf_.data(), data.data(), data.size());
-      v_.dcf_size_ = data.size();
-      return 0;
-    default:
-      return sdo_abort::kNoObject;
+  const StandardObject* row = nullptr;
+  uint32_t abort = 0;
+  const uint64_t* slot = find(index, sub, row, abort);
+  if (!row) return abort;
+  if (row->access != ObjAccess::kRw) return sdo_abort::kReadOnly;
+  if (row->type == ObjType::kDomain) {
+    if (data.size() > kMaxStoredDcf) return sdo_abort::kOutOfRange;
+    std::memcpy(v_.dcf.data(), data.data(), data.size());
+    v_.dcf_size = data.size();
+    return 0;
   }
+  if (data.size() != powerlink::type_size(row->type)) return sdo_abort::kTypeLength;
+  const uint64_t v = le(data);
+  // The rules a type and an access do not say.
+  if (index == obj::kStoreParam || index == obj::kRestoreDefParam) {
+    // Without the signature ("save" / "load") DS 301 answers "data cannot be transferred or
+    // stored". The value itself is not kept (it reads back the device's capability).
+    if (index == obj::kStoreParam) {
+      if (v != kSignatureSave) return sdo_abort::kCannotStore;
+      stored_ = v_;
+      has_stored_ = true;
+    } else {
+      // Defaults again from the next reset on (the values in use stay until then).
+      if (v != kSignatureLoad) return sdo_abort::kCannotStore;
+      has_stored_ = false;
+    }
+    return 0;
+  }
+  if (index == obj::kCycleTiming &&
+      (sub == obj::kCycleTimingPReqActPayload || sub == obj::kCycleTimingPResActPayload)) {
+    // The payload in use is at most the device's limit (/2 for the PReq, /1 for the PRes).
+    if (v > value(obj::kCycleTiming, sub == obj::kCycleTimingPReqActPayload ? 2 : 1))
+      return sdo_abort::kOutOfRange;
+  }
+  if (index == obj::kRxPdoMapping || index == obj::kTxPdoMapping) {
+    if (sub == 0 && v > kMaxMapped) return sdo_abort::kOutOfRange;
+    // Mapping written while enabled (sub 0 ≠ 0): DS 301 wants it disabled first.
+    if (sub != 0 && value(index, 0) != 0) return sdo_abort::kDeviceState;
+  }
+  *const_cast<uint64_t*>(slot) = v;
+  return 0;
 }
 
-CnObjectDictionary::LossCounter& CnObjectDictionary::loss_counter(uint16_t index) noexcept {
-  return index == 0x1C0B   ? v_.loss_of_soc
-         : index == 0x1C0C ? v_.loss_of_soa
-         : index == 0x1C0D ? v_.loss_of_preq
-                           : v_.crc_error;
+void CnObjectDictionary::set_identity(uint32_t device_type, uint32_t vendor_id,
+                                      uint32_t product_code, uint32_t revision_no,
+                                      uint32_t serial_no) noexcept {
+  set(obj::kDeviceType, 0, device_type);
+  set(obj::kIdentity, 1, vendor_id);
+  set(obj::kIdentity, 2, product_code);
+  set(obj::kIdentity, 3, revision_no);
+  set(obj::kIdentity, 4, serial_no);
 }
 
-const CnObjectDictionary::LossCounter& CnObjectDictionary::loss_counter(
-    uint16_t index) const noexcept {
-  return const_cast<CnObjectDictionary*>(this)->loss_counter(index);
+void CnObjectDictionary::set_error_register(uint8_t bits) noexcept {
+  set(obj::kErrorRegister, 0, bits);
+}
+
+void CnObjectDictionary::reset_communication() noexcept {
+  // The written values return to the stored (or default) ones; the device's own stay.
+  const Values defaults = [] {
+    CnObjectDictionary fresh;
+    return fresh.v_;
+  }();
+  const Values& from = has_stored_ ? stored_ : defaults;
+  for (std::size_t i = 0; i < kStandardObjects.size(); ++i) {
+    const StandardObject& o = kStandardObjects[i];
+    if (!stored(o) || o.access != ObjAccess::kRw) continue;
+    for (std::size_t k = 0; k < entries(o); ++k)
+      v_.slot[kFirstSlot[i] + k] = from.slot[kFirstSlot[i] + k];
+  }
+  v_.dcf = from.dcf;
+  v_.dcf_size = from.dcf_size;
+}
+
+uint16_t CnObjectDictionary::mapped_end_bytes(uint16_t mapping_index) const noexcept {
+  uint32_t end_bits = 0;
+  const auto count = static_cast<uint8_t>(value(mapping_index, 0));
+  for (uint8_t i = 1; i <= count; ++i) {
+    const auto e = powerlink::PdoMapEntry::from_u64(value(mapping_index, i));
+    end_bits = std::max<uint32_t>(end_bits, uint32_t{e.offset_bits} + e.length_bits);
+  }
+  return static_cast<uint16_t>((end_bits + 7) / 8);
 }
 
 uint16_t CnObjectDictionary::pres_size(uint16_t fallback) const noexcept {
-  if (v_.pres_act_payload_ != 0) return v_.pres_act_payload_;
-  if (v_.tx_map_.count != 0) return std::max(fallback, v_.tx_map_.end_bytes());
+  if (const auto v = value(obj::kCycleTiming, obj::kCycleTimingPResActPayload); v != 0)
+    return static_cast<uint16_t>(v);
+  if (value(obj::kTxPdoMapping, 0) != 0)
+    return std::max(fallback, mapped_end_bytes(obj::kTxPdoMapping));
   return fallback;
 }
 
 uint16_t CnObjectDictionary::preq_size(uint16_t fallback) const noexcept {
-  if (v_.preq_act_payload_ != 0) return v_.preq_act_payload_;
-  if (v_.rx_map_.count != 0) return std::max(fallback, v_.rx_map_.end_bytes());
+  if (const auto v = value(obj::kCycleTiming, obj::kCycleTimingPReqActPayload); v != 0)
+    return static_cast<uint16_t>(v);
+  if (value(obj::kRxPdoMapping, 0) != 0)
+    return std::max(fallback, mapped_end_bytes(obj::kRxPdoMapping));
   return fallback;
+}
+
+uint32_t CnObjectDictionary::cycle_length_us() const noexcept {
+  return static_cast<uint32_t>(value(obj::kCycleLen, 0));
+}
+uint32_t CnObjectDictionary::loss_of_frame_tolerance_ns() const noexcept {
+  return static_cast<uint32_t>(value(obj::kLossOfSocTolerance, 0));
+}
+uint32_t CnObjectDictionary::configuration_date() const noexcept {
+  return static_cast<uint32_t>(value(obj::kVerifyConfiguration, 1));
+}
+uint32_t CnObjectDictionary::configuration_time() const noexcept {
+  return static_cast<uint32_t>(value(obj::kVerifyConfiguration, 2));
 }
 
 }  // namespace ds1928::sim

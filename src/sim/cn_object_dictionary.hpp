@@ -1,9 +1,11 @@
-// The communication objects of the simulated CN that an MN's configuration manager writes
-// (EPSG DS 301): 0x1006 cycle length, 0x1020 configuration date/time, 0x1C0B/0x1C0C/0x1C0D/
-// 0x1C0F the CN's DLL loss/CRC counters, 0x1C14 loss-of-frame tolerance, 0x1F98 cycle timing,
-// 0x1400/0x1800 PDO communication, 0x1600/0x1A00 PDO mapping, 0x1F22 concise DCF (accepted and
-// kept), 0x1010 store ("save") and 0x1011 restore defaults ("load"). Objects it does not have
-// are refused with 0x06020000, subindices with 0x06090011 (the caller's other objects first).
+// The simulated CN's standard objects (EPSG DS 301): every row of powerlink/standard_objects.hpp
+// a CN holds — identity, error register, cycle length, store/restore, configuration date/time,
+// DLL loss/CRC counters, loss-of-SoC tolerance, cycle timing, PDO communication and mapping, the
+// concise DCF (accepted and kept) — served by one generic read and write over the table and fixed
+// storage. Objects the table does not give a CN are refused with 0x06020000, subindices with
+// 0x06090011 (the caller's other objects first). The few rules a type and an access cannot say
+// (store/restore signatures, the payload limits of 0x1F98/4,5, PDO mappings written while
+// disabled) are named in write().
 // Fixed storage, no allocation: the SDO server calls it from the CN's cycle loop.
 // Pure: returns SDO abort codes (0 = done).
 #pragma once
@@ -13,12 +15,16 @@
 #include <cstdint>
 #include <span>
 
+#include "powerlink/standard_objects.hpp"
+
 namespace ds1928::sim {
 
 class CnObjectDictionary {
  public:
   static constexpr std::size_t kMaxMapped = 32;       // PDO mapping entries per direction
-  static constexpr std::size_t kMaxStoredDcf = 1024;  // bytes of 0x1F22 kept
+  static constexpr std::size_t kMaxStoredDcf = 1024;  // bytes of the concise DCF kept
+
+  CnObjectDictionary() noexcept;
 
   // False when `index` is none of these objects (the caller looks elsewhere).
   [[nodiscard]] static bool handles(uint16_t index) noexcept;
@@ -27,64 +33,51 @@ class CnObjectDictionary {
   [[nodiscard]] uint32_t write(uint16_t index, uint8_t subindex,
                                std::span<const uint8_t> data) noexcept;
 
-  // The payload sizes the objects define: 0x1F98/5 (/4) when written, else the end of the
-  // mapped objects of 0x1A00 (0x1600) when mapped, else `fallback` (the modules' layout).
+  // The device's own values (read-only over SDO): identity, error register.
+  void set_identity(uint32_t device_type, uint32_t vendor_id, uint32_t product_code,
+                    uint32_t revision_no, uint32_t serial_no) noexcept;
+  void set_error_register(uint8_t bits) noexcept;
+
+  // The payload sizes the objects define: cycle timing /5 (/4) when written, else the end of the
+  // mapped objects of the TPDO (RPDO) mapping when mapped, else `fallback` (the modules' layout).
   [[nodiscard]] uint16_t pres_size(uint16_t fallback) const noexcept;
   [[nodiscard]] uint16_t preq_size(uint16_t fallback) const noexcept;
-  [[nodiscard]] uint32_t cycle_length_us() const noexcept { return v_.cycle_len_us_; }
-  [[nodiscard]] uint32_t loss_of_frame_tolerance_ns() const noexcept {
-    return v_.lof_tolerance_ns_;
-  }
-  // 0x1020/1, /2: the IdentResponse's VerifyConfigurationDate/Time, which an MN compares with
-  // the configuration it expects (0x1F26/0x1F27) to skip a download.
-  [[nodiscard]] uint32_t configuration_date() const noexcept { return v_.conf_date_time_[0]; }
-  [[nodiscard]] uint32_t configuration_time() const noexcept { return v_.conf_date_time_[1]; }
-  // Power-up, NMTResetNode, NMTResetCommunication: the values stored by 0x1010 (non-volatile),
-  // else the defaults. NMTResetConfiguration keeps the values written: it is how an MN makes a
-  // CN take the configuration it just downloaded.
-  void reset_communication() noexcept { v_ = has_stored_ ? stored_ : Values{}; }
+  [[nodiscard]] uint32_t cycle_length_us() const noexcept;
+  [[nodiscard]] uint32_t loss_of_frame_tolerance_ns() const noexcept;
+  // CFM_VerifyConfiguration /1, /2: the IdentResponse's VerifyConfigurationDate/Time, which an MN
+  // compares with the configuration it expects (CFM_ExpConfDateList/TimeList) to skip a download.
+  [[nodiscard]] uint32_t configuration_date() const noexcept;
+  [[nodiscard]] uint32_t configuration_time() const noexcept;
+  // Power-up, NMTResetNode, NMTResetCommunication: the values stored by NMT_StoreParam
+  // (non-volatile), else the defaults. NMTResetConfiguration keeps the values written: it is how
+  // an MN makes a CN take the configuration it just downloaded.
+  void reset_communication() noexcept;
+
+  // Storage slots: one per CN row and sub-index (arrays up to kMaxMapped entries).
+  static constexpr std::size_t kSlots = [] {
+    std::size_t n = 0;
+    for (const powerlink::StandardObject& o : powerlink::kStandardObjects)
+      if (o.holder == powerlink::ObjHolder::kCn && o.type != powerlink::ObjType::kDomain) {
+        const std::size_t entries = std::size_t{o.sub_last} - o.sub_first + 1;
+        n += entries > kMaxMapped ? kMaxMapped : entries;
+      }
+    return n;
+  }();
 
  private:
-  struct Mapping {
-    uint8_t count = 0;
-    std::array<uint64_t, kMaxMapped> entries{};
-    [[nodiscard]] uint16_t end_bytes() const noexcept;
-  };
-  // DLL_CN*_REC: sub 1 cumulative count, 2 threshold counter (read-only), 3 threshold.
-  struct LossCounter {
-    uint32_t cumulative = 0;
-    uint32_t threshold_count = 0;
-    uint32_t threshold = 15;
-  };
-  struct PdoComm {
-    uint8_t node_id = 0;
-    uint8_t mapping_version = 0;
-  };
-
-  // Every value an MN can write: the live set and the one 0x1010 stored.
+  // Every value an MN can write: the live set and the one NMT_StoreParam stored.
   struct Values {
-    uint32_t cycle_len_us_ = 0;
-    std::array<uint32_t, 2> conf_date_time_{};  // 0x1020/1, /2
-    uint32_t lof_tolerance_ns_ = 300'000;
-    // 0x1F98 NMT_CycleTiming_REC, sub 1..9.
-    uint16_t isochr_tx_max_payload_ = 1490;
-    uint16_t isochr_rx_max_payload_ = 1490;
-    uint32_t pres_max_latency_ns_ = 2000;
-    uint16_t preq_act_payload_ = 0;  // 0 = not written
-    uint16_t pres_act_payload_ = 0;
-    uint32_t asnd_max_latency_ns_ = 2000;
-    uint8_t multipl_cycle_cnt_ = 0;
-    uint16_t async_mtu_ = 300;
-    uint16_t prescaler_ = 2;
-    PdoComm rx_comm_, tx_comm_;
-    Mapping rx_map_, tx_map_;
-    std::array<uint8_t, kMaxStoredDcf> dcf_{};
-    std::size_t dcf_size_ = 0;
-    LossCounter loss_of_soc, loss_of_soa, loss_of_preq,
-        crc_error;  // 0x1C0B, 0x1C0C, 0x1C0D, 0x1C0F
+    std::array<uint64_t, kSlots> slot{};
+    std::array<uint8_t, kMaxStoredDcf> dcf{};
+    std::size_t dcf_size = 0;
   };
-  [[nodiscard]] LossCounter& loss_counter(uint16_t index) noexcept;
-  [[nodiscard]] const LossCounter& loss_counter(uint16_t index) const noexcept;
+  // The slot of index/subindex; nullptr with `abort` set when the CN has no such object.
+  [[nodiscard]] const uint64_t* find(uint16_t index, uint8_t subindex,
+                                     const powerlink::StandardObject*& row,
+                                     uint32_t& abort) const noexcept;
+  [[nodiscard]] uint64_t value(uint16_t index, uint8_t subindex) const noexcept;
+  [[nodiscard]] uint16_t mapped_end_bytes(uint16_t mapping_index) const noexcept;
+  void set(uint16_t index, uint8_t subindex, uint64_t v) noexcept;
 
   Values v_;
   Values stored_;

@@ -36,52 +36,25 @@ constexpr uint8_t kPriorityNmtRequest = 7;
 }  // namespace
 
 // The bus controller's object dictionary as the SDO server sees it: identity objects and the
-// module registers through the (index, subindex) ↔ register mapping.
+// module registers through the (index, subindex) ↔ register mapping; the standard objects are
+// CnObjectDictionary's (powerlink/standard_objects.hpp).
 class PowerlinkCn::Objects final : public pl::SdoObjectAccess {
  public:
   explicit Objects(PowerlinkCn& cn) : cn_(cn) {}
 
   uint32_t read_object(uint16_t index, uint8_t subindex, std::span<uint8_t> out,
                        std::size_t& size) noexcept override {
-    if (CnObjectDictionary::handles(index)) return cn_.comm_.read(index, subindex, out, size);
-    uint32_t value = 0;
-    uint8_t width = 4;
-    if (index == 0x1000) {
-      if (subindex != 0) return sdo_abort::kNoSubindex;
-      value = cn_.config_.device_type;
-    } else if (index == 0x1001) {
+    if (CnObjectDictionary::handles(index)) {
       // ERR_ErrorRegister_U8: byte 0 of the StatusResponse's static error bit field.
-      if (subindex != 0) return sdo_abort::kNoSubindex;
-      value = static_cast<uint8_t>(cn_.errsig_.static_error_bits());
-      width = 1;
-    } else if (index == 0x1018) {
-      switch (subindex) {
-        case 0:
-          value = 4;
-          width = 1;
-          break;
-        case 1:
-          value = cn_.config_.vendor_id;
-          break;
-        case 2:
-          value = cn_.config_.product_code;
-          break;
-        case 3:
-          value = cn_.config_.revision_no;
-          break;
-        case 4:
-          value = cn_.config_.serial_no;
-          break;
-        default:
-          return sdo_abort::kNoSubindex;
-      }
-    } else {
-      Ds1928Module* module = nullptr;
-      uint16_t reg = 0;
-      if (const uint32_t abort = locate(index, subindex, module, reg)) return abort;
-      width = ds1928::register_size(reg).value_or(4);
-      if (auto ec = module->read_register(reg, width, value)) return sdo_abort_for(ec);
+      cn_.comm_.set_error_register(static_cast<uint8_t>(cn_.errsig_.static_error_bits()));
+      return cn_.comm_.read(index, subindex, out, size);
     }
+    Ds1928Module* module = nullptr;
+    uint16_t reg = 0;
+    if (const uint32_t abort = locate(index, subindex, module, reg)) return abort;
+    uint32_t value = 0;
+    const uint8_t width = ds1928::register_size(reg).value_or(4);
+    if (auto ec = module->read_register(reg, width, value)) return sdo_abort_for(ec);
     if (out.size() < width) return sdo_abort::kGeneral;
     for (uint8_t i = 0; i < width; ++i) out[i] = static_cast<uint8_t>(value >> (8 * i));
     size = width;
@@ -90,7 +63,6 @@ class PowerlinkCn::Objects final : public pl::SdoObjectAccess {
 
   uint32_t write_object(uint16_t index, uint8_t subindex,
                         std::span<const uint8_t> data) noexcept override {
-    if (index == 0x1000 || index == 0x1001 || index == 0x1018) return sdo_abort::kReadOnly;
     if (CnObjectDictionary::handles(index)) return cn_.comm_.write(index, subindex, data);
     Ds1928Module* module = nullptr;
     uint16_t reg = 0;
@@ -153,6 +125,8 @@ PowerlinkCn::PowerlinkCn(const PowerlinkCnConfig& config, FrameSink send)
       send_(std::move(send)),
       mapping_(config.sdo_overrides),
       rng_(config.faults.seed) {
+  comm_.set_identity(config_.device_type, config_.vendor_id, config_.product_code,
+                     config_.revision_no, config_.serial_no);
   std::vector<pl::ModuleSpec> specs;
   for (const PowerlinkCnModuleConfig& m : config_.modules) {
     specs.push_back(
@@ -428,8 +402,8 @@ void PowerlinkCn::send_pres(int64_t now_ns, int64_t offset_ns) noexcept {
     return;
   }
   std::array<uint8_t, pl::kMaxIsoPayload> payload{};
-  // The size an MN configured (0x1F98/5, 0x1A00), else the modules' image; module bytes beyond
-  // a smaller configured size are left out.
+  // The size an MN configured (cycle timing /5, the TPDO mapping), else the modules' image; module
+  // bytes beyond a smaller configured size are left out.
   std::size_t size = comm_.pres_size(layout_.pres_size);
   for (const HostedModule& m : modules_) {
     if (m.mapping == nullptr) continue;

@@ -74,7 +74,7 @@ struct PowerlinkCnResponse {
 struct PowerlinkCnConfig {
   uint8_t node_id = 1;
   powerlink::MacAddress mac{0x02, 0x00, 0x00, 0x00, 0x19, 0x28};
-  // Identification (IdentResponse, objects 0x1000 / 0x1018).
+  // Identification (IdentResponse, NMT_DeviceType and NMT_IdentityObject).
   uint32_t device_type = 0x00000191;  // DS 401 generic I/O
   uint32_t vendor_id = 0x0000001A;
   uint32_t product_code = 0x00001928;

@@ -47,22 +47,7 @@ ExchangeResult SimulatedBus::exchange(std::span<AxisIo> axes, int64_t /*cycle_st
   const uint64_t net_us = static_cast<uint64_t>(now_ns / 1000);
 
   // Acyclic accesses run between cycles on this thread, which owns the modules.
-  while (!results_.full()) {
-    auto request = requests_.try_pop();
-    if (!request) break;
-    RegisterResult result;
-    result.tag = request->tag;
-    if (request->axis >= modules_.size()) {
-      result.error = std::make_error_code(std::errc::no_such_device);
-    } else if (request->write) {
-      result.error =
-          modules_[request->axis]->write_register(request->reg, request->size, request->value);
-    } else {
-      result.error =
-          modules_[request->axis]->read_register(request->reg, request->size, result.value);
-    }
-    (void)results_.try_push(result);  // room was checked above
-  }
+  registers().serve(*this);
 
   const std::size_t n = std::min(axes.size(), modules_.size());
   for (std::size_t i = 0; i < n; ++i) {
@@ -78,15 +63,18 @@ ExchangeResult SimulatedBus::exchange(std::span<AxisIo> axes, int64_t /*cycle_st
   return r;
 }
 
-bool SimulatedBus::submit(const RegisterRequest& request) noexcept {
-  return requests_.try_push(request);
-}
-
-bool SimulatedBus::poll(RegisterResult& out) noexcept {
-  auto r = results_.try_pop();
-  if (!r) return false;
-  out = *r;
-  return true;
+RegisterTarget::Offer SimulatedBus::offer(const RegisterRequest& request) noexcept {
+  RegisterResult result;
+  result.tag = request.tag;
+  if (request.axis >= modules_.size()) {
+    result.error = std::make_error_code(std::errc::no_such_device);
+  } else if (request.write) {
+    result.error = modules_[request.axis]->write_register(request.reg, request.size, request.value);
+  } else {
+    result.error = modules_[request.axis]->read_register(request.reg, request.size, result.value);
+  }
+  (void)registers().complete(result);  // held when the results queue is full
+  return Offer::kTaken;
 }
 
 }  // namespace ds1928::sim

@@ -8,13 +8,12 @@
 
 #include "core/axis_config.hpp"
 #include "core/bus.hpp"
-#include "core/spsc_queue.hpp"
 #include "sim/ds1928_module.hpp"
 #include "sim/sim_options.hpp"
 
 namespace ds1928::sim {
 
-class SimulatedBus final : public BusDriver {
+class SimulatedBus final : public BusDriver, private RegisterTarget {
  public:
   // One simulated X20DS1928 per axis; simulated.axes[i] describes axes[i] (defaults for the
   // rest).
@@ -28,8 +27,6 @@ class SimulatedBus final : public BusDriver {
   [[nodiscard]] BusState state() const noexcept override {
     return state_.load(std::memory_order_acquire);
   }
-  [[nodiscard]] bool submit(const RegisterRequest& request) noexcept override;
-  [[nodiscard]] bool poll(RegisterResult& out) noexcept override;
 
   // Test hooks: reach a module between cycles (only while the cycle thread is not running).
   [[nodiscard]] Ds1928Module& module(std::size_t axis) { return *modules_.at(axis); }
@@ -37,12 +34,13 @@ class SimulatedBus final : public BusDriver {
   [[nodiscard]] const std::string& load_error() const noexcept { return load_error_; }
 
  private:
+  // Register requests run between cycles on the cycle thread, which owns the modules.
+  Offer offer(const RegisterRequest& request) noexcept override;
+
   std::vector<std::unique_ptr<Ds1928Module>> modules_;
   std::vector<ModuleSettings> settings_;
   std::atomic<BusState> state_{BusState::Down};
   std::string load_error_;
-  SpscQueue<RegisterRequest, 64> requests_;
-  SpscQueue<RegisterResult, 64> results_;
 };
 
 }  // namespace ds1928::sim

@@ -165,3 +165,50 @@ TEST_CASE("The simulated CN's communication objects: typed access, mapping rules
   CHECK(sim::CnObjectDictionary::handles(0x1400));
   CHECK_FALSE(sim::CnObjectDictionary::handles(0x2001));
 }
+
+TEST_CASE("The simulated CN's object dictionary serves every CN row of the standard table",
+          "[sim][powerlink][od][standard_objects]") {
+  sim::CnObjectDictionary od;
+  od.set_identity(0x191, 0x1A, 0x1928, 3, 77);
+  std::array<uint8_t, 16> out{};
+  for (const pl::StandardObject& o : pl::kStandardObjects) {
+    const bool cn = o.holder == pl::ObjHolder::kCn;
+    INFO(pl::object_name(o.index, o.sub_first) << " " << o.name);
+    CHECK(sim::CnObjectDictionary::handles(o.index) ==
+          pl::has_standard_index(o.index, pl::ObjHolder::kCn));
+    if (!cn || o.type == pl::ObjType::kDomain) continue;
+    const int width = static_cast<int>(pl::type_size(o.type));
+    const unsigned last =
+        std::min<unsigned>(o.sub_last, o.sub_first + sim::CnObjectDictionary::kMaxMapped - 1);
+    for (unsigned s = o.sub_first; s <= last; ++s) {
+      const auto sub = static_cast<uint8_t>(s);
+      std::size_t size = 0;
+      REQUIRE(od.read(o.index, sub, out, size) == 0);
+      CHECK(size == static_cast<std::size_t>(width));  // typed by the table
+      uint64_t v = 0;
+      for (std::size_t i = 0; i < size; ++i) v |= uint64_t{out[i]} << (8 * i);
+      if (o.access != pl::ObjAccess::kRo) CHECK(v == o.default_value);
+      // Access from the table: a write of the device's own values is refused; a writable one
+      // of the wrong length too.
+      if (o.access != pl::ObjAccess::kRw) {
+        CHECK(od.write(o.index, sub, le(v, width)) == 0x06010002);
+      } else {
+        CHECK(od.write(o.index, sub, le(v, width + 1)) == 0x06070010);
+      }
+    }
+  }
+  // The identity the CN was given, read back as an MN's identity check reads it.
+  std::size_t size = 0;
+  REQUIRE(od.read(pl::obj::kIdentity, 2, out, size) == 0);
+  CHECK((size == 4 && out[0] == 0x28 && out[1] == 0x19));
+  REQUIRE(od.read(pl::obj::kDeviceType, 0, out, size) == 0);
+  CHECK((out[0] == 0x91 && out[1] == 0x01));
+  CHECK(od.read(pl::obj::kIdentity, 5, out, size) == 0x06090011);         // no such sub-index
+  CHECK(od.read(pl::obj::kMnCnPResTimeout, 1, out, size) == 0x06020000);  // an MN's object
+  // A reset keeps the device's own values and returns the written ones to their defaults.
+  CHECK(od.write(pl::obj::kCycleLen, 0, le(4000, 4)) == 0);
+  od.reset_communication();
+  CHECK(od.cycle_length_us() == 0);
+  REQUIRE(od.read(pl::obj::kIdentity, 4, out, size) == 0);
+  CHECK(out[0] == 77);
+}

@@ -45,21 +45,21 @@ TEST_CASE("PDO mapping entries give the payload size, 0x1F98 limits take precede
   CHECK(PdoMapEntry::from_u64(0x0010'0020'0002'6401ULL).offset_bits == 32);
   CHECK(b.to_u64() == 0x0010'0020'0002'6401ULL);
   std::vector<CdcEntry> objects = {
-      {kObjTxPdoMapping, 0, {2}},
-      {kObjTxPdoMapping, 1, u64(a.to_u64())},
-      {kObjTxPdoMapping, 2, u64(b.to_u64())},
-      {kObjTxPdoMapping, 3, u64(PdoMapEntry{0x6000, 9, 64, 64}.to_u64())},
-      {kObjRxPdoMapping, 0, {1}},
-      {kObjRxPdoMapping, 1, u64(PdoMapEntry{0x6200, 1, 0, 12}.to_u64())}};
+      {obj::kTxPdoMapping, 0, {2}},
+      {obj::kTxPdoMapping, 1, u64(a.to_u64())},
+      {obj::kTxPdoMapping, 2, u64(b.to_u64())},
+      {obj::kTxPdoMapping, 3, u64(PdoMapEntry{0x6000, 9, 64, 64}.to_u64())},
+      {obj::kRxPdoMapping, 0, {1}},
+      {obj::kRxPdoMapping, 1, u64(PdoMapEntry{0x6200, 1, 0, 12}.to_u64())}};
   ImageSizes s = image_sizes_from_objects(objects);
   CHECK(s.pres_size == uint16_t{6});  // entry 3 is beyond the count: not mapped
   CHECK(s.preq_size == uint16_t{2});  // 12 bits round up
   // Written in order: disabled, entries, enabled — the last value of sub 0 counts.
-  objects.insert(objects.begin(), {kObjTxPdoMapping, 0, {0}});
+  objects.insert(objects.begin(), {obj::kTxPdoMapping, 0, {0}});
   CHECK(image_sizes_from_objects(objects).pres_size == uint16_t{6});
-  objects.push_back({kObjTxPdoMapping, 0, {1}});
+  objects.push_back({obj::kTxPdoMapping, 0, {1}});
   CHECK(image_sizes_from_objects(objects).pres_size == uint16_t{1});
-  objects.push_back({kObjCycleTiming, 4, {40, 0}});
+  objects.push_back({obj::kCycleTiming, 4, {40, 0}});
   s = image_sizes_from_objects(objects);
   CHECK(s.preq_size == uint16_t{40});
 }
@@ -77,8 +77,10 @@ TEST_CASE("Truncated and garbage concise DCFs are refused with the place and the
   auto cut = decode_cdc(std::span(good).first(good.size() - 2));
   REQUIRE_FALSE(cut.ok());
   CHECK(cut.error->entry == 1);
-  CHECK_THAT(cut.error->message,
-             Catch::Equals("entry 1 (0x1C14/0) announces 4 data bytes, only 2 remain"));
+  CHECK_THAT(
+      cut.error->message,
+      Catch::Equals(
+          "entry 1 (0x1C14/0 DLL_CNLossOfSocTolerance_U32) announces 4 data bytes, only 2 remain"));
   CHECK(cut.entries.size() == 1);
   // Cut inside the second entry's header.
   cut = decode_cdc(std::span(good).first(4 + 11 + 3));

@@ -1,0 +1,41 @@
+// The daemon's side of the CAN-I/O bus: opens the ports (SocketCAN, or the cross-process virtual
+// test bus when canio.virtual_bus is set), checks the interface's bit rate, and contributes the
+// CAN state, counters and per-node figures to `status`, the log and the metrics
+// (canio_metrics.cpp). Same shape as every bus kind: <kind>_service.hpp/.cpp + <kind>_metrics.cpp.
+#pragma once
+
+#include <memory>
+#include <vector>
+
+#include "bus_service.hpp"
+#include "canio/canio_bus.hpp"
+#include "canio/virtual_bus.hpp"
+
+namespace ds1928 {
+
+class CanioService final : public BusService {
+ public:
+  // Owns the bus; `vbus` (the virtual test bus, or nullptr) outlives its ports.
+  CanioService(std::unique_ptr<canio::CanioBus> bus, std::shared_ptr<canio::VirtualCanBus> vbus)
+      : vbus_(std::move(vbus)), bus_(std::move(bus)) {}
+
+  [[nodiscard]] BusDriver& driver() noexcept override { return *bus_; }
+  [[nodiscard]] std::string start_detail() const override { return bus_->start_error(); }
+  void watch(std::vector<BusEvent>& events, bool first,
+             std::chrono::steady_clock::time_point now) override;
+  void append_metrics(metrics::Exposition& out) const override;  // canio_metrics.cpp
+
+ protected:
+  void status_extra(nlohmann::json& j) const override;
+
+ private:
+  void on_node_event(const canio::CanioNodeEvent& e, std::vector<BusEvent>& events) const;
+
+  std::shared_ptr<canio::VirtualCanBus> vbus_;  // outlives the ports
+  std::unique_ptr<canio::CanioBus> bus_;
+  canio::CanState can_state_ = canio::CanState::Unknown;
+  SaidCounter tx_full_;
+  std::vector<bool> silent_;
+};
+
+}  // namespace ds1928
