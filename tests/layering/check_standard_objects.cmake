@@ -11,7 +11,10 @@ set(ALLOWED
     # EPSG DS 301 error entry type bit field, not an object index.
     "src/powerlink/error_signalling.hpp|kModeActive = 0x1000"
     # CiA 301 heartbeat producer time of a CAN-I/O node (config_canio: another protocol).
-    "src/config/config_canio.cpp|object 0x1017 is 16 bit")
+    "src/config/config_canio.cpp|object 0x1017 is 16 bit"
+    # CiA 301 identity objects of a CAN-I/O node (the CAN-I/O expected topology).
+    "src/config/config_canio.cpp|an expected identity (0x1000 / 0x1018)"
+    "daemon/canio_metrics.cpp|CAN-I/O node's identity (0x1000 / 0x1018)")
 
 function(check_file path rel out)
   # One list element per line: the list separator and brackets in code become harmless.
