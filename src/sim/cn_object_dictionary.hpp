@@ -32,6 +32,7 @@ class CnObjectDictionary {
   [[nodiscard]] uint16_t pres_size(uint16_t fallback) const noexcept;
   [[nodiscard]] uint16_t preq_size(uint16_t fallback) const noexcept;
   [[nodiscard]] uint32_t cycle_length_us() const noexcept { return v_.cycle_len_us_; }
+  [[nodiscard]] uint8_t multiplexed_cycle_count() const noexcept { return v_.multipl_cycle_cnt_; }
   [[nodiscard]] uint32_t loss_of_frame_tolerance_ns() const noexcept {
     return v_.lof_tolerance_ns_;
   }
