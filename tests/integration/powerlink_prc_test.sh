@@ -50,14 +50,11 @@ tshark_cn_pid=$!
 pids+=($tshark_cn_pid)
 wait_for "$tmp/tshark.log" "Capturing on" 30 || fail "tshark did not start"
 wait_for "$tmp/tshark_cn.log" "Capturing on" 30 || fail "tshark at the CN's end did not start"
-# MN and simulator on their own CPU each (as the cycle bench places them): at SCHED_FIFO the
-# MN's polling would otherwise delay the simulator's timed PRC PRes whenever the scheduler put
-# both on one CPU.
 ip netns exec "$ns_cn" "$sim" powerlink --iface plp_cn --node 1 --count 3 --config "$tmp/prc.yaml" \
-    --cpu 0 >"$tmp/sim.log" 2>&1 &
+    >"$tmp/sim.log" 2>&1 &
 sim_pid=$!
 pids+=($sim_pid)
-ip netns exec "$ns_mn" "$mn" --iface plp_mn --config "$tmp/prc.yaml" --rt-priority 80 --cpu 1 \
+ip netns exec "$ns_mn" "$mn" --iface plp_mn --config "$tmp/prc.yaml" --rt-priority 80 \
     --warmup 1 --duration "$hold" --boot-timeout 30 >"$tmp/mn.log" 2>&1
 rc=$?
 sleep 0.2
@@ -77,7 +74,7 @@ tshark() { command tshark --disable-protocol opensafety "$@"; }
 for end in mn_end cn_end; do
   tshark -r "$tmp/$end.pcapng" -Y epl -T fields -e frame.time_epoch -e epl.mtyp -e epl.src \
       -e epl.dest -e epl.soa.svid -e epl.asnd.svid -e epl.asnd.nmtcommand.cid -e epl.pres.stat \
-      -e epl.asnd.ires.state -e epl.asnd.sres.stat 2>/dev/null ||
+      -e epl.asnd.ires.state -e epl.asnd.sres.stat -e epl.soa.svtg 2>/dev/null ||
     fail "tshark could not read $end.pcapng"
 done | sort -t$'\t' -k1,1n >"$tmp/frames.txt"
 # Resets judged by the wire (both captures cover the MN's whole run, the window of `resets`): each
@@ -87,7 +84,7 @@ done | sort -t$'\t' -k1,1n >"$tmp/frames.txt"
 # often enough for the loss-of-PRes counter (168 at 1 ms; a PRC node's PRes counts when it came
 # within 220 µs of the PResMN: the MN's PRC slot, the 200 µs PRes timeout after the chain), or the node reporting a state the MN
 # resets for. A reset the wire does not explain (the MN counting a PRes lost that came) fails.
-wire=$(python3 "$src/tests/integration/pl_prc_resets.py" "$tmp/frames.txt" 168 5 220) ||
+wire=$(python3 "$src/tests/integration/pl_prc_resets.py" "$tmp/frames.txt" 168 5 220 100) ||
   fail "could not judge the resets from the capture"
 wire_resets=$(sed -n 's/^resets=\([0-9]*\).*/\1/p' <<<"$wire")
 unexplained=$(sed -n 's/.* unexplained=\([0-9]*\).*/\1/p' <<<"$wire")
