@@ -74,7 +74,7 @@ tshark() { command tshark --disable-protocol opensafety "$@"; }
 for end in mn_end cn_end; do
   tshark -r "$tmp/$end.pcapng" -Y epl -T fields -e frame.time_epoch -e epl.mtyp -e epl.src \
       -e epl.dest -e epl.soa.svid -e epl.asnd.svid -e epl.asnd.nmtcommand.cid -e epl.pres.stat \
-      -e epl.asnd.ires.state -e epl.asnd.sres.stat -e epl.soa.svtg 2>/dev/null ||
+      -e epl.asnd.ires.state -e epl.asnd.sres.stat -e epl.soa.svtg -e epl.preq.rd 2>/dev/null ||
     fail "tshark could not read $end.pcapng"
 done | sort -t$'\t' -k1,1n >"$tmp/frames.txt"
 # Resets judged by the wire (both captures cover the MN's whole run, the window of `resets`): each
@@ -100,12 +100,19 @@ import sys
 socs = pres_mn = preq12 = preq3 = syncreq = syncres = 0
 pres = {1: 0, 2: 0}
 rows = [l.rstrip("\n").split("\t") for l in open(sys.argv[1])]
-rows = [r + [""] * (6 - len(r)) for r in rows if len(r) >= 3 and r[1]]
+rows = [r + [""] * (12 - len(r)) for r in rows if len(r) >= 3 and r[1]]
 # tshark prints some fields in hex (0x06): numbers compared as numbers.
 num = lambda v: str(int(v, 0)) if v else ""
+rd = [r[11] in ("1", "True", "true") for r in rows]
 rows = [[r[0]] + [num(v) for v in r[1:6]] for r in rows]
-# The hold: from the first PResMN on, up to the last SoC whose cycle is complete (its SoA seen).
-first = next((i for i, r in enumerate(rows) if r[1] == "4" and r[2] == "240"), len(rows))
+# The hold: from the first PResMN on and the MN OPERATIONAL (its first PReq with RD=1: every node
+# booted, node 3 back from its NMTResetConfiguration), up to the last SoC whose cycle is complete
+# (its SoA seen).
+first_mn = next((i for i, r in enumerate(rows) if r[1] == "4" and r[2] == "240"), len(rows))
+first_rd = next((i for i, r in enumerate(rows) if r[1] == "3" and rd[i]), len(rows))
+first = max(first_mn, first_rd)
+while first > 0 and rows[first][1] != "1":
+    first -= 1  # from that cycle's SoC
 last_soa = max((i for i, r in enumerate(rows) if r[1] == "5"), default=-1)
 for i, r in enumerate(rows):
     mtyp, src, dst, soa_svid, asnd_svid = r[1], r[2], r[3], r[4], r[5]
@@ -131,7 +138,7 @@ PY
 [ "$preq12" = 0 ] || fail "$preq12 PReq to the PRC nodes 1/2 on the wire"
 [ "${syncreq:-0}" -ge 6 ] && [ "${syncres:-0}" -ge 6 ] ||
   fail "SyncRequests $syncreq, SyncResponses $syncres (two PRC nodes need at least 3 each)"
-# From the first PResMN on, every SoC is followed by one (the first PResMN's own SoC precedes the window).
+# In the hold every SoC is followed by one PResMN.
 # (A cycle with every PRC node being booted again after a reset has no PResMN.)
 [ "${socs:-0}" -gt 1000 ] && [ $((pres_mn - socs)) -le 1 ] &&
   { [ "$resets" != 0 ] || [ $((socs - pres_mn)) -le 1 ]; } ||
