@@ -120,7 +120,7 @@ def main():
             resets.append((t, dst))
             prc_members.discard(dst)
             was_op.discard(dst)
-            counter[dst] = 0
+            # (the MN's loss counter runs on across a reset: it restarts at 0 only when it fires)
     explained = {"soc_gap": 0, "pres_missing": 0, "sync_missing": 0, "not_operational": 0,
                  "boot_timeout": 0}
     op_times = {}
