@@ -156,7 +156,7 @@ for end in mn_end cn_end; do
       -T fields -e frame.number -e epl.src -e epl.mtyp -e _ws.expert.message 2>/dev/null
 done >"$tmp/expert.txt"
 [ -s "$tmp/expert.txt" ] && { head "$tmp/expert.txt"; fail "Wireshark finds malformed frames or expert errors"; }
-pass "on the wire: $socs SoCs, $pres_mn PResMN, PRes node 1 $pres1 / node 2 $pres2 ($lost PRes counted lost by the MN, no threshold reached), $preq3 PReq to node 3, none to 1 and 2; $syncreq SyncRequests, $syncres SyncResponses; Wireshark clean"
+pass "on the wire: $socs SoCs, $pres_mn PResMN, PRes node 1 $pres1 / node 2 $pres2 ($lost PRes counted lost by the MN), $preq3 PReq to node 3, none to 1 and 2; $syncreq SyncRequests, $syncres SyncResponses; Wireshark clean"
 
 stats() { grep "^node $1 stats" "$tmp/sim.log"; }
 for n in 1 2; do
