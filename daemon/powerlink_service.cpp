@@ -20,6 +20,7 @@ nlohmann::json configuration_json(const powerlink::CnStatus& n) {
     failures.push_back(powerlink::describe(n.last_failures[i]));
   return {{"objects_written", n.objects_written},
           {"object_failures", n.object_failures},
+          {"configuration_resets", n.configuration_resets},
           {"last_failures", std::move(failures)},
           {"identity_mismatch",
            n.identity_mismatch ? nlohmann::json(powerlink::describe(n.mismatch)) : nullptr}};

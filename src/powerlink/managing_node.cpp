@@ -20,6 +20,8 @@ std::string_view to_string(CnBootState s) noexcept {
       return "wait_pre_operational_2";
     case CnBootState::kConfigure:
       return "configure";
+    case CnBootState::kResetConfiguration:
+      return "reset_configuration";
     case CnBootState::kWaitReadyToOperate:
       return "wait_ready_to_operate";
     case CnBootState::kWaitOperational:
@@ -77,6 +79,8 @@ const ManagingNode::Handler ManagingNode::kHandlers[] = {
      &ManagingNode::on_timeout_boot, false},
     {&ManagingNode::on_enter_configure, &ManagingNode::on_state_configure,
      &ManagingNode::on_timeout_boot, false},
+    {&ManagingNode::on_enter_reset_configuration, &ManagingNode::on_state_reset,
+     &ManagingNode::on_timeout_reset, true},
     {&ManagingNode::on_enter_ready, &ManagingNode::on_state_ready, &ManagingNode::on_timeout_boot,
      false},
     {&ManagingNode::on_enter_wait_operational, &ManagingNode::on_state_wait_operational,
@@ -176,6 +180,15 @@ ManagingNode::ManagingNode(const MnConfig& config)
       cn->object_ops.push_back({OpKind::kObjectWrite, w.index, w.subindex, ValueSource::kData, 0,
                                 cn->object_data.size(), w.data.size()});
       cn->object_data.insert(cn->object_data.end(), w.data.begin(), w.data.end());
+    }
+    // A multiplexed CN checks its PReqs against NMT_CycleTiming.MultiplCycleCnt (0x1F98/7): the
+    // PReq due every n-th cycle after the last one. Written last, so it is the polling the MN
+    // does whatever a concise DCF said.
+    if (nc.multiplex > 1) {
+      cn->object_ops.push_back({OpKind::kObjectWrite, obj::kCycleTiming,
+                                obj::kCycleTimingMultiplCycleCnt, ValueSource::kData, 0,
+                                cn->object_data.size(), 1});
+      cn->object_data.push_back(static_cast<uint8_t>(nc.multiplex));
     }
     Cn* raw = cn.get();
     SdoClientConfig sc;
@@ -278,16 +291,37 @@ void ManagingNode::on_state_wait_preop2(Cn& cn, NmtState s) noexcept {
 }
 
 void ManagingNode::on_enter_configure(Cn& cn) noexcept {
-  // A PRC node joins the isochronous phase by its SyncRequests (managing_node_prc.cpp).
+  // Two passes when there is something to write (EPSG DS 301's configuration download): the
+  // writes, then NMTResetConfiguration (the CN takes the objects on re-entering its boot), then
+  // this step again without writes, in which a PRC node is chained. A PRC node joins the
+  // isochronous phase by its SyncRequests only (managing_node_prc.cpp): during the writes it gets
+  // no PReq.
+  const bool writing = !cn.config_applied && (!cn.object_ops.empty() || !cn.boot_ops.empty());
   cn.st->in_isochronous = !uses_prc(cn);
-  cn.prc_step = uses_prc(cn) ? PrcStep::kMeasurePredecessor : PrcStep::kOff;
+  cn.prc_step = uses_prc(cn) && !writing ? PrcStep::kMeasurePredecessor : PrcStep::kOff;
   cn.prc_failures = 0;
   cn.prc_wait = false;
-  cn.object_next = 0;
-  cn.st->last_failure_count = 0;
-  cn.boot_next = 0;
+  cn.object_next = writing ? 0 : cn.object_ops.size();
+  cn.boot_next = writing ? 0 : cn.boot_ops.size();
+  if (writing) {
+    cn.st->last_failure_count = 0;
+    cn.written = 0;
+  }
   cn.configuring = true;
   start_next_sdo(cn);
+}
+
+void ManagingNode::on_enter_reset_configuration(Cn& cn) noexcept {
+  // The CN goes through RESET_CONFIGURATION to NOT_ACTIVE and answers no PReq until it is in
+  // PRE_OPERATIONAL_2 again: out of the isochronous phase, identified again after reset_wait
+  // (its IdentResponse then reports the payload sizes it took).
+  cn.st->in_isochronous = false;
+  cn.st->identified = false;
+  cn.config_applied = true;
+  cn.sdo_wait_answer = false;
+  cn.sdo->reset();  // the CN's SDO server forgets its connection; the next transfer reopens it
+  ++cn.st->configuration_resets;
+  queue_nmt(cn, NmtCommandId::kResetConfiguration);
 }
 void ManagingNode::on_state_configure(Cn& cn, NmtState s) noexcept {
   if (s == NmtState::kNotActive || s == NmtState::kPreOperational1)
@@ -326,6 +360,8 @@ void ManagingNode::on_state_operational(Cn& cn, NmtState s) noexcept {
 }
 
 void ManagingNode::on_enter_reset(Cn& cn) noexcept {
+  // NMTResetNode: the CN restores its stored communication objects; they are written again.
+  cn.config_applied = false;
   cn.st->in_isochronous = false;
   cn.st->identified = false;
   cn.st->prc = false;

@@ -30,9 +30,12 @@
 namespace ds1928::powerlink {
 
 enum class CnBootState : uint8_t {
-  kIdentify,            // IdentRequests until an IdentResponse matches the configuration
-  kWaitPreOp2,          // StatusRequests until the CN reports PRE_OPERATIONAL_2
-  kConfigure,           // in the isochronous phase; SDO writes of the module settings
+  kIdentify,    // IdentRequests until an IdentResponse matches the configuration
+  kWaitPreOp2,  // StatusRequests until the CN reports PRE_OPERATIONAL_2
+  kConfigure,   // in the isochronous phase; SDO writes of the module settings
+  // NMTResetConfiguration sent after objects were written (EPSG DS 301: the CN takes them on
+  // re-entering its boot); out of the isochronous phase, identified again after reset_wait.
+  kResetConfiguration,
   kWaitReadyToOperate,  // NMTEnableReadyToOperate sent
   kWaitOperational,     // NMTStartNode sent
   kOperational,
@@ -100,7 +103,9 @@ struct CnStatus {
   std::size_t error_entry_count = 0;
   uint64_t static_error_bits = 0;  // of the last StatusResponse
   uint32_t boots = 0;              // times the CN reached OPERATIONAL
-  uint32_t resets = 0;             // NMTResetNode sent
+  // NMTResetConfiguration sent after the boot step "configure" wrote objects (not a reset).
+  uint32_t configuration_resets = 0;
+  uint32_t resets = 0;  // NMTResetNode sent
   uint32_t sdo_errors = 0;
   // PollResponse Chaining (docs/powerlink.md §PollResponse Chaining): configured for it, in it
   // (PRes after the PResMN), polled with PReq/PRes because the CN lacks the PRC feature flag;
@@ -281,6 +286,7 @@ class ManagingNode {
   void on_enter_wait_operational(Cn& cn) noexcept;
   void on_enter_operational(Cn& cn) noexcept;
   void on_enter_reset(Cn& cn) noexcept;
+  void on_enter_reset_configuration(Cn& cn) noexcept;
   void on_state_identify(Cn& cn, NmtState s) noexcept;
   void on_state_wait_preop2(Cn& cn, NmtState s) noexcept;
   void on_state_configure(Cn& cn, NmtState s) noexcept;

@@ -38,7 +38,9 @@ Result<std::size_t> ManagingNode::build_soa(std::span<uint8_t> out) noexcept {
           }
           soa_target_ = cn.cfg.node_id;
           return true;
-        default:
+        default: {
+          const bool resetting =
+              cn.st->boot == CnBootState::kReset || cn.st->boot == CnBootState::kResetConfiguration;
           if (prc_wants_sync_request(cn)) {
             prc_sync_from_ = &cn;  // the SoA is the SyncRequest (build_prc_sync_request)
             soa_service_ = RequestedService::kSyncRequest;
@@ -47,12 +49,13 @@ Result<std::size_t> ManagingNode::build_soa(std::span<uint8_t> out) noexcept {
           }
           if (cn.st->boot == CnBootState::kIdentify) {
             soa_service_ = RequestedService::kIdentRequest;
-          } else if (cn.errsig.status_request_due() && cn.st->boot != CnBootState::kReset) {
+          } else if (resetting) {
+            break;  // no answer to expect while it resets (NMTResetNode, ResetConfiguration)
+          } else if (cn.errsig.status_request_due()) {
             // The error signalling handshake, or EN toggled: whatever the boot state.
             soa_service_ = RequestedService::kStatusRequest;
             cn.last_status_request = counters_.cycles;
-          } else if (cn.st->boot != CnBootState::kReset &&
-                     counters_.cycles - cn.last_status_request >=
+          } else if (counters_.cycles - cn.last_status_request >=
                          config_.bus.nmt.status_request_every &&
                      cn.st->boot != CnBootState::kOperational) {
             soa_service_ = RequestedService::kStatusRequest;
@@ -62,6 +65,7 @@ Result<std::size_t> ManagingNode::build_soa(std::span<uint8_t> out) noexcept {
           }
           soa_target_ = cn.cfg.node_id;
           return true;
+        }
       }
     }
     return false;

@@ -89,6 +89,11 @@ struct ManagingNode::Cn {
   uint8_t prc_failures = 0;     // SyncResponses missed or wrong in a row
   uint8_t prc_measured_to = 0;  // the predecessor the last SyncRequest pair was for
   bool configuring = false;
+  // Boot step "configure" wrote objects in this boot (successful SDO writes) ...
+  uint32_t written = 0;
+  // ... and NMTResetConfiguration made the CN take them: the next "configure" writes nothing
+  // (until an NMTResetNode, which restores the CN's stored values).
+  bool config_applied = false;
   std::array<SlotRegister, kOpQueueDepth> ops{};
   std::size_t ops_head = 0;
   std::size_t ops_count = 0;

@@ -31,7 +31,8 @@ bool ManagingNode::uses_prc(const Cn& cn) const noexcept {
 }
 
 bool ManagingNode::prc_setup_pending(const Cn& cn) const noexcept {
-  return uses_prc(cn) && cn.prc_step != PrcStep::kActive;
+  // kOff in the writing pass of "configure": chained only once the CN took its configuration.
+  return uses_prc(cn) && cn.prc_step != PrcStep::kOff && cn.prc_step != PrcStep::kActive;
 }
 
 bool ManagingNode::prc_wants_sync_request(const Cn& cn) const noexcept {

@@ -35,7 +35,9 @@ bool ManagingNode::poll(RegisterResult& out) noexcept {
 void ManagingNode::start_next_sdo(Cn& cn) noexcept {
   while (!cn.op_active) {
     const CnBootState b = cn.st->boot;
-    if (b == CnBootState::kIdentify || b == CnBootState::kReset) return;
+    if (b == CnBootState::kIdentify || b == CnBootState::kReset ||
+        b == CnBootState::kResetConfiguration)
+      return;
     if (cn.configuring && cn.object_next < cn.object_ops.size()) {
       start_object_op(cn);
       continue;
@@ -48,6 +50,17 @@ void ManagingNode::start_next_sdo(Cn& cn) noexcept {
       // A PRC node is configured once its chain set-up is done too (managing_node_prc.cpp).
       if (prc_setup_pending(cn)) return;
       cn.configuring = false;
+      if (!cn.config_applied && cn.written > 0) {
+        // Objects were written: NMTResetConfiguration makes the CN take them (EPSG DS 301).
+        enter(cn, CnBootState::kResetConfiguration);
+        return;
+      }
+      if (!cn.config_applied && uses_prc(cn)) {
+        // Nothing was taken (every write refused): chain the PRC node without a reset.
+        cn.config_applied = true;
+        enter(cn, CnBootState::kConfigure);
+        return;
+      }
       enter(cn, CnBootState::kWaitReadyToOperate);
       continue;
     } else if (cn.ops_count > 0 && b != CnBootState::kWaitPreOp2) {
@@ -118,6 +131,7 @@ void ManagingNode::object_done(Cn& cn, std::error_code ec, std::span<const uint8
                                                    op.kind == OpKind::kIdentityRead, ec};
   } else if (op.kind == OpKind::kObjectWrite) {
     ++st.objects_written;
+    ++cn.written;
   }
   if (op.kind != OpKind::kIdentityRead) return;
   uint32_t found = 0;
@@ -153,6 +167,8 @@ void ManagingNode::sdo_done(Cn& cn, std::error_code ec, std::span<const uint8_t>
   if (ec) {
     ++cn.st->sdo_errors;
     cn.st->last_error = ec;
+  } else if (cn.op_internal && cn.current.write) {
+    ++cn.written;
   }
   if (cn.op_internal) {
     // A setting the bus controller refuses is reported (status) but does not stop the boot.

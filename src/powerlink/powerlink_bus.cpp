@@ -267,7 +267,11 @@ void PowerlinkBus::prc_slot(ExchangeResult& result, std::size_t n_axes) noexcept
   drain(0);  // a PRes found now answered an earlier PResMN
   const int64_t sent_ns = clock_();
   send(mn_.build_pres_mn(tx_));
-  const int64_t deadline = sent_ns + mn_.prc_slot_ns();
+  // The slot counts from the clock read after the send: a cycle thread preempted between the
+  // read and the send put the PResMN (the CNs' time reference) on the wire late, and the PRC
+  // PRes with it; a deadline from the earlier read would count that lateness of the MN as the
+  // CNs' loss.
+  const int64_t deadline = clock_() + mn_.prc_slot_ns();
   std::size_t pending = nodes.size();
   while (pending > 0) {
     Received r = link_.receive(rx_, deadline);

@@ -50,6 +50,7 @@ inline constexpr uint16_t kCycleTiming = 0x1F98;
 // Sub-indices with a meaning of their own.
 inline constexpr uint8_t kCycleTimingPReqActPayload = 4;  // kCycleTiming/4
 inline constexpr uint8_t kCycleTimingPResActPayload = 5;  // kCycleTiming/5
+inline constexpr uint8_t kCycleTimingMultiplCycleCnt = 7;  // kCycleTiming/7
 // NMT_NodeAssignment bit 14: the node is polled by PollResponse Chaining.
 inline constexpr uint32_t kNodeAssignmentPrc = 0x00004000;
 }  // namespace obj

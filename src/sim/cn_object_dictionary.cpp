@@ -221,6 +221,9 @@ uint16_t CnObjectDictionary::preq_size(uint16_t fallback) const noexcept {
 uint32_t CnObjectDictionary::cycle_length_us() const noexcept {
   return static_cast<uint32_t>(value(obj::kCycleLen, 0));
 }
+uint8_t CnObjectDictionary::multiplexed_cycle_count() const noexcept {
+  return static_cast<uint8_t>(value(obj::kCycleTiming, obj::kCycleTimingMultiplCycleCnt));
+}
 uint32_t CnObjectDictionary::loss_of_frame_tolerance_ns() const noexcept {
   return static_cast<uint32_t>(value(obj::kLossOfSocTolerance, 0));
 }

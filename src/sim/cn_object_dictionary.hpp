@@ -43,6 +43,7 @@ class CnObjectDictionary {
   [[nodiscard]] uint16_t pres_size(uint16_t fallback) const noexcept;
   [[nodiscard]] uint16_t preq_size(uint16_t fallback) const noexcept;
   [[nodiscard]] uint32_t cycle_length_us() const noexcept;
+  [[nodiscard]] uint8_t multiplexed_cycle_count() const noexcept;
   [[nodiscard]] uint32_t loss_of_frame_tolerance_ns() const noexcept;
   // CFM_VerifyConfiguration /1, /2: the IdentResponse's VerifyConfigurationDate/Time, which an MN
   // compares with the configuration it expects (CFM_ExpConfDateList/TimeList) to skip a download.

@@ -196,6 +196,9 @@ void PowerlinkCn::reset(pl::NmtCommandId command, int64_t now_ns) noexcept {
   // NMTResetNode/ResetCommunication take the communication objects back to their stored (else
   // default) values; NMTResetConfiguration is how an MN activates what it wrote: kept.
   if (command != pl::NmtCommandId::kResetConfiguration) comm_.reset_communication();
+  // RESET_CONFIGURATION (which every reset passes): the DLL takes what the objects say now.
+  dll_ = {comm_.pres_size(layout_.pres_size), comm_.preq_size(layout_.preq_size),
+          comm_.multiplexed_cycle_count()};
   sdo_->reset();
   async_head_ = 0;
   async_count_ = 0;
@@ -340,8 +343,10 @@ void PowerlinkCn::soc_cycling(const pl::Soc& soc, int64_t now_ns) noexcept {
   check_prc_fallback(now_ns);
   // Loss of PReq (in PRC mode: of the PResMN): polled before (interval learned) but not within that
   // interval this time.
+  // Counted from READY_TO_OPERATE on (before, the MN may still be configuring the interval).
   if (loss_of_preq_counter_ > 0) --loss_of_preq_counter_;
-  if (preq_interval_ != 0) {
+  if (preq_interval_ != 0 &&
+      (state_ == NmtState::kReadyToOperate || state_ == NmtState::kOperational)) {
     ++cycles_since_preq_;
     if (cycles_since_preq_ > preq_interval_) {
       ++stats_.loss_of_preq;
@@ -359,11 +364,9 @@ void PowerlinkCn::soc_cycling(const pl::Soc& soc, int64_t now_ns) noexcept {
 // ---- PReq / PRes ----------------------------------------------------------------------------
 
 void PowerlinkCn::note_polled() noexcept {
-  if (preq_interval_ == 0 || cycles_since_preq_ == 0) {
-    preq_interval_ = std::max<uint32_t>(1, cycles_since_preq_);
-  } else {
-    preq_interval_ = cycles_since_preq_;
-  }
+  // Strict: the interval is the configured one (a multiplexed CN is told its MultiplCycleCnt),
+  // not learned from the MN's PReqs.
+  preq_interval_ = std::max<uint32_t>(1, dll_.multiplexed_cycle_count);
   cycles_since_preq_ = 0;
 }
 
@@ -404,7 +407,7 @@ void PowerlinkCn::send_pres(int64_t now_ns, int64_t offset_ns) noexcept {
   std::array<uint8_t, pl::kMaxIsoPayload> payload{};
   // The size an MN configured (cycle timing /5, the TPDO mapping), else the modules' image; module
   // bytes beyond a smaller configured size are left out.
-  std::size_t size = comm_.pres_size(layout_.pres_size);
+  std::size_t size = dll_.pres_size;
   for (const HostedModule& m : modules_) {
     if (m.mapping == nullptr) continue;
     (void)pl::write_inputs(std::span<uint8_t>(payload.data(), size), *m.mapping,
@@ -538,8 +541,8 @@ void PowerlinkCn::send_ident_response() noexcept {
   ident.request_count = request_count();
   ident.priority = request_priority();
   ident.mtu = 300;
-  ident.poll_in_size = comm_.pres_size(layout_.pres_size);
-  ident.poll_out_size = comm_.preq_size(layout_.preq_size);
+  ident.poll_in_size = dll_.pres_size;
+  ident.poll_out_size = dll_.preq_size;
   ident.response_time_ns = config_.response_time_ns;
   ident.device_type = config_.device_type;
   ident.vendor_id = config_.vendor_id;

@@ -245,9 +245,17 @@ class PowerlinkCn {
   bool have_soc_ = false;
   // The module's NetTime: CLOCK_MONOTONIC minus this anchor's offset.
   NetTimeAnchor net_anchor_;
-  // Loss of PReq: cycles since the last PReq vs. the learned multiplex interval.
+  // The DLL configuration taken from the objects when the node last passed RESET_CONFIGURATION
+  // (every reset does; EPSG DS 301: objects written later wait for the next one): PRes/PReq
+  // payload sizes (0x1F98/5, /4 or the PDO mappings) and MultiplCycleCnt (0x1F98/7).
+  struct DllConfig {
+    uint16_t pres_size = 0;
+    uint16_t preq_size = 0;
+    uint8_t multiplexed_cycle_count = 0;
+  } dll_;
+  // Loss of PReq: cycles since the last PReq against the interval of 0x1F98/7 (1 when it is 0).
   uint32_t cycles_since_preq_ = 0;
-  uint32_t preq_interval_ = 0;  // 0 = not polled yet
+  uint32_t preq_interval_ = 0;  // 0 = not polled since the reset
   uint32_t loss_of_preq_counter_ = 0;
   // Power.
   bool powered_ = true;

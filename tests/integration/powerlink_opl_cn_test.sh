@@ -73,18 +73,14 @@ cpu_line=""
 # 200 µs of the demo's CDC would count its late answers as lost PRes and reset it in bursts. What a
 # user sets for such a CN: half the cycle at 1 ms, 1 ms at 10 ms (PRES_TIMEOUT_US overrides).
 pres_timeout_us=${PRES_TIMEOUT_US:-$((period_us >= 10000 ? 1000 : period_us / 2))}
-# Multiplexed: the CN is told its multiplexed cycle (NMT_CycleTiming.MultiplCycleCnt 0x1F98/7),
-# and its loss-of-PReq threshold (DLL_CNLossPReq 0x1C0D/3) is switched off: openPOWERLINK's CN
-# counts its own multiplexed cycle from an arbitrary start (it ignores the SoC's MC flag:
-# "$$$ check multiplexed cycle restart" in dllkstatemachine.c) and expects its PReq in its own
-# cycle 0, and it never decrements that counter (errhndk.c decrementCnCounters()), so a CN polled
-# in another slot would count a lost PReq every multiplexed cycle until its threshold.
-mux_writes=""
-if [ "$mux" -gt 1 ]; then
-  mux_writes="      sdo_writes:
-        - {index: 0x1F98, subindex: 7, u8: $mux}
-        - {index: 0x1C0D, subindex: 3, u32: 0}"
-fi
+# Multiplexed (MULTIPLEX=n): nothing but `multiplex: n`. The MN writes the CN its
+# NMT_CycleTiming.MultiplCycleCnt (0x1F98/7 = n) with the CDC's objects and ends the download with
+# NMTResetConfiguration: openPOWERLINK's CN reads 0x1F98/7 into its DLL only then
+# (ctrlu.c updateDllConfig(), called on kNmtGsResetConfiguration) and from then on expects a PReq
+# every n-th cycle counted from its last one (dllkframe.c processReceivedPreq() sets cycleCount 0,
+# each SoC advances it modulo n, dllkstatemachine.c reports DLL_ERR_CN_LOSS_PREQ at an SoA with
+# cycleCount 0 and no PReq). Without the reset it kept 0 (every cycle) and left OPERATIONAL with
+# NmtEventNmtCycleError about 10 ms after each start.
 cat >"$tmp/opl.yaml" <<YAML
 bus: powerlink
 cycle:
@@ -98,7 +94,6 @@ powerlink:
       pres_timeout_us: $pres_timeout_us
       prc: $([ "$prc" = 1 ] && echo true || echo false)
       multiplex: $mux
-$mux_writes
 shm:
   name: /ds1928d_plo_$tag
 socket:
@@ -260,11 +255,42 @@ if [ "$resets" = 0 ]; then
   [ "$mux" -gt 1 ] && polled=$((socs / mux))
   [ "$total" -ge $((polled - lost)) ] ||
     fail "only $total OPERATIONAL PRes on the wire for $socs SoCs ($polled polling node 1) in the same window and $lost lost"
-  if [ "$mux" -gt 1 ]; then
-    # Polled only every n-th cycle: at most one PRes per n SoCs (+1 at the window's edges).
-    [ "$total" -le $((socs / mux + 1)) ] ||
-      fail "$total PRes of node 1 for $socs SoCs: not polled every ${mux}th cycle only"
-  fi
+fi
+if [ "$mux" -gt 1 ]; then
+  # The MN's frames as the CN got them: the configuration download ended with
+  # NMTResetConfiguration (0x2A) to node 1 before its start; in the hold (from the first PReq with
+  # RD=1 on) every PReq to node 1 carries MS and follows the previous one by exactly n SoCs.
+  read -r preqs bad_gap no_ms reset_conf < <(tshark -r "$tmp/mn_frames.pcapng" -Y "epl" -T fields \
+      -e epl.mtyp -e epl.dest -e epl.preq.ms -e epl.preq.rd -e epl.asnd.nmtcommand.cid 2>/dev/null |
+    python3 -c '
+import sys
+n = int(sys.argv[1])
+preqs = bad = no_ms = reset_conf = 0
+socs_since, holding = None, False
+for line in sys.stdin:
+    f = (line.rstrip("\n").split("\t") + [""] * 5)[:5]
+    mtyp = int(f[0], 0) if f[0] else 0
+    num = lambda v: int(v, 0) if v else 0
+    if mtyp == 6 and f[1] == "1" and num(f[4]) == 0x2A:
+        reset_conf += 1
+    if mtyp == 1 and socs_since is not None:
+        socs_since += 1
+    if mtyp != 3 or f[1] != "1":
+        continue
+    if num(f[3]) == 1:
+        holding = True
+    if holding:
+        preqs += 1
+        no_ms += num(f[2]) != 1
+        bad += socs_since is not None and socs_since != n
+    socs_since = 0
+print(preqs, bad, no_ms, reset_conf)
+' "$mux")
+  [ "${reset_conf:-0}" -ge 1 ] || fail "no NMTResetConfiguration to node 1 on the wire"
+  [ "${preqs:-0}" -gt 0 ] && [ "$bad_gap" = 0 ] && [ "$no_ms" = 0 ] ||
+    fail "PReq to node 1: $preqs in the hold, $bad_gap not $mux SoCs after the previous one, $no_ms without MS"
+  n=$(node1 "$(status)")
+  pass "multiplexed every ${mux}th cycle: $preqs PReq to node 1 in the hold, each $mux SoCs after the last and with MS; NMTResetConfiguration sent $reset_conf time(s) (status: $(jq -c .configuration <<<"$n"))"
 fi
 tshark -r "$tmp/cn_frames.pcapng" -Y "_ws.malformed || _ws.expert.severity >= 0x00600000" \
     -T fields -e frame.number -e epl.src -e epl.mtyp -e _ws.expert.message >"$tmp/expert.txt" 2>/dev/null

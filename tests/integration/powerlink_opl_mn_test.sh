@@ -22,12 +22,17 @@
 # The openPOWERLINK archive (DS1928_PEERS_DIR, ../shared/peers or fetched) is built once into a cache
 # (tests/peers/openpowerlink.sh); a missing archive SKIPS this test (77) with the command that gets
 # it, or FAILS it under CI=true or DS1928_REQUIRE_PEERS=1; it never passes silently.
-# Usage: powerlink_opl_mn_test.sh BUILD_DIR SOURCE_DIR [plain|prc]   (root; 77 = skipped)
+# With MODE mux the CDC makes node 1 a multiplexed CN as openCONFIGURATOR writes one
+# (tests/peers/opl_cdc.py --mux-node 1: NodeAssignment bit 9, 0x1F9B/1 = 1, MultiplCycleCnt
+# 0x1F98/7 = 4 for the MN and in node 1's DCF). openPOWERLINK V2.7.2's MN does not multiplex
+# (docs/powerlink-testing.md): the test states what it does on the wire — a PReq to node 1 in
+# every cycle, never with MS — and that ds1928-sim, told MultiplCycleCnt 4, holds under it.
+# Usage: powerlink_opl_mn_test.sh BUILD_DIR SOURCE_DIR [plain|prc|mux]   (root; 77 = skipped)
 set -u
 . "${2:?source dir}/tests/lib/netns.sh"
 use_trees "$1" "$2"
 mode=${3:-plain}
-case $mode in plain | prc) ;; *) echo "FAIL: mode must be plain or prc"; exit 1 ;; esac
+case $mode in plain | prc | mux) ;; *) echo "FAIL: mode must be plain, prc or mux"; exit 1 ;; esac
 if [ "$mode" = prc ]; then hold=${OPL_MN_HOLD_SECONDS:-60}; else hold=${OPL_MN_HOLD_SECONDS:-20}; fi
 boot_limit=40
 
@@ -68,6 +73,10 @@ if [ "$mode" = prc ]; then
   cdc=$tmp/mnobd_prc.cdc
   "$src/tests/peers/opl_cdc.py" "$OPL_MNOBD_CDC" "$cdc" --prc-node 1 ||
     fail "cannot write the demo's concise DCF with node 1 as a PRC node"
+elif [ "$mode" = mux ]; then
+  cdc=$tmp/mnobd_mux.cdc
+  "$src/tests/peers/opl_cdc.py" "$OPL_MNOBD_CDC" "$cdc" --mux-node 1 --mux-count 4 ||
+    fail "cannot write the demo's concise DCF with node 1 multiplexed"
 fi
 start=$(date +%s.%N)
 "$src/tests/peers/opl_run.sh" "$ns_mn" -- "$OPL_DEMO_MN" -d "$if_mn" -c "$cdc" \
@@ -122,6 +131,38 @@ error_resets=$(grep -c "NMTResetNode (E_" "$tmp/nmt.txt")
 node_errors=$(grep -c "Node=  1, NmtNodeEventError" "$tmp/opl_mn.log")
 echo "whole run: NMT commands to node 1: $(sed 's/.*(NMT_COMMAND) //' "$tmp/nmt.txt" | tr '\n' ';')"
 echo "whole run: resets of node 1 for an error: $error_resets, MN node error events: $node_errors"
+if [ "$mode" = mux ]; then
+  # ---- 4. What openPOWERLINK's MN does with a multiplexed node 1, from the capture ------------
+  tshark -r "$tmp/mn.pcapng" -Y epl -T fields -e frame.time_epoch -e epl.mtyp -e epl.dest \
+    -e epl.preq.ms -e epl.soc.mc -e epl.soa.svid >"$tmp/frames.txt" 2>/dev/null
+  read -r socs preq1 preq_ms mc_toggles < <(python3 - "$tmp/frames.txt" "$hold" <<'PY'
+import sys
+rows = [(l.rstrip("\n").split("\t") + [""] * 6)[:6] for l in open(sys.argv[1])]
+rows = [r for r in rows if r[1]]
+num = lambda v: int(v, 0) if v else 0
+truth = lambda v: v in ("1", "True", "true")
+hold = float(sys.argv[2])
+end = max((float(r[0]) for r in rows if num(r[1]) == 5), default=0)
+win = [r for r in rows if end - hold <= float(r[0]) <= end]
+socs = sum(1 for r in win if num(r[1]) == 1)
+preq = [r for r in win if num(r[1]) == 3 and r[2] == "1"]
+mc = [truth(r[4]) for r in win if num(r[1]) == 1]
+print(socs, len(preq), sum(1 for r in preq if truth(r[3])),
+      sum(1 for a, b in zip(mc, mc[1:]) if a != b))
+PY
+)
+  [ "${socs:-0}" -gt 0 ] || fail "no SoC in the hold"
+  kill -TERM "$sim_pid" 2>/dev/null
+  wait "$sim_pid" 2>/dev/null
+  stats=$(grep "^node 1 stats" "$tmp/sim.log")
+  grep -q " loss_preq=0 " <<<"$stats" || fail "ds1928-sim counted lost PReqs: $stats"
+  # The finding, checked so that a change of openPOWERLINK's behaviour shows: every cycle polls
+  # node 1, no PReq carries MS, the SoC's MC never toggles.
+  [ $((preq1 + 1)) -ge "$socs" ] && [ "$preq_ms" = 0 ] ||
+    fail "openPOWERLINK's MN multiplexed node 1 after all: $preq1 PReq for $socs SoCs, $preq_ms with MS, MC toggled $mc_toggles times"
+  pass "openPOWERLINK's MN with node 1 multiplexed (MultiplCycleCnt 4) polls it in every cycle: in the last $hold s $socs SoCs, $preq1 PReq to node 1, $preq_ms with MS, MC toggled $mc_toggles times; ds1928-sim held (loss_preq=0)"
+  exit 0
+fi
 [ "$mode" = prc ] || exit 0
 
 # ---- 4. PollResponse Chaining, as the capture and the simulator show it ----------------------

@@ -93,6 +93,54 @@ TEST_CASE("cycle_objects: the MN writes the CN's cycle length and payload limits
   CHECK(rig.st(3).pres_size == 16 + 7);
 }
 
+TEST_CASE("Objects written in the boot are taken by NMTResetConfiguration before the CN is started",
+          "[powerlink][mn][configure]") {
+  // EPSG DS 301: a configuration download ends with NMTResetConfiguration; the CN takes the
+  // objects on re-entering its boot (RESET_CONFIGURATION -> NOT_ACTIVE), is identified again and
+  // started without a second download.
+  Rig rig({3}, 1, {}, [](PowerlinkNodeConfig& n) {
+    n.cycle_objects = true;
+    n.multiplex = 2;
+  });
+  REQUIRE(rig.run_until([&] { return operational(rig); }, 5000));
+  TestCn& cn = *rig.cns[0];
+  const std::vector<NmtCommandId> boot{NmtCommandId::kResetConfiguration,
+                                       NmtCommandId::kEnableReadyToOperate,
+                                       NmtCommandId::kStartNode};
+  CHECK(cn.nmt_log == boot);
+  CHECK(rig.st(3).configuration_resets == 1);
+  CHECK(rig.st(3).resets == 0);
+  CHECK(rig.st(3).boots == 1);
+  // What the CN took at RESET_CONFIGURATION: the cycle objects and MultiplCycleCnt (0x1F98/7),
+  // the interval in which the MN polls it.
+  CHECK(cn.taken[{0x1006, 0}] == le(1000, 4));
+  CHECK(cn.taken[{0x1F98, 5}] == le(rig.st(3).pres_size, 2));
+  CHECK(cn.taken[{0x1F98, 7}] == std::vector<uint8_t>{2});
+  // Written once: the second pass of "configure" writes nothing.
+  const auto writes_of_1006 =
+      std::count(cn.writes.begin(), cn.writes.end(), std::pair<uint16_t, uint8_t>{0x1006, 0});
+  CHECK(writes_of_1006 == 1);
+
+  // NMTResetNode restores the CN's stored objects: the next boot writes and resets again.
+  cn.drop_pres = true;
+  REQUIRE(rig.run_until([&] { return rig.st(3).resets == 1; }, 200));
+  cn.drop_pres = false;
+  REQUIRE(rig.run_until([&] { return rig.st(3).boots == 2; }, 5000));
+  CHECK(rig.st(3).configuration_resets == 2);
+  CHECK(std::count(cn.writes.begin(), cn.writes.end(), std::pair<uint16_t, uint8_t>{0x1006, 0}) ==
+        2);
+}
+
+TEST_CASE("A CN with nothing to write is started without NMTResetConfiguration",
+          "[powerlink][mn][configure]") {
+  Rig rig({3}, 0);
+  REQUIRE(rig.run_until([&] { return operational(rig); }, 5000));
+  const std::vector<NmtCommandId> boot{NmtCommandId::kEnableReadyToOperate,
+                                       NmtCommandId::kStartNode};
+  CHECK(rig.cns[0]->nmt_log == boot);
+  CHECK(rig.st(3).configuration_resets == 0);
+}
+
 TEST_CASE("The identity is read back by SDO, a mismatch names the object, expected and found",
           "[powerlink][mn][identity]") {
   SECTION("matching identity boots") {
@@ -172,12 +220,16 @@ TEST_CASE("Error signalling handshake: ER=1 until EC=1, then ER=0 until EC=0",
   const TestCn& cn = *rig.cns[0];
   REQUIRE(cn.er_seen.size() >= 2);
   // ER=1 first, then ER=0 (no ER=1 after the first ER=0: the handshake completed once).
+  // The handshake runs after every identification: again after NMTResetConfiguration (the CN
+  // reset, EC=1 again), so once more per configuration reset.
   CHECK(cn.er_seen.front());
-  const auto first_zero = std::find(cn.er_seen.begin(), cn.er_seen.end(), false);
-  REQUIRE(first_zero != cn.er_seen.end());
-  CHECK(std::find(first_zero, cn.er_seen.end(), true) == cn.er_seen.end());
+  const auto last_one = std::find(cn.er_seen.rbegin(), cn.er_seen.rend(), true);
+  REQUIRE(last_one != cn.er_seen.rend());
+  const auto after = last_one.base();  // the first ER=0 after the last ER=1
+  REQUIRE(after != cn.er_seen.end());
+  CHECK(std::find(after, cn.er_seen.end(), true) == cn.er_seen.end());
   CHECK(rig.st(1).errsig == ErrSigState::kReady);
-  CHECK(rig.st(1).errsig_handshakes == 1);
+  CHECK(rig.st(1).errsig_handshakes == 1 + rig.st(1).configuration_resets);
   CHECK(rig.st(1).errsig_gave_up == 0);
   CHECK(rig.st(1).resets == 0);
 }
@@ -191,7 +243,9 @@ TEST_CASE("A CN that never answers EC=1 still boots, the MN gives up on the hand
   CHECK(rig.st(1).errsig_gave_up == 1);
   CHECK(rig.st(1).errsig_handshakes == 0);
   const int requests = rig.cns[0]->status_requests;
-  CHECK(requests <= static_cast<int>(MnErrorSignalling::kMaxAttempts) + 12);  // bounded
+  // Bounded: per identification (the first, and after each NMTResetConfiguration).
+  CHECK(requests <= static_cast<int>((1 + rig.st(1).configuration_resets) *
+                                     (MnErrorSignalling::kMaxAttempts + 12)));
   for (int i = 0; i < 200; ++i) rig.step();
   CHECK(rig.cns[0]->status_requests == requests);  // no further handshake requests
   CHECK(rig.st(1).boot == CnBootState::kOperational);

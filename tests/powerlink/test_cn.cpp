@@ -137,6 +137,7 @@ void TestCn::on_frame(std::span<const uint8_t> bytes, std::deque<std::vector<uin
     if (h.dst_node != node && h.dst_node != kNodeBroadcast) return;
     if (const auto* cmd = std::get_if<NmtCommand>(&asnd->body)) {
       ++nmt_commands;
+      nmt_log.push_back(static_cast<NmtCommandId>(cmd->command));
       switch (static_cast<NmtCommandId>(cmd->command)) {
         case NmtCommandId::kEnableReadyToOperate:
           if (state == NmtState::kPreOperational2 && !hold_ready_to_operate)
@@ -148,6 +149,12 @@ void TestCn::on_frame(std::span<const uint8_t> bytes, std::deque<std::vector<uin
         case NmtCommandId::kResetNode:
         case NmtCommandId::kResetCommunication:
           state = NmtState::kNotActive;
+          server_.reset();
+          sdo_out_.clear();
+          break;
+        case NmtCommandId::kResetConfiguration:
+          state = NmtState::kNotActive;
+          taken = objects;
           server_.reset();
           sdo_out_.clear();
           break;

@@ -71,6 +71,9 @@ class TestCn : public SdoObjectAccess {
   std::vector<std::pair<uint16_t, uint8_t>> writes;  // in the order received
   // Seen.
   int nmt_commands = 0;
+  std::vector<NmtCommandId> nmt_log;  // every NMT command to this CN, in order
+  // State of the objects when the CN last passed RESET_CONFIGURATION (what it took).
+  std::map<std::pair<uint16_t, uint8_t>, std::vector<uint8_t>> taken;
   int ident_requests = 0;
   int status_requests = 0;
   int reads = 0;  // SDO reads

@@ -1,0 +1,162 @@
+#!/usr/bin/env python3
+"""Explains each reset of a mixed PollResponse Chaining hold from the wire.
+
+  pl_prc_resets.py FRAMES.tsv THRESHOLD SOC_LOSS_MS SLOT_US [ASYNC_US]
+
+FRAMES.tsv: both veth ends' POWERLINK frames merged by time (one clock: one machine), columns
+time, MessageType, source, destination, SoA service, ASnd service, NMTCommandId, the NMT state
+of a PRes, of an IdentResponse, of a StatusResponse, the SoA's RequestedServiceTarget.
+Each NMTResetNode the MN sent to a CN (ASnd NMTCommand 0x28) is a reset. A reset is explained
+by the wire when, before it and since the node's previous reset,
+  - the MN's SoCs stopped for longer than the simulated CN's loss-of-SoC limit (SOC_LOSS_MS:
+    the CN falls back to PRE_OPERATIONAL_1 by the standard's rule; the MN then resets it), or
+  - the node's PRes was missing from its cycles often enough for the MN's loss-of-PRes counter
+    (DS 301: +8 per cycle without the node's PRes, -1 per cycle with it) to reach THRESHOLD:
+    replayed per cycle from the wire, a PRC node's PRes counting when it came within SLOT_US of
+    the cycle's PResMN (the MN's PRC slot: later is outside its slot, lost), a PReq/PRes node's
+    when it came after its PReq and before the next SoC;
+  - or a SyncRequest to the node (PollResponse Chaining set-up) got no SyncResponse within
+    ASYNC_US (the MN's AsyncSlotTimeout, default 100 µs; the MN resets a PRC node at the second
+    miss),
+  - or the node was being booted for longer than a boot step may take (BOOT_STEP_S, 5 s: its
+    answers in the asynchronous slots came late or not; not OPERATIONAL since its last reset),
+  - or the node reported a state the MN resets it for: another than OPERATIONAL after an
+    OPERATIONAL one (it fell back), or READY_TO_OPERATE/OPERATIONAL in an Ident- or
+    StatusResponse while being booted (it did not take an earlier NMTResetNode).
+Prints one line: resets, explained by each cause, unexplained, the longest SoC gap (ms), the SoC
+gaps longer than SOC_LOSS_MS, and per node the cycles without its PRes on the wire.
+"""
+import sys
+
+RESET_NODE = 0x28
+BOOT_STEP_S = 5.0
+OPERATIONAL = 0xFD
+
+
+def num(v):
+    return int(v, 0) if v else None
+
+
+def main():
+    path, threshold, soc_loss_ms = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
+    slot_s = float(sys.argv[4]) / 1e6
+    async_s = float(sys.argv[5] if len(sys.argv) > 5 else 100) / 1e6
+    sync_missed = {}
+    sync_open = {}
+    rows = []
+    for line in open(path):
+        f = (line.rstrip("\n").split("\t") + [""] * 11)[:11]
+        if not f[1]:
+            continue
+        state = f[7] or f[8] or f[9]
+        # A SoA names its invited node in RequestedServiceTarget: kept as its destination.
+        dst = num(f[10]) if num(f[1]) == 5 and f[10] else num(f[3])
+        rows.append((float(f[0]), num(f[1]), num(f[2]), dst, num(f[4]), num(f[5]),
+                     num(f[6]), num(state)))
+    counter, fired_at, missing = {}, {}, {}
+    cycle_seen, polled, answered = set(), {}, set()
+    gap_at, last_soc, max_gap, long_gaps = [], None, 0.0, 0
+    not_op_at = {}
+    was_op = set()
+    resets = []
+
+    def close_cycle():
+        for node in polled:
+            lost = node not in answered
+            c = counter.get(node, 0)
+            if lost:
+                missing[node] = missing.get(node, 0) + 1
+                c += 8
+            elif c > 0:
+                c -= 1
+            if threshold and c >= threshold:
+                fired_at.setdefault(node, []).append(last_soc)
+                c = 0
+            counter[node] = c
+
+    pres_mn_seen = False
+    pres_mn_t = 0.0
+    preq_t = {}
+    prc_members = set()  # nodes that answered a PResMN since their last reset
+    for t, mtyp, src, dst, soa_svid, asnd_svid, cid, stat in rows:
+        if src is not None and src != 240 and stat is not None and mtyp in (4, 6):
+            if stat == OPERATIONAL and mtyp == 4:
+                was_op.add(src)
+            elif (src in was_op and stat != OPERATIONAL) or (
+                    mtyp == 6 and stat in (0x6D, OPERATIONAL) and src not in was_op):
+                not_op_at.setdefault(src, []).append(t)
+        if mtyp == 5 and soa_svid == 6 and dst is not None:
+            for n, t0 in list(sync_open.items()):
+                sync_missed.setdefault(n, []).append(t0)
+            sync_open = {dst: t}
+        elif mtyp == 6 and asnd_svid == 6 and src in sync_open:
+            if t - sync_open.pop(src) > async_s:
+                sync_missed.setdefault(src, []).append(t)
+        if mtyp == 1:  # SoC: the previous cycle is complete
+            if last_soc is not None:
+                close_cycle()
+                gap = (t - last_soc) * 1000
+                max_gap = max(max_gap, gap)
+                if gap > soc_loss_ms:
+                    long_gaps += 1
+                    gap_at.append(t)
+            last_soc, polled, answered, pres_mn_seen = t, {}, set(), False
+        elif mtyp == 4 and src == 240:
+            pres_mn_seen = True
+            pres_mn_t = t
+            for n in prc_members:
+                polled[n] = "prc"  # polled by the PResMN: missing if its PRes does not come
+        elif mtyp == 3 and dst is not None:
+            polled[dst] = "preq"
+            preq_t[dst] = t
+        elif mtyp == 4 and src is not None and last_soc is not None:
+            if src not in polled and pres_mn_seen:
+                polled[src] = "prc"  # a PRC node answers the PResMN without a PReq
+                prc_members.add(src)
+            ref = pres_mn_t if polled.get(src) == "prc" else preq_t.get(src, 0.0)
+            if t - ref <= slot_s:
+                answered.add(src)
+        elif mtyp == 6 and asnd_svid == 4 and cid == RESET_NODE and dst is not None:
+            resets.append((t, dst))
+            prc_members.discard(dst)
+            was_op.discard(dst)
+            # (the MN's loss counter runs on across a reset: it restarts at 0 only when it fires)
+    explained = {"soc_gap": 0, "pres_missing": 0, "sync_missing": 0, "not_operational": 0,
+                 "boot_timeout": 0}
+    op_times = {}
+    for t, mtyp, src, dst, soa_svid, asnd_svid, cid, stat in rows:
+        if mtyp == 4 and stat == OPERATIONAL and src is not None:
+            op_times.setdefault(src, []).append(t)
+    unexplained = []
+    prev = {}
+    first_t = rows[0][0] if rows else 0.0
+    for t, node in resets:
+        since = prev.get(node, 0.0)
+        prev[node] = t
+        if any(since < g <= t for g in gap_at):
+            explained["soc_gap"] += 1
+        elif any(since < f <= t for f in fired_at.get(node, [])):
+            explained["pres_missing"] += 1
+        elif any(since < x <= t for x in sync_missed.get(node, [])):
+            explained["sync_missing"] += 1
+        elif any(since < x <= t for x in not_op_at.get(node, [])):
+            explained["not_operational"] += 1
+        elif t - max(since, first_t) >= BOOT_STEP_S and not any(
+                since < x <= t for x in op_times.get(node, [])):
+            explained["boot_timeout"] += 1
+        else:
+            unexplained.append("node %d at %.3f" % (node, t))
+    print("resets=%d soc_gap=%d pres_missing=%d sync_missing=%d not_operational=%d "
+          "boot_timeout=%d unexplained=%d "
+          "max_soc_gap_ms=%.1f soc_gaps_over_limit=%d cycles_without_pres=%s%s" % (
+              len(resets), explained["soc_gap"], explained["pres_missing"],
+              explained["sync_missing"],
+              explained["not_operational"], explained["boot_timeout"], len(unexplained), max_gap,
+              long_gaps,
+              ",".join("%d:%d" % kv for kv in sorted(missing.items())),
+              (" first_unexplained=" + unexplained[0]) if unexplained else ""))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
