@@ -32,7 +32,8 @@ set(LAYER_tools 8)
 set(SIDEWAYS "")
 
 # Lower folders or single headers a folder must not include although the layers would allow it,
-# NEVER_<from> → folders ("canio") or headers ("canio/canio_bus.hpp"), with the reason in NEVER_<from>_WHY: the configuration takes the CAN-I/O bus options
+# NEVER_<from> → folders ("canio") or headers ("canio/canio_bus.hpp"), with the reason in
+# NEVER_<from>_WHY: the configuration takes the CAN-I/O bus options
 # from can/ and never sees the driver, which only the daemon builds.
 set(NEVER_config "canio")
 set(NEVER_config_WHY "the CAN-I/O bus options live in can/; the driver is the daemon's to build")
