@@ -1,4 +1,4 @@
-// The work of one cycle (DESIGN.md "One cycle", steps 2–5): exchange with the bus, decode each
+// The work of one cycle (docs/design.md §2 "One cycle"): exchange with the bus, decode each
 // axis, run its Flatstream channel, publish to shared memory. Runs on the cycle thread; the
 // normal thread talks to it only through the lock-free queues and atomics below.
 #pragma once

@@ -13,6 +13,7 @@
 #include <cerrno>
 #include <cstring>
 
+#include "canio/can_port_counters.hpp"
 #include "core/clock.hpp"
 
 namespace ds1928::canio {
@@ -41,10 +42,7 @@ struct SocketCanPort::Impl {
   alignas(cmsghdr) std::array<std::array<uint8_t, kControlBytes>, kBatch> control{};
 
   std::atomic<uint8_t> state{static_cast<uint8_t>(CanState::Unknown)};
-  std::atomic<uint64_t> tx_frames{0}, tx_queue_full{0}, tx_interface_down{0}, tx_bus_off{0},
-      tx_invalid{0}, tx_errors{0}, rx_frames{0}, rx_error_frames{0}, rx_kernel_drops{0},
-      rx_unstamped{0}, rx_errors{0}, bus_off_events{0}, restarts{0}, protocol_errors{0},
-      controller_errors{0}, tx_timeouts{0}, no_ack{0};
+  AtomicCanPortCounters counters;
 
   Impl() {
     for (std::size_t i = 0; i < kBatch; ++i) {
@@ -70,12 +68,6 @@ struct SocketCanPort::Impl {
     return static_cast<CanState>(state.load(std::memory_order_acquire));
   }
 };
-
-namespace {
-void bump(std::atomic<uint64_t>& c) noexcept {
-  c.fetch_add(1, std::memory_order_relaxed);
-}
-}  // namespace
 
 std::error_code probe_af_can() noexcept {
   UniqueFd fd(socket(PF_CAN, SOCK_RAW | SOCK_CLOEXEC, CAN_RAW));
@@ -157,7 +149,7 @@ SocketCanPort::~SocketCanPort() = default;
 SendResult SocketCanPort::send(const CanFrame& frame) noexcept {
   Impl& p = *impl_;
   if (!is_sendable(frame)) {
-    bump(p.tx_invalid);
+    bump(p.counters.tx_invalid);
     return {SendStatus::InvalidFrame, EINVAL};
   }
   can_frame cf{};
@@ -167,7 +159,7 @@ SendResult SocketCanPort::send(const CanFrame& frame) noexcept {
   if (!frame.rtr) std::memcpy(cf.data, frame.data.data(), frame.dlc);
   const ssize_t n = ::send(fd_.get(), &cf, sizeof cf, MSG_DONTWAIT);
   if (n == static_cast<ssize_t>(sizeof cf)) {
-    bump(p.tx_frames);
+    bump(p.counters.tx_frames);
     return {};
   }
   const int e = n < 0 ? errno : EIO;
@@ -176,19 +168,19 @@ SendResult SocketCanPort::send(const CanFrame& frame) noexcept {
     case EAGAIN:
       // A controller that is bus-off stops its queue: the queue fills because of it.
       if (p.get_state() == CanState::BusOff) {
-        bump(p.tx_bus_off);
+        bump(p.counters.tx_bus_off);
         return {SendStatus::BusOff, e};
       }
-      bump(p.tx_queue_full);
+      bump(p.counters.tx_queue_full);
       return {SendStatus::QueueFull, e};
     case ENETDOWN:
     case ENXIO:
     case ENODEV:
-      bump(p.tx_interface_down);
+      bump(p.counters.tx_interface_down);
       p.set_state(CanState::Down);
       return {SendStatus::InterfaceDown, e};
     default:
-      bump(p.tx_errors);
+      bump(p.counters.tx_errors);
       return {SendStatus::Failed, e};
   }
 }
@@ -237,7 +229,7 @@ ReceiveResult SocketCanPort::receive(std::span<CanFrame> out, int64_t deadline_n
             uint32_t drops = 0;
             std::memcpy(&drops, CMSG_DATA(c), sizeof drops);
             // The kernel's running total for this socket.
-            p.rx_kernel_drops.store(drops, std::memory_order_relaxed);
+            p.counters.rx_kernel_drops.store(drops, std::memory_order_relaxed);
           }
         }
         if (stamp != 0) {
@@ -251,21 +243,16 @@ ReceiveResult SocketCanPort::receive(std::span<CanFrame> out, int64_t deadline_n
         } else {
           f.rx_time_ns = mono;
           f.rx_clock = RxClock::ReadTime;
-          bump(p.rx_unstamped);
+          bump(p.counters.rx_unstamped);
         }
         if (f.error) {
-          bump(p.rx_error_frames);
+          bump(p.counters.rx_error_frames);
           if (auto e = decode_error_frame(f)) {
-            if (e->bus_off) bump(p.bus_off_events);
-            if (e->restarted) bump(p.restarts);
-            if (e->protocol) bump(p.protocol_errors);
-            if (e->controller) bump(p.controller_errors);
-            if (e->tx_timeout) bump(p.tx_timeouts);
-            if (e->no_ack) bump(p.no_ack);
+            p.counters.count_error_event(*e);
             if (auto s = e->state_change()) p.set_state(*s);
           }
         } else {
-          bump(p.rx_frames);
+          bump(p.counters.rx_frames);
           if (p.get_state() == CanState::Unknown || p.get_state() == CanState::Down)
             p.set_state(CanState::ErrorActive);  // frames flow: the controller is on the bus
         }
@@ -276,7 +263,7 @@ ReceiveResult SocketCanPort::receive(std::span<CanFrame> out, int64_t deadline_n
     const int e = n < 0 ? errno : EAGAIN;
     if (e == EINTR) continue;
     if (e != EAGAIN && e != EWOULDBLOCK) {
-      bump(p.rx_errors);
+      bump(p.counters.rx_errors);
       if (e == ENETDOWN || e == ENODEV || e == ENXIO) {
         p.set_state(CanState::Down);
         return {0, make_error_code(CanError::kInterfaceDown)};
@@ -291,7 +278,7 @@ ReceiveResult SocketCanPort::receive(std::span<CanFrame> out, int64_t deadline_n
     pollfd pfd{fd_.get(), POLLIN, 0};
     const int r = ppoll(&pfd, 1, &ts, nullptr);
     if (r < 0 && errno != EINTR) {
-      bump(p.rx_errors);
+      bump(p.counters.rx_errors);
       return {0, errno_code(errno)};
     }
     if (r > 0 && (pfd.revents & (POLLERR | POLLHUP | POLLNVAL)) != 0 &&
@@ -307,35 +294,14 @@ CanState SocketCanPort::state() const noexcept {
 }
 
 CanPortCounters SocketCanPort::counters() const noexcept {
-  const Impl& p = *impl_;
-  auto r = [](const std::atomic<uint64_t>& a) { return a.load(std::memory_order_relaxed); };
-  CanPortCounters c;
-  c.tx_frames = r(p.tx_frames);
-  c.tx_queue_full = r(p.tx_queue_full);
-  c.tx_interface_down = r(p.tx_interface_down);
-  c.tx_bus_off = r(p.tx_bus_off);
-  c.tx_invalid = r(p.tx_invalid);
-  c.tx_errors = r(p.tx_errors);
-  c.rx_frames = r(p.rx_frames);
-  c.rx_error_frames = r(p.rx_error_frames);
-  c.rx_kernel_drops = r(p.rx_kernel_drops);
-  c.rx_unstamped = r(p.rx_unstamped);
-  c.rx_errors = r(p.rx_errors);
-  c.bus_off_events = r(p.bus_off_events);
-  c.restarts = r(p.restarts);
-  c.protocol_errors = r(p.protocol_errors);
-  c.controller_errors = r(p.controller_errors);
-  c.tx_timeouts = r(p.tx_timeouts);
-  c.no_ack = r(p.no_ack);
-  return c;
+  return impl_->counters.snapshot();
 }
 
 std::error_code SocketCanPort::set_filters(std::span<const CanIdFilter> ids) noexcept {
-  if (ids.size() > kMaxFilters) return CanError::kTooManyFilters;
+  if (auto ec = check_filters(ids, kMaxFilters)) return ec;
   std::array<can_filter, kMaxFilters> table{};
   for (std::size_t i = 0; i < ids.size(); ++i) {
     const CanIdFilter& f = ids[i];
-    if (f.id > (f.extended ? kMaxExtendedId : kMaxStandardId)) return CanError::kInvalidFrame;
     // Full mask over id, format and RTR: exactly this data frame, no remote frames, and a
     // standard id never matches the extended id with the same low bits.
     table[i].can_id = f.extended ? f.id | CAN_EFF_FLAG : f.id;

@@ -6,6 +6,7 @@
 #include <cstring>
 
 #include "can/bit_budget.hpp"
+#include "canio/can_port_counters.hpp"
 #include "canio/virtual_bus.hpp"
 #include "canio/virtual_bus_ring.hpp"
 #include "core/spsc_queue.hpp"
@@ -57,18 +58,11 @@ struct LossControl {
   }
 };
 
-struct AtomicCounters {
-  std::atomic<uint64_t> tx_frames{0}, tx_queue_full{0}, tx_interface_down{0}, tx_bus_off{0},
-      tx_invalid{0}, tx_errors{0}, rx_frames{0}, rx_error_frames{0}, rx_kernel_drops{0},
-      rx_errors{0}, bus_off_events{0}, restarts{0}, protocol_errors{0}, controller_errors{0},
-      tx_timeouts{0}, no_ack{0};
+// The port's counters and the virtual bus's fault counters.
+struct AtomicCounters : AtomicCanPortCounters {
   std::atomic<uint64_t> rx_lost{0}, tx_lost{0}, delayed{0}, delay_overflow{0}, errors_injected{0},
       sends_failed{0}, missed_off_bus{0};
 };
-
-void bump(std::atomic<uint64_t>& c) noexcept {
-  c.fetch_add(1, std::memory_order_relaxed);
-}
 
 struct Delayed {
   CanFrame frame;
@@ -159,14 +153,7 @@ struct VirtualCanPort::Impl {
     set_state(*s);
   }
 
-  void count_event(const CanErrorEvent& e) noexcept {
-    if (e.bus_off) bump(counters.bus_off_events);
-    if (e.restarted) bump(counters.restarts);
-    if (e.protocol) bump(counters.protocol_errors);
-    if (e.controller) bump(counters.controller_errors);
-    if (e.tx_timeout) bump(counters.tx_timeouts);
-    if (e.no_ack) bump(counters.no_ack);
-  }
+  void count_event(const CanErrorEvent& e) noexcept { counters.count_error_event(e); }
 };
 
 VirtualCanPort::VirtualCanPort(std::shared_ptr<VirtualCanBus> bus, uint16_t index,
@@ -446,26 +433,7 @@ CanState VirtualCanPort::state() const noexcept {
 }
 
 CanPortCounters VirtualCanPort::counters() const noexcept {
-  const AtomicCounters& c = impl_->counters;
-  auto r = [](const std::atomic<uint64_t>& a) { return a.load(std::memory_order_relaxed); };
-  CanPortCounters s;
-  s.tx_frames = r(c.tx_frames);
-  s.tx_queue_full = r(c.tx_queue_full);
-  s.tx_interface_down = r(c.tx_interface_down);
-  s.tx_bus_off = r(c.tx_bus_off);
-  s.tx_invalid = r(c.tx_invalid);
-  s.tx_errors = r(c.tx_errors);
-  s.rx_frames = r(c.rx_frames);
-  s.rx_error_frames = r(c.rx_error_frames);
-  s.rx_kernel_drops = r(c.rx_kernel_drops);
-  s.rx_errors = r(c.rx_errors);
-  s.bus_off_events = r(c.bus_off_events);
-  s.restarts = r(c.restarts);
-  s.protocol_errors = r(c.protocol_errors);
-  s.controller_errors = r(c.controller_errors);
-  s.tx_timeouts = r(c.tx_timeouts);
-  s.no_ack = r(c.no_ack);
-  return s;
+  return impl_->counters.snapshot();
 }
 
 FaultCounters VirtualCanPort::fault_counters() const noexcept {
@@ -483,9 +451,7 @@ FaultCounters VirtualCanPort::fault_counters() const noexcept {
 }
 
 std::error_code VirtualCanPort::set_filters(std::span<const CanIdFilter> ids) noexcept {
-  if (ids.size() > kMaxFilters) return CanError::kTooManyFilters;
-  for (const auto& f : ids)
-    if (f.id > (f.extended ? kMaxExtendedId : kMaxStandardId)) return CanError::kInvalidFrame;
+  if (auto ec = check_filters(ids, kMaxFilters)) return ec;
   std::copy(ids.begin(), ids.end(), impl_->filters.begin());
   impl_->filter_count = ids.size();
   impl_->filter_all = false;

@@ -68,7 +68,7 @@ std::error_code SdoClient::write(uint16_t index, uint8_t subindex, std::span<con
 
 void SdoClient::start_command(int64_t now_ns) noexcept {
   transaction_ = static_cast<uint8_t>(transaction_ + 1);
-  offset_ = 0;
+  segmenter_.start(size_);
   expected_ = 0;
   deadline_ns_ = now_ns + config_.timeout_ns;
   if (!connected_) {
@@ -101,23 +101,35 @@ void SdoClient::send_command() noexcept {
   send_next_write_segment();
 }
 
+// ---- Segmenter ----------------------------------------------------------------------------------
+
+SdoSegmenter::Segment SdoSegmenter::next(std::size_t max_segment) noexcept {
+  Segment seg;
+  const std::size_t remaining = size_ - offset_;
+  seg.offset = offset_;
+  seg.length = std::min(remaining, max_segment);
+  if (offset_ == 0 && seg.length == remaining) {
+    seg.segmentation = SdoSegmentation::kExpedited;
+  } else if (offset_ == 0) {
+    seg.segmentation = SdoSegmentation::kInitiate;
+    seg.total_size = static_cast<uint32_t>(size_);
+  } else {
+    seg.segmentation =
+        seg.length == remaining ? SdoSegmentation::kComplete : SdoSegmentation::kSegment;
+  }
+  offset_ += seg.length;
+  return seg;
+}
+
 void SdoClient::send_next_write_segment() noexcept {
   SdoCommand cmd;
   cmd.transaction_id = transaction_;
   cmd.command_id = static_cast<uint8_t>(SdoCommandId::kWriteByIndex);
-  const std::size_t remaining = size_ - offset_;
-  const std::size_t chunk = std::min(remaining, config_.max_segment);
-  if (offset_ == 0 && chunk == remaining) {
-    cmd.segmentation = SdoSegmentation::kExpedited;
-  } else if (offset_ == 0) {
-    cmd.segmentation = SdoSegmentation::kInitiate;
-    cmd.total_size = static_cast<uint32_t>(size_);
-  } else {
-    cmd.segmentation = chunk == remaining ? SdoSegmentation::kComplete : SdoSegmentation::kSegment;
-  }
-  cmd.payload = std::span<const uint8_t>(buffer_.data() + offset_, chunk);
-  offset_ += chunk;
-  if (offset_ == size_) state_ = State::kWaitResponse;
+  const SdoSegmenter::Segment seg = segmenter_.next(config_.max_segment);
+  cmd.segmentation = seg.segmentation;
+  cmd.total_size = seg.total_size;
+  cmd.payload = std::span<const uint8_t>(buffer_.data() + seg.offset, seg.length);
+  if (segmenter_.done()) state_ = State::kWaitResponse;
   send_frame(true, cmd);
 }
 
@@ -372,13 +384,8 @@ void SdoServer::handle_command(const SdoCommand& c, int64_t now_ns) noexcept {
     size = std::min(size, kMaxSdoTransfer);
     transaction_ = c.transaction_id;
     size_ = size;
-    offset_ = 0;
-    if (size <= config_.max_segment) {
-      rsp.payload = std::span<const uint8_t>(buffer_.data(), size);
-      send_frame(true, rsp);
-      return;
-    }
-    in_read_ = true;
+    // Expedited when it fits one segment, else Initiate now and the rest on the client's acks.
+    segmenter_.start(size);
     send_read_segment();
     return;
   }
@@ -443,17 +450,11 @@ void SdoServer::send_read_segment() noexcept {
   rsp.transaction_id = transaction_;
   rsp.response = true;
   rsp.command_id = static_cast<uint8_t>(SdoCommandId::kReadByIndex);
-  const std::size_t remaining = size_ - offset_;
-  const std::size_t chunk = std::min(remaining, config_.max_segment);
-  if (offset_ == 0) {
-    rsp.segmentation = SdoSegmentation::kInitiate;
-    rsp.total_size = static_cast<uint32_t>(size_);
-  } else {
-    rsp.segmentation = chunk == remaining ? SdoSegmentation::kComplete : SdoSegmentation::kSegment;
-  }
-  rsp.payload = std::span<const uint8_t>(buffer_.data() + offset_, chunk);
-  offset_ += chunk;
-  if (offset_ == size_) in_read_ = false;
+  const SdoSegmenter::Segment seg = segmenter_.next(config_.max_segment);
+  rsp.segmentation = seg.segmentation;
+  rsp.total_size = seg.total_size;
+  rsp.payload = std::span<const uint8_t>(buffer_.data() + seg.offset, seg.length);
+  in_read_ = !segmenter_.done();
   send_frame(true, rsp);
 }
 

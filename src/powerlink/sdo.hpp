@@ -31,6 +31,33 @@ struct SdoClientConfig {
 };
 
 // One transfer at a time per CN; a second request while busy is refused with SdoError::kBusy.
+// Cuts one transfer into SDO command-layer segments (EPSG DS 301 §6.3.2.4): a transfer that fits
+// one segment goes expedited; a larger one as Initiate (carrying the total size), Segment ...,
+// Complete. The client's writes and the server's read responses both send through it. Pure: it
+// only counts bytes.
+class SdoSegmenter {
+ public:
+  struct Segment {
+    SdoSegmentation segmentation = SdoSegmentation::kExpedited;
+    uint32_t total_size = 0;  // Initiate only: the whole transfer
+    std::size_t offset = 0;   // of this segment's first byte in the transfer
+    std::size_t length = 0;
+  };
+
+  void start(std::size_t size) noexcept {
+    size_ = size;
+    offset_ = 0;
+  }
+  // The next segment, at most `max_segment` bytes (> 0); call while !done() (or once for an
+  // empty transfer, which goes expedited).
+  [[nodiscard]] Segment next(std::size_t max_segment) noexcept;
+  [[nodiscard]] bool done() const noexcept { return offset_ == size_; }
+
+ private:
+  std::size_t size_ = 0;
+  std::size_t offset_ = 0;
+};
+
 class SdoClient {
  public:
   // `data` is the value read (empty for writes); valid only during the call.
@@ -77,7 +104,7 @@ class SdoClient {
   uint16_t index_ = 0;
   uint8_t subindex_ = 0;
   std::size_t size_ = 0;      // write: data bytes; read: bytes received so far
-  std::size_t offset_ = 0;    // write: data bytes sent
+  SdoSegmenter segmenter_;    // write: the segments still to send
   std::size_t expected_ = 0;  // read: announced total size
   int64_t deadline_ns_ = 0;
   std::array<uint8_t, kMaxSdoTransfer + 4> buffer_{};
@@ -134,7 +161,7 @@ class SdoServer {
   uint16_t index_ = 0;
   uint8_t subindex_ = 0;
   std::size_t size_ = 0;
-  std::size_t offset_ = 0;
+  SdoSegmenter segmenter_;  // read response: the segments still to send
   std::size_t expected_ = 0;
   int64_t deadline_ns_ = 0;
   std::array<uint8_t, kMaxSdoTransfer + 4> buffer_{};

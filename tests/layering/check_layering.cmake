@@ -31,8 +31,9 @@ set(LAYER_tools 8)
 # register facts CAN-I/O took from powerlink/ live in x20ds1928/).
 set(SIDEWAYS "")
 
-# Lower folders a folder must not include although the layers would allow it, NEVER_<from> →
-# folders, with the reason in NEVER_<from>_WHY: the configuration takes the CAN-I/O bus options
+# Lower folders or single headers a folder must not include although the layers would allow it,
+# NEVER_<from> → folders ("canio") or headers ("canio/canio_bus.hpp"), with the reason in
+# NEVER_<from>_WHY: the configuration takes the CAN-I/O bus options
 # from can/ and never sees the driver, which only the daemon builds.
 set(NEVER_config "canio")
 set(NEVER_config_WHY "the CAN-I/O bus options live in can/; the driver is the daemon's to build")
@@ -85,8 +86,8 @@ function(check_tree root out)
         list(APPEND found "${rel}: #include \"${header}\": ${from} (layer ${LAYER_${from}}) must not include ${to} (layer ${LAYER_${to}})")
       elseif(LAYER_${to} EQUAL LAYER_${from} AND NOT "${from}>${to}" IN_LIST SIDEWAYS)
         list(APPEND found "${rel}: #include \"${header}\": ${from} and ${to} share layer ${LAYER_${to}}; a sideways include needs its reason in SIDEWAYS")
-      elseif(to IN_LIST NEVER_${from})
-        list(APPEND found "${rel}: #include \"${header}\": ${from} must not include ${to} (${NEVER_${from}_WHY})")
+      elseif(to IN_LIST NEVER_${from} OR header IN_LIST NEVER_${from})
+        list(APPEND found "${rel}: #include \"${header}\": ${from} must not include ${header} (${NEVER_${from}_WHY})")
       endif()
     endforeach()
   endforeach()
@@ -104,9 +105,9 @@ if(SELF_TEST)
   check_tree("${t}" found)
   file(REMOVE_RECURSE "${t}")
   set(expected
-      "src/config/config.hpp: #include \"canio/canio_bus.hpp\": config must not include canio (the CAN-I/O bus options live in can/; the driver is the daemon's to build)"
-      "src/core/cycle_engine.hpp: #include \"config/config.hpp\": core (layer 0) must not include config (layer 6)"
-      "src/shm/publisher.hpp: #include \"control/socket_config.hpp\": shm and control share layer 4; a sideways include needs its reason in SIDEWAYS")
+      "src/config/config.hpp: #include \"canio/canio_bus.hpp\": config must not include canio/canio_bus.hpp (${NEVER_config_WHY})"
+      "src/core/cycle_engine.hpp: #include \"config/config.hpp\": core (layer ${LAYER_core}) must not include config (layer ${LAYER_config})"
+      "src/shm/publisher.hpp: #include \"control/socket_config.hpp\": shm and control share layer ${LAYER_shm}; a sideways include needs its reason in SIDEWAYS")
   if(NOT found STREQUAL expected)
     string(REPLACE ";" "\n  " found "${found}")
     message(FATAL_ERROR "layering self-test: the planted back-arrows were not reported as expected; got:\n  ${found}")

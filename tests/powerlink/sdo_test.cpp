@@ -232,3 +232,75 @@ TEST_CASE(
   b.server.receive(request, 0);
   CHECK(b.to_client.size() == 1);
 }
+
+TEST_CASE("the SDO segmenter cuts a transfer as EPSG DS 301 §6.3.2.4 lays out the segments",
+          "[powerlink][sdo]") {
+  using Seg = SdoSegmentation;
+  SdoSegmenter s;
+  SECTION("a transfer that fits one segment goes expedited, whole") {
+    s.start(12);
+    const auto a = s.next(12);
+    CHECK(a.segmentation == Seg::kExpedited);
+    CHECK(a.offset == 0);
+    CHECK(a.length == 12);
+    CHECK(s.done());
+  }
+  SECTION("an empty transfer is one expedited segment of no bytes") {
+    s.start(0);
+    const auto a = s.next(8);
+    CHECK(a.segmentation == Seg::kExpedited);
+    CHECK(a.length == 0);
+    CHECK(s.done());
+  }
+  SECTION("a larger one: Initiate with the total size, Segment, Complete with the rest") {
+    s.start(21);
+    const auto a = s.next(8);
+    CHECK(a.segmentation == Seg::kInitiate);
+    CHECK(a.total_size == 21);
+    CHECK((a.offset == 0 && a.length == 8));
+    CHECK_FALSE(s.done());
+    const auto b = s.next(8);
+    CHECK(b.segmentation == Seg::kSegment);
+    CHECK(b.total_size == 0);
+    CHECK((b.offset == 8 && b.length == 8));
+    const auto c = s.next(8);
+    CHECK(c.segmentation == Seg::kComplete);
+    CHECK((c.offset == 16 && c.length == 5));
+    CHECK(s.done());
+  }
+  SECTION("an exact multiple ends with a full Complete segment, never an empty one") {
+    s.start(16);
+    CHECK(s.next(8).segmentation == Seg::kInitiate);
+    const auto b = s.next(8);
+    CHECK(b.segmentation == Seg::kComplete);
+    CHECK(b.length == 8);
+    CHECK(s.done());
+  }
+  SECTION("random sizes: the segments cover the transfer once, in order") {
+    uint32_t x = 0x2545F491;
+    for (int round = 0; round < 500; ++round) {
+      x ^= x << 13, x ^= x >> 17, x ^= x << 5;
+      const std::size_t size = x % (kMaxSdoTransfer + 1);
+      const std::size_t max = 8 + (x >> 16) % (kMaxSdoSegment - 11);
+      s.start(size);
+      std::size_t covered = 0, segments = 0;
+      do {
+        const auto seg = s.next(max);
+        REQUIRE(seg.offset == covered);
+        REQUIRE(seg.length <= max);
+        const bool first = segments == 0, last = s.done();
+        if (first && last)
+          REQUIRE(seg.segmentation == Seg::kExpedited);
+        else if (first)
+          REQUIRE((seg.segmentation == Seg::kInitiate && seg.total_size == size));
+        else if (last)
+          REQUIRE(seg.segmentation == Seg::kComplete);
+        else
+          REQUIRE(seg.segmentation == Seg::kSegment);
+        covered += seg.length;
+        ++segments;
+      } while (!s.done());
+      REQUIRE(covered == size);
+    }
+  }
+}
