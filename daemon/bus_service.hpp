@@ -14,9 +14,9 @@
 
 #include "config/config.hpp"
 #include "control/control_server.hpp"
-#include "control/journal.hpp"
 #include "core/bus.hpp"
 #include "metrics/exposition.hpp"
+#include "service/journal.hpp"
 
 namespace ds1928::capture {
 class Tap;

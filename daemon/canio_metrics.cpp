@@ -5,7 +5,7 @@
 #include <vector>
 
 #include "can/bit_budget.hpp"
-#include "canio/can_state.hpp"
+#include "can/can_state.hpp"
 #include "canio_service.hpp"
 
 namespace ds1928 {

@@ -2,7 +2,7 @@
 
 #include <fmt/format.h>
 
-#include "canio/socketcan_port.hpp"
+#include "can/socketcan_port.hpp"
 #include "capture/capturing_can_port.hpp"
 
 namespace ds1928 {

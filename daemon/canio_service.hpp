@@ -8,8 +8,8 @@
 #include <vector>
 
 #include "bus_service.hpp"
+#include "can/virtual_bus.hpp"
 #include "canio/canio_bus.hpp"
-#include "canio/virtual_bus.hpp"
 
 namespace ds1928 {
 

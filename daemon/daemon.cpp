@@ -8,9 +8,9 @@
 
 #include "canio/canio_bus.hpp"
 #include "config/config_loader.hpp"
-#include "control/journal.hpp"
 #include "control/socket_path.hpp"
 #include "endat_service.hpp"
+#include "service/journal.hpp"
 
 namespace ds1928 {
 

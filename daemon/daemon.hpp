@@ -15,7 +15,6 @@
 #include "capture_service.hpp"
 #include "config/config.hpp"
 #include "control/control_server.hpp"
-#include "control/systemd_notifier.hpp"
 #include "core/bus.hpp"
 #include "core/cycle_engine.hpp"
 #include "cycle_work.hpp"
@@ -23,6 +22,7 @@
 #include "incident_service.hpp"
 #include "metrics/http_server.hpp"
 #include "register_client.hpp"
+#include "service/systemd_notifier.hpp"
 #include "shm/publisher.hpp"
 #include "topology.hpp"
 

@@ -1,8 +1,8 @@
 #include <spdlog/spdlog.h>
 
-#include "control/journal.hpp"
 #include "endat/names.hpp"
 #include "endat_service_state.hpp"
+#include "service/journal.hpp"
 #include "x20ds1928/object_dictionary.hpp"
 
 namespace ds1928 {

@@ -1,7 +1,7 @@
 #include <algorithm>
 
-#include "core/module_image.hpp"
 #include "endat_service_state.hpp"
+#include "x20ds1928/module_image.hpp"
 
 namespace ds1928 {
 

@@ -7,9 +7,9 @@
 #include <cstdlib>
 
 #include "capture/pcapng.hpp"
-#include "control/journal.hpp"
 #include "control/peer_privilege.hpp"
 #include "core/clock.hpp"
+#include "service/journal.hpp"
 
 namespace ds1928 {
 namespace {

@@ -8,9 +8,9 @@
 #include <iostream>
 
 #include "config/config_loader.hpp"
-#include "control/logging.hpp"
 #include "core/rt_setup.hpp"
 #include "daemon.hpp"
+#include "service/logging.hpp"
 
 namespace {
 constexpr std::size_t kThreadStackBytes = 1024 * 1024;

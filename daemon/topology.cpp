@@ -3,8 +3,8 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
-#include "control/journal.hpp"
 #include "endat_service.hpp"
+#include "service/journal.hpp"
 
 namespace ds1928 {
 

@@ -4,7 +4,7 @@
 #include <cstdlib>
 #include <cstring>
 
-#include "canio/can_error_frame.hpp"
+#include "can/can_error_frame.hpp"
 #include "canio/object_codec.hpp"
 #include "canio/sdo_expedited.hpp"
 #include "fuzz_input.hpp"

@@ -12,7 +12,7 @@
 #include <vector>
 
 #include "../tests/powerlink/frame_samples.hpp"
-#include "canio/can_error_frame.hpp"
+#include "can/can_error_frame.hpp"
 #include "canio/object_codec.hpp"
 #include "canio/sdo_expedited.hpp"
 #include "endat/command.hpp"

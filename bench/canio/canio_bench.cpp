@@ -25,7 +25,7 @@
 #include <vector>
 
 #include "can/bit_budget.hpp"
-#include "canio/virtual_bus.hpp"
+#include "can/virtual_bus.hpp"
 
 using namespace ds1928::canio;
 

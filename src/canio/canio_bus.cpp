@@ -2,9 +2,9 @@
 
 #include <algorithm>
 
-#include "canio/can_error_frame.hpp"
-#include "canio/can_netlink.hpp"
-#include "canio/errors.hpp"
+#include "can/can_error_frame.hpp"
+#include "can/can_netlink.hpp"
+#include "can/errors.hpp"
 #include "canio/sdo_expedited.hpp"
 #include "core/clock.hpp"
 #include "x20ds1928/object_dictionary.hpp"

@@ -37,8 +37,8 @@
 #include <string>
 #include <vector>
 
-#include "can/canio_options.hpp"
-#include "canio/can_port.hpp"
+#include "can/can_port.hpp"
+#include "canio/canio_options.hpp"
 #include "canio/canopen_nmt.hpp"
 #include "canio/object_codec.hpp"
 #include "canio/sdo_client.hpp"

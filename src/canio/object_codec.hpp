@@ -13,7 +13,7 @@
 #include <cstdint>
 #include <span>
 
-#include "core/module_image.hpp"
+#include "x20ds1928/module_image.hpp"
 
 namespace ds1928::canio {
 

@@ -14,7 +14,7 @@
 #include <system_error>
 
 #include "can/can_frame.hpp"
-#include "canio/errors.hpp"
+#include "can/errors.hpp"
 #include "canio/sdo_expedited.hpp"
 
 namespace ds1928::canio {

@@ -15,7 +15,7 @@
 #include <system_error>
 
 #include "can/can_frame.hpp"
-#include "canio/errors.hpp"
+#include "can/errors.hpp"
 #include "core/sdo_abort.hpp"
 
 namespace ds1928::canio {

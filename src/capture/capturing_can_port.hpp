@@ -6,7 +6,7 @@
 
 #include <memory>
 
-#include "canio/can_port.hpp"
+#include "can/can_port.hpp"
 #include "capture/can_record.hpp"
 #include "capture/tap.hpp"
 

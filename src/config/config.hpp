@@ -12,7 +12,7 @@
 #include <string>
 #include <vector>
 
-#include "can/canio_options.hpp"
+#include "canio/canio_options.hpp"
 #include "control/socket_config.hpp"
 #include "core/axis_config.hpp"
 #include "core/cycle_config.hpp"
@@ -49,8 +49,8 @@ struct CaptureConfig {
 struct FlightRecorderConfig {
   bool enabled = true;
   uint64_t ring_bytes = 1048576;  // all capture points together (split evenly)
-  uint32_t before_s = 10;             // the window kept before the event (at most what fits)
-  uint32_t after_ms = 500;            // the tail after it
+  uint32_t before_s = 10;         // the window kept before the event (at most what fits)
+  uint32_t after_ms = 500;        // the tail after it
   // "" : $STATE_DIRECTORY/incidents under systemd (StateDirectory=ds1928d: /var/lib/ds1928d/
   // incidents); without systemd no files are written unless a directory is given.
   std::string dir;

@@ -8,8 +8,8 @@
 #include <system_error>
 
 #include "core/incident.hpp"
-#include "core/module_image.hpp"
 #include "core/register_path.hpp"
+#include "x20ds1928/module_image.hpp"
 
 namespace ds1928 {
 

@@ -13,11 +13,11 @@
 #include <span>
 #include <system_error>
 
-#include "core/module_image.hpp"
 #include "flatstream/message.hpp"
 #include "flatstream/protocol.hpp"
 #include "flatstream/receiver.hpp"
 #include "flatstream/sender.hpp"
+#include "x20ds1928/module_image.hpp"
 
 namespace ds1928::flatstream {
 

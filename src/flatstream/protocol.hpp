@@ -6,7 +6,7 @@
 #include <cstddef>
 #include <cstdint>
 
-#include "core/module_image.hpp"
+#include "x20ds1928/module_image.hpp"
 
 namespace ds1928::flatstream {
 

@@ -167,7 +167,7 @@ void ManagingNode::sdo_done(Cn& cn, std::error_code ec, std::span<const uint8_t>
   if (ec) {
     ++cn.st->sdo_errors;
     cn.st->last_error = ec;
-  } else if (cn.op_internal && cn.current.write) {
+  } else if (cn.op_internal && cn.current.request.write) {
     ++cn.written;
   }
   if (cn.op_internal) {

@@ -15,8 +15,8 @@
 #include <optional>
 #include <span>
 
-#include "core/module_image.hpp"
 #include "powerlink/errors.hpp"
+#include "x20ds1928/module_image.hpp"
 
 namespace ds1928::powerlink {
 

@@ -26,8 +26,8 @@
 #include <utility>
 #include <vector>
 
-#include "can/canio_options.hpp"
-#include "canio/can_port.hpp"
+#include "can/can_port.hpp"
+#include "canio/canio_options.hpp"
 #include "canio/canopen_nmt.hpp"
 #include "canio/sdo_expedited.hpp"
 #include "sim/ds1928_module.hpp"

@@ -7,12 +7,12 @@
 #include <memory>
 #include <system_error>
 
-#include "core/module_image.hpp"
-#include "core/module_settings.hpp"
 #include "flatstream/channel.hpp"
 #include "sim/encoder_description_yaml.hpp"
 #include "sim/endat_bridge.hpp"
 #include "sim/sim_options.hpp"
+#include "x20ds1928/module_image.hpp"
+#include "x20ds1928/module_settings.hpp"
 
 namespace ds1928::sim {
 

@@ -2,8 +2,8 @@
 
 #include <algorithm>
 
-#include "core/module_image.hpp"
 #include "endat/wire.hpp"
+#include "x20ds1928/module_image.hpp"
 #include "x20ds1928/object_dictionary.hpp"
 
 namespace ds1928::sim {

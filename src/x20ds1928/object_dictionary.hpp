@@ -18,8 +18,8 @@
 #include <string>
 #include <string_view>
 
-#include "core/module_image.hpp"
-#include "core/module_settings.hpp"
+#include "x20ds1928/module_image.hpp"
+#include "x20ds1928/module_settings.hpp"
 
 namespace ds1928 {
 

@@ -8,7 +8,7 @@
 #include <random>
 #include <string>
 
-#include "canio/can_error_frame.hpp"
+#include "can/can_error_frame.hpp"
 
 using namespace ds1928::canio;
 

@@ -18,8 +18,8 @@
 #include <string>
 #include <vector>
 
-#include "canio/can_netlink.hpp"
-#include "canio/socketcan_port.hpp"
+#include "can/can_netlink.hpp"
+#include "can/socketcan_port.hpp"
 #include "support/alloc_counter.hpp"
 
 using namespace ds1928::canio;

@@ -13,7 +13,7 @@
 #include <string>
 #include <vector>
 
-#include "canio/virtual_bus.hpp"
+#include "can/virtual_bus.hpp"
 #include "core/clock.hpp"
 
 namespace ds1928::canio::test {

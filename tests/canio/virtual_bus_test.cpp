@@ -1,7 +1,7 @@
 // The virtual CAN bus as a test transport: broadcast semantics, filters, stamps from an injected
 // clock, every fault it can inject, overrun accounting, the cross-process bus over shared
 // memory, and an allocation-free send/receive path.
-#include "canio/virtual_bus.hpp"
+#include "can/virtual_bus.hpp"
 
 #include <sys/wait.h>
 #include <unistd.h>

@@ -11,7 +11,7 @@
 #include <vector>
 
 #include "can/bit_budget.hpp"
-#include "canio/virtual_bus.hpp"
+#include "can/virtual_bus.hpp"
 #include "support/alloc_counter.hpp"
 #include "vbus_test_support.hpp"
 

@@ -6,7 +6,7 @@
 #include <cstdio>
 #include <map>
 
-#include "canio/can_netlink.hpp"
+#include "can/can_netlink.hpp"
 #include "rig.hpp"
 #include "x20ds1928/object_dictionary.hpp"
 

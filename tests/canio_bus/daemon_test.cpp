@@ -13,7 +13,7 @@
 #include <thread>
 
 #include "../control/control_test_util.hpp"
-#include "canio/virtual_bus.hpp"
+#include "can/virtual_bus.hpp"
 #include "cycle_work.hpp"
 #include "rig.hpp"
 #include "support/unix_socket.hpp"

@@ -8,7 +8,7 @@
 #include <catch2/catch.hpp>
 #include <map>
 
-#include "can/canio_options.hpp"
+#include "canio/canio_options.hpp"
 #include "rig.hpp"
 #include "x20ds1928/object_dictionary.hpp"
 

@@ -9,8 +9,8 @@
 #include <map>
 #include <set>
 
-#include "can/canio_options.hpp"
-#include "canio/can_error_frame.hpp"
+#include "can/can_error_frame.hpp"
+#include "canio/canio_options.hpp"
 #include "canio/canopen_nmt.hpp"
 #include "core/axis_sample.hpp"
 #include "core/sdo_abort.hpp"

@@ -16,8 +16,8 @@
 #include <thread>
 #include <vector>
 
+#include "can/virtual_bus.hpp"
 #include "canio/canio_bus.hpp"
-#include "canio/virtual_bus.hpp"
 #include "config/config.hpp"
 #include "sim/canio_node.hpp"
 

@@ -1,6 +1,6 @@
 // The daemon's log queue: bounded, and a stalled writer (a journal or terminal that stops
 // reading) never blocks a caller — the oldest messages are dropped instead.
-#include "control/logging.hpp"
+#include "service/logging.hpp"
 
 #include <spdlog/async.h>
 #include <spdlog/sinks/base_sink.h>

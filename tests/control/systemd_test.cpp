@@ -14,8 +14,8 @@
 #include <vector>
 
 #include "control/asio.hpp"
-#include "control/logging.hpp"
-#include "control/systemd_notifier.hpp"
+#include "service/logging.hpp"
+#include "service/systemd_notifier.hpp"
 
 using namespace ds1928::control;
 

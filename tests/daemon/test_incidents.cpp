@@ -17,11 +17,11 @@
 
 #include "capture/pcapng.hpp"
 #include "capture/tap.hpp"
-#include "control/journal.hpp"
 #include "core/clock.hpp"
 #include "daemon.hpp"
 #include "incident_service.hpp"
 #include "incident_store.hpp"
+#include "service/journal.hpp"
 
 using namespace ds1928;
 namespace fs = std::filesystem;

@@ -24,12 +24,12 @@
 #include <string>
 #include <vector>
 
-#include "control/journal.hpp"
-#include "control/logging.hpp"
 #include "daemon.hpp"
 #include "mn_rig.hpp"
 #include "powerlink/powerlink_bus.hpp"
 #include "powerlink_service.hpp"
+#include "service/journal.hpp"
+#include "service/logging.hpp"
 
 using namespace ds1928;
 using namespace ds1928::powerlink;

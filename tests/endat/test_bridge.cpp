@@ -6,10 +6,10 @@
 #include <random>
 #include <vector>
 
-#include "core/module_image.hpp"
 #include "endat/command.hpp"
 #include "endat/names.hpp"
 #include "sim/endat_bridge.hpp"
+#include "x20ds1928/module_image.hpp"
 #include "x20ds1928/object_dictionary.hpp"
 
 using namespace ds1928;

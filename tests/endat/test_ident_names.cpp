@@ -2,10 +2,10 @@
 #include <catch2/catch.hpp>
 #include <cstdint>
 
-#include "core/module_image.hpp"
 #include "endat/ident.hpp"
 #include "endat/names.hpp"
 #include "endat/number.hpp"
+#include "x20ds1928/module_image.hpp"
 
 using namespace ds1928::endat;
 

@@ -4,9 +4,9 @@
 #include <map>
 #include <set>
 
-#include "core/module_image.hpp"
 #include "ds1928/shm.hpp"
 #include "rig.hpp"
+#include "x20ds1928/module_image.hpp"
 
 using namespace ds1928;
 using namespace ds1928::endat_test;

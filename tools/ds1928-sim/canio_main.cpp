@@ -7,8 +7,8 @@
 #include <memory>
 #include <string>
 
-#include "canio/socketcan_port.hpp"
-#include "canio/virtual_bus.hpp"
+#include "can/socketcan_port.hpp"
+#include "can/virtual_bus.hpp"
 #include "config/config_loader.hpp"
 #include "core/clock.hpp"
 #include "sim/canio_node.hpp"

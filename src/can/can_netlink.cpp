@@ -1,4 +1,4 @@
-#include "canio/can_netlink.hpp"
+#include "can/can_netlink.hpp"
 
 #include <linux/can/netlink.h>
 #include <linux/if_link.h>
@@ -11,7 +11,7 @@
 #include <cstring>
 #include <vector>
 
-#include "canio/unique_fd.hpp"
+#include "can/unique_fd.hpp"
 
 namespace ds1928::canio {
 namespace {

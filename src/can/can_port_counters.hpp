@@ -9,10 +9,10 @@
 #include <span>
 #include <system_error>
 
+#include "can/can_error_frame.hpp"
 #include "can/can_frame.hpp"
-#include "canio/can_error_frame.hpp"
-#include "canio/can_port.hpp"
-#include "canio/errors.hpp"
+#include "can/can_port.hpp"
+#include "can/errors.hpp"
 
 namespace ds1928::canio {
 

@@ -1,4 +1,4 @@
-#include "control/systemd_notifier.hpp"
+#include "service/systemd_notifier.hpp"
 
 #include <systemd/sd-daemon.h>
 

@@ -15,8 +15,8 @@
 #include <string_view>
 #include <system_error>
 
-#include "canio/can_port.hpp"
-#include "canio/errors.hpp"
+#include "can/can_port.hpp"
+#include "can/errors.hpp"
 
 namespace ds1928::canio {
 

@@ -1,4 +1,4 @@
-#include "canio/can_error_frame.hpp"
+#include "can/can_error_frame.hpp"
 
 #include <cstdio>
 

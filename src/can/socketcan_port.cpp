@@ -1,4 +1,4 @@
-#include "canio/socketcan_port.hpp"
+#include "can/socketcan_port.hpp"
 
 #include <linux/can.h>
 #include <linux/can/raw.h>
@@ -13,7 +13,7 @@
 #include <cerrno>
 #include <cstring>
 
-#include "canio/can_port_counters.hpp"
+#include "can/can_port_counters.hpp"
 #include "core/clock.hpp"
 
 namespace ds1928::canio {

@@ -1,4 +1,4 @@
-#include "canio/errors.hpp"
+#include "can/errors.hpp"
 
 #include <string>
 

@@ -1,4 +1,4 @@
-#include "control/logging.hpp"
+#include "service/logging.hpp"
 
 #include <spdlog/async.h>
 #include <spdlog/sinks/stdout_color_sinks.h>
@@ -6,7 +6,7 @@
 #include <cstdlib>
 #include <string>
 
-#include "control/journal.hpp"
+#include "service/journal.hpp"
 
 namespace ds1928::control {
 

@@ -12,8 +12,8 @@
 #include <optional>
 
 #include "can/can_frame.hpp"
-#include "canio/can_state.hpp"
-#include "canio/errors.hpp"
+#include "can/can_state.hpp"
+#include "can/errors.hpp"
 
 namespace ds1928::canio {
 

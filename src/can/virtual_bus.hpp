@@ -38,8 +38,8 @@
 #include <string>
 #include <string_view>
 
-#include "canio/can_error_frame.hpp"
-#include "canio/can_port.hpp"
+#include "can/can_error_frame.hpp"
+#include "can/can_port.hpp"
 
 namespace ds1928::canio {
 

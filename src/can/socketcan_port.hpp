@@ -19,10 +19,10 @@
 #include <string>
 #include <system_error>
 
-#include "canio/can_error_frame.hpp"
-#include "canio/can_netlink.hpp"
-#include "canio/can_port.hpp"
-#include "canio/unique_fd.hpp"
+#include "can/can_error_frame.hpp"
+#include "can/can_netlink.hpp"
+#include "can/can_port.hpp"
+#include "can/unique_fd.hpp"
 
 namespace ds1928::canio {
 

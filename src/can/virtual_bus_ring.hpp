@@ -13,7 +13,7 @@
 #include <cstdint>
 #include <cstring>
 
-#include "canio/virtual_bus.hpp"
+#include "can/virtual_bus.hpp"
 
 namespace ds1928::canio {
 namespace vbus {

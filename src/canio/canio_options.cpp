@@ -1,6 +1,6 @@
 // The facts derived from the `canio` options that the configuration checks and the driver use
 // alike: an axis' identifiers and the cycle's time on the wire (docs/canio.md).
-#include "can/canio_options.hpp"
+#include "canio/canio_options.hpp"
 
 #include <algorithm>
 

@@ -1,4 +1,4 @@
-#include "control/journal.hpp"
+#include "service/journal.hpp"
 
 #include <fmt/format.h>
 #include <sys/uio.h>

@@ -5,7 +5,7 @@
 
 #include <cstdint>
 
-#include "core/module_image.hpp"
+#include "x20ds1928/module_image.hpp"
 
 namespace ds1928 {
 

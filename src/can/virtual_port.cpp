@@ -6,9 +6,9 @@
 #include <cstring>
 
 #include "can/bit_budget.hpp"
-#include "canio/can_port_counters.hpp"
-#include "canio/virtual_bus.hpp"
-#include "canio/virtual_bus_ring.hpp"
+#include "can/can_port_counters.hpp"
+#include "can/virtual_bus.hpp"
+#include "can/virtual_bus_ring.hpp"
 #include "core/spsc_queue.hpp"
 
 namespace ds1928::canio {

@@ -17,8 +17,8 @@
 #include <system_error>
 
 #include "can/can_frame.hpp"
-#include "canio/can_state.hpp"
-#include "canio/errors.hpp"
+#include "can/can_state.hpp"
+#include "can/errors.hpp"
 
 namespace ds1928::canio {
 

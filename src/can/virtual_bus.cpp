@@ -1,4 +1,4 @@
-#include "canio/virtual_bus.hpp"
+#include "can/virtual_bus.hpp"
 
 #include <fcntl.h>
 #include <sys/mman.h>
@@ -13,7 +13,7 @@
 #include <string>
 
 #include "can/bit_budget.hpp"
-#include "canio/virtual_bus_ring.hpp"
+#include "can/virtual_bus_ring.hpp"
 #include "core/clock.hpp"
 
 namespace ds1928::canio {
