@@ -24,11 +24,19 @@
 namespace ds1928::test {
 
 // Wraps the daemon's CycleTask and counts `counted` cycles: from the first cycle after `warmup`
-// cycles once armed (from the start when `armed`, else from arm()).
+// cycles once armed (from the start when `armed`, else from arm()). `open_ended`: `counted` is the
+// least, and the window closes at the first cycle after close() — a test whose window must hold
+// traffic from other threads (a node thread, SDO answers) closes it once that traffic was seen,
+// so what the window contains does not depend on how the scheduler shares the cores.
 class CountingTask final : public CycleTask {
  public:
-  CountingTask(CycleTask& inner, uint64_t counted, uint64_t warmup = 0, bool armed = true)
-      : inner_(inner), counted_(counted), warmup_(warmup), armed_(armed) {}
+  CountingTask(CycleTask& inner, uint64_t counted, uint64_t warmup = 0, bool armed = true,
+               bool open_ended = false)
+      : inner_(inner),
+        counted_(counted),
+        warmup_(warmup),
+        armed_(armed),
+        close_(!open_ended) {}
   void run_cycle(const CycleContext& ctx) noexcept override {
     if (!counting_ && !done() && executed_ >= warmup_ && armed_.load(std::memory_order_acquire)) {
       counting_ = true;
@@ -37,7 +45,7 @@ class CountingTask final : public CycleTask {
     }
     inner_.run_cycle(ctx);
     ++executed_;
-    if (counting_ && ++in_window_ == counted_) {
+    if (counting_ && ++in_window_ >= counted_ && close_.load(std::memory_order_acquire)) {
       counting_ = false;
       result_ = end_counting();
       const Faults end = thread_faults();
@@ -52,6 +60,10 @@ class CountingTask final : public CycleTask {
   // Page faults of the cycle thread within the window. Valid once done().
   [[nodiscard]] Faults faults() const noexcept { return faults_; }
   void arm() noexcept { armed_.store(true, std::memory_order_release); }
+  // Open-ended window: close it at the next cycle once `counted` cycles are in it.
+  void close() noexcept { close_.store(true, std::memory_order_release); }
+  // Cycles in the window. Valid once done().
+  [[nodiscard]] uint64_t counted() const noexcept { return in_window_; }
   [[nodiscard]] bool done() const noexcept { return done_.load(std::memory_order_acquire); }
   // Valid once done().
   [[nodiscard]] const HeapCounts& result() const noexcept { return result_; }
@@ -62,6 +74,7 @@ class CountingTask final : public CycleTask {
   uint64_t executed_ = 0, in_window_ = 0;
   bool counting_ = false;
   std::atomic<bool> armed_;
+  std::atomic<bool> close_;
   std::atomic<bool> done_{false};
   HeapCounts result_;
   Faults faults_at_start_, faults_;
