@@ -7,15 +7,11 @@
 #include "can/errors.hpp"
 #include "canio/sdo_expedited.hpp"
 #include "core/clock.hpp"
+#include "core/single_writer.hpp"
 #include "x20ds1928/object_dictionary.hpp"
 
 namespace ds1928::canio {
 namespace {
-
-template <class T>
-void bump(std::atomic<T>& a, T n = 1) noexcept {
-  a.store(a.load(std::memory_order_relaxed) + n, std::memory_order_relaxed);
-}
 
 class CanioBusCategory final : public std::error_category {
  public:
@@ -267,9 +263,9 @@ const CanioBus::ObjectRoute* CanioBus::route(uint32_t id) const noexcept {
 void CanioBus::count_send(SendResult r) noexcept {
   if (r.sent()) return;
   if (r.status == SendStatus::QueueFull)
-    bump(counters_.tx_queue_full);
+    single_writer_add(counters_.tx_queue_full);
   else
-    bump(counters_.tx_failed);
+    single_writer_add(counters_.tx_failed);
 }
 
 bool CanioBus::bus_filtered(const CanFrame& f) noexcept {
@@ -278,35 +274,35 @@ bool CanioBus::bus_filtered(const CanFrame& f) noexcept {
   if (!f.error || (f.id & err_class::kBusError) == 0) return false;
   auto ev = decode_error_frame(f);
   if (ev && ev.value().state_change()) return false;
-  bump(counters_.bus_errors_filtered);
+  single_writer_add(counters_.bus_errors_filtered);
   return true;
 }
 
 void CanioBus::handle_frame(const CanFrame& f, Stamp where) noexcept {
   if (f.error) {
     if (bus_filtered(f)) return;
-    bump(counters_.error_frames);  // the port has applied the state change
+    single_writer_add(counters_.error_frames);  // the port has applied the state change
     return;
   }
   const ObjectRoute* r = f.extended ? nullptr : route(f.id);
   if (r == nullptr) {
-    bump(counters_.unexpected_ids);
+    single_writer_add(counters_.unexpected_ids);
     return;
   }
   CanioAxisCounters& c = axis_counters_[r->axis];
   SyncPairing& p = track_[r->axis].pairing;
   if (f.rtr || f.dlc != kObjectBytes) {
-    bump(c.wrong_length);
+    single_writer_add(c.wrong_length);
     if (where == Stamp::Window) p.seen(r->kind);
     return;
   }
   if (where == Stamp::Before) {
-    bump(c.late_frames);
+    single_writer_add(c.late_frames);
     p.late_before(r->kind);
     return;
   }
   if (where == Stamp::After) {
-    bump(c.late_frames);
+    single_writer_add(c.late_frames);
     p.late_after(r->kind);
     return;
   }
@@ -314,7 +310,7 @@ void CanioBus::handle_frame(const CanFrame& f, Stamp where) noexcept {
   std::copy_n(f.data.begin(), kObjectBytes, bytes.begin());
   const uint8_t before = p.late_in_window();
   p.in_window(r->kind, bytes, f.rx_time_ns);
-  if (p.late_in_window() != before) bump(c.late_frames);  // object 2 before object 1
+  if (p.late_in_window() != before) single_writer_add(c.late_frames);  // object 2 before object 1
 }
 
 bool CanioBus::window_complete(std::size_t n) const noexcept {
@@ -325,7 +321,7 @@ bool CanioBus::window_complete(std::size_t n) const noexcept {
 
 ExchangeResult CanioBus::exchange(std::span<AxisIo> axes, int64_t, uint64_t) noexcept {
   ExchangeResult result;
-  bump(counters_.cycles);
+  single_writer_add(counters_.cycles);
   const std::size_t n = std::min(axes.size(), track_.size());
   for (std::size_t i = 0; i < n; ++i) axes[i].inputs_fresh = false;
 
@@ -334,7 +330,7 @@ ExchangeResult CanioBus::exchange(std::span<AxisIo> axes, int64_t, uint64_t) noe
   for (;;) {
     const ReceiveResult rr = cycle_port_->receive(rx_, 0);
     if (rr.error) {
-      bump(counters_.receive_errors);
+      single_writer_add(counters_.receive_errors);
       break;
     }
     for (std::size_t k = 0; k < rr.count; ++k) handle_frame(rx_[k], Stamp::Before);
@@ -349,7 +345,7 @@ ExchangeResult CanioBus::exchange(std::span<AxisIo> axes, int64_t, uint64_t) noe
       bus_was_down_ = true;
       push_event({CanioNodeEventKind::BusOff, 0, clock_(), {}, 0});
     }
-    bump(counters_.bus_off_cycles);
+    single_writer_add(counters_.bus_off_cycles);
     if (can == CanState::BusOff && !bus_off_raised_) raise_incident(IncidentKind::BusOff);
     bus_off_raised_ = can == CanState::BusOff;
     state_.store(BusState::Error, std::memory_order_relaxed);
@@ -364,7 +360,7 @@ ExchangeResult CanioBus::exchange(std::span<AxisIo> axes, int64_t, uint64_t) noe
     // Every configured axis is trusted again only after a boot-up (configured anew), an
     // OPERATIONAL heartbeat, or a read-back of its configuration (the check after silence).
     bus_was_down_ = false;
-    bump(counters_.bus_restarts);
+    single_writer_add(counters_.bus_restarts);
     const int64_t t = clock_();
     push_event({CanioNodeEventKind::BusRestarted, 0, t, {}, 0});
     if (!options_.assume_configured)
@@ -389,7 +385,7 @@ ExchangeResult CanioBus::exchange(std::span<AxisIo> axes, int64_t, uint64_t) noe
     sync.dlc = 0;
     const SendResult r = cycle_port_->send(sync);
     count_send(r);
-    if (r.sent()) bump(counters_.sync_sent);
+    if (r.sent()) single_writer_add(counters_.sync_sent);
     sync_sent = r.sent();
   }
   for (std::size_t i = 0; i < n; ++i) {
@@ -417,7 +413,7 @@ ExchangeResult CanioBus::exchange(std::span<AxisIo> axes, int64_t, uint64_t) noe
       handle_frame(f, where);
     }
     if (rr.error) {
-      bump(counters_.receive_errors);
+      single_writer_add(counters_.receive_errors);
       break;
     }
     if (rr.count == 0) break;
@@ -430,7 +426,7 @@ ExchangeResult CanioBus::exchange(std::span<AxisIo> axes, int64_t, uint64_t) noe
     Track& t = track_[i];
     CanioAxisCounters& c = axis_counters_[i];
     const PairingVerdict verdict = t.pairing.close(sync_sent);
-    if (t.pairing.surplus()) bump(c.duplicates);
+    if (t.pairing.surplus()) single_writer_add(c.duplicates);
     const bool whole = verdict == PairingVerdict::Whole;
     if (whole) {
       if (c.silent.load(std::memory_order_relaxed) &&
@@ -445,15 +441,15 @@ ExchangeResult CanioBus::exchange(std::span<AxisIo> axes, int64_t, uint64_t) noe
       }
       c.silent.store(false, std::memory_order_relaxed);
       c.last_sample_ns.store(now, std::memory_order_relaxed);
-      bump(c.samples);
+      single_writer_add(c.samples);
     } else {
       result.frames_lost += 2;
       if (verdict == PairingVerdict::Half)
-        bump(c.half_samples);
+        single_writer_add(c.half_samples);
       else if (verdict == PairingVerdict::Missing)
-        bump(c.missing);
+        single_writer_add(c.missing);
       else
-        bump(c.unpaired);
+        single_writer_add(c.unpaired);
       if (now - c.last_sample_ns.load(std::memory_order_relaxed) > input_timeout_ns)
         c.silent.store(true, std::memory_order_relaxed);
     }
@@ -492,7 +488,7 @@ ExchangeResult CanioBus::exchange(std::span<AxisIo> axes, int64_t, uint64_t) noe
       }
     }
     if (t.gated) {
-      if (whole) bump(c.gated);
+      if (whole) single_writer_add(c.gated);
       // No process data at all since the configuration: the node has not started (yet).
       const bool starting =
           !t.gate_have && options_.bus.nmt == CanNmt::Start && !options_.assume_configured;

@@ -12,14 +12,10 @@
 #include <cstdio>
 
 #include "canio/canio_bus.hpp"
+#include "core/single_writer.hpp"
 
 namespace ds1928::canio {
 namespace {
-
-template <class T>
-void bump(std::atomic<T>& a, T n = 1) noexcept {
-  a.store(a.load(std::memory_order_relaxed) + n, std::memory_order_relaxed);
-}
 
 constexpr int64_t kMs = 1'000'000;
 // A node that differs is asked again after 0.5, 1, 2, ... s, at most 30 s (the back-off of an
@@ -141,7 +137,7 @@ void CanioBus::identity_step_done(int64_t now, std::error_code ec, uint32_t valu
   NodeTrack& t = nodes_[axis_node_[axis]];
   if (ec && transient(ec)) {
     // No answer says nothing about who is there: asked again later, the node's axes wait.
-    bump(axis_counters_[axis].sdo_errors);
+    single_writer_add(axis_counters_[axis].sdo_errors);
     job_.kind = SdoJobKind::None;
     for (std::size_t i = 0; i < axis_node_.size(); ++i)
       if (axis_node_[i] == axis_node_[axis]) axis_sdo_[i].retry_at_ns = now + kIdentityRetryFirstNs;
@@ -177,9 +173,9 @@ void CanioBus::finish_identity(int64_t now) noexcept {
   t.identity_state = t.id_unreadable != 0 ? NodeIdentityState::Unreadable
                      : differs            ? NodeIdentityState::Mismatch
                                           : NodeIdentityState::Confirmed;
-  bump(c.identity_checks);
+  single_writer_add(c.identity_checks);
   const bool bad = t.identity_state != NodeIdentityState::Confirmed;
-  if (bad) bump(c.identity_mismatches);
+  if (bad) single_writer_add(c.identity_mismatches);
   publish_identity(k);
   // The journal hears of a change (and of every mismatch a boot-up brought), not of each retry.
   const bool was_bad =

@@ -7,14 +7,10 @@
 #include <algorithm>
 
 #include "canio/canio_bus.hpp"
+#include "core/single_writer.hpp"
 
 namespace ds1928::canio {
 namespace {
-
-template <class T>
-void bump(std::atomic<T>& a, T n = 1) noexcept {
-  a.store(a.load(std::memory_order_relaxed) + n, std::memory_order_relaxed);
-}
 
 constexpr int64_t kMs = 1'000'000;
 // NMT Start repeated while a configured node stays silent: 100 ms, doubling, at most 5 s.
@@ -52,7 +48,7 @@ std::size_t CanioBus::node_index(uint8_t node) const noexcept {
 }
 
 void CanioBus::push_event(const CanioNodeEvent& e) noexcept {
-  if (!events_.try_push(e)) bump(counters_.events_dropped);
+  if (!events_.try_push(e)) single_writer_add(counters_.events_dropped);
 }
 
 bool CanioBus::poll_event(CanioNodeEvent& out) noexcept {
@@ -134,12 +130,12 @@ void CanioBus::on_error_control(std::size_t k, NmtState state, int64_t now) noex
   if (state == NmtState::BootUp) {
     // The node (re)started: pre-operational, its modules back at their power-up settings
     // (EnDat disabled). Its axes are down from now on and configured anew.
-    bump(nc.boot_ups);
+    single_writer_add(nc.boot_ups);
     push_event({CanioNodeEventKind::BootUp, t.node, now, {}, 0});
     if (!options_.assume_configured) node_down(k, true, now);
     return;
   }
-  bump(nc.heartbeats);
+  single_writer_add(nc.heartbeats);
   if (t.heartbeat_deadline_ns != 0) t.heartbeat_deadline_ns = now + t.consumer_ns;
   if (options_.assume_configured) return;
   if (state == NmtState::Operational && t.trust_by_heartbeat) {
@@ -172,7 +168,7 @@ void CanioBus::on_error_control(std::size_t k, NmtState state, int64_t now) noex
 
 void CanioBus::on_emcy(std::size_t k, const Emcy& e, int64_t now) noexcept {
   CanioNodeCounters& nc = node_counters_[k];
-  bump(nc.emcys);
+  single_writer_add(nc.emcys);
   uint64_t w = uint64_t{e.error_code} | (uint64_t{e.error_register} << 16);
   for (std::size_t j = 0; j < e.vendor.size(); ++j) w |= uint64_t{e.vendor[j]} << (24 + 8 * j);
   nc.last_emcy.store(w, std::memory_order_relaxed);
@@ -201,7 +197,7 @@ void CanioBus::step_nmt(int64_t now) noexcept {
     if (t.heartbeat_deadline_ns != 0 && now > t.heartbeat_deadline_ns) {
       // Heartbeat consumer timeout: the node is gone or hangs. Its axes go down until a check
       // (or a boot-up) proves the configuration again.
-      bump(nc.heartbeat_misses);
+      single_writer_add(nc.heartbeat_misses);
       push_event({CanioNodeEventKind::HeartbeatMissed,
                   t.node,
                   now,
@@ -221,7 +217,7 @@ void CanioBus::step_nmt(int64_t now) noexcept {
                                  ? kStartBackoffFirstNs
                                  : std::min(2 * t.start_backoff_ns, kStartBackoffMaxNs);
         t.next_start_ns = now + t.start_backoff_ns;
-        bump(nc.start_retries);
+        single_writer_add(nc.start_retries);
         push_event({CanioNodeEventKind::StartRetry,
                     t.node,
                     now,
@@ -240,7 +236,7 @@ void CanioBus::step_nmt(int64_t now) noexcept {
                                  ? kStartBackoffFirstNs
                                  : std::min(2 * t.start_backoff_ns, kStartBackoffMaxNs);
         t.next_start_ns = now + t.start_backoff_ns;
-        bump(nc.start_retries);
+        single_writer_add(nc.start_retries);
         push_event({CanioNodeEventKind::StartRetry,
                     t.node,
                     now,
@@ -250,7 +246,7 @@ void CanioBus::step_nmt(int64_t now) noexcept {
     }
     if (!send) continue;
     if (auto f = build_nmt(NmtCommand::Start, t.node); f && sdo_port_->send(*f).sent()) {
-      bump(nc.nmt_starts);
+      single_writer_add(nc.nmt_starts);
       t.started = true;
       t.start_sent_ns = now;
     } else {

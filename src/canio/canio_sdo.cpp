@@ -10,15 +10,11 @@
 
 #include "canio/canio_bus.hpp"
 #include "canio/sdo_expedited.hpp"
+#include "core/single_writer.hpp"
 #include "x20ds1928/object_dictionary.hpp"
 
 namespace ds1928::canio {
 namespace {
-
-template <class T>
-void bump(std::atomic<T>& a, T n = 1) noexcept {
-  a.store(a.load(std::memory_order_relaxed) + n, std::memory_order_relaxed);
-}
 
 constexpr int64_t kMs = 1'000'000;
 // A configuration (or check) that failed is tried again this much later.
@@ -294,7 +290,7 @@ bool CanioBus::issue(int64_t now) noexcept {
     transfer_done(now, make_error_code(CanioBusError::kNoSdoObject), 0, 0);
     return false;
   }
-  bump(axis_counters_[job_.axis].sdo_transfers);
+  single_writer_add(axis_counters_[job_.axis].sdo_transfers);
   // The pacing counts every transfer started; a late step does not earn a burst (at most one
   // period of slack is kept).
   const int64_t interval =
@@ -352,7 +348,7 @@ void CanioBus::configure_step_done(int64_t now, std::error_code ec, uint32_t val
       unconfigurable(now, reg::kEnDatAck, 0x02, ec);
       return;
     }
-    bump(axis_counters_[axis].rescans);
+    single_writer_add(axis_counters_[axis].rescans);
     finish_configure(now, job_.mismatch, true);
     return;
   }
@@ -367,7 +363,7 @@ void CanioBus::configure_step_done(int64_t now, std::error_code ec, uint32_t val
       return;
     }
     if (ec) {
-      bump(axis_counters_[axis].write_aborts);
+      single_writer_add(axis_counters_[axis].write_aborts);
       if (!job_.refused) {
         job_.refused = ec;
         job_.refused_reg = 0;
@@ -392,7 +388,7 @@ void CanioBus::configure_step_done(int64_t now, std::error_code ec, uint32_t val
       // with back-off. Any other register (prescaler, SinCos window, MTUs, ...) does not change
       // whether positions arrive: the remaining registers, EnDatMode among them, are written
       // all the same and the refusal is reported.
-      bump(axis_counters_[axis].write_aborts);
+      single_writer_add(axis_counters_[axis].write_aborts);
       if (w.reg == reg::kEnDatMode) {
         unconfigurable(now, w.reg, w.value, ec);
         return;
@@ -417,7 +413,7 @@ void CanioBus::configure_step_done(int64_t now, std::error_code ec, uint32_t val
       // The write was acknowledged; a read that is refused (write-only, unsupported access, or
       // any other abort — "object does not exist" from a controller that maps writes only)
       // cannot prove it: the write stays unverified, not failed.
-      bump(axis_counters_[axis].unverified);
+      single_writer_add(axis_counters_[axis].unverified);
     } else if (ec == SdoFrameError::kSizeMismatch) {
       differs = make_error_code(CanioBusError::kReadBackSize);
     } else if (ec) {
@@ -463,7 +459,7 @@ void CanioBus::unconfigurable(int64_t now, uint16_t reg, uint32_t value,
   AxisSdo& a = axis_sdo_[axis];
   note(axis, {NoteKind::Refused, 0, reg, value, ec});
   axis_counters_[axis].unconfigurable.store(true, std::memory_order_relaxed);
-  bump(axis_counters_[axis].sdo_errors);
+  single_writer_add(axis_counters_[axis].sdo_errors);
   job_.kind = SdoJobKind::None;
   // Bounded back-off: the refusal may be the node's state (it may need a restart, or a tool
   // holds it); asking every 500 ms for ever would load the bus for nothing.
@@ -488,12 +484,12 @@ void CanioBus::finish_configure(int64_t now, std::error_code ec, bool completed)
   }
   job_.kind = SdoJobKind::None;
   if (!ec) {
-    bump(axis_counters_[axis].configurations);
-    if (job_.refused) bump(axis_counters_[axis].sdo_errors);
+    single_writer_add(axis_counters_[axis].configurations);
+    if (job_.refused) single_writer_add(axis_counters_[axis].sdo_errors);
     mark_configured(axis, now);
     return;
   }
-  bump(axis_counters_[axis].sdo_errors);
+  single_writer_add(axis_counters_[axis].sdo_errors);
   a.retry_at_ns = now + kRetryConfigureNs;
   // The node answers, but not as written (another value or size): after a few attempts the axis
   // goes up with the configuration unverified (last_error says why); the PosCycle gate keeps it
@@ -502,7 +498,7 @@ void CanioBus::finish_configure(int64_t now, std::error_code ec, bool completed)
     SdoNote n = notes_[axis].load();
     n.unverified_after = static_cast<uint8_t>(std::min(a.definitive, 255U));
     note(axis, n);
-    bump(axis_counters_[axis].configurations);
+    single_writer_add(axis_counters_[axis].configurations);
     mark_configured(axis, now);
   }
 }
@@ -515,7 +511,7 @@ void CanioBus::check_step_done(int64_t now, std::error_code ec, uint32_t value,
     // No answer proves nothing about the configuration: asked again later; this axis publishes
     // nothing meanwhile.
     note(axis, {NoteKind::Checking, 0, c.reg, 0, ec});
-    bump(axis_counters_[axis].sdo_errors);
+    single_writer_add(axis_counters_[axis].sdo_errors);
     axis_sdo_[axis].retry_at_ns = now + kRetryConfigureNs;
     job_.kind = SdoJobKind::None;
     return;
@@ -540,7 +536,7 @@ void CanioBus::request_step_done(std::error_code ec, uint32_t value) noexcept {
   }
   if (job_.stage == SdoStage::ReadBack) {
     if (cannot_be_read(ec)) {
-      bump(axis_counters_[r.axis].unverified);
+      single_writer_add(axis_counters_[r.axis].unverified);
       ec = {};
     } else if (ec == SdoFrameError::kSizeMismatch) {
       ec = make_error_code(CanioBusError::kReadBackSize);
@@ -565,7 +561,7 @@ void CanioBus::mark_configured(std::size_t axis, int64_t now) noexcept {
   // The configuration is the proof: the first samples after it (the node was silent while
   // pre-operational) are not a return from silence that needs checking again.
   axis_counters_[axis].last_sample_ns.store(0, std::memory_order_relaxed);
-  bump(axis_counters_[axis].generation);
+  single_writer_add(axis_counters_[axis].generation);
   axis_counters_[axis].configured.store(true, std::memory_order_release);
   node_configured(axis, now);
 }
@@ -576,7 +572,7 @@ void CanioBus::answer(const RegisterRequest& request, std::error_code ec, uint32
   res.error = ec;
   res.value = value;
   if (ec && request.axis < options_.axes.size() && ec != CanioBusError::kNotConfigured)
-    bump(axis_counters_[request.axis].sdo_errors);
+    single_writer_add(axis_counters_[request.axis].sdo_errors);
   // The normal thread has not polled for a while: the path holds it until the queue has room and
   // step_sdo() starts no other job meanwhile (so it is the only one held).
   (void)registers().complete(res);

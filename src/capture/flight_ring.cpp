@@ -4,12 +4,10 @@
 #include <stdexcept>
 #include <string>
 
+#include "core/single_writer.hpp"
+
 namespace ds1928::capture {
 namespace {
-
-void bump(std::atomic<uint64_t>& c, uint64_t by = 1) noexcept {
-  c.store(c.load(std::memory_order_relaxed) + by, std::memory_order_relaxed);
-}
 
 uint64_t header_word(std::size_t length, Direction d, uint64_t kind) noexcept {
   return static_cast<uint64_t>(length) | (uint64_t{static_cast<uint8_t>(d)} << 16) | (kind << 24);
@@ -75,9 +73,9 @@ void FlightRing::record(Direction direction, int64_t time_ns,
   }
   head_local_ = end;
   head_.store(end, std::memory_order_release);
-  bump(frames_);
-  if (gone != 0) bump(overwritten_, gone);
-  if (bytes.size() > length) bump(cut_);
+  single_writer_add(frames_);
+  if (gone != 0) single_writer_add(overwritten_, gone);
+  if (bytes.size() > length) single_writer_add(cut_);
 }
 
 std::vector<FlightFrame> FlightRing::frames_since(int64_t from_ns) const {

@@ -8,16 +8,9 @@
 #include <stdexcept>
 
 #include "core/clock.hpp"
+#include "core/single_writer.hpp"
 
 namespace ds1928::capture {
-namespace {
-
-// The single writer of a counter updates it without a read-modify-write.
-void bump(std::atomic<uint64_t>& c) noexcept {
-  c.store(c.load(std::memory_order_relaxed) + 1, std::memory_order_relaxed);
-}
-
-}  // namespace
 
 Tap::Tap(std::string name, uint16_t link_type, std::size_t max_frame, std::size_t ring_frames)
     : name_(std::move(name)),
@@ -37,7 +30,7 @@ Tap::Tap(std::string name, uint16_t link_type, std::size_t max_frame, std::size_
 void Tap::record(Direction direction, int64_t time_ns, std::span<const uint8_t> bytes) noexcept {
   const uint64_t seq = seq_.load(std::memory_order_relaxed) + 1;
   seq_.store(seq, std::memory_order_seq_cst);
-  bump(direction == Direction::Outbound ? tx_ : rx_);
+  single_writer_add(direction == Direction::Outbound ? tx_ : rx_);
   if (flight_) {
     if (time_ns == 0) time_ns = rt::now_ns();
     flight_->record(direction, time_ns, bytes);
@@ -47,7 +40,7 @@ void Tap::record(Direction direction, int64_t time_ns, std::span<const uint8_t> 
   if (active_.load(std::memory_order_seq_cst) && ring_ != nullptr) {
     const std::size_t head = head_.load(std::memory_order_relaxed);
     if (head - tail_.load(std::memory_order_acquire) == capacity_) {
-      bump(dropped_);
+      single_writer_add(dropped_);
     } else {
       uint8_t* slot = slot_at(head);
       const std::size_t length = std::min(bytes.size(), max_frame_);
@@ -56,7 +49,7 @@ void Tap::record(Direction direction, int64_t time_ns, std::span<const uint8_t> 
       std::memcpy(slot, &h, sizeof h);
       if (length != 0) std::memcpy(slot + sizeof h, bytes.data(), length);
       head_.store(head + 1, std::memory_order_release);
-      bump(captured_);
+      single_writer_add(captured_);
     }
   }
   done_.store(seq, std::memory_order_release);
