@@ -8,11 +8,16 @@
 // cycles.
 #pragma once
 
+#include <fcntl.h>
+#include <sys/mman.h>
 #include <sys/resource.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
 #include <cstdint>
+#include <cstdio>
+#include <cstring>
 
 #include "core/bus.hpp"
 #include "core/cycle_engine.hpp"
@@ -28,18 +33,45 @@ namespace ds1928::test {
 // least, and the window closes at the first cycle after close() — a test whose window must hold
 // traffic from other threads (a node thread, SDO answers) closes it once that traffic was seen,
 // so what the window contains does not depend on how the scheduler shares the cores.
+// Loads and locks every code mapping of the process (the test executable and its libraries).
+// The daemon locks memory as it is first touched (mlockall with MCL_ONFAULT, core/rt_setup.cpp),
+// so a branch of code the cycle thread first takes costs one page fault, once. Which branches it
+// first takes inside a window depends on how the scheduler shares the cores (a register result
+// held because the normal thread polled late, a tunnel reply that waits one cycle more), so the
+// proofs lock the code before their window opens: a fault they count is then a data page the
+// cycle touched for the first time in steady cycles, which is what they are about.
+inline void lock_code_pages() noexcept {
+  const int fd = ::open("/proc/self/maps", O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return;
+  static char buf[1 << 18];
+  std::size_t len = 0;
+  for (;;) {
+    const ssize_t n = ::read(fd, buf + len, sizeof(buf) - 1 - len);
+    if (n <= 0 || (len += static_cast<std::size_t>(n)) == sizeof(buf) - 1) break;
+  }
+  ::close(fd);
+  buf[len] = 0;
+  for (char* line = buf; line != nullptr && *line != 0;) {
+    char* next = std::strchr(line, '\n');
+    if (next != nullptr) *next++ = 0;
+    unsigned long lo = 0, hi = 0;
+    char perms[8] = {};
+    if (std::sscanf(line, "%lx-%lx %7s", &lo, &hi, perms) == 3 && std::strcmp(perms, "r-xp") == 0 &&
+        std::strchr(line, '/') != nullptr)
+      (void)::mlock(reinterpret_cast<void*>(lo), hi - lo);
+    line = next;
+  }
+}
+
 class CountingTask final : public CycleTask {
  public:
   CountingTask(CycleTask& inner, uint64_t counted, uint64_t warmup = 0, bool armed = true,
                bool open_ended = false)
-      : inner_(inner),
-        counted_(counted),
-        warmup_(warmup),
-        armed_(armed),
-        close_(!open_ended) {}
+      : inner_(inner), counted_(counted), warmup_(warmup), armed_(armed), close_(!open_ended) {}
   void run_cycle(const CycleContext& ctx) noexcept override {
     if (!counting_ && !done() && executed_ >= warmup_ && armed_.load(std::memory_order_acquire)) {
       counting_ = true;
+      lock_code_pages();  // outside what the window counts: before its first reading
       faults_at_start_ = thread_faults();
       begin_counting();
     }
