@@ -49,7 +49,8 @@ class Wire final : public pl::Link {
 
 std::vector<uint8_t> le(uint64_t v, int n) {
   std::vector<uint8_t> d;
-  for (int i = 0; i < n; ++i) d.push_back(static_cast<uint8_t>(v >> (8 * i)));
+  // Bytes past the eighth (a write one byte too long for a U64) are 0: no shift by 64.
+  for (int i = 0; i < n; ++i) d.push_back(i < 8 ? static_cast<uint8_t>(v >> (8 * i)) : 0);
   return d;
 }
 
