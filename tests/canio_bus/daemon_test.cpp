@@ -67,46 +67,57 @@ json request(const std::string& path, const json& j) {
   return r.is_object() ? r : json::object();
 }
 
+// A test's own virtual CAN bus, directory and shared-memory name (unique per process), removed
+// when the test ends, and the daemon's configuration on them: one node, 2 ms.
+struct TestPlace {
+  explicit TestPlace(const std::string& name)
+      : tag(std::to_string(::getpid())),
+        bus("ds1928d-" + name + "-" + tag),
+        dir(std::filesystem::temp_directory_path() / ("ds1928d-canio-" + name + "-" + tag)) {
+    std::filesystem::create_directories(dir);
+  }
+  ~TestPlace() {
+    std::error_code ec;
+    std::filesystem::remove_all(dir, ec);
+    (void)canio::VirtualCanBus::remove_shared(bus);
+  }
+  [[nodiscard]] DaemonConfig config() const {
+    DaemonConfig c = test::canio_config(1, 2000);
+    c.canio.virtual_bus = bus;
+    // SYNC + 2 input objects take ~540 µs of a 500 kbit/s wire; the rest is the node thread's
+    // and the daemon's reaction on a shared machine.
+    c.canio.response_timeout_us = 1500;
+    c.cycle.hold_cpu_dma_latency = false;
+    c.cycle.lock_memory = false;
+    c.shm.name = "/" + bus;
+    c.socket.path = (dir / "control.sock").string();
+    return c;
+  }
+  const std::string tag, bus;
+  const std::filesystem::path dir;
+};
+
+// The daemon running on its own thread until the scope ends.
+struct RunningDaemon {
+  explicit RunningDaemon(const DaemonConfig& c)
+      : daemon(c), thread([this] { rc = daemon.run(); }) {}
+  ~RunningDaemon() {
+    daemon.request_stop();
+    thread.join();
+  }
+  Daemon daemon;
+  int rc = -1;
+  std::thread thread;
+};
+
 }  // namespace
 
 TEST_CASE("ds1928d on bus canio: configured at start, positions, status, EnDat commands",
           "[canio][daemon][socket]") {
-  const std::string tag = std::to_string(::getpid());
-  const std::string bus_name = "ds1928d-test-" + tag;
-  const auto dir = std::filesystem::temp_directory_path() / ("ds1928d-canio-" + tag);
-  std::filesystem::create_directories(dir);
-  struct Cleanup {
-    std::filesystem::path dir;
-    std::string bus;
-    ~Cleanup() {
-      std::error_code ec;
-      std::filesystem::remove_all(dir, ec);
-      (void)canio::VirtualCanBus::remove_shared(bus);
-    }
-  } cleanup{dir, bus_name};
-
-  DaemonConfig c = test::canio_config(1, 2000);
-  c.canio.virtual_bus = bus_name;
-  // SYNC + 2 input objects take ~540 µs of a 500 kbit/s wire; the rest is the node thread's and
-  // the daemon's reaction on a shared machine.
-  c.canio.response_timeout_us = 1500;
-  c.cycle.hold_cpu_dma_latency = false;
-  c.cycle.lock_memory = false;
-  c.shm.name = "/ds1928d-canio-daemon-" + tag;
-  c.socket.path = (dir / "control.sock").string();
-  SimulatedNodeThread node(c, bus_name);
-
-  Daemon daemon(c);
-  int rc = -1;
-  std::thread t([&] { rc = daemon.run(); });
-  struct Join {
-    Daemon& d;
-    std::thread& t;
-    ~Join() {
-      d.request_stop();
-      t.join();
-    }
-  } join{daemon, t};
+  const TestPlace place("daemon");
+  const DaemonConfig c = place.config();
+  SimulatedNodeThread node(c, place.bus);
+  RunningDaemon running(c);
   REQUIRE(test::wait_until([&] { return test::unix_socket_accepts(c.socket.path); }));
 
   // Configured over SDO, then operational with fresh positions.
@@ -164,46 +175,17 @@ TEST_CASE(
     "ds1928d on bus canio: a node with the wrong product is held down, the reason in status, "
     "topology and metrics",
     "[canio][daemon][topology]") {
-  const std::string tag = std::to_string(::getpid());
-  const std::string bus_name = "ds1928d-topo-test-" + tag;
-  const auto dir = std::filesystem::temp_directory_path() / ("ds1928d-canio-topo-" + tag);
-  std::filesystem::create_directories(dir);
-  struct Cleanup {
-    std::filesystem::path dir;
-    std::string bus;
-    ~Cleanup() {
-      std::error_code ec;
-      std::filesystem::remove_all(dir, ec);
-      (void)canio::VirtualCanBus::remove_shared(bus);
-    }
-  } cleanup{dir, bus_name};
-
-  DaemonConfig c = test::canio_config(1, 2000);
-  c.canio.virtual_bus = bus_name;
-  c.canio.response_timeout_us = 1500;
+  const TestPlace place("topo");
+  DaemonConfig c = place.config();
   CanioNodeOptions expected;
   expected.node = 1;
   expected.identity.vendor_id = 0x0000001A;
   expected.identity.product_code = 0x00001928;
   c.canio.nodes.push_back(expected);
-  c.cycle.hold_cpu_dma_latency = false;
-  c.cycle.lock_memory = false;
-  c.shm.name = "/ds1928d-canio-topo-" + tag;
-  c.socket.path = (dir / "control.sock").string();
   c.metrics.listen.reset();
-  SimulatedNodeThread node(c, bus_name,
+  SimulatedNodeThread node(c, place.bus,
                            [](sim::CanioNodeConfig& nc) { nc.identity.product_code = 0xBEEF; });
-
-  Daemon daemon(c);
-  std::thread t([&] { (void)daemon.run(); });
-  struct Join {
-    Daemon& d;
-    std::thread& t;
-    ~Join() {
-      d.request_stop();
-      t.join();
-    }
-  } join{daemon, t};
+  RunningDaemon running(c);
   REQUIRE(test::wait_until([&] { return test::unix_socket_accepts(c.socket.path); }));
 
   json status;
@@ -230,9 +212,9 @@ TEST_CASE(
   CHECK(topo["nodes"][0]["difference"] ==
         "identity: product_code 0x0000BEEF, expected 0x00001928 (0x1018/2)");
 
-  const std::string metrics = daemon.metrics_text(metrics::Format::Prometheus);
+  const std::string metrics = running.daemon.metrics_text(metrics::Format::Prometheus);
   CHECK_THAT(metrics, Catch::Contains("ds1928_canio_node_identity_mismatch{node=\"1\"} 1"));
-  CHECK(daemon.cycle_work()
+  CHECK(running.daemon.cycle_work()
             .counters(0)
             .published[static_cast<std::size_t>(shm::AxisValidity::Valid)]
             .load() == 0);  // never a position from the wrong node
