@@ -376,10 +376,7 @@ void ManagingNode::on_enter_reset(Cn& cn) noexcept {
   // Queued register requests cannot be served by a node that restarts.
   while (cn.ops_count > 0) {
     const RegisterRequest& op = cn.ops[cn.ops_head].request;
-    if (results_count_ < results_.size()) {
-      results_[(results_head_ + results_count_++) % results_.size()] = {
-          op.tag, make_error_code(SdoError::kConnectionLost), 0};
-    }
+    push_result({op.tag, make_error_code(SdoError::kConnectionLost), 0});
     cn.ops_head = (cn.ops_head + 1) % kOpQueueDepth;
     --cn.ops_count;
   }

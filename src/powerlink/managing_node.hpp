@@ -227,7 +227,9 @@ class ManagingNode {
   // A register request of the module in `slot` of CN `node` (its axis resolved by the caller),
   // as an SDO transfer. False when the node is unknown or its queue is full.
   [[nodiscard]] bool submit(uint8_t node, uint8_t slot, const RegisterRequest& request) noexcept;
-  // True when submit() for `node` would find room in the node's queue.
+  // True when submit() for `node` would find room: in the node's queue, and a result slot for
+  // it (each request accepted holds one until its result is polled, so none is ever dropped,
+  // however slowly results are taken and however many nodes have requests queued).
   [[nodiscard]] bool can_submit(uint8_t node) const noexcept;
   // One result per request submitted, in completion order.
   [[nodiscard]] bool poll(RegisterResult& out) noexcept;
@@ -326,6 +328,9 @@ class ManagingNode {
   std::array<RegisterResult, kRegisterQueueDepth> results_{};
   std::size_t results_head_ = 0;
   std::size_t results_count_ = 0;
+  std::size_t results_reserved_ = 0;  // requests accepted whose result is not in results_ yet
+  // A result of a request accepted by submit() (its slot was reserved there).
+  void push_result(const RegisterResult& r) noexcept;
 };
 
 }  // namespace ds1928::powerlink

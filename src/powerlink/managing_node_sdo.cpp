@@ -11,17 +11,25 @@ namespace ds1928::powerlink {
 // ------------------------------------------------------------------------------------------
 
 bool ManagingNode::submit(uint8_t node, uint8_t slot, const RegisterRequest& request) noexcept {
+  if (!can_submit(node)) return false;
   Cn* cn = find(node);
-  if (!cn || cn->ops_count == kOpQueueDepth) return false;
   cn->ops[(cn->ops_head + cn->ops_count) % kOpQueueDepth] = {slot, request};
   ++cn->ops_count;
+  ++results_reserved_;
   start_next_sdo(*cn);
   return true;
 }
 
 bool ManagingNode::can_submit(uint8_t node) const noexcept {
   const Cn* cn = find(node);
-  return cn != nullptr && cn->ops_count < kOpQueueDepth;
+  return cn != nullptr && cn->ops_count < kOpQueueDepth &&
+         results_count_ + results_reserved_ < results_.size();
+}
+
+void ManagingNode::push_result(const RegisterResult& r) noexcept {
+  // Room is certain: submit() reserved it.
+  if (results_reserved_ > 0) --results_reserved_;
+  results_[(results_head_ + results_count_++) % results_.size()] = r;
 }
 
 bool ManagingNode::poll(RegisterResult& out) noexcept {
@@ -173,9 +181,8 @@ void ManagingNode::sdo_done(Cn& cn, std::error_code ec, std::span<const uint8_t>
   if (cn.op_internal) {
     // A setting the bus controller refuses is reported (status) but does not stop the boot.
     ++cn.boot_next;
-  } else if (results_count_ < results_.size()) {
-    results_[(results_head_ + results_count_++) % results_.size()] = {cn.current.request.tag, ec,
-                                                                      value};
+  } else {
+    push_result({cn.current.request.tag, ec, value});
   }
   if (ec == SdoError::kConnectionLost) return;  // the node is being reset
   start_next_sdo(cn);

@@ -180,6 +180,39 @@ TEST_CASE("A burst of register requests longer than the node's SDO queue waits, 
   for (uint32_t i = 0; i < submitted; ++i) CHECK(tags[i] == 100 + i);  // served in order
 }
 
+TEST_CASE("Every register request accepted gets its result, however long results are not taken",
+          "[powerlink][mn]") {
+  // Five nodes could queue 5 × 32 SDO transfers in the MN; its results ring holds 64 and the
+  // request path 64 more. Nobody takes a result for 400 cycles while requests keep coming: the
+  // MN accepts a request only with a result slot reserved for it, so none is dropped.
+  Rig rig({1, 2, 3, 4, 5}, 1);
+  REQUIRE(rig.run_until([&] { return rig.bus->state() == BusState::Operational; }));
+  uint32_t submitted = 0;
+  for (int c = 0; c < 400; ++c) {
+    while (rig.bus->submit(RegisterRequest{1000 + submitted, static_cast<uint16_t>(submitted % 5),
+                                           reg::kSystemCyclePrescaler, 2, false, 0}))
+      ++submitted;
+    rig.step();
+  }
+  REQUIRE(submitted >= 128);  // more than one ring and path hold: the point is reached
+  std::vector<int> seen(submitted, 0);
+  RegisterResult res;
+  uint32_t results = 0;
+  REQUIRE(rig.run_until(
+      [&] {
+        while (rig.bus->poll(res)) {
+          REQUIRE(res.tag >= 1000);
+          REQUIRE(res.tag < 1000 + submitted);
+          CHECK_FALSE(res.error);
+          ++seen[res.tag - 1000];
+          ++results;
+        }
+        return results == submitted;
+      },
+      20000));
+  for (uint32_t i = 0; i < submitted; ++i) CHECK(seen[i] == 1);
+}
+
 TEST_CASE("Loss-of-PRes threshold removes, resets and re-boots the CN", "[powerlink][mn]") {
   Rig rig({1, 2}, 1);
   REQUIRE(rig.run_until([&] { return rig.bus->state() == BusState::Operational; }));
