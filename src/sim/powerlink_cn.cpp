@@ -205,6 +205,7 @@ void PowerlinkCn::reset(pl::NmtCommandId command, int64_t now_ns) noexcept {
   have_soc_ = false;
   period_ns_ = 0;
   last_soc_ns_ = 0;
+  unobserved_since_soc_ns_ = 0;
   cycles_since_preq_ = 0;
   preq_interval_ = 0;
   loss_of_preq_counter_ = 0;
@@ -252,7 +253,7 @@ void PowerlinkCn::tick(int64_t now_ns) noexcept {
     // booted again.
     const int64_t timeout = std::max<int64_t>(
         config_.soc_timeout_min_ns, static_cast<int64_t>(config_.soc_loss_periods) * period_ns_);
-    if (now_ns - last_soc_ns_ > timeout) {
+    if (now_ns - last_soc_ns_ - unobserved_since_soc_ns_ > timeout) {
       ++stats_.loss_of_soc;
       log_error(kErrorLossOfSoc, now_ns);
       have_soc_ = false;
@@ -263,6 +264,17 @@ void PowerlinkCn::tick(int64_t now_ns) noexcept {
   }
   sdo_->tick(now_ns);
   tick_modules(now_ns);
+}
+
+void PowerlinkCn::note_own_stall(int64_t from_ns, int64_t to_ns) noexcept {
+  if (to_ns <= from_ns) return;
+  ++stats_.own_stalls;
+  stats_.own_stall_max_ns = std::max(stats_.own_stall_max_ns, to_ns - from_ns);
+  if (!have_soc_) return;
+  // Only the part after the last SoC: a SoC that came during the stall (its kernel stamp inside
+  // the span) already restarted the count.
+  const int64_t unseen = to_ns - std::max(from_ns, last_soc_ns_);
+  if (unseen > 0) unobserved_since_soc_ns_ += unseen;
 }
 
 void PowerlinkCn::receive(std::span<const uint8_t> frame, int64_t now_ns) noexcept {
@@ -322,6 +334,7 @@ void PowerlinkCn::note_soc_timing(const pl::Soc& soc, int64_t now_ns) noexcept {
   }
   have_soc_ = true;
   last_soc_ns_ = now_ns;
+  unobserved_since_soc_ns_ = 0;
   soc_relative_us_ = soc.relative_time_us;
   // NetTime from the earliest SoC arrival, not the latest (sim/nettime_anchor.hpp).
   net_anchor_.sample(now_ns - static_cast<int64_t>(soc.relative_time_us) * 1000);

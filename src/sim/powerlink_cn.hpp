@@ -117,6 +117,10 @@ struct PowerlinkCnStats {
   uint64_t sync_requests = 0;  // SyncRequests to this node (answered with a SyncResponse)
   uint64_t pres_mn = 0;        // PResMN seen while in PRC mode (each answered with the PRes)
   uint64_t prc_fallbacks = 0;  // PRC mode left for PReq/PRes: no PResMN within the fallback time
+  // Spans in which the simulator's own thread was not run by its host (note_own_stall): not
+  // counted as silence on the wire.
+  uint64_t own_stalls = 0;
+  int64_t own_stall_max_ns = 0;
 };
 
 class PowerlinkCn {
@@ -136,6 +140,12 @@ class PowerlinkCn {
   void tick(int64_t now_ns) noexcept;
   // Earliest instant tick() has work to do (delayed PRes, end of power-off); INT64_MAX if none.
   [[nodiscard]] int64_t next_deadline_ns() const noexcept;
+  // The simulator's own thread was not run from `from_ns` to `to_ns` by its host (the vCPU
+  // stopped; not a task of this machine running instead). A CN in its own hardware never stops,
+  // and on a test machine that stops both the MN and the simulator the wire did not go silent:
+  // that span does not count toward the loss of SoC. Silence the simulator was there to see
+  // still counts in full.
+  void note_own_stall(int64_t from_ns, int64_t to_ns) noexcept;
 
   // Fault injection: the node loses power now and boots again after config.power_off_ns.
   void power_cycle(int64_t now_ns) noexcept;
@@ -240,6 +250,7 @@ class PowerlinkCn {
 
   // Cycle timing.
   int64_t last_soc_ns_ = 0;
+  int64_t unobserved_since_soc_ns_ = 0;  // of the time since the last SoC, the own stalls' part
   int64_t period_ns_ = 0;
   uint64_t soc_relative_us_ = 0;
   bool have_soc_ = false;
@@ -297,6 +308,13 @@ class PowerlinkCnLoop {
   struct Options {
     int64_t guard_ns = 80'000;  // start polling this long before the next SoC is due
     int64_t idle_wait_ns = 1'000'000;
+    // The thread's run-queue wait so far in ns (the kernel's schedstat): a stall of the loop is
+    // its host's only for the part the kernel did not count as waiting for a CPU of this
+    // machine. Empty: no stall is the host's (every silence counts).
+    std::function<int64_t()> run_queue_wait_ns;
+    // The loop back from a wait later than this after its deadline (or the frame's stamp) =
+    // a stall.
+    int64_t own_stall_min_ns = 500'000;
   };
   PowerlinkCnLoop(powerlink::Link& link, std::function<bool(int64_t)> wait_readable,
                   std::span<PowerlinkCn* const> nodes, Options options);
@@ -304,17 +322,26 @@ class PowerlinkCnLoop {
   // Returns false on a link error that is not a timeout.
   bool run_once() noexcept;
 
- private:
-  // Arrival rhythm of one frame type (SoC in full cycles, SoA in the reduced cycle).
+  // Arrival rhythm of one frame type (SoC in full cycles, SoA in the reduced cycle): what the
+  // loop sleeps by. A gap of more than 4 periods is a pause (the MN's host stalled, the link was
+  // gone), not a new period — learned as one, the loop would sleep through the next cycles and
+  // answer every PResMN late until the average came back. Two such gaps in a row are: the MN
+  // runs a longer cycle now.
   struct Rhythm {
     int64_t last = 0;
     int64_t period = 0;
+    uint32_t pauses = 0;  // gaps of more than 4 periods in a row
     void note(int64_t t) noexcept;
     [[nodiscard]] bool valid(int64_t now) const noexcept {
       return period > 0 && now - last < 3 * period;
     }
   };
+
+ private:
   [[nodiscard]] int64_t next_cycle_start(int64_t now) const noexcept;
+  // `now` read after a wait that should have ended by `due`: later means the thread was stopped
+  // meanwhile; the host's part of that goes to the nodes.
+  void check_own_stall(int64_t due, int64_t now) noexcept;
 
   powerlink::Link& link_;
   std::function<bool(int64_t)> wait_readable_;
@@ -322,7 +349,8 @@ class PowerlinkCnLoop {
   Options options_;
   Rhythm soc_;
   Rhythm soa_;
-  bool cycle_done_ = false;  // SoA seen: idle phase until the next cycle start
+  bool cycle_done_ = false;          // SoA seen: idle phase until the next cycle start
+  int64_t run_queue_wait_mark_ = 0;  // run_queue_wait_ns() at this pass' start
   std::array<uint8_t, powerlink::kMaxFrameSize> rx_{};
 };
 

@@ -22,9 +22,15 @@ PowerlinkCnLoop::PowerlinkCnLoop(pl::Link& link, std::function<bool(int64_t)> wa
 void PowerlinkCnLoop::Rhythm::note(int64_t t) noexcept {
   if (last != 0) {
     const int64_t gap = t - last;
-    if (period == 0 || gap > 4 * period) {
+    if (period == 0) {
       period = gap;
+    } else if (gap > 4 * period) {
+      if (++pauses >= 2) {
+        period = gap;
+        pauses = 0;
+      }
     } else {
+      pauses = 0;
       period += (gap - period) / 8;
     }
   }
@@ -41,8 +47,23 @@ int64_t PowerlinkCnLoop::next_cycle_start(int64_t now) const noexcept {
   return 0;
 }
 
+void PowerlinkCnLoop::check_own_stall(int64_t due, int64_t now) noexcept {
+  const int64_t late = now - due;
+  if (late < options_.own_stall_min_ns || !options_.run_queue_wait_ns) return;
+  // The part the kernel counted as waiting for a CPU is this machine's scheduling (a task of
+  // higher priority ran): silence the simulator would have seen had it run, so it still counts.
+  const int64_t waited = options_.run_queue_wait_ns();
+  if (waited < 0) return;  // the kernel's count unreadable: the silence counts
+  const int64_t host = late - std::max<int64_t>(0, waited - run_queue_wait_mark_);
+  run_queue_wait_mark_ = waited;
+  if (host < options_.own_stall_min_ns) return;
+  for (PowerlinkCn* n : nodes_) n->note_own_stall(now - host, now);
+}
+
 bool PowerlinkCnLoop::run_once() noexcept {
   int64_t now = rt::now_ns();
+  // The run-queue wait from here on: a stall found in this pass is compared with it.
+  if (options_.run_queue_wait_ns) run_queue_wait_mark_ = options_.run_queue_wait_ns();
   int64_t node_deadline = INT64_MAX;
   for (PowerlinkCn* n : nodes_) node_deadline = std::min(node_deadline, n->next_deadline_ns());
 
@@ -52,12 +73,19 @@ bool PowerlinkCnLoop::run_once() noexcept {
     // after its SoA) wait in the ring until the wake-up.
     const int64_t wake =
         std::min({next_start - options_.guard_ns, node_deadline, now + options_.idle_wait_ns});
-    if (wake > now) (void)rt::sleep_until(wake);
+    if (wake > now) {
+      (void)rt::sleep_until(wake);
+      now = rt::now_ns();
+      check_own_stall(wake, now);
+    }
     now = rt::now_ns();
   } else if (next_start == 0 && node_deadline > now) {
-    // No rhythm known (MN silent or just starting): block until something comes.
-    (void)wait_readable_(std::min(node_deadline, now + options_.idle_wait_ns));
+    // No rhythm known (MN silent or just starting): block until something comes. (A frame
+    // that ends the wait and is then read late: the receive below judges it by its stamp.)
+    const int64_t until = std::min(node_deadline, now + options_.idle_wait_ns);
+    const bool readable = wait_readable_(until);
     now = rt::now_ns();
+    if (!readable) check_own_stall(until, now);
   }
   cycle_done_ = false;
 
@@ -66,8 +94,18 @@ bool PowerlinkCnLoop::run_once() noexcept {
   const int64_t end = now + (period > 0 ? period + options_.guard_ns : options_.idle_wait_ns);
   bool ok = true;
   while (!cycle_done_ && now < end) {
-    const pl::Received r = link_.receive(rx_, std::min(end, node_deadline));
-    now = r.rx_time_ns != 0 ? r.rx_time_ns : rt::now_ns();
+    const int64_t deadline = std::min(end, node_deadline);
+    const int64_t called = rt::now_ns();
+    const pl::Received r = link_.receive(rx_, deadline);
+    const int64_t back = rt::now_ns();
+    // Back by the deadline, or — a frame — as soon as it came (its kernel stamp) or the call
+    // began. Only the waits are judged: the frames' handling may write a log line, and a thread
+    // blocked in its own write is not one its host stopped.
+    const int64_t due = r.rx_time_ns != 0 ? std::max(called, r.rx_time_ns)
+                        : r.length != 0   ? back  // no stamp: nothing to judge by
+                                          : std::max(called, deadline);
+    check_own_stall(due, back);
+    now = r.rx_time_ns != 0 ? r.rx_time_ns : back;
     if (r.error && r.length == 0) {
       ok = false;
       break;

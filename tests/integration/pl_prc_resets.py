@@ -1,15 +1,13 @@
 #!/usr/bin/env python3
 """Explains each reset of a mixed PollResponse Chaining hold from the wire.
 
-  pl_prc_resets.py FRAMES.tsv THRESHOLD SOC_LOSS_MS SLOT_US [ASYNC_US]
+  pl_prc_resets.py FRAMES.tsv THRESHOLD SOC_LOSS_MS SLOT_US [ASYNC_US [STALLS]]
 
 FRAMES.tsv: both veth ends' POWERLINK frames merged by time (one clock: one machine), columns
 time, MessageType, source, destination, SoA service, ASnd service, NMTCommandId, the NMT state
 of a PRes, of an IdentResponse, of a StatusResponse, the SoA's RequestedServiceTarget.
 Each NMTResetNode the MN sent to a CN (ASnd NMTCommand 0x28) is a reset. A reset is explained
-by the wire when, before it and since the node's previous reset,
-  - the MN's SoCs stopped for longer than the simulated CN's loss-of-SoC limit (SOC_LOSS_MS:
-    the CN falls back to PRE_OPERATIONAL_1 by the standard's rule; the MN then resets it), or
+by the wire when, before it and since the node's previous reset (checked in this order),
   - the node's PRes was missing from its cycles often enough for the MN's loss-of-PRes counter
     (DS 301: +8 per cycle without the node's PRes, -1 per cycle with it) to reach THRESHOLD:
     replayed per cycle from the wire, a PRC node's PRes counting when it came within SLOT_US of
@@ -18,18 +16,28 @@ by the wire when, before it and since the node's previous reset,
   - or a SyncRequest to the node (PollResponse Chaining set-up) got no SyncResponse within
     ASYNC_US (the MN's AsyncSlotTimeout, default 100 µs; the MN resets a PRC node at the second
     miss),
-  - or the node was being booted for longer than a boot step may take (BOOT_STEP_S, 5 s: its
-    answers in the asynchronous slots came late or not; not OPERATIONAL since its last reset),
   - or the node reported a state the MN resets it for: another than OPERATIONAL after an
     OPERATIONAL one (it fell back), or READY_TO_OPERATE/OPERATIONAL in an Ident- or
-    StatusResponse while being booted (it did not take an earlier NMTResetNode).
-Prints one line: resets, explained by each cause, unexplained, the longest SoC gap (ms), the SoC
+    StatusResponse while being booted (it did not take an earlier NMTResetNode),
+  - or the MN's SoCs stopped for longer than the simulated CN's loss-of-SoC limit (SOC_LOSS_MS),
+    the gap ending at most GAP_WINDOW_S (2 s) before the reset,
+  - or the node was being booted for longer than a boot step may take (BOOT_STEP_S, 5 s: its
+    answers in the asynchronous slots came late or not; not OPERATIONAL since its last reset).
+STALLS (bench/cycle/host_stall_probe's output: CPU START END LATE_MS per line) says whose a SoC gap
+was: the host's when a CPU's probe thread, at SCHED_FIFO 99, was stopped for all of the gap but
+HOST_SLACK_MS (its own period and the MN's wake-up) — the host did not run that vCPU, and the MN
+on it could not send. A reset is `host_stalled` when such a gap ended at most GAP_WINDOW_S before
+it, whatever cause explains it (the CN's fall-back, the MN's threshold).
+Prints one line: resets, explained by each cause, unexplained, host_stalled, the SoC gaps over
+SOC_LOSS_MS that the host caused (gaps_host), the longest SoC gap (ms), the SoC
 gaps longer than SOC_LOSS_MS, and per node the cycles without its PRes on the wire.
 """
 import sys
 
 RESET_NODE = 0x28
 BOOT_STEP_S = 5.0
+GAP_WINDOW_S = 2.0
+HOST_SLACK_MS = 1.5
 OPERATIONAL = 0xFD
 
 
@@ -41,6 +49,12 @@ def main():
     path, threshold, soc_loss_ms = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
     slot_s = float(sys.argv[4]) / 1e6
     async_s = float(sys.argv[5] if len(sys.argv) > 5 else 100) / 1e6
+    stalls = []  # (start, end) of each CPU's stop seen by the probe
+    if len(sys.argv) > 6:
+        for line in open(sys.argv[6]):
+            f = line.split()
+            if len(f) >= 3:
+                stalls.append((float(f[1]), float(f[2])))
     sync_missed = {}
     sync_open = {}
     rows = []
@@ -56,6 +70,7 @@ def main():
     counter, fired_at, missing = {}, {}, {}
     cycle_seen, polled, answered = set(), {}, set()
     gap_at, last_soc, max_gap, long_gaps = [], None, 0.0, 0
+    host_gap_at = []  # the ends of the gaps a stopped CPU accounts for
     not_op_at = {}
     was_op = set()
     resets = []
@@ -100,6 +115,10 @@ def main():
                 if gap > soc_loss_ms:
                     long_gaps += 1
                     gap_at.append(t)
+                    a, b = last_soc, t
+                    if any(min(b, e) - max(a, st) >= (b - a) - HOST_SLACK_MS / 1000
+                           for st, e in stalls):
+                        host_gap_at.append(t)
             last_soc, polled, answered, pres_mn_seen = t, {}, set(), False
         elif mtyp == 4 and src == 240:
             pres_mn_seen = True
@@ -130,29 +149,35 @@ def main():
     unexplained = []
     prev = {}
     first_t = rows[0][0] if rows else 0.0
+    host_stalled = 0
     for t, node in resets:
         since = prev.get(node, 0.0)
         prev[node] = t
-        if any(since < g <= t for g in gap_at):
-            explained["soc_gap"] += 1
-        elif any(since < f <= t for f in fired_at.get(node, [])):
+        if any(max(since, t - GAP_WINDOW_S) < g <= t for g in host_gap_at):
+            host_stalled += 1
+        # The direct causes first (the MN's counter replayed, the node's own report), a SoC gap
+        # only when it ended shortly before the reset (GAP_WINDOW_S): the CN's fall-back or the
+        # MN's threshold follow a gap within cycles, not minutes.
+        if any(since < f <= t for f in fired_at.get(node, [])):
             explained["pres_missing"] += 1
         elif any(since < x <= t for x in sync_missed.get(node, [])):
             explained["sync_missing"] += 1
         elif any(since < x <= t for x in not_op_at.get(node, [])):
             explained["not_operational"] += 1
+        elif any(max(since, t - GAP_WINDOW_S) < g <= t for g in gap_at):
+            explained["soc_gap"] += 1
         elif t - max(since, first_t) >= BOOT_STEP_S and not any(
                 since < x <= t for x in op_times.get(node, [])):
             explained["boot_timeout"] += 1
         else:
             unexplained.append("node %d at %.3f" % (node, t))
     print("resets=%d soc_gap=%d pres_missing=%d sync_missing=%d not_operational=%d "
-          "boot_timeout=%d unexplained=%d "
-          "max_soc_gap_ms=%.1f soc_gaps_over_limit=%d cycles_without_pres=%s%s" % (
+          "boot_timeout=%d unexplained=%d host_stalled=%d "
+          "max_soc_gap_ms=%.1f soc_gaps_over_limit=%d gaps_host=%d cycles_without_pres=%s%s" % (
               len(resets), explained["soc_gap"], explained["pres_missing"],
               explained["sync_missing"],
-              explained["not_operational"], explained["boot_timeout"], len(unexplained), max_gap,
-              long_gaps,
+              explained["not_operational"], explained["boot_timeout"], len(unexplained),
+              host_stalled, max_gap, long_gaps, len(host_gap_at),
               ",".join("%d:%d" % kv for kv in sorted(missing.items())),
               (" first_unexplained=" + unexplained[0]) if unexplained else ""))
     return 0

@@ -4,8 +4,10 @@
 
 #include <catch2/catch.hpp>
 #include <deque>
+#include <functional>
 #include <vector>
 
+#include "core/clock.hpp"
 #include "powerlink/frames.hpp"
 #include "powerlink/process_image.hpp"
 #include "powerlink/sdo.hpp"
@@ -304,6 +306,50 @@ TEST_CASE("CN loss of SoC falls back to PRE_OPERATIONAL_1 and logs it in the Sta
   CHECK(status->exception_new);
 }
 
+TEST_CASE("CN loss of SoC: a span the simulator itself was stopped by its host is not silence") {
+  sim::PowerlinkCnConfig config;
+  config.node_id = 2;
+  Harness h(config);
+  boot_to_pre_op2(h, 2);
+  std::vector<uint8_t> preq_payload(h.cn.layout().preq_size, 0);
+  for (int i = 0; i < 5; ++i) h.cycle(2, preq_payload, false);
+  // 30 ms without a SoC, 29 of them with the simulator stopped: 1 ms seen, no loss.
+  h.cn.note_own_stall(h.now + 500'000, h.now + 29'500'000);
+  h.advance(30 * kCycle);
+  CHECK(h.cn.nmt_state() == NmtState::kPreOperational2);
+  CHECK(h.cn.stats().loss_of_soc == 0);
+  CHECK(h.cn.stats().own_stalls == 1);
+  CHECK(h.cn.stats().own_stall_max_ns == 29'000'000);
+  // A SoC restarts the count: a stall noted before it is not credited to the next silence.
+  h.soc();
+  h.cn.note_own_stall(h.now - 20 * kCycle, h.now - kCycle);
+  // Silence the simulator was there to see counts in full, stalls before it included.
+  h.advance(config.soc_timeout_min_ns - kCycle);
+  CHECK(h.cn.nmt_state() == NmtState::kPreOperational2);
+  h.advance(2 * kCycle);
+  CHECK(h.cn.nmt_state() == NmtState::kPreOperational1);
+  CHECK(h.cn.stats().loss_of_soc == 1);
+}
+
+TEST_CASE("CN loss of SoC: stalls add up only over what the simulator did not see") {
+  sim::PowerlinkCnConfig config;
+  config.node_id = 2;
+  Harness h(config);
+  boot_to_pre_op2(h, 2);
+  std::vector<uint8_t> preq_payload(h.cn.layout().preq_size, 0);
+  for (int i = 0; i < 5; ++i) h.cycle(2, preq_payload, false);
+  const int64_t last_soc = h.now - kCycle;  // cycle() advanced one period after its SoC
+  // Two stalls of 3 ms with 3 ms seen between and after: 6 ms seen of 12 ms, a loss of SoC.
+  h.cn.note_own_stall(h.now, h.now + 3 * kCycle);
+  h.cn.note_own_stall(h.now + 6 * kCycle, h.now + 9 * kCycle);
+  h.advance(10 * kCycle);
+  CHECK(h.cn.nmt_state() == NmtState::kPreOperational2);  // 11 ms since the SoC, 5 ms seen
+  h.advance(kCycle);
+  CHECK(h.now - last_soc == 12 * kCycle);
+  CHECK(h.cn.nmt_state() == NmtState::kPreOperational1);
+  CHECK(h.cn.stats().own_stalls == 2);
+}
+
 TEST_CASE("CN reset and power cycle bring it back to NOT_ACTIVE with module defaults") {
   sim::PowerlinkCnConfig config;
   config.node_id = 4;
@@ -476,4 +522,107 @@ TEST_CASE("CN objects an MN's configuration manager writes: store, restore, DLL 
   CHECK(od.configuration_date() == 0x3124);  // still in use until the next reset
   od.reset_communication();
   CHECK(od.configuration_date() == 0);
+}
+
+namespace {
+
+// A link with nothing on it: the MN has gone quiet.
+class QuietLink final : public pl::Link {
+ public:
+  std::error_code send(std::span<const uint8_t>) noexcept override { return {}; }
+  pl::Received receive(std::span<uint8_t>, int64_t) noexcept override { return {}; }
+  bool link_up() const noexcept override { return true; }
+  pl::MacAddress mac() const noexcept override { return Harness::cn_mac(); }
+};
+
+// The node booted and cycling on the real clock (the loop reads it), then one pass of the loop
+// whose wait comes back `stall_ns` late: the thread stopped there. `run_queue_wait` is what the
+// kernel counted meanwhile as waiting for a CPU of this machine.
+struct StalledPass {
+  sim::PowerlinkCnConfig config;
+  Harness h;
+  QuietLink link;
+  explicit StalledPass(int64_t soc_timeout_ns) : config(make(soc_timeout_ns)), h(config) {
+    h.now = ds1928::rt::now_ns() - 10 * kCycle;  // the boot's own steps stay in the past
+    boot_to_pre_op2(h, 2);
+    std::vector<uint8_t> preq_payload(h.cn.layout().preq_size, 0);
+    for (int i = 0; i < 5; ++i) {
+      h.now = ds1928::rt::now_ns();
+      h.soc();
+      h.preq(2, preq_payload, false);
+    }
+  }
+  static sim::PowerlinkCnConfig make(int64_t soc_timeout_ns) {
+    sim::PowerlinkCnConfig c;
+    c.node_id = 2;
+    c.soc_timeout_min_ns = soc_timeout_ns;
+    return c;
+  }
+  void run(int64_t stall_ns, std::function<int64_t()> run_queue_wait) {
+    sim::PowerlinkCnLoop::Options options;
+    options.run_queue_wait_ns = std::move(run_queue_wait);
+    sim::PowerlinkCn* nodes[] = {&h.cn};
+    // No SoC rhythm known to the loop: it blocks in wait_readable, which returns stall_ns after
+    // its deadline (a sleep lasts at least as long as asked: the stall is certain).
+    sim::PowerlinkCnLoop loop(
+        link,
+        [stall_ns](int64_t deadline) {
+          (void)ds1928::rt::sleep_until(deadline + stall_ns);
+          return false;
+        },
+        nodes, options);
+    REQUIRE(loop.run_once());
+  }
+};
+
+}  // namespace
+
+TEST_CASE("CN loop: its host stopping the simulator's thread is not counted as loss of SoC") {
+  // Loss of SoC after 100 ms seen; the pass stops 300 ms and otherwise takes about 1 ms.
+  StalledPass p(100'000'000);
+  p.run(300'000'000, [] { return int64_t{5'000}; });  // the kernel counted no wait
+  CHECK(p.h.cn.nmt_state() == NmtState::kPreOperational2);
+  CHECK(p.h.cn.stats().loss_of_soc == 0);
+  CHECK(p.h.cn.stats().own_stalls == 1);
+  CHECK(p.h.cn.stats().own_stall_max_ns >= 300'000'000);
+}
+
+TEST_CASE("CN loop: a task of this machine running instead of the simulator is still silence") {
+  StalledPass p(100'000'000);
+  int64_t waited = 0;
+  // The kernel counted the whole stall (and more) as run-queue wait: nothing is the host's.
+  p.run(300'000'000, [&waited] { return waited += 1'000'000'000; });
+  CHECK(p.h.cn.nmt_state() == NmtState::kPreOperational1);
+  CHECK(p.h.cn.stats().loss_of_soc == 1);
+  CHECK(p.h.cn.stats().own_stalls == 0);
+}
+
+TEST_CASE("CN loop: without the kernel's run-queue count every stall is silence") {
+  StalledPass p(100'000'000);
+  p.run(300'000'000, {});
+  CHECK(p.h.cn.nmt_state() == NmtState::kPreOperational1);
+  CHECK(p.h.cn.stats().loss_of_soc == 1);
+}
+
+TEST_CASE("CN loop rhythm: a pause of the MN is not its new period, a longer cycle is") {
+  sim::PowerlinkCnLoop::Rhythm r;
+  int64_t t = 1'000'000'000;
+  for (int i = 0; i < 20; ++i) r.note(t += kCycle);
+  CHECK(r.period == kCycle);
+  // The MN's host stalls 9 ms once, then cycles on: the loop keeps sleeping by 1 ms.
+  r.note(t += 9 * kCycle);
+  CHECK(r.period == kCycle);
+  r.note(t += kCycle);
+  CHECK(r.period == kCycle);
+  CHECK(r.valid(t + kCycle));
+  // The MN restarted with a 10 ms cycle: the second long gap in a row is the period.
+  r.note(t += 10 * kCycle);
+  CHECK(r.period == kCycle);
+  r.note(t += 10 * kCycle);
+  CHECK(r.period == 10 * kCycle);
+  for (int i = 0; i < 5; ++i) r.note(t += 10 * kCycle);
+  CHECK(r.period == 10 * kCycle);
+  // A shorter cycle is followed by the average.
+  for (int i = 0; i < 100; ++i) r.note(t += kCycle);
+  CHECK(r.period < kCycle + kCycle / 10);
 }

@@ -15,12 +15,15 @@
 // (SIGUSR1: the CAN-I/O node resets by itself, as --reset-after.)
 // runs a CAN-I/O bus controller with simulated X20DS1928 modules (function model 254) on
 // SocketCAN or on the cross-process virtual test bus (docs/canio.md).
+#include <fcntl.h>
 #include <sched.h>
 #include <sys/mman.h>
 #include <time.h>
+#include <unistd.h>
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <csignal>
 #include <cstdio>
@@ -29,6 +32,7 @@
 #include <tuple>
 #include <vector>
 
+#include "can/unique_fd.hpp"
 #include "canio_main.hpp"
 #include "config/config_loader.hpp"
 #include "core/clock.hpp"
@@ -110,6 +114,26 @@ void apply_profile(PowerlinkOptions& o, const std::vector<std::string>& given) {
   if (o.pres_latency_max_us < 0) o.pres_latency_max_us = 2000;
   if (o.ready_after_soc_us < 0) o.ready_after_soc_us = 0;
 }
+
+// The calling thread's run-queue wait in ns, as the kernel counts it (/proc/thread-self/schedstat:
+// time on the CPU, time waiting for one, time slices): how the loop tells a task of this machine
+// running instead of it (counted there) from its host not running the vCPU (not counted).
+class RunQueueWait {
+ public:
+  RunQueueWait() : fd_(::open("/proc/thread-self/schedstat", O_RDONLY | O_CLOEXEC)) {}
+  [[nodiscard]] bool available() const noexcept { return fd_.valid() && read() >= 0; }
+  [[nodiscard]] int64_t read() const noexcept {
+    std::array<char, 96> buf{};
+    const ssize_t n = ::pread(fd_.get(), buf.data(), buf.size() - 1, 0);
+    unsigned long long on_cpu = 0;
+    unsigned long long waited = 0;
+    if (n <= 0 || std::sscanf(buf.data(), "%llu %llu", &on_cpu, &waited) != 2) return -1;
+    return static_cast<int64_t>(waited);
+  }
+
+ private:
+  ds1928::canio::UniqueFd fd_;
+};
 
 // SCHED_FIFO and locked memory when permitted; the simulator still runs (slower) without.
 void try_realtime(int priority, int cpu) {
@@ -246,6 +270,15 @@ int run_powerlink(const PowerlinkOptions& o) {
   try_realtime(o.rt_priority, o.cpu);
   sim::PowerlinkCnLoop::Options loop_options;
   loop_options.guard_ns = static_cast<int64_t>(o.guard_us) * 1000;
+  // Opened by the thread that runs the loop (this one). Without it every stall counts as silence.
+  RunQueueWait run_queue_wait;
+  if (run_queue_wait.available()) {
+    loop_options.run_queue_wait_ns = [&run_queue_wait] { return run_queue_wait.read(); };
+  } else {
+    std::fprintf(stderr,
+                 "ds1928-sim: no /proc/thread-self/schedstat: the simulator's own stalls count as "
+                 "loss of SoC\n");
+  }
   sim::PowerlinkCnLoop loop(
       link, [&link](int64_t deadline) { return link.wait_readable(deadline); }, node_ptrs,
       loop_options);
@@ -306,7 +339,7 @@ int run_powerlink(const PowerlinkOptions& o) {
         "node %u stats: soc=%llu preq=%llu pres=%llu dropped=%llu delayed=%llu soa=%llu "
         "asnd=%llu nmt=%llu sdo_in=%llu loss_soc=%llu loss_preq=%llu resets=%llu "
         "bad=%llu short=%llu sync_req=%llu pres_mn=%llu prc=%s prc_fallbacks=%llu "
-        "pres_time_first_ns=%u state=%s\n",
+        "pres_time_first_ns=%u own_stalls=%llu own_stall_max_us=%lld state=%s\n",
         n->node_id(), static_cast<unsigned long long>(s.soc),
         static_cast<unsigned long long>(s.preq), static_cast<unsigned long long>(s.pres_sent),
         static_cast<unsigned long long>(s.pres_dropped),
@@ -321,6 +354,8 @@ int run_powerlink(const PowerlinkOptions& o) {
         static_cast<unsigned long long>(s.sync_requests),
         static_cast<unsigned long long>(s.pres_mn), n->prc_mode() ? "yes" : "no",
         static_cast<unsigned long long>(s.prc_fallbacks), n->pres_time_first_ns(),
+        static_cast<unsigned long long>(s.own_stalls),
+        static_cast<long long>(s.own_stall_max_ns / 1000),
         std::string(pl::to_string(n->nmt_state())).c_str());
   }
   return 0;
