@@ -14,6 +14,13 @@ namespace ds1928::powerlink::test {
 
 inline constexpr int64_t kPeriodNs = 1'000'000;
 
+// The first 4 bytes of an object's value, little-endian.
+inline uint32_t le(const std::vector<uint8_t>& v) {
+  uint32_t x = 0;
+  for (std::size_t i = 0; i < v.size() && i < 4; ++i) x |= static_cast<uint32_t>(v[i]) << (8 * i);
+  return x;
+}
+
 // Simulated CLOCK_MONOTONIC. Rig::step() sets it to the nominal cycle start plus the cycle
 // thread's wake-up latency; every read advances it by `g_clock_step_ns` (0: the exchange takes
 // no time).
