@@ -119,6 +119,13 @@ pl::IdentResponse boot_to_pre_op2(Harness& h, uint8_t node) {
   return *ident;
 }
 
+// Node 2 booted and cycled 5 periods: PRE_OPERATIONAL_2, its SoC period learned.
+void cycle_node2(Harness& h) {
+  boot_to_pre_op2(h, 2);
+  std::vector<uint8_t> preq_payload(h.cn.layout().preq_size, 0);
+  for (int i = 0; i < 5; ++i) h.cycle(2, preq_payload, false);
+}
+
 }  // namespace
 
 TEST_CASE("CN boots NOT_ACTIVE to PRE_OPERATIONAL_2 and identifies with its image sizes") {
@@ -288,9 +295,7 @@ TEST_CASE("CN loss of SoC falls back to PRE_OPERATIONAL_1 and logs it in the Sta
   sim::PowerlinkCnConfig config;
   config.node_id = 2;
   Harness h(config);
-  boot_to_pre_op2(h, 2);
-  std::vector<uint8_t> preq_payload(h.cn.layout().preq_size, 0);
-  for (int i = 0; i < 5; ++i) h.cycle(2, preq_payload, false);
+  cycle_node2(h);
   h.out.clear();
   h.advance(config.soc_timeout_min_ns + kCycle);
   CHECK(h.cn.nmt_state() == NmtState::kPreOperational1);
@@ -310,9 +315,7 @@ TEST_CASE("CN loss of SoC: a span the simulator itself was stopped by its host i
   sim::PowerlinkCnConfig config;
   config.node_id = 2;
   Harness h(config);
-  boot_to_pre_op2(h, 2);
-  std::vector<uint8_t> preq_payload(h.cn.layout().preq_size, 0);
-  for (int i = 0; i < 5; ++i) h.cycle(2, preq_payload, false);
+  cycle_node2(h);
   // 30 ms without a SoC, 29 of them with the simulator stopped: 1 ms seen, no loss.
   h.cn.note_own_stall(h.now + 500'000, h.now + 29'500'000);
   h.advance(30 * kCycle);
@@ -335,9 +338,7 @@ TEST_CASE("CN loss of SoC: stalls add up only over what the simulator did not se
   sim::PowerlinkCnConfig config;
   config.node_id = 2;
   Harness h(config);
-  boot_to_pre_op2(h, 2);
-  std::vector<uint8_t> preq_payload(h.cn.layout().preq_size, 0);
-  for (int i = 0; i < 5; ++i) h.cycle(2, preq_payload, false);
+  cycle_node2(h);
   const int64_t last_soc = h.now - kCycle;  // cycle() advanced one period after its SoC
   // Two stalls of 3 ms with 3 ms seen between and after: 6 ms seen of 12 ms, a loss of SoC.
   h.cn.note_own_stall(h.now, h.now + 3 * kCycle);
