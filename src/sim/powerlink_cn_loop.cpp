@@ -73,12 +73,10 @@ bool PowerlinkCnLoop::run_once() noexcept {
     // after its SoA) wait in the ring until the wake-up.
     const int64_t wake =
         std::min({next_start - options_.guard_ns, node_deadline, now + options_.idle_wait_ns});
-    if (wake > now) {
-      (void)rt::sleep_until(wake);
-      now = rt::now_ns();
-      check_own_stall(wake, now);
-    }
+    const bool sleeps = wake > now;
+    if (sleeps) (void)rt::sleep_until(wake);
     now = rt::now_ns();
+    if (sleeps) check_own_stall(wake, now);
   } else if (next_start == 0 && node_deadline > now) {
     // No rhythm known (MN silent or just starting): block until something comes. (A frame
     // that ends the wait and is then read late: the receive below judges it by its stamp.)
