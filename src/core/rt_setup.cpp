@@ -28,17 +28,11 @@ SetupStep pin_to_cpu(int cpu) noexcept {
   return SetupStep{pthread_setaffinity_np(pthread_self(), sizeof(set), &set)};
 }
 
-namespace {
-// Gives back the pages of the shared libraries' code that start-up touched (the dynamic loader,
-// locale and stream initialisation, the configuration parser...) before memory is locked, so
-// that mlockall keeps resident only what runs afterwards. Only code mappings (r-xp: never
-// written, so nothing is lost) of files other than the executable; a page used again is simply
-// read back from the page cache — by the cycle thread during its first cycles, before it is
-// ready, and locked from then on.
-void drop_startup_library_code() noexcept {
+void for_each_code_mapping(CodeMappingVisitor visit, void* context) noexcept {
   const int fd = ::open("/proc/self/maps", O_RDONLY | O_CLOEXEC);
   if (fd < 0) return;
-  char buf[65536];
+  // Static: a sanitizer build maps hundreds of regions, more than a stack buffer should hold.
+  static char buf[1 << 18];
   std::size_t len = 0;
   for (;;) {
     const ssize_t n = ::read(fd, buf + len, sizeof(buf) - 1 - len);
@@ -48,23 +42,45 @@ void drop_startup_library_code() noexcept {
   }
   ::close(fd);
   buf[len] = 0;
-  // The executable's own code stays as it is.
-  char exe[4096];
-  const ssize_t exe_len = readlink("/proc/self/exe", exe, sizeof(exe) - 1);
-  if (exe_len <= 0) return;
-  exe[exe_len] = 0;
   for (char* line = buf; line != nullptr && *line != 0;) {
     char* next = std::strchr(line, '\n');
     if (next != nullptr) *next++ = 0;
     unsigned long lo = 0, hi = 0;
     char perms[8] = {};
     int path_at = 0;
+    // Code (r-xp: never written) of a file (a path), not [vdso] and the like.
     if (std::sscanf(line, "%lx-%lx %7s %*s %*s %*s %n", &lo, &hi, perms, &path_at) >= 3 &&
-        path_at > 0 && std::strcmp(perms, "r-xp") == 0 && line[path_at] == '/' &&
-        std::strcmp(line + path_at, exe) != 0)
-      (void)madvise(reinterpret_cast<void*>(lo), hi - lo, MADV_DONTNEED);
+        path_at > 0 && std::strcmp(perms, "r-xp") == 0 && line[path_at] == '/')
+      visit(lo, hi, line + path_at, context);
     line = next;
   }
+}
+
+void lock_code_mappings() noexcept {
+  for_each_code_mapping([](uintptr_t lo, uintptr_t hi, const char*,
+                           void*) { (void)::mlock(reinterpret_cast<void*>(lo), hi - lo); },
+                        nullptr);
+}
+
+namespace {
+// Gives back the pages of the shared libraries' code that start-up touched (the dynamic loader,
+// locale and stream initialisation, the configuration parser...) before memory is locked, so
+// that mlockall keeps resident only what runs afterwards. Only code mappings (never written, so
+// nothing is lost) of files other than the executable; a page used again is simply read back
+// from the page cache — by the cycle thread during its first cycles, before it is ready, and
+// locked from then on.
+void drop_startup_library_code() noexcept {
+  // The executable's own code stays as it is.
+  static char exe[4096];
+  const ssize_t exe_len = readlink("/proc/self/exe", exe, sizeof(exe) - 1);
+  if (exe_len <= 0) return;
+  exe[exe_len] = 0;
+  for_each_code_mapping(
+      [](uintptr_t lo, uintptr_t hi, const char* path, void*) {
+        if (std::strcmp(path, exe) != 0)
+          (void)madvise(reinterpret_cast<void*>(lo), hi - lo, MADV_DONTNEED);
+      },
+      nullptr);
 }
 }  // namespace
 

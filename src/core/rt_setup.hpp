@@ -50,6 +50,14 @@ inline constexpr std::size_t kStackReserve = 64 * 1024;
 // pages), so the heap range is unlocked for the trim and locked again (on fault) right after:
 // pages in use stay resident throughout (unlocking does not evict), the free ones go.
 std::size_t trim_heap(std::size_t min_free) noexcept;
+// Each code mapping of the process (the executable's and its libraries': r-xp mappings of a file
+// in /proc/self/maps): visit(lo, hi, path, context). Start-up and tests only — it reads the
+// file into one static buffer, so two threads must not call it at once.
+using CodeMappingVisitor = void (*)(uintptr_t lo, uintptr_t hi, const char* path, void* context);
+void for_each_code_mapping(CodeMappingVisitor visit, void* context) noexcept;
+// Loads and locks every code mapping (mlock). With mlockall(MCL_ONFAULT) code is locked as it is
+// first run; after this no branch taken later costs a page fault.
+void lock_code_mappings() noexcept;
 // Whether `cpu` exists and the process may run on it.
 [[nodiscard]] bool cpu_usable(int cpu) noexcept;
 

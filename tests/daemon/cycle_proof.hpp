@@ -8,19 +8,15 @@
 // cycles.
 #pragma once
 
-#include <fcntl.h>
-#include <sys/mman.h>
 #include <sys/resource.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
 #include <cstdint>
-#include <cstdio>
-#include <cstring>
 
 #include "core/bus.hpp"
 #include "core/cycle_engine.hpp"
+#include "core/rt_setup.hpp"
 #include "cycle_work.hpp"
 #include "endat/command.hpp"
 #include "support/alloc_counter.hpp"
@@ -41,26 +37,7 @@ namespace ds1928::test {
 // proofs lock the code before their window opens: a fault they count is then a data page the
 // cycle touched for the first time in steady cycles, which is what they are about.
 inline void lock_code_pages() noexcept {
-  const int fd = ::open("/proc/self/maps", O_RDONLY | O_CLOEXEC);
-  if (fd < 0) return;
-  static char buf[1 << 18];
-  std::size_t len = 0;
-  for (;;) {
-    const ssize_t n = ::read(fd, buf + len, sizeof(buf) - 1 - len);
-    if (n <= 0 || (len += static_cast<std::size_t>(n)) == sizeof(buf) - 1) break;
-  }
-  ::close(fd);
-  buf[len] = 0;
-  for (char* line = buf; line != nullptr && *line != 0;) {
-    char* next = std::strchr(line, '\n');
-    if (next != nullptr) *next++ = 0;
-    unsigned long lo = 0, hi = 0;
-    char perms[8] = {};
-    if (std::sscanf(line, "%lx-%lx %7s", &lo, &hi, perms) == 3 && std::strcmp(perms, "r-xp") == 0 &&
-        std::strchr(line, '/') != nullptr)
-      (void)::mlock(reinterpret_cast<void*>(lo), hi - lo);
-    line = next;
-  }
+  rt::lock_code_mappings();
 }
 
 class CountingTask final : public CycleTask {
