@@ -12,14 +12,10 @@
 //                               START = the wake-up that was due, END = when it came)
 // and on stdout a summary: per CPU the stalls and the longest, and how many stalls overlapped a
 // stall of every other CPU (the whole machine stopped).
-#include <pthread.h>
 #include <sched.h>
-#include <sys/mman.h>
-#include <time.h>
 
 #include <algorithm>
 #include <atomic>
-#include <cerrno>
 #include <csignal>
 #include <cstdint>
 #include <cstdio>
@@ -29,16 +25,15 @@
 #include <thread>
 #include <vector>
 
+#include "core/clock.hpp"
+#include "core/rt_setup.hpp"
+
 namespace {
 
 std::atomic<bool> g_stop{false};
 
-void on_signal(int) { g_stop.store(true); }
-
-int64_t read_ns(clockid_t clock) {
-  timespec ts{};
-  clock_gettime(clock, &ts);
-  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+void on_signal(int) {
+  g_stop.store(true);
 }
 
 struct Stall {
@@ -58,26 +53,18 @@ struct Options {
 constexpr std::size_t kMaxStallsPerCpu = 100'000;
 
 void probe(int cpu, const Options& o, std::vector<Stall>& stalls, std::atomic<int>& failed) {
-  cpu_set_t set;
-  CPU_ZERO(&set);
-  CPU_SET(cpu, &set);
-  sched_param sp{};
-  sp.sched_priority = o.priority;
-  if (pthread_setaffinity_np(pthread_self(), sizeof set, &set) != 0 ||
-      pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp) != 0) {
+  namespace rt = ds1928::rt;
+  if (!rt::pin_to_cpu(cpu).ok() || !rt::set_fifo_priority(o.priority).ok()) {
     failed.store(cpu + 1);
     return;
   }
-  int64_t due = read_ns(CLOCK_MONOTONIC);
+  int64_t due = rt::now_ns();
   while (!g_stop.load(std::memory_order_relaxed)) {
     due += o.period_ns;
-    timespec ts{static_cast<time_t>(due / 1'000'000'000), static_cast<long>(due % 1'000'000'000)};
-    while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
-    }
-    const int64_t now = read_ns(CLOCK_MONOTONIC);
+    const int64_t now = rt::sleep_until(due);
     const int64_t late = now - due;
     if (late >= o.threshold_ns) {
-      const int64_t real_now = read_ns(CLOCK_REALTIME);
+      const int64_t real_now = rt::realtime_ns() - (rt::now_ns() - now);
       if (stalls.size() < stalls.capacity()) stalls.push_back({cpu, real_now - late, real_now});
     }
     if (late > o.period_ns) due = now;  // one stall, one line: no catching up
@@ -111,8 +98,7 @@ int main(int argc, char** argv) {
       return usage();
     }
   }
-  if (o.out.empty() || o.period_ns <= 0 || o.threshold_ns <= 0 || o.priority < 1 ||
-      o.priority > 99)
+  if (o.out.empty() || o.period_ns <= 0 || o.threshold_ns <= 0 || o.priority < 1 || o.priority > 99)
     return usage();
   std::FILE* out = std::fopen(o.out.c_str(), "w");
   if (out == nullptr) {
@@ -121,17 +107,12 @@ int main(int argc, char** argv) {
   }
   std::signal(SIGINT, on_signal);
   std::signal(SIGTERM, on_signal);
-  if (mlockall(MCL_CURRENT | MCL_FUTURE) != 0) std::perror("host_stall_probe: mlockall");
+  if (const auto locked = ds1928::rt::lock_all_memory(); !locked.ok())
+    std::fprintf(stderr, "host_stall_probe: mlockall: %s\n", std::strerror(locked.error));
 
-  cpu_set_t allowed;
-  CPU_ZERO(&allowed);
-  if (sched_getaffinity(0, sizeof allowed, &allowed) != 0) {
-    std::perror("host_stall_probe: sched_getaffinity");
-    return 1;
-  }
   std::vector<int> cpus;
   for (int c = 0; c < CPU_SETSIZE; ++c)
-    if (CPU_ISSET(c, &allowed)) cpus.push_back(c);
+    if (ds1928::rt::cpu_usable(c)) cpus.push_back(c);
   std::vector<std::vector<Stall>> per_cpu(cpus.size());
   for (auto& v : per_cpu) v.reserve(kMaxStallsPerCpu);
   std::atomic<int> failed{0};

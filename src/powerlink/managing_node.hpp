@@ -328,8 +328,10 @@ class ManagingNode {
   std::array<RegisterResult, kRegisterQueueDepth> results_{};
   std::size_t results_head_ = 0;
   std::size_t results_count_ = 0;
-  std::size_t results_reserved_ = 0;  // requests accepted whose result is not in results_ yet
-  // A result of a request accepted by submit() (its slot was reserved there).
+  // Register requests accepted whose result is not in results_ yet: queued, or the transfer under
+  // way. Each holds a slot of results_ (can_submit()).
+  [[nodiscard]] std::size_t requests_in_flight() const noexcept;
+  // The result of a request accepted by submit(): its slot is free (can_submit()).
   void push_result(const RegisterResult& r) noexcept;
 };
 

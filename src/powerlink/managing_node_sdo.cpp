@@ -15,20 +15,24 @@ bool ManagingNode::submit(uint8_t node, uint8_t slot, const RegisterRequest& req
   Cn* cn = find(node);
   cn->ops[(cn->ops_head + cn->ops_count) % kOpQueueDepth] = {slot, request};
   ++cn->ops_count;
-  ++results_reserved_;
   start_next_sdo(*cn);
   return true;
+}
+
+std::size_t ManagingNode::requests_in_flight() const noexcept {
+  std::size_t n = 0;
+  for (const auto& cn : cns_) n += cn->ops_count + (cn->op_active && !cn->op_internal ? 1 : 0);
+  return n;
 }
 
 bool ManagingNode::can_submit(uint8_t node) const noexcept {
   const Cn* cn = find(node);
   return cn != nullptr && cn->ops_count < kOpQueueDepth &&
-         results_count_ + results_reserved_ < results_.size();
+         results_count_ + requests_in_flight() < results_.size();
 }
 
 void ManagingNode::push_result(const RegisterResult& r) noexcept {
-  // Room is certain: submit() reserved it.
-  if (results_reserved_ > 0) --results_reserved_;
+  // Room is certain: submit() accepted the request only while it had one.
   results_[(results_head_ + results_count_++) % results_.size()] = r;
 }
 
