@@ -7,7 +7,8 @@
 //
 //   host_stall_probe --out FILE [--period-us 1000] [--threshold-us 1000] [--priority 99]
 //
-// Runs until SIGINT or SIGTERM, then writes one line per stall, ordered by start:
+// Prints "probing N CPU(s) ..." once every CPU's thread measures, runs until SIGINT or SIGTERM,
+// then writes one line per stall, ordered by start:
 //   CPU START END LATE_MS      (START/END: CLOCK_REALTIME seconds, the capture files' clock;
 //                               START = the wake-up that was due, END = when it came)
 // and on stdout a summary: per CPU the stalls and the longest, and how many stalls overlapped a
@@ -52,13 +53,15 @@ struct Options {
 // Fixed room per CPU: a probe that allocated while measuring would measure its allocator.
 constexpr std::size_t kMaxStallsPerCpu = 100'000;
 
-void probe(int cpu, const Options& o, std::vector<Stall>& stalls, std::atomic<int>& failed) {
+void probe(int cpu, const Options& o, std::vector<Stall>& stalls, std::atomic<int>& failed,
+           std::atomic<std::size_t>& measuring) {
   namespace rt = ds1928::rt;
   if (!rt::pin_to_cpu(cpu).ok() || !rt::set_fifo_priority(o.priority).ok()) {
     failed.store(cpu + 1);
     return;
   }
   int64_t due = rt::now_ns();
+  measuring.fetch_add(1);
   while (!g_stop.load(std::memory_order_relaxed)) {
     due += o.period_ns;
     const int64_t now = rt::sleep_until(due);
@@ -116,12 +119,21 @@ int main(int argc, char** argv) {
   std::vector<std::vector<Stall>> per_cpu(cpus.size());
   for (auto& v : per_cpu) v.reserve(kMaxStallsPerCpu);
   std::atomic<int> failed{0};
+  std::atomic<std::size_t> measuring{0};
   std::vector<std::thread> threads;
   for (std::size_t i = 0; i < cpus.size(); ++i)
-    threads.emplace_back(probe, cpus[i], std::cref(o), std::ref(per_cpu[i]), std::ref(failed));
-  std::printf("probing %zu CPU(s) every %lld us at SCHED_FIFO %d, stalls from %lld us\n",
-              cpus.size(), static_cast<long long>(o.period_ns / 1000), o.priority,
-              static_cast<long long>(o.threshold_ns / 1000));
+    threads.emplace_back(probe, cpus[i], std::cref(o), std::ref(per_cpu[i]), std::ref(failed),
+                         std::ref(measuring));
+  // The line below says every CPU is watched from here on: whoever starts the probe can wait for
+  // it before the span it wants covered (the probe's test stops it only after this line).
+  while (measuring.load() < cpus.size() && failed.load() == 0 && !g_stop.load())
+    (void)ds1928::rt::sleep_until(ds1928::rt::now_ns() + 1'000'000);
+  if (failed.load() != 0)
+    g_stop.store(true);  // the others stop too: the run is void
+  else
+    std::printf("probing %zu CPU(s) every %lld us at SCHED_FIFO %d, stalls from %lld us\n",
+                cpus.size(), static_cast<long long>(o.period_ns / 1000), o.priority,
+                static_cast<long long>(o.threshold_ns / 1000));
   std::fflush(stdout);
   for (auto& t : threads) t.join();
   if (failed.load() != 0) {

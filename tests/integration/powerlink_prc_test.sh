@@ -60,6 +60,7 @@ pids+=($sim_pid)
 "$probe" --out "$tmp/stalls.txt" >"$tmp/probe.log" 2>&1 &
 probe_pid=$!
 pids+=($probe_pid)
+wait_for "$tmp/probe.log" '^probing [0-9]+ CPU' 10 || fail "host_stall_probe never said it measures"
 ip netns exec "$ns_mn" "$mn" --iface plp_mn --config "$tmp/prc.yaml" --rt-priority 80 \
     --warmup 1 --duration "$hold" --boot-timeout 30 >"$tmp/mn.log" 2>&1
 rc=$?
