@@ -21,6 +21,7 @@ nlohmann::json configuration_json(const powerlink::CnStatus& n) {
   return {{"objects_written", n.objects_written},
           {"object_failures", n.object_failures},
           {"configuration_resets", n.configuration_resets},
+          {"configuration_not_verified", n.configuration_not_verified},
           {"last_failures", std::move(failures)},
           {"identity_mismatch",
            n.identity_mismatch ? nlohmann::json(powerlink::describe(n.mismatch)) : nullptr}};

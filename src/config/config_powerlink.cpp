@@ -253,6 +253,12 @@ void apply_mn_cdc(Section& n, PowerlinkNodeConfig& node, std::span<const powerli
   if (!node.product_code) node.product_code = value(powerlink::obj::kMnProductCodeList);
   if (!node.revision_no) node.revision_no = value(powerlink::obj::kMnRevisionNoList);
   if (!node.serial_no) node.serial_no = value(powerlink::obj::kMnSerialNoList);
+  // CFM_ExpConfDateList/TimeList: checked when either is set (0 = not set), as the CDC's tool
+  // and openPOWERLINK's MN read them; the YAML's pair wins as a whole.
+  if (!node.expected_conf_date && !node.expected_conf_time) {
+    node.expected_conf_date = value(powerlink::obj::kExpConfDateList);
+    node.expected_conf_time = value(powerlink::obj::kExpConfTimeList);
+  }
   if (!node.preq_size)
     if (const auto v = value(powerlink::obj::kMnPReqPayloadLimitList))
       node.preq_size = static_cast<uint16_t>(std::min(*v, 1490u));
@@ -286,6 +292,8 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
     n.optional_integer("device_type", node.device_type, 0, kU32);
     n.optional_integer("revision_no", node.revision_no, 0, kU32);
     n.optional_integer("serial_no", node.serial_no, 0, kU32);
+    n.optional_integer("expected_conf_date", node.expected_conf_date, 0, kU32);
+    n.optional_integer("expected_conf_time", node.expected_conf_time, 0, kU32);
     bool own_cdc = false;
     if (n.text("cdc", node.cdc) && !node.cdc.empty()) {
       own_cdc = true;
@@ -460,6 +468,8 @@ void dump_powerlink(std::ostream& o, const PowerlinkBusConfig& p) {
       << "      device_type: " << opt(n.device_type) << "\n"
       << "      revision_no: " << opt(n.revision_no) << "\n"
       << "      serial_no: " << opt(n.serial_no) << "\n"
+      << "      expected_conf_date: " << opt(n.expected_conf_date) << "\n"
+      << "      expected_conf_time: " << opt(n.expected_conf_time) << "\n"
       << "      cdc: " << quote(n.cdc) << "\n"
       << "      cycle_objects: " << yes(n.cycle_objects) << "\n"
       << "      pres_timeout_us: " << n.pres_timeout_us << "\n"

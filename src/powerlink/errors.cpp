@@ -126,6 +126,9 @@ class MnCategory final : public std::error_category {
                "PReq/PRes";
       case MnError::kPrcSyncFailed:
         return "PollResponse Chaining set-up failed (no or wrong SyncResponse)";
+      case MnError::kConfigurationNotVerified:
+        return "configuration not verified: after NMTResetConfiguration the node reports another "
+               "configuration date/time (0x1020) than expected (0x1F26/0x1F27); written again";
     }
     return "unknown MN error";
   }

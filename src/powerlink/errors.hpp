@@ -74,6 +74,9 @@ enum class MnError : int {
                          // polled with PReq/PRes instead
   kPrcSyncFailed,        // reset reason: PRC set-up (SyncRequest/SyncResponse) failed twice, or
                          // the CN reports another PRes time than assigned
+  kConfigurationNotVerified,  // after NMTResetConfiguration the CN's IdentResponse reports
+                              // another configuration date/time (0x1020) than expected
+                              // (0x1F26/0x1F27): it lost the download (power cycle), written again
 };
 
 [[nodiscard]] const std::error_category& frame_category() noexcept;

@@ -105,6 +105,9 @@ struct CnStatus {
   uint32_t boots = 0;              // times the CN reached OPERATIONAL
   // NMTResetConfiguration sent after the boot step "configure" wrote objects (not a reset).
   uint32_t configuration_resets = 0;
+  // IdentResponses after NMTResetConfiguration whose configuration date/time (0x1020) was not the
+  // expected one (0x1F26/0x1F27): the CN lost what was written; the download was repeated.
+  uint32_t configuration_not_verified = 0;
   uint32_t resets = 0;  // NMTResetNode sent
   uint32_t sdo_errors = 0;
   // PollResponse Chaining (docs/powerlink.md §PollResponse Chaining): configured for it, in it
@@ -254,6 +257,7 @@ class ManagingNode {
   void queue_nmt(Cn& cn, NmtCommandId command) noexcept;
   void handle_pres(Cn& cn, const PRes& pres, std::span<const uint8_t> frame) noexcept;
   void handle_asnd(const FrameHeader& h, const Asnd& asnd) noexcept;
+  void verify_configuration(Cn& cn, const IdentResponse& ident) noexcept;
   void handle_nmt_request(Cn& from, const NmtRequest& request) noexcept;
   void note_exception_new(Cn& cn, bool en) noexcept;
   void sync_errsig(Cn& cn) noexcept;

@@ -146,6 +146,7 @@ void ManagingNode::handle_asnd(const FrameHeader& h, const Asnd& asnd) noexcept 
         cn->st->nmt = ident->nmt_state;
         return;
       }
+      if (cn->verify_after_reset) verify_configuration(*cn, *ident);
       cn->st->identified = true;
       cn->st->mac = h.src_mac;
       cn->st->vendor_id = ident->vendor_id;
@@ -190,6 +191,22 @@ void ManagingNode::handle_asnd(const FrameHeader& h, const Asnd& asnd) noexcept 
     // invitation is not repeated until the CN announces a request again.
     cn->rs = 0;
   }
+}
+
+void ManagingNode::verify_configuration(Cn& cn, const IdentResponse& ident) noexcept {
+  // EPSG DS 301's configuration check (CFM), as openPOWERLINK's MN runs it at each boot: the
+  // download writes 0x1020/1, /2; a CN that took it reports them in its IdentResponse. One that
+  // was power-cycled while it reset (or dropped the objects) reports its stored or default values
+  // and would otherwise be started with them: the next configure step writes everything again.
+  cn.verify_after_reset = false;
+  const auto& c = cn.cfg;
+  if (!c.expected_conf_date && !c.expected_conf_time) return;
+  if (ident.verify_conf_date == c.expected_conf_date.value_or(0) &&
+      ident.verify_conf_time == c.expected_conf_time.value_or(0))
+    return;
+  cn.config_applied = false;
+  ++cn.st->configuration_not_verified;
+  cn.st->last_error = make_error_code(MnError::kConfigurationNotVerified);
 }
 
 void ManagingNode::note_exception_new(Cn& cn, bool en) noexcept {

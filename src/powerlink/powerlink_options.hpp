@@ -35,6 +35,12 @@ struct PowerlinkNodeConfig {
   // Written in this order in the boot step "configure": the CN's concise DCF (node `cdc`, else
   // 0x1F22/node of powerlink.cdc), the cycle objects (cycle_objects), then `sdo_writes`.
   std::vector<CnObjectWrite> object_writes;
+  // CFM_ExpConfDateList/TimeList (0x1F26/0x1F27 /node): the configuration date and time the CN
+  // reports in its IdentResponse (its 0x1020/1, /2) once it took the download (which writes
+  // them). Set (either one), the MN checks them after its NMTResetConfiguration and writes the
+  // configuration again when they differ. Unset: not checked.
+  std::optional<uint32_t> expected_conf_date;
+  std::optional<uint32_t> expected_conf_time;
   bool cycle_objects = false;  // write 0x1006 and 0x1F98/4,5 from the configuration
   // PResTimeout (0x1F92/node): how long the MN waits for the PRes after the PReq. Long enough for
   // a CN that answers from software on a busy PC (docs/realtime.md); a lost PRes costs it once.

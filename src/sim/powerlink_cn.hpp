@@ -165,6 +165,8 @@ class PowerlinkCn {
   [[nodiscard]] powerlink::NmtState nmt_state() const noexcept { return state_; }
   [[nodiscard]] uint8_t node_id() const noexcept { return config_.node_id; }
   [[nodiscard]] const PowerlinkCnStats& stats() const noexcept { return stats_; }
+  // The communication objects an MN writes (0x1006, 0x1020, 0x1F98...), as they are now.
+  [[nodiscard]] const CnObjectDictionary& communication_objects() const noexcept { return comm_; }
   [[nodiscard]] const powerlink::NodeImageLayout& layout() const noexcept { return layout_; }
   [[nodiscard]] std::size_t module_count() const noexcept { return modules_.size(); }
   [[nodiscard]] Ds1928Module& module(std::size_t i) noexcept { return *modules_[i].module; }

@@ -160,6 +160,8 @@ TEST_CASE("The MN's mnobd.cdc supplies each node's 0x1F22 objects, identity and 
       {0x1F85, 3, le(0x0000001A, 4)},           // vendor
       {0x1F86, 3, le(0, 4)},                    // 0 = not checked
       {0x1F8D, 3, le(24, 2)},                   // PRes payload limit
+      {0x1F26, 3, le(0x3124, 4)},               // expected configuration date
+      {0x1F27, 3, le(0, 4)},                    // ... and time: 0, compared as 0
       {0x1F22, 4, {1, 0, 0, 0, 0x06, 0x10}},    // node 4's domain is truncated
   };
   dir.write("mnobd.cdc", powerlink::encode_cdc(mn));
@@ -175,6 +177,25 @@ TEST_CASE("The MN's mnobd.cdc supplies each node's 0x1F22 objects, identity and 
   CHECK_FALSE(n.product_code.has_value());
   CHECK(n.pres_size == uint16_t{24});
   CHECK(n.preq_size == uint16_t{12});
+  CHECK(n.expected_conf_date == uint32_t{0x3124});
+  CHECK_FALSE(n.expected_conf_time.has_value());
+  // The YAML's pair wins as a whole over the CDC's.
+  const ConfigResult y = from(kHead +
+                                  "    - {node_id: 3, expected_conf_time: 0x03735955}\n"
+                                  "  cdc: mnobd.cdc\n",
+                              cfg);
+  INFO(y.error_report());
+  REQUIRE(y.ok());
+  CHECK_FALSE(y.config().powerlink.nodes[0].expected_conf_date.has_value());
+  CHECK(y.config().powerlink.nodes[0].expected_conf_time == uint32_t{0x03735955});
+  const std::string dumped = dump_config(y.config());
+  CHECK_THAT(dumped, Catch::Contains("expected_conf_time: 0x3735955"));
+  const ConfigResult again = from(dumped, cfg);
+  INFO(again.error_report());
+  REQUIRE(again.ok());
+  CHECK(again.config().powerlink.nodes[0].expected_conf_time == uint32_t{0x03735955});
+  CHECK_THAT(one_error(kHead + "    - {node_id: 3, expected_conf_date: -1}\n", cfg),
+             Catch::Contains("powerlink.nodes[0].expected_conf_date"));
   CHECK_THAT(one_error(kHead + "    - {node_id: 4}\n  cdc: mnobd.cdc\n", cfg),
              Catch::Contains("powerlink.nodes[0].node_id: powerlink.cdc: object 0x1F22/4 (this "
                              "node's concise DCF) is not valid: entry 0 of 1 is truncated"));

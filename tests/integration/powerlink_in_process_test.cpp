@@ -5,6 +5,7 @@
 #include <catch2/catch.hpp>
 #include <cmath>
 #include <deque>
+#include <functional>
 #include <vector>
 
 #include "core/axis_sample.hpp"
@@ -61,11 +62,13 @@ struct Setup {
   std::vector<ds1928::AxisIo> io;
   uint64_t cycle = 0;
 
-  explicit Setup(const sim::PowerlinkCnFaults& faults = {}, uint32_t loss_threshold = 15) {
+  explicit Setup(const sim::PowerlinkCnFaults& faults = {}, uint32_t loss_threshold = 15,
+                 const std::function<void(ds1928::PowerlinkNodeConfig&)>& node_config = {}) {
     bus.thresholds.loss_of_pres = loss_threshold;
     ds1928::PowerlinkNodeConfig node;
     node.node_id = 1;
     node.pres_timeout_us = 100;
+    if (node_config) node_config(node);
     bus.nodes.push_back(node);
     ds1928::AxisConfig axis;
     axis.node = 1;
@@ -205,4 +208,38 @@ TEST_CASE("The simulated CN asks for its own reset and the MN serves it") {
   CHECK(st->resets == 1);
   CHECK(s.cn->stats().power_cycles == 0);
   CHECK(s.cn->stats().nmt_requests_sent == 1);  // asked once, not again after the reset
+}
+
+TEST_CASE(
+    "A simulated CN power-cycled during the MN's NMTResetConfiguration wait gets its "
+    "configuration again (0x1020 verified)") {
+  constexpr uint32_t kDate = 0x3124;
+  constexpr uint32_t kTime = 0x03735955;
+  const auto u32 = [](uint32_t v) {
+    return std::vector<uint8_t>{static_cast<uint8_t>(v), static_cast<uint8_t>(v >> 8),
+                                static_cast<uint8_t>(v >> 16), static_cast<uint8_t>(v >> 24)};
+  };
+  Setup s({}, 15, [&](ds1928::PowerlinkNodeConfig& n) {
+    n.object_writes = {{0x1020, 1, u32(kDate), true}, {0x1020, 2, u32(kTime), true}};
+    n.expected_conf_date = kDate;
+    n.expected_conf_time = kTime;
+  });
+  const pl::CnStatus* st = s.mn->managing_node().node(1);
+  REQUIRE(st != nullptr);
+  // The MN has sent NMTResetConfiguration: the node loses power before it is identified again
+  // (nothing was stored with 0x1010, so it comes back with its defaults).
+  bool reset_sent = false;
+  for (int i = 0; i < 3000 && !reset_sent; ++i) {
+    (void)s.step();
+    reset_sent = st->configuration_resets == 1;
+  }
+  REQUIRE(reset_sent);
+  s.cn->power_cycle(g_now_ns);
+  REQUIRE(s.run_until_operational(5000));
+  CHECK(s.cn->stats().power_cycles == 1);
+  CHECK(st->configuration_not_verified == 1);
+  CHECK(st->configuration_resets == 2);
+  CHECK(st->resets == 0);
+  CHECK(s.cn->communication_objects().configuration_date() == kDate);
+  CHECK(s.cn->communication_objects().configuration_time() == kTime);
 }

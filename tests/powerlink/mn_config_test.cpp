@@ -131,6 +131,68 @@ TEST_CASE("Objects written in the boot are taken by NMTResetConfiguration before
         2);
 }
 
+namespace {
+// A download that carries its configuration date and time (0x1020/1, /2), as openCONFIGURATOR's
+// concise DCF does, with the MN expecting them (0x1F26/0x1F27 of its CDC).
+constexpr uint32_t kConfDate = 0x3124;
+constexpr uint32_t kConfTime = 0x03735955;
+void dated_download(PowerlinkNodeConfig& n) {
+  n.cycle_objects = true;
+  n.object_writes = {{0x1020, 1, le(kConfDate, 4), true}, {0x1020, 2, le(kConfTime, 4), true}};
+  n.expected_conf_date = kConfDate;
+  n.expected_conf_time = kConfTime;
+}
+long writes_of(const TestCn& cn, uint16_t index, uint8_t sub) {
+  return std::count(cn.writes.begin(), cn.writes.end(), std::pair<uint16_t, uint8_t>{index, sub});
+}
+}  // namespace
+
+TEST_CASE("A CN that took the download reports the expected configuration date: written once",
+          "[powerlink][mn][configure]") {
+  Rig rig({3}, 1, {}, dated_download);
+  REQUIRE(rig.run_until([&] { return operational(rig); }, 5000));
+  CHECK(rig.st(3).configuration_resets == 1);
+  CHECK(rig.st(3).configuration_not_verified == 0);
+  CHECK(writes_of(*rig.cns[0], 0x1006, 0) == 1);
+  CHECK(rig.cns[0]->taken[{0x1020, 1}] == le(kConfDate, 4));
+}
+
+TEST_CASE(
+    "A CN power-cycled while it resets its configuration is not started with its defaults: the "
+    "MN sees the configuration date differ and writes it again",
+    "[powerlink][mn][configure]") {
+  Rig rig({3}, 1, {}, dated_download);
+  TestCn& cn = *rig.cns[0];
+  cn.power_cycles_in_reset_configuration = 1;  // the download is lost in the first reset
+  REQUIRE(rig.run_until([&] { return operational(rig); }, 5000));
+  const CnStatus& st = rig.st(3);
+  CHECK(st.configuration_not_verified == 1);
+  CHECK(st.configuration_resets == 2);
+  CHECK(st.resets == 0);
+  CHECK(st.boots == 1);
+  CHECK_FALSE(st.last_error);  // said while it lasted, cleared once the node runs
+  // Written twice, and what the CN runs with is the download: its cycle length, the date.
+  CHECK(writes_of(cn, 0x1006, 0) == 2);
+  CHECK(writes_of(cn, 0x1020, 1) == 2);
+  CHECK(cn.taken[{0x1006, 0}] == le(1000, 4));
+  CHECK(cn.taken[{0x1020, 2}] == le(kConfTime, 4));
+}
+
+TEST_CASE(
+    "A CN that never reports the expected configuration date is never started, the reason is in "
+    "status",
+    "[powerlink][mn][configure]") {
+  Rig rig({3}, 1, {}, dated_download);
+  TestCn& cn = *rig.cns[0];
+  cn.write_aborts[{0x1020, 2}] = 0x06010002;  // read-only here: the time stays 0
+  REQUIRE(rig.run_until([&] { return rig.st(3).configuration_not_verified >= 3; }, 20000));
+  CHECK(rig.st(3).boot != CnBootState::kOperational);
+  CHECK(rig.st(3).boots == 0);
+  CHECK(cn.state != NmtState::kOperational);
+  CHECK(rig.st(3).last_error == make_error_code(MnError::kConfigurationNotVerified));
+  CHECK(rig.st(3).configuration_resets >= 3);
+}
+
 TEST_CASE("A CN with nothing to write is started without NMTResetConfiguration",
           "[powerlink][mn][configure]") {
   Rig rig({3}, 0);

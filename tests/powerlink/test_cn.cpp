@@ -98,6 +98,16 @@ void TestCn::on_frame(std::span<const uint8_t> bytes, std::deque<std::vector<uin
         r.serial_no = serial_no;
         r.poll_in_size = layout.pres_size;
         r.poll_out_size = layout.preq_size;
+        // VerifyConfigurationDate/Time: the CN's 0x1020/1, /2 (0 when never written).
+        const auto u32 = [this](uint8_t sub) {
+          uint32_t v = 0;
+          if (auto it = objects.find({0x1020, sub}); it != objects.end())
+            for (std::size_t i = 0; i < std::min<std::size_t>(4, it->second.size()); ++i)
+              v |= static_cast<uint32_t>(it->second[i]) << (8 * i);
+          return v;
+        };
+        r.verify_conf_date = u32(1);
+        r.verify_conf_time = u32(2);
         emit(build_ident_response(buf, ah, r));
         break;
       }
@@ -154,6 +164,10 @@ void TestCn::on_frame(std::span<const uint8_t> bytes, std::deque<std::vector<uin
           break;
         case NmtCommandId::kResetConfiguration:
           state = NmtState::kNotActive;
+          if (power_cycles_in_reset_configuration > 0) {
+            --power_cycles_in_reset_configuration;
+            objects.clear();
+          }
           taken = objects;
           server_.reset();
           sdo_out_.clear();

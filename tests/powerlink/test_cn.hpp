@@ -63,6 +63,9 @@ class TestCn : public SdoObjectAccess {
   bool exception_clear = true;
   bool last_er = false;
   std::vector<bool> er_seen;  // ER of every StatusRequest, in order
+  // The next this many NMTResetConfiguration find the CN power-cycled meanwhile: it comes back
+  // with no object written (nothing stored).
+  int power_cycles_in_reset_configuration = 0;
   // Stays in PRE_OPERATIONAL_2 on NMTEnableReadyToOperate while set.
   bool hold_ready_to_operate = false;
   // Object writes: refused with this abort code (else communication objects 0x1000..0x1FFF and
