@@ -11,6 +11,8 @@
 # ("unpinned").
 #
 # Checks, over HOLD_SECONDS (default 20) after the CN reached OPERATIONAL:
+#  0. the MN took node 1's expected configuration date/time from the CDC (0x1F26/0x1F27) and the
+#     demo CN reported them after the MN's NMTResetConfiguration (configuration_not_verified 0);
 #  1. node 1 OPERATIONAL, 0 resets (status sampled every second, and at the end);
 #  2. the cycle count advanced by at least 90 % of the hold's cycles (the cycle really ran);
 #  3. the demo CN never left NmtCsOperational (its own log) and logged no cycle/communication error;
@@ -101,6 +103,12 @@ socket:
   privileged_group: ""
 YAML
 "$daemon" --check-config "$tmp/opl.yaml" >"$tmp/check.log" 2>&1 || fail "check-config refused it"
+# The demo's CDC expects node 1's configuration date and time (0x1F26/0x1F27) and its concise DCF
+# writes them (0x1020): the MN checks the demo CN's IdentResponse against them after its reset.
+"$daemon" --check-config "$tmp/opl.yaml" --print-config >"$tmp/effective.yaml" 2>&1 ||
+  fail "print-config refused it"
+grep -qE "expected_conf_date: 0x[0-9a-f]+$" "$tmp/effective.yaml" ||
+  fail "no expected configuration date from the demo's CDC"
 
 netns_add "$ns_mn" "$ns_cn"
 veth_pair "$ns_mn" "$if_mn" "$ns_cn" "$if_cn"
@@ -134,6 +142,8 @@ wait_for "$tmp/demo_cn.log" "NmtCsReadyToOperate->NmtCsOperational" 10 ||
   fail "the daemon says OPERATIONAL, the demo CN's log does not"
 s0=$(status)
 c0=$(jq .cycle.count <<<"$s0")
+[ "$(node1 "$s0" | jq .configuration.configuration_not_verified)" = 0 ] ||
+  fail "the demo CN reported another configuration date/time than its CDC: $(node1 "$s0" | jq -c .configuration)"
 pass "demo CN OPERATIONAL at ${period_us} us, cycle thread $placement: $(node1 "$s0" | jq -c '{boots, pres_size, preq_size}')"
 
 # The hold: node 1 sampled every second; a reset is not fatal at once, it must be explained below.
