@@ -11,7 +11,7 @@
 #include <cstring>
 #include <vector>
 
-#include "can/unique_fd.hpp"
+#include "core/unique_fd.hpp"
 
 namespace ds1928::canio {
 namespace {

@@ -22,7 +22,7 @@
 #include "can/can_error_frame.hpp"
 #include "can/can_netlink.hpp"
 #include "can/can_port.hpp"
-#include "can/unique_fd.hpp"
+#include "core/unique_fd.hpp"
 
 namespace ds1928::canio {
 

@@ -128,7 +128,8 @@ class MnCategory final : public std::error_category {
         return "PollResponse Chaining set-up failed (no or wrong SyncResponse)";
       case MnError::kConfigurationNotVerified:
         return "configuration not verified: after NMTResetConfiguration the node reports another "
-               "configuration date/time (0x1020) than expected (0x1F26/0x1F27); written again";
+               "configuration date/time (CFM_VerifyConfiguration) than expected "
+               "(CFM_ExpConfDateList/TimeList); written again";
     }
     return "unknown MN error";
   }

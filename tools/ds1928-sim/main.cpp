@@ -32,10 +32,10 @@
 #include <tuple>
 #include <vector>
 
-#include "can/unique_fd.hpp"
 #include "canio_main.hpp"
 #include "config/config_loader.hpp"
 #include "core/clock.hpp"
+#include "core/unique_fd.hpp"
 #include "powerlink/raw_link.hpp"
 #include "sim/powerlink_cn.hpp"
 
@@ -132,7 +132,7 @@ class RunQueueWait {
   }
 
  private:
-  ds1928::canio::UniqueFd fd_;
+  ds1928::UniqueFd fd_;
 };
 
 // SCHED_FIFO and locked memory when permitted; the simulator still runs (slower) without.

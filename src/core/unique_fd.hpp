@@ -1,11 +1,12 @@
-// Owns one file descriptor: closed when the owner goes, movable, never copied.
+// Owns one file descriptor: closed when the owner goes, movable, never copied. In core, below
+// every layer that opens one (the CAN port, netlink and the simulator hold theirs in it).
 #pragma once
 
 #include <unistd.h>
 
 #include <utility>
 
-namespace ds1928::canio {
+namespace ds1928 {
 
 class UniqueFd {
  public:
@@ -32,4 +33,4 @@ class UniqueFd {
   int fd_ = -1;
 };
 
-}  // namespace ds1928::canio
+}  // namespace ds1928
