@@ -8,7 +8,8 @@
 #  1. `ds1928d --check-config` accepts the configuration (no axes, CDC file);
 #  2. the CN reaches OPERATIONAL; the MN wrote every object of 0x1F22/9 (none refused) and the
 #     CN's PRes has the size its written mapping (0x1A00) defines, its PReq the written limit
-#     (0x1F98/4);
+#     (0x1F98/4); it reported the configuration date and time the MN's lists expect
+#     (0x1F26/0x1F27) after the MN's NMTResetConfiguration;
 #  3. the raw PRes is published (`ds1928ctl pl pres`), PReq bytes set with `pl preq-set` reach
 #     the CN (its PReq payload carries them on the wire);
 #  4. the MN sent the CN nothing but NMT, Ident/StatusRequests, the identity read (0x1018/1) and
@@ -101,6 +102,8 @@ written=$(echo "$n" | jq .configuration.objects_written)
 [ "$written" -ge ${#cn_entries[@]} ] && [ $((written % ${#cn_entries[@]})) = 0 ] ||
   fail "not every object of 0x1F22/9 was written ($written)"
 [ "$(echo "$n" | jq .configuration.object_failures)" = 0 ] || fail "the CN refused objects"
+[ "$(echo "$n" | jq .configuration.configuration_not_verified)" = 0 ] ||
+  fail "the CN reported another configuration date/time after the MN's NMTResetConfiguration"
 [ "$(echo "$n" | jq .pres_size)" = 10 ] || fail "PRes size is not the mapped 10 bytes"
 [ "$(echo "$n" | jq .preq_size)" = 4 ] || fail "PReq size is not the written limit of 4"
 [ "$(echo "$n" | jq .pres_size_mismatches)" = 0 ] || fail "the CN's PRes size differs from the configured"
