@@ -593,7 +593,9 @@ TEST_CASE("CN loop: its host stopping the simulator's thread is not counted as l
   p.run(1'500'000'000, [] { return int64_t{5'000}; });  // the kernel counted no wait
   CHECK(p.h.cn.nmt_state() == NmtState::kPreOperational2);
   CHECK(p.h.cn.stats().loss_of_soc == 0);
-  CHECK(p.h.cn.stats().own_stalls == 1);
+  // At least the one stall: the fake count says "no run-queue wait" for every check, so a
+  // preemption of this test's thread in the pass' polling (make stress) counts as one more.
+  CHECK(p.h.cn.stats().own_stalls >= 1);
   CHECK(p.h.cn.stats().own_stall_max_ns >= 1'500'000'000);
 }
 
