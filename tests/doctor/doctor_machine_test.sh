@@ -2,7 +2,7 @@
 # ds1928ctl doctor on this machine, against config/powerlink.yaml and config/simulated.yaml:
 # every check line is PASS/WARN/FAIL, --json parses and agrees with the text, the exit code says
 # whether a check failed, an unreadable configuration is a usage error (2), and --measure runs the
-# cycle engine and reports its wake-up figures.
+# cycle engine, reports its wake-up figures and judges them (measured_wakeup) as they say.
 # Usage: doctor_machine_test.sh BUILD_DIR SOURCE_DIR
 set -u
 ctl=${1:?build dir}/tools/ds1928ctl/ds1928ctl
@@ -40,5 +40,12 @@ echo "ok: a missing configuration is a usage error naming the file"
 "$ctl" doctor --config "$src/config/simulated.yaml" --measure 1 --json >"$tmp/measure.json" 2>&1 || true
 jq -e '.measure.cycles > 500 and .measure.wake_latency_ns.p99 > 0 and .measure.wake_latency_ns.max >= .measure.wake_latency_ns.p99' \
   "$tmp/measure.json" >/dev/null || fail "--measure: $(cat "$tmp/measure.json")"
-echo "ok: --measure 1: $(jq -c '.measure | {cycles, overruns, wake_latency_ns, rt_status}' "$tmp/measure.json")"
+# The measurement is judged as one more check, by the figures it reports beside it.
+jq -e '[.checks[] | select(.name == "measured_wakeup")] | length == 1' "$tmp/measure.json" >/dev/null ||
+  fail "--measure: no measured_wakeup check: $(jq -c .checks "$tmp/measure.json")"
+verdict=$(jq -r '.checks[] | select(.name == "measured_wakeup") | .verdict' "$tmp/measure.json")
+want=$(jq -r 'if .measure.wake_latency_ns.max < .measure.period_us * 1000 and .measure.overruns == 0
+              then "PASS" else "WARN" end' "$tmp/measure.json")
+[ "$verdict" = "$want" ] || fail "--measure: measured_wakeup is $verdict, the figures say $want"
+echo "ok: --measure 1: $(jq -c '.measure | {cycles, overruns, wake_latency_ns, rt_status}' "$tmp/measure.json"), measured_wakeup $verdict"
 echo "PASS: doctor_machine"

@@ -207,3 +207,32 @@ TEST_CASE("doctor: the unit's limits and CPUAffinity", "[doctor]") {
     if (c.verdict != Verdict::Pass) CHECK_FALSE(c.detail.empty());
   }
 }
+
+TEST_CASE("doctor: the measured wake-ups are judged against the period", "[doctor]") {
+  // 5 s at 1 ms, every cycle started well within its period.
+  MeasuredCycles m{5.0, 1000, 4998, 0, 143'000, 999'999};
+  Check c = check_measured_cycles(m);
+  CHECK(c.name == "measured_wakeup");
+  CHECK(c.verdict == Verdict::Pass);
+  CHECK_THAT(c.detail, Catch::Contains("4998 cycles at 1000 µs") &&
+                           Catch::Contains("max 1000.0 µs") && Catch::Contains("0 overrun(s)"));
+  CHECK(c.fix.empty());
+  // One wake-up a whole period late (a VM's host stopped the vCPU for 3.9 ms): a missed SoC.
+  m.wake_max_ns = 3'885'100;
+  c = check_measured_cycles(m);
+  CHECK(c.verdict == Verdict::Warn);
+  CHECK_THAT(c.detail, Catch::Contains("max 3885.1 µs") && Catch::Contains("SoC"));
+  CHECK_THAT(c.fix, Catch::Contains("pinned vCPUs") && Catch::Contains("hwlatdetect"));
+  // Exactly one period late is already too late; an overrun alone is too.
+  m.wake_max_ns = 1'000'000;
+  CHECK(check_measured_cycles(m).verdict == Verdict::Warn);
+  m.wake_max_ns = 500'000;
+  m.overruns = 1;
+  CHECK(check_measured_cycles(m).verdict == Verdict::Warn);
+  // No cycle at all: the engine did not run.
+  m.cycles = 0;
+  c = check_measured_cycles(m);
+  CHECK(c.verdict == Verdict::Fail);
+  CHECK_THAT(c.detail, Catch::Contains("no cycle in 5.0 s"));
+  CHECK_FALSE(c.fix.empty());
+}

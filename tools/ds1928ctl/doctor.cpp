@@ -443,6 +443,30 @@ std::vector<Check> check_unit(const DoctorInput& in) {
   return out;
 }
 
+Check check_measured_cycles(const MeasuredCycles& m) {
+  const char* name = "measured_wakeup";
+  if (m.cycles == 0)
+    return fail(name, fmt::format("the cycle engine ran no cycle in {:.1f} s", m.seconds),
+                "see the rt_status of --measure; run as root or with CAP_SYS_NICE");
+  const double max_us = static_cast<double>(m.wake_max_ns) / 1000.0;
+  const double p99_us = static_cast<double>(m.wake_p99_ns) / 1000.0;
+  const std::string figures =
+      fmt::format("{} cycles at {} µs: wake-up p99 {:.1f} µs, max {:.1f} µs, {} overrun(s)",
+                  m.cycles, m.period_us, p99_us, max_us, m.overruns);
+  if (m.wake_max_ns < static_cast<int64_t>(m.period_us) * 1000 && m.overruns == 0)
+    return pass(name, figures + ": every cycle started within its period");
+  // At SCHED_FIFO the machine's ordinary load does not outrank the cycle thread: what stops it
+  // for a period or more is below the scheduler (a VM's host not running the vCPU, SMIs) or the
+  // kernel's own work on that CPU.
+  return warn(name,
+              figures +
+                  ": a cycle started a period or more late, and a CN misses that cycle's SoC "
+                  "(a VM's host not running the vCPU, SMIs, or kernel work on the CPU)",
+              "on a VM: dedicated, pinned vCPUs on a host with CPUs to spare (or bare metal); "
+              "else isolate cycle.cpu (see isolation) and look for SMIs with hwlatdetect "
+              "(rt-tests)");
+}
+
 std::vector<Check> run_doctor(const DoctorInput& in) {
   std::vector<Check> out{check_preemption(in), check_governor(in),      check_idle_states(in),
                          check_isolation(in),  check_rt_throttling(in), check_irq_affinity(in)};

@@ -4,6 +4,7 @@
 // ip) are given, so a test can put fakes in their place.
 #pragma once
 
+#include <cstdint>
 #include <functional>
 #include <optional>
 #include <string>
@@ -48,6 +49,19 @@ struct DoctorInput {
     const DoctorInput& in);  // bitrate, restart-ms, txqueuelen
 [[nodiscard]] std::vector<Check> check_unit(const DoctorInput& in);  // limits, CPUAffinity
 [[nodiscard]] std::vector<Check> run_doctor(const DoctorInput& in);
+
+// What `--measure` saw of the daemon's cycle engine (no bus) at the configured period, priority
+// and CPU, and its verdict ("measured_wakeup"): a wake-up later than the period is a cycle whose
+// SoC a CN misses.
+struct MeasuredCycles {
+  double seconds = 0;
+  uint32_t period_us = 0;
+  uint64_t cycles = 0;
+  uint64_t overruns = 0;
+  int64_t wake_p99_ns = 0;
+  int64_t wake_max_ns = 0;
+};
+[[nodiscard]] Check check_measured_cycles(const MeasuredCycles& m);
 
 // Parses a CPU list ("1,3-5"); empty on a syntax error.
 [[nodiscard]] std::vector<int> parse_cpu_list(const std::string& text);

@@ -1,6 +1,6 @@
 // `ds1928ctl doctor [--config FILE] [--root DIR] [--measure S] [--json]`: the pre-flight check
 // (doctor.hpp), and with --measure the daemon's own cycle engine at the configured period,
-// priority and CPU for S seconds without a bus.
+// priority and CPU for S seconds without a bus, judged as one more check (measured_wakeup).
 #include <cstdio>
 #include <iostream>
 #include <memory>
@@ -52,22 +52,8 @@ int run(const Context& ctx, const DoctorArgs& args) {
   in.config = loaded.config();
   in.unit = args.unit;
   in.run = run_command;
-  const std::vector<Check> checks = run_doctor(in);
+  std::vector<Check> checks = run_doctor(in);
   json j{{"config", args.config}, {"checks", json::array()}};
-  int fails = 0, warns = 0;
-  for (const Check& c : checks) {
-    fails += c.verdict == Verdict::Fail;
-    warns += c.verdict == Verdict::Warn;
-    j["checks"].push_back({{"name", c.name},
-                           {"verdict", to_string(c.verdict)},
-                           {"detail", c.detail},
-                           {"fix", c.fix.empty() ? json(nullptr) : json(c.fix)}});
-    if (!ctx.json) {
-      std::printf("%s  %-15s %s\n", to_string(c.verdict), c.name.c_str(), c.detail.c_str());
-      if (!c.fix.empty()) std::printf("      fix: %s\n", c.fix.c_str());
-    }
-  }
-  j["summary"] = {{"pass", checks.size() - fails - warns}, {"warn", warns}, {"fail", fails}};
   if (args.measure_s > 0) {
     NoWork work;
     CycleConfig cc = in.config.cycle;
@@ -99,7 +85,25 @@ int run(const Context& ctx, const DoctorArgs& args) {
           static_cast<unsigned long long>(s.cycles), static_cast<unsigned long long>(s.overruns),
           s.wake_latency.p50_ns / 1000.0, s.wake_latency.p99_ns / 1000.0,
           s.wake_latency.max_ns / 1000.0);
+    // The measurement's verdict is one more check: counted in the summary and the exit code.
+    checks.push_back(check_measured_cycles({args.measure_s, cc.period_us, s.cycles, s.overruns,
+                                            static_cast<int64_t>(s.wake_latency.p99_ns),
+                                            static_cast<int64_t>(s.wake_latency.max_ns)}));
   }
+  int fails = 0, warns = 0;
+  for (const Check& c : checks) {
+    fails += c.verdict == Verdict::Fail;
+    warns += c.verdict == Verdict::Warn;
+    j["checks"].push_back({{"name", c.name},
+                           {"verdict", to_string(c.verdict)},
+                           {"detail", c.detail},
+                           {"fix", c.fix.empty() ? json(nullptr) : json(c.fix)}});
+    if (!ctx.json) {
+      std::printf("%s  %-15s %s\n", to_string(c.verdict), c.name.c_str(), c.detail.c_str());
+      if (!c.fix.empty()) std::printf("      fix: %s\n", c.fix.c_str());
+    }
+  }
+  j["summary"] = {{"pass", checks.size() - fails - warns}, {"warn", warns}, {"fail", fails}};
   if (ctx.json)
     std::cout << j.dump() << std::endl;
   else
