@@ -321,7 +321,6 @@ void ManagingNode::on_enter_reset_configuration(Cn& cn) noexcept {
   cn.sdo_wait_answer = false;
   cn.sdo->reset();  // the CN's SDO server forgets its connection; the next transfer reopens it
   ++cn.st->configuration_resets;
-  cn.verify_after_reset = true;
   queue_nmt(cn, NmtCommandId::kResetConfiguration);
 }
 void ManagingNode::on_state_configure(Cn& cn, NmtState s) noexcept {
@@ -363,7 +362,6 @@ void ManagingNode::on_state_operational(Cn& cn, NmtState s) noexcept {
 void ManagingNode::on_enter_reset(Cn& cn) noexcept {
   // NMTResetNode: the CN restores its stored communication objects; they are written again.
   cn.config_applied = false;
-  cn.verify_after_reset = false;
   cn.st->in_isochronous = false;
   cn.st->identified = false;
   cn.st->prc = false;

@@ -146,7 +146,9 @@ void ManagingNode::handle_asnd(const FrameHeader& h, const Asnd& asnd) noexcept 
         cn->st->nmt = ident->nmt_state;
         return;
       }
-      if (cn->verify_after_reset) verify_configuration(*cn, *ident);
+      // Identified with the download applied: only after this MN's NMTResetConfiguration (every
+      // other way back to "identify" passes reset_node, which clears config_applied).
+      if (cn->config_applied) verify_configuration(*cn, *ident);
       cn->st->identified = true;
       cn->st->mac = h.src_mac;
       cn->st->vendor_id = ident->vendor_id;
@@ -198,7 +200,6 @@ void ManagingNode::verify_configuration(Cn& cn, const IdentResponse& ident) noex
   // download writes 0x1020/1, /2; a CN that took it reports them in its IdentResponse. One that
   // was power-cycled while it reset (or dropped the objects) reports its stored or default values
   // and would otherwise be started with them: the next configure step writes everything again.
-  cn.verify_after_reset = false;
   const auto& c = cn.cfg;
   if (!c.expected_conf_date && !c.expected_conf_time) return;
   if (ident.verify_conf_date == c.expected_conf_date.value_or(0) &&

@@ -94,9 +94,6 @@ struct ManagingNode::Cn {
   // ... and NMTResetConfiguration made the CN take them: the next "configure" writes nothing
   // (until an NMTResetNode, which restores the CN's stored values).
   bool config_applied = false;
-  // NMTResetConfiguration sent: the next IdentResponse shows whether the CN took the download
-  // (its configuration date/time, when expected ones are configured).
-  bool verify_after_reset = false;
   std::array<SlotRegister, kOpQueueDepth> ops{};
   std::size_t ops_head = 0;
   std::size_t ops_count = 0;

@@ -226,14 +226,18 @@ TEST_CASE(
   });
   const pl::CnStatus* st = s.mn->managing_node().node(1);
   REQUIRE(st != nullptr);
-  // The MN has sent NMTResetConfiguration: the node loses power before it is identified again
-  // (nothing was stored with 0x1010, so it comes back with its defaults).
-  bool reset_sent = false;
-  for (int i = 0; i < 3000 && !reset_sent; ++i) {
+  // The node has taken the MN's NMTResetConfiguration (it went back to NOT_ACTIVE) and loses
+  // power before it is identified again; nothing was stored with 0x1010, so it comes back with
+  // its defaults.
+  bool in_reset = false;
+  for (int i = 0; i < 3000 && !in_reset; ++i) {
     (void)s.step();
-    reset_sent = st->configuration_resets == 1;
+    in_reset = st->configuration_resets == 1 && s.cn->stats().nmt_commands == 1;
   }
-  REQUIRE(reset_sent);
+  REQUIRE(in_reset);
+  REQUIRE(s.cn->nmt_state() == pl::NmtState::kNotActive);
+  REQUIRE_FALSE(st->identified);  // the MN waits reset_wait_ms before it asks again
+  REQUIRE(s.cn->communication_objects().configuration_date() == kDate);  // it had the download
   s.cn->power_cycle(g_now_ns);
   REQUIRE(s.run_until_operational(5000));
   CHECK(s.cn->stats().power_cycles == 1);
