@@ -29,17 +29,6 @@ namespace ds1928::test {
 // least, and the window closes at the first cycle after close() — a test whose window must hold
 // traffic from other threads (a node thread, SDO answers) closes it once that traffic was seen,
 // so what the window contains does not depend on how the scheduler shares the cores.
-// Loads and locks every code mapping of the process (the test executable and its libraries).
-// The daemon locks memory as it is first touched (mlockall with MCL_ONFAULT, core/rt_setup.cpp),
-// so a branch of code the cycle thread first takes costs one page fault, once. Which branches it
-// first takes inside a window depends on how the scheduler shares the cores (a register result
-// held because the normal thread polled late, a tunnel reply that waits one cycle more), so the
-// proofs lock the code before their window opens: a fault they count is then a data page the
-// cycle touched for the first time in steady cycles, which is what they are about.
-inline void lock_code_pages() noexcept {
-  rt::lock_code_mappings();
-}
-
 class CountingTask final : public CycleTask {
  public:
   CountingTask(CycleTask& inner, uint64_t counted, uint64_t warmup = 0, bool armed = true,
@@ -48,7 +37,14 @@ class CountingTask final : public CycleTask {
   void run_cycle(const CycleContext& ctx) noexcept override {
     if (!counting_ && !done() && executed_ >= warmup_ && armed_.load(std::memory_order_acquire)) {
       counting_ = true;
-      lock_code_pages();  // outside what the window counts: before its first reading
+      // Every code mapping locked, outside what the window counts (before its first reading).
+      // The daemon locks memory as it is first touched (mlockall with MCL_ONFAULT), so a branch
+      // of code the cycle thread first takes costs one page fault, once; which branches it first
+      // takes inside a window depends on how the scheduler shares the cores (a register result
+      // held because the normal thread polled late, a tunnel reply that waits one cycle more).
+      // Locked before, a fault the window counts is a data page the cycle touched for the first
+      // time in steady cycles, which is what the proofs are about.
+      rt::lock_code_mappings();
       faults_at_start_ = thread_faults();
       begin_counting();
     }
