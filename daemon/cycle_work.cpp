@@ -130,7 +130,7 @@ void CycleWork::run_cycle(const CycleContext& ctx) noexcept {
   // The next cycle's wake-up on the engine's timeline (the start, less the spin): the
   // shared-memory wake-up thread, on the same CPU, wakes then too and runs once this thread
   // sleeps again.
-  publisher_.publish(ctx.index, status_, ctx.start_ns + next_wake_offset_ns_);
+  publisher_.publish(ctx, status_, ctx.start_ns + next_wake_offset_ns_);
   watch_overruns(ctx);
 }
 

@@ -17,6 +17,10 @@
  *  - Waiting for the next publication is a futex on `ds1928_shm_wait_area.futex`; a reader
  *    registers in a "factor slot" so that it is woken only on the cycles it asked for, and the
  *    daemon makes the wake-up system call only when someone is registered.
+ *  - Or, without the daemon's help, on the bus's own timeline: the header's time base
+ *    (`features` bit DS1928_SHM_FEATURE_TIMEBASE: t0, period, measured publication offset) gives
+ *    the next publication's instant (ds1928_shm_next_publication) to sleep until with
+ *    clock_nanosleep(TIMER_ABSTIME), every N-th cycle.
  *
  * Requires Linux and GCC or Clang; C99, C11, C17 (also strict ISO modes such as -std=c99
  * -pedantic) and C++. The functions below need POSIX and syscall(): when the translation unit
@@ -110,6 +114,16 @@ enum ds1928_time_source {
   DS1928_TIME_RX_TIMESTAMP = 2 /* master's reception time of the inputs */
 };
 
+/* ds1928_shm_header.features: what this daemon publishes beyond the ABI version 1 base (a bit
+ * set; 0 in daemons that predate it). Bits not named here are reserved. */
+#define DS1928_SHM_FEATURE_TIMEBASE 0x01u /* the time base fields (docs/shared-memory.md) */
+
+/* ds1928_shm_header.timebase_kind: the clock the cycle starts are aligned to. */
+enum ds1928_timebase_kind {
+  DS1928_TIMEBASE_MONOTONIC = 0, /* t0 chosen at the daemon's start */
+  DS1928_TIMEBASE_TAI = 1        /* cycle starts on multiples of the period in CLOCK_TAI */
+};
+
 /* ds1928_axis_data.flags */
 #define DS1928_AXIS_NEW_POSITION 0x01u   /* PosCycle changed: a new EnDat position this cycle */
 #define DS1928_AXIS_FRACTION_VALID 0x02u /* the fraction's low 3 bits are zero */
@@ -145,7 +159,12 @@ struct ds1928_shm_axis {
     struct ds1928_axis_data data;
     uint64_t words[DS1928_AXIS_DATA_WORDS]; /* accessed word by word, atomically */
   } u;
-  uint64_t reserved[6];
+  /* Time base (DS1928_SHM_FEATURE_TIMEBASE), atomic, outside the seqlock: from the acquisition
+   * instant (pos_time_ns) to the publication, this cycle's (0 when no fresh stamped input) and
+   * the largest of the last measurement window: the axis' T_IO_Input equivalent. */
+  uint32_t acq_to_publish_ns;
+  uint32_t acq_to_publish_max_ns;
+  uint64_t reserved[5];
 };
 
 /* The object starts with this header; the records follow at offset header_size. */
@@ -159,15 +178,24 @@ struct ds1928_shm_header {
   uint64_t generation;      /* new at every daemon start (CLOCK_REALTIME ns of the start) */
   uint64_t cycle_period_ns; /* the daemon's cycle period */
   int32_t daemon_pid;       /* for messages */
-  uint32_t reserved0;
-  uint64_t reserved1[2];
+  uint32_t features;        /* DS1928_SHM_FEATURE_* bits (0 in older daemons) */
+  /* Time base (DS1928_SHM_FEATURE_TIMEBASE), atomic: cycle n starts at timebase_t0_ns +
+   * n * cycle_period_ns on CLOCK_MONOTONIC (0 = no cycle yet); it moves only when a clock step
+   * re-anchors the timeline. */
+  int64_t timebase_t0_ns;
+  int64_t timebase_tai_offset_ns; /* CLOCK_TAI - CLOCK_MONOTONIC of the timeline (tai only) */
   /* Second cache line: changes at run time (all atomic). */
-  uint32_t daemon_state; /* enum ds1928_daemon_state */
-  uint32_t reserved2;
-  uint64_t last_cycle;     /* cycle index of the last publication */
-  int64_t last_publish_ns; /* CLOCK_MONOTONIC ns of the last publication (0 = none yet) */
-  uint64_t publish_count;  /* publications since start */
-  uint64_t reserved3[4];
+  uint32_t daemon_state;          /* enum ds1928_daemon_state */
+  uint32_t timebase_steps;        /* re-anchors after a step of the aligned clock */
+  uint64_t last_cycle;            /* cycle index of the last publication */
+  int64_t last_publish_ns;        /* CLOCK_MONOTONIC ns of the last publication (0 = none yet) */
+  uint64_t publish_count;         /* publications since start */
+  uint32_t publish_offset_p50_ns; /* publication - cycle start, last measurement window */
+  uint32_t publish_offset_p99_ns; /*   (0 = not measured yet) */
+  uint32_t publish_offset_max_ns;
+  uint32_t timebase_kind;        /* enum ds1928_timebase_kind */
+  int64_t timebase_last_step_ns; /* how far the last re-anchor moved the cycle starts */
+  uint64_t reserved3;
 };
 
 /* <name>.wait: written by readers (registration) and by the daemon (futex word). */
@@ -272,6 +300,37 @@ static inline int64_t ds1928_shm_last_publish_ns(const struct ds1928_shm_header*
 }
 static inline uint64_t ds1928_shm_publish_count(const struct ds1928_shm_header* h) {
   return __atomic_load_n(&h->publish_count, __ATOMIC_ACQUIRE);
+}
+
+/* The daemon publishes the time base (DS1928_SHM_FEATURE_TIMEBASE). An older daemon leaves
+ * `features` 0; a reader then falls back to ds1928_shm_wait(). */
+static inline int ds1928_shm_has_timebase(const struct ds1928_shm_header* h) {
+  return (__atomic_load_n(&h->features, __ATOMIC_ACQUIRE) & DS1928_SHM_FEATURE_TIMEBASE) != 0;
+}
+
+/* The instant (CLOCK_MONOTONIC ns) of the first publication later than `after_ns` whose cycle
+ * index is a multiple of `every` (0 counts as 1), predicted from the time base: that cycle's
+ * start plus the measured publication offset p99 (the cycle's start alone while no window has
+ * been measured yet). An application sleeps with clock_nanosleep(CLOCK_MONOTONIC,
+ * TIMER_ABSTIME) until *at_ns plus its own offset, then reads: the record of cycle *cycle is
+ * there unless that cycle overran or the daemon is gone (check the record's `cycle`). Pass the
+ * *at_ns of one call as `after_ns` of the next to step from publication to publication.
+ * Returns 0; -ENOTSUP when the daemon publishes no time base; -EAGAIN before its first cycle. */
+static inline int ds1928_shm_next_publication(const struct ds1928_shm_header* h, int64_t after_ns,
+                                              uint32_t every, int64_t* at_ns, uint64_t* cycle) {
+  if (!ds1928_shm_has_timebase(h)) return -ENOTSUP;
+  const int64_t t0 = __atomic_load_n(&h->timebase_t0_ns, __ATOMIC_ACQUIRE);
+  const int64_t period = (int64_t)h->cycle_period_ns;
+  if (t0 == 0 || period <= 0) return -EAGAIN;
+  const int64_t offset = (int64_t)__atomic_load_n(&h->publish_offset_p99_ns, __ATOMIC_ACQUIRE);
+  if (every == 0) every = 1;
+  const int64_t step = period * (int64_t)every;
+  /* First multiple of `every` whose publication lies after after_ns. */
+  const int64_t rel = after_ns - offset - t0;
+  const int64_t k = rel < 0 ? 0 : rel / step + 1;
+  *cycle = (uint64_t)k * every;
+  *at_ns = t0 + k * step + offset;
+  return 0;
 }
 
 /* "Nothing seen yet": the starting value for ds1928_shm_wait's *seen_cycle before the first

@@ -6,12 +6,14 @@ Pure Python (mmap + struct on the ABI of include/ds1928/shm.h, docs/shared-memor
     >>> r = ds1928.Reader("/ds1928d")
     >>> r.axis(0)            # one consistent record (seqlock + check word)
     >>> r.wait(every=1)      # sleep until the next publication (futex, through ctypes)
+    >>> for s in r.cycles(every=2, offset_us=50):   # isochronous: clock_nanosleep to the
+    ...     use(s.axes)                               # publication + 50 µs, every 2nd cycle
     >>> ds1928.Control().status()
 """
-from .shm import (ABI_VERSION, AbiMismatch, AxisData, DaemonStopped, NotReady, Reader,
-                  TornRead, check_value)
+from .shm import (ABI_VERSION, AbiMismatch, AxisData, DaemonStopped, NotReady, Reader, Sample,
+                  Timebase, TornRead, check_value)
 from .control import Control, ControlError
 
 __all__ = ["ABI_VERSION", "AbiMismatch", "AxisData", "Control", "ControlError", "DaemonStopped",
-           "NotReady", "Reader", "TornRead", "check_value"]
+           "NotReady", "Reader", "Sample", "Timebase", "TornRead", "check_value"]
 __version__ = "0.1.0"

@@ -37,6 +37,8 @@ VALIDITY = {0: "valid", 1: "stale", 2: "bus_down", 3: "module_error"}
 TIME_SOURCE = {0: "none", 1: "nettime", 2: "rx_timestamp"}
 STATE = {0: "starting", 1: "running", 2: "stopping", 3: "stopped"}
 FLAG_NEW_POSITION, FLAG_FRACTION_VALID, FLAG_FRESH = 0x01, 0x02, 0x04
+FEATURE_TIMEBASE = 0x01  # header.features: the time base fields are published
+TIMEBASE_KIND = {0: "monotonic", 1: "tai"}
 _M64 = (1 << 64) - 1
 
 
@@ -112,6 +114,32 @@ def _shm_path(name):
 _libc = None
 _SYS_FUTEX = {"x86_64": 202, "aarch64": 98, "armv7l": 240, "i686": 240}.get(os.uname().machine)
 _FUTEX_WAIT_BITSET = 9
+
+
+@dataclass(frozen=True)
+class Timebase:
+    """The bus's time base (header fields of DS1928_SHM_FEATURE_TIMEBASE): cycle n starts at
+    t0_ns + n * period_ns on CLOCK_MONOTONIC; the publication follows the start by
+    publish_offset_p50_ns / _p99_ns / _max_ns (last measurement window, 0 = not yet)."""
+    t0_ns: int
+    period_ns: int
+    publish_offset_p50_ns: int
+    publish_offset_p99_ns: int
+    publish_offset_max_ns: int
+    kind: str
+    tai_offset_ns: int
+    steps: int
+    last_step_ns: int
+
+
+@dataclass(frozen=True)
+class Sample:
+    """One pass of Reader.cycles(): the cycle it was timed for, when it woke (CLOCK_MONOTONIC
+    ns), the predicted publication, and every axis as read then."""
+    cycle: int
+    publication_ns: int
+    woke_ns: int
+    axes: list
 
 
 class _Timespec(ctypes.Structure):
@@ -239,6 +267,87 @@ class Reader:
     @property
     def publish_count(self):
         return self._u64[88 // 8]
+
+    @property
+    def features(self):
+        return self._u32[44 // 4]
+
+    @property
+    def has_timebase(self):
+        return bool(self.features & FEATURE_TIMEBASE)
+
+    def timebase(self):
+        """The time base, or None when the daemon publishes none (an older daemon)."""
+        if not self.has_timebase:
+            return None
+        t0, tai = struct.unpack("<qq", self._u64[6:8].tobytes())
+        p50, p99, pmax, kind = self._u32[96 // 4:112 // 4].tolist()
+        (last_step,) = struct.unpack("<q", self._u64[14:15].tobytes())
+        return Timebase(t0_ns=t0, period_ns=self.cycle_period_ns, publish_offset_p50_ns=p50,
+                        publish_offset_p99_ns=p99, publish_offset_max_ns=pmax,
+                        kind=TIMEBASE_KIND.get(kind, "unknown"), tai_offset_ns=tai,
+                        steps=self._u32[68 // 4], last_step_ns=last_step)
+
+    def next_publication(self, after_ns=None, every=1):
+        """As ds1928_shm_next_publication(): (at_ns, cycle) of the first publication after
+        `after_ns` (default: now) whose cycle is a multiple of `every`: that cycle's start plus
+        the measured publication offset p99. None while there is no time base (an older daemon,
+        or before the first cycle)."""
+        if not self.has_timebase:
+            return None
+        t0 = struct.unpack("<q", self._u64[6:7].tobytes())[0]
+        period = self.cycle_period_ns
+        if t0 == 0 or period <= 0:
+            return None
+        offset = self._u32[100 // 4]
+        if after_ns is None:
+            after_ns = time.clock_gettime_ns(time.CLOCK_MONOTONIC)
+        step = period * max(1, int(every))
+        rel = after_ns - offset - t0
+        k = 0 if rel < 0 else rel // step + 1
+        return t0 + k * step + offset, k * max(1, int(every))
+
+    def cycles(self, every=1, offset_us=0, timeout=1.0):
+        """Isochronous loop: yields a Sample at every `every`-th publication, `offset_us` after
+        its predicted instant (next_publication()), woken by clock_nanosleep(TIMER_ABSTIME) on
+        CLOCK_MONOTONIC: no wake-up from the daemon. A pass that woke a whole step late skips to
+        the next one ahead (never a burst). Without a time base it falls back to wait(); raises
+        DaemonStopped when the daemon stops and TimeoutError when it publishes nothing for
+        `timeout` seconds."""
+        every = max(1, int(every))
+        offset_ns = int(offset_us * 1000)
+        after = None
+        while True:
+            nxt = self.next_publication(after, every)
+            if nxt is None:
+                seen = self.wait(None, every, timeout)
+                if seen is None:
+                    raise TimeoutError(f"{self.name}: no publication for {timeout} s")
+                now = time.clock_gettime_ns(time.CLOCK_MONOTONIC)
+                yield Sample(cycle=seen, publication_ns=self.last_publish_ns, woke_ns=now,
+                             axes=self.axes())
+                continue
+            at, cycle = nxt
+            _sleep_until(at + offset_ns)
+            woke = time.clock_gettime_ns(time.CLOCK_MONOTONIC)
+            if self.state == "stopped":
+                raise DaemonStopped(f"{self.name}: the daemon stopped")
+            if not self.daemon_alive(max(10, int(timeout * 1e9) // max(1, self.cycle_period_ns))):
+                raise TimeoutError(f"{self.name}: no publication for {timeout} s")
+            yield Sample(cycle=cycle, publication_ns=at, woke_ns=woke, axes=self.axes())
+            # Late by a whole step or more (a stop in the debugger, a stalled process): resume
+            # at the first publication ahead instead of catching up.
+            after = at if woke - at < self.cycle_period_ns * every else woke
+
+    def acq_to_publish(self, axis=0):
+        """(this cycle's, the last window's largest) time from the axis' acquisition to the
+        publication, in ns; (0, 0) without a time base or a stamped input."""
+        if not 0 <= axis < self.axis_count:
+            raise IndexError(f"axis {axis}: the daemon has {self.axis_count} axes")
+        if not self.has_timebase:
+            return (0, 0)
+        i = (self.header_size + axis * self.record_size + 80) // 4
+        return (self._u32[i], self._u32[i + 1])
 
     def daemon_alive(self, missed_cycles=10):
         """As ds1928_shm_daemon_alive(): not stopped and published within max(N periods, 100 ms)."""
@@ -385,6 +494,16 @@ def _cas32(m, offset, expected, desired):
     _lib()[1].__atomic_compare_exchange_4(_address(m, offset), ctypes.byref(seen), desired,
                                           _SEQ_CST, _SEQ_CST)
     return seen.value
+
+
+def _sleep_until(deadline_ns):
+    """clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME): an absolute wake-up, so that a late
+    pass never shifts the later ones."""
+    libc = _lib()[0]
+    ts = _Timespec(deadline_ns // 1_000_000_000, deadline_ns % 1_000_000_000)
+    while libc.clock_nanosleep(ctypes.c_int(time.CLOCK_MONOTONIC), ctypes.c_int(1),
+                               ctypes.byref(ts), None) == errno.EINTR:
+        pass
 
 
 def _futex_wait(m, offset, value, deadline_ns, bitset):

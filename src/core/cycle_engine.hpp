@@ -15,11 +15,23 @@
 
 namespace ds1928 {
 
+// The clock the timeline is aligned to, and what its steps did (written by the cycle thread).
+struct TimebaseStatus {
+  TimebaseKind kind = TimebaseKind::Monotonic;
+  int64_t tai_offset_ns = 0;  // CLOCK_TAI − CLOCK_MONOTONIC the timeline follows (tai only)
+  uint32_t steps = 0;         // re-anchors after a step of the aligned clock
+  int64_t last_step_ns = 0;   // how far the last re-anchor moved the cycle starts
+};
+
 // What the cycle thread knows when a cycle starts.
 struct CycleContext {
   uint64_t index = 0;    // grid index: start_ns == t0 + index·period (skipped slots leave gaps)
   int64_t start_ns = 0;  // nominal start, CLOCK_MONOTONIC
   int64_t woke_ns = 0;   // when the thread actually got going, CLOCK_MONOTONIC
+  // The timeline: start_ns == t0_ns + index·period. It moves only when a step of the aligned
+  // clock re-anchors it (cycle.timebase: tai); the shared memory's time base publishes it.
+  int64_t t0_ns = 0;
+  const struct TimebaseStatus* timebase = nullptr;  // what the timeline is aligned to
 };
 
 // The work of one cycle, implemented by the daemon (bus exchange, decoding, publishing...).
@@ -110,6 +122,7 @@ class CycleEngine {
   std::atomic<bool> realtime_{false};
   std::atomic<uint64_t> cycle_count_{0};
   CycleStats stats_;
+  TimebaseStatus timebase_;  // cycle thread
 
   // Setup outcome, written before setup_ is released, read after.
   int mlock_error_ = 0;

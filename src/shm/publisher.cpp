@@ -7,6 +7,7 @@
 #include <sys/syscall.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <climits>
 #include <cstring>
@@ -231,6 +232,8 @@ std::error_code Publisher::open(const ShmConfig& config, uint32_t axis_count,
   header_->generation = generation;
   header_->cycle_period_ns = cycle_period_ns;
   header_->daemon_pid = static_cast<int32_t>(getpid());
+  // The time base fields are atomic; t0 stays 0 until the first cycle with a context.
+  header_->features = DS1928_SHM_FEATURE_TIMEBASE;
   for (uint32_t i = 0; i < axis_count; ++i) {
     ds1928_axis_data empty{};
     empty.validity = DS1928_AXIS_BUS_DOWN;
@@ -247,6 +250,13 @@ std::error_code Publisher::open(const ShmConfig& config, uint32_t axis_count,
   period_ns_ = static_cast<int64_t>(cycle_period_ns);
   prev_cycle_ = 0;
   publish_count_ = 0;
+  offset_hist_.assign(kOffsetBuckets, 0u);
+  offset_bucket_ns_ = std::max<int64_t>(1, (period_ns_ + kOffsetBuckets - 1) / kOffsetBuckets);
+  window_count_ = 0;
+  window_max_ns_ = 0;
+  first_window_ = true;
+  acq_max_.assign(axis_count, 0u);
+  published_t0_ = 0;
   wake_calls_.store(0, std::memory_order_relaxed);
   doorbell_calls_.store(0, std::memory_order_relaxed);
   if (!start_waker()) {
@@ -434,9 +444,93 @@ void Publisher::publish(uint64_t cycle, std::span<const AxisStatus> axes,
                         int64_t next_wake_ns) noexcept {
   if (header_ == nullptr) return;
   const int64_t now = rt::now_ns();  // vDSO, no system call
+  publish_records(cycle, axes, now);
+  publish_header(cycle, now, next_wake_ns);
+}
+
+void Publisher::publish(const CycleContext& ctx, std::span<const AxisStatus> axes,
+                        int64_t next_wake_ns) noexcept {
+  if (header_ == nullptr) return;
+  const int64_t now = rt::now_ns();
+  publish_records(ctx.index, axes, now);
+  measure(ctx, now);
+  publish_header(ctx.index, now, next_wake_ns);
+}
+
+void Publisher::publish_records(uint64_t cycle, std::span<const AxisStatus> axes,
+                                int64_t now) noexcept {
   const std::size_t n = axes.size() < axis_count_ ? axes.size() : axis_count_;
   for (std::size_t i = 0; i < n; ++i) write_record(records_[i], to_data(axes[i], cycle, now));
+}
 
+namespace {
+uint32_t clamp_u32(int64_t ns) noexcept {
+  if (ns < 0) return 0;
+  return ns > int64_t{UINT32_MAX} ? UINT32_MAX : static_cast<uint32_t>(ns);
+}
+}  // namespace
+
+// The time base and its measurement: a histogram of the publication's offset in the cycle and
+// each axis' largest acquisition-to-publication time over a window; the header gets the
+// window's p50, p99 and max when it closes (and early results after 64 and 256 publications of
+// the first window, so a reader needs not wait a second). Fixed buffers, no system call.
+void Publisher::measure(const CycleContext& ctx, int64_t now) noexcept {
+  if (ctx.t0_ns != published_t0_) {
+    published_t0_ = ctx.t0_ns;
+    atomic(header_->timebase_t0_ns).store(ctx.t0_ns, std::memory_order_release);
+  }
+  if (ctx.timebase != nullptr) {
+    const TimebaseStatus& tb = *ctx.timebase;
+    atomic(header_->timebase_tai_offset_ns).store(tb.tai_offset_ns, std::memory_order_relaxed);
+    atomic(header_->timebase_kind).store(static_cast<uint32_t>(tb.kind), std::memory_order_relaxed);
+    atomic(header_->timebase_last_step_ns).store(tb.last_step_ns, std::memory_order_relaxed);
+    atomic(header_->timebase_steps).store(tb.steps, std::memory_order_release);
+  }
+  const int64_t offset = now - ctx.start_ns < 0 ? 0 : now - ctx.start_ns;
+  std::size_t bucket = static_cast<std::size_t>(offset / offset_bucket_ns_);
+  if (bucket >= offset_hist_.size()) bucket = offset_hist_.size() - 1;
+  ++offset_hist_[bucket];
+  if (offset > window_max_ns_) window_max_ns_ = offset;
+  const std::size_t n = static_cast<std::size_t>(axis_count_);
+  for (std::size_t i = 0; i < n; ++i) {
+    const ds1928_axis_data& d = records_[i].u.data;  // written by this thread just now
+    uint32_t acq = 0;
+    if ((d.flags & DS1928_AXIS_FRESH) != 0 && d.pos_time_ns != 0) {
+      acq = clamp_u32(now - d.pos_time_ns);
+      if (acq > acq_max_[i]) acq_max_[i] = acq;
+    }
+    atomic(records_[i].acq_to_publish_ns).store(acq, std::memory_order_relaxed);
+  }
+  ++window_count_;
+  const bool close_window = window_count_ >= kTimebaseWindow;
+  if (!close_window && !(first_window_ && (window_count_ == 64 || window_count_ == 256))) return;
+  // Percentiles from the histogram: the upper edge of the bucket that holds the rank.
+  auto percentile = [&](uint32_t permille) {
+    const uint64_t rank = (uint64_t{window_count_} * permille + 999) / 1000;
+    uint64_t seen = 0;
+    for (std::size_t b = 0; b < offset_hist_.size(); ++b) {
+      seen += offset_hist_[b];
+      if (seen >= rank) return (static_cast<int64_t>(b) + 1) * offset_bucket_ns_;
+    }
+    return window_max_ns_;
+  };
+  const int64_t p50 = std::min(percentile(500), window_max_ns_);
+  const int64_t p99 = std::min(percentile(990), window_max_ns_);
+  atomic(header_->publish_offset_p50_ns).store(clamp_u32(p50), std::memory_order_relaxed);
+  atomic(header_->publish_offset_max_ns)
+      .store(clamp_u32(window_max_ns_), std::memory_order_relaxed);
+  atomic(header_->publish_offset_p99_ns).store(clamp_u32(p99), std::memory_order_release);
+  for (std::size_t i = 0; i < n; ++i)
+    atomic(records_[i].acq_to_publish_max_ns).store(acq_max_[i], std::memory_order_relaxed);
+  if (!close_window) return;
+  first_window_ = false;
+  window_count_ = 0;
+  window_max_ns_ = 0;
+  std::fill(offset_hist_.begin(), offset_hist_.end(), 0u);
+  std::fill(acq_max_.begin(), acq_max_.end(), 0u);
+}
+
+void Publisher::publish_header(uint64_t cycle, int64_t now, int64_t next_wake_ns) noexcept {
   const bool first = publish_count_ == 0;
   ++publish_count_;
   atomic(header_->last_cycle).store(cycle, std::memory_order_release);

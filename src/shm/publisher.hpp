@@ -9,8 +9,10 @@
 #include <span>
 #include <string>
 #include <system_error>
+#include <vector>
 
 #include "core/axis_sample.hpp"
+#include "core/cycle_engine.hpp"
 #include "ds1928/shm.h"
 #include "shm/shm_config.hpp"
 
@@ -77,6 +79,15 @@ class Publisher {
   // wake-up thread, when it shares the cycle thread's CPU, wakes at that instant too. The first
   // publication sets the state to Running.
   void publish(uint64_t cycle, std::span<const AxisStatus> axes, int64_t next_wake_ns = 0) noexcept;
+  // The same, and the time base: the timeline (ctx.t0_ns, ctx.timebase), the publication's
+  // offset from ctx.start_ns and each axis' acquisition-to-publication time, measured over
+  // windows of kTimebaseWindow publications (the first results after 64 and 256).
+  void publish(const CycleContext& ctx, std::span<const AxisStatus> axes,
+               int64_t next_wake_ns = 0) noexcept;
+
+  // Publications per measurement window of the time base, and the histogram's buckets.
+  static constexpr uint32_t kTimebaseWindow = 1024;
+  static constexpr uint32_t kOffsetBuckets = 1024;
 
   // Normal thread, after open(): the wake-up thread's scheduling. `rt_priority` 1..99 sets
   // SCHED_FIFO (the daemon uses one below the cycle thread's), 0 leaves it as it is; `cpu` >= 0
@@ -118,6 +129,9 @@ class Publisher {
   void waker_main() noexcept;
   [[nodiscard]] bool any_waiter() const noexcept;
   [[nodiscard]] uint32_t due_mask(uint64_t seen_cycle, uint64_t last) const noexcept;
+  void publish_records(uint64_t cycle, std::span<const AxisStatus> axes, int64_t now) noexcept;
+  void publish_header(uint64_t cycle, int64_t now, int64_t next_wake_ns) noexcept;
+  void measure(const CycleContext& ctx, int64_t now) noexcept;
   static void* waker_entry(void* self) noexcept;
 
   std::string name_;
@@ -133,6 +147,16 @@ class Publisher {
   int64_t period_ns_ = 0;
   uint64_t prev_cycle_ = 0;
   uint64_t publish_count_ = 0;
+
+  // Time base measurement (cycle thread; sized at open()). The offset histogram's buckets are
+  // period / kOffsetBuckets wide; an offset past the period lands in the last one.
+  std::vector<uint32_t> offset_hist_;
+  int64_t offset_bucket_ns_ = 1;
+  uint32_t window_count_ = 0;
+  int64_t window_max_ns_ = 0;
+  bool first_window_ = true;
+  std::vector<uint32_t> acq_max_;  // per axis, this window
+  int64_t published_t0_ = 0;
 
   // The wake-up thread and what the cycle thread tells it. Written by publish(), read by the
   // waker: plain atomics, no read-modify-write except on the idle -> active transition.

@@ -31,7 +31,7 @@ for cc in gcc clang; do
         echo "FAIL: $cc -std=$std ($variant):"; cat "$exe.log"; fail=1; continue
       fi
       out=$("$exe" "$name"); rc=$?
-      if [ $rc = 0 ] && [ "$out" = "open $name: -$enoent, clock ok" ]; then
+      if [ $rc = 0 ] && [ "$out" = "open $name: -$enoent, clock ok, timebase ok" ]; then
         echo "ok:   $cc -std=$std -Wall -Wextra -pedantic -Werror, $variant ($out)"
       else
         echo "FAIL: $cc -std=$std ($variant) ran with exit $rc: $out"; fail=1

@@ -5,6 +5,7 @@
   compare OUT CTL_JSON     the records equal ds1928ctl's for the same cycles (>= 200 matched)
   abi NAME                 objects of another ABI version / foreign magic / truncated: refused
   restart SHM FLAG         DaemonStopped when the daemon stops, reopen() maps the new one
+  timebase SHM             the time base, next_publication() and the isochronous cycles() loop
 """
 import json
 import os
@@ -159,9 +160,42 @@ def restart(shm, flag):
         check("the new generation publishes", seen is not None and r.axis(0).cycle >= seen)
 
 
+def timebase(shm):
+    r = ds1928.Reader(shm)
+    check("the daemon publishes the time base (features bit 0)", r.has_timebase, f"{r.features}")
+    tb = r.timebase()
+    check("time base: t0 set, the period, a measured publication offset, kind monotonic",
+          tb is not None and tb.t0_ns > 0 and tb.period_ns == r.cycle_period_ns and
+          0 < tb.publish_offset_p50_ns <= tb.publish_offset_p99_ns <= tb.publish_offset_max_ns
+          and tb.kind == "monotonic", repr(tb))
+    at, cycle = r.next_publication(every=3)
+    check("next_publication(every=3): a multiple of 3 on the timeline, ahead of the last",
+          cycle % 3 == 0 and cycle > r.last_cycle and
+          at == tb.t0_ns + cycle * tb.period_ns + tb.publish_offset_p99_ns, f"{at} {cycle}")
+    acq, acq_max = r.acq_to_publish(0)
+    check("axis 0's acquisition-to-publication time is measured", 0 < acq_max, f"{acq} {acq_max}")
+    # 300 passes of the isochronous loop at every 2nd cycle, 100 µs after the publication.
+    passes, exact = [], 0
+    for sample in r.cycles(every=2, offset_us=100):
+        passes.append(sample)
+        exact += sample.axes[0].cycle == sample.cycle
+        if len(passes) == 300:
+            break
+    cycles = [p.cycle for p in passes]
+    check("cycles(every=2): increasing multiples of 2", all(c % 2 == 0 for c in cycles) and
+          all(b > a for a, b in zip(cycles, cycles[1:])), f"{cycles[:3]}..{cycles[-1:]}")
+    check("cycles(): woke at or after the publication + 100 µs",
+          all(p.woke_ns >= p.publication_ns + 100_000 for p in passes))
+    # The record of the cycle the pass was timed for is there in almost every pass (a
+    # publication later than its p99 + 100 µs is rare, a preempted reader too).
+    check("cycles(): the timed cycle's record was read in >= 90 % of the passes",
+          exact >= 270, f"{exact} of 300")
+
+
 def main():
     mode, args = sys.argv[1], sys.argv[2:]
-    {"live": live, "compare": compare, "abi": abi, "restart": restart}[mode](*args)
+    {"live": live, "compare": compare, "abi": abi, "restart": restart,
+     "timebase": timebase}[mode](*args)
     return 1 if failures else 0
 
 

@@ -2,6 +2,7 @@
 # The Python package ds1928 (python/) against the running daemon on the simulated node:
 # records read by ds1928.Reader equal ds1928ctl's for the same bus cycles, the futex wait wakes
 # at each publication, the control client gets status, EnDat identification and precise errors,
+# the time base and the isochronous loop (cycles()) read the cycle they were timed for,
 # an object of another ABI version or a foreign one is refused with a message naming what
 # differs, and a stopped then restarted daemon is seen (DaemonStopped, reopen()).
 #
@@ -40,6 +41,7 @@ python3 "$here/python_reader_check.py" live "$shm" "$work/control.sock" "$work/p
 wait $ctlpid
 python3 "$here/python_reader_check.py" compare "$work/py.json" "$work/ctl.json" || fail=1
 python3 "$here/python_reader_check.py" abi "$shm-bad" || fail=1
+python3 "$here/python_reader_check.py" timebase "$shm" || fail=1
 # Stop and restart under a reader.
 python3 "$here/python_reader_check.py" restart "$shm" "$work/restart.flag" &
 reader=$!

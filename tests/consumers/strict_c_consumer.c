@@ -27,6 +27,19 @@ int main(int argc, char** argv) {
     ds1928_shm_reader_close(&r);
   }
   const int64_t t1 = ds1928_shm_now_ns(), t2 = ds1928_shm_now_ns();
-  printf("open %s: %d, clock %s\n", name, rc, t1 > 0 && t2 >= t1 ? "ok" : "broken");
+  /* The time base on a header built here: cycle n starts at 1 s + n ms, publication 40 µs in;
+   * the next publication after 1.0051 s of a multiple of 4 is cycle 8's, at 1.008040 s. */
+  struct ds1928_shm_header h;
+  memset(&h, 0, sizeof h);
+  int64_t at = 0;
+  uint64_t cycle = 0;
+  const int none = ds1928_shm_next_publication(&h, 0, 1, &at, &cycle);
+  h.features = DS1928_SHM_FEATURE_TIMEBASE;
+  h.cycle_period_ns = 1000000;
+  h.timebase_t0_ns = 1000000000;
+  h.publish_offset_p99_ns = 40000;
+  const int tb = ds1928_shm_next_publication(&h, 1005100000, 4, &at, &cycle);
+  printf("open %s: %d, clock %s, timebase %s\n", name, rc, t1 > 0 && t2 >= t1 ? "ok" : "broken",
+         none == -ENOTSUP && tb == 0 && cycle == 8 && at == 1008040000 ? "ok" : "broken");
   return 0;
 }
