@@ -64,6 +64,8 @@ void parse_cycle(Section s, CycleConfig& c) {
   s.integer("spin_us", c.spin_us, 0, 100000, "µs");
   s.boolean("hold_cpu_dma_latency", c.hold_cpu_dma_latency);
   s.boolean("lock_memory", c.lock_memory);
+  s.choice("timebase", c.timebase,
+           {{"monotonic", TimebaseKind::Monotonic}, {"tai", TimebaseKind::Tai}});
   s.finish();
 }
 
@@ -548,7 +550,8 @@ std::string dump_config(const DaemonConfig& c) {
     << "  cpu: " << c.cycle.cpu << "\n"
     << "  spin_us: " << c.cycle.spin_us << "\n"
     << "  hold_cpu_dma_latency: " << yes(c.cycle.hold_cpu_dma_latency) << "\n"
-    << "  lock_memory: " << yes(c.cycle.lock_memory) << "\n";
+    << "  lock_memory: " << yes(c.cycle.lock_memory) << "\n"
+    << "  timebase: " << (c.cycle.timebase == TimebaseKind::Tai ? "tai" : "monotonic") << "\n";
   o << "bus: " << to_string(c.bus) << "\n";
   o << "simulated:\n  axes:" << (c.simulated.axes.empty() ? " []" : "") << "\n";
   for (const auto& a : c.simulated.axes) {

@@ -6,6 +6,9 @@
 #include <string>
 #include <system_error>
 
+#include "core/clock.hpp"
+#include "core/timebase.hpp"
+
 namespace ds1928 {
 
 namespace {
@@ -148,22 +151,40 @@ void CycleEngine::thread_main() noexcept {
 void CycleEngine::cycle_loop() noexcept {
   const int64_t period = period_ns_;
   const int64_t spin = int64_t{config_.spin_us} * 1000;
-  // One period of margin so that cycle 0 is not already late when the setup took a while.
-  const int64_t t0 = rt::now_ns() + period;
+  const bool tai = config_.timebase == TimebaseKind::Tai;
+  TaiTimeline tai_timeline(period);
+  // One period of margin so that cycle 0 is not already late when the setup took a while; with
+  // the tai timebase, cycle 0 is the first TAI multiple of the period after that.
+  int64_t t0 =
+      tai ? tai_timeline.anchor(rt::now_ns(), measure_tai_offset()) : rt::now_ns() + period;
+  timebase_ = TimebaseStatus{};
+  timebase_.kind = config_.timebase;
+  timebase_.tai_offset_ns = tai ? tai_timeline.tai_offset() : 0;
   uint64_t index = 0;
   uint64_t executed = 0;
 
   while (!stop_requested_.load(std::memory_order_relaxed)) {
     const int64_t start = t0 + static_cast<int64_t>(index) * period;
     const int64_t woke = rt::sleep_until(start, spin);
-    task_.run_cycle(CycleContext{index, start, woke});
-    const int64_t end = rt::now_ns();
+    task_.run_cycle(CycleContext{index, start, woke, t0, &timebase_});
+    int64_t end = rt::now_ns();
 
     stats_.apply_pending_reset();
     stats_.record_cycle(woke - start, end - woke);
     cycle_count_.store(cycle_count_.load(std::memory_order_relaxed) + 1, std::memory_order_relaxed);
 
     ++index;
+    if (tai && tai_timeline.follow(measure_tai_offset()) != 0) {
+      // A step of the TAI clock: the timeline moved by less than half a period; the index
+      // continues, and a start now behind is skipped once (never a burst).
+      t0 = tai_timeline.t0();
+      timebase_.tai_offset_ns = tai_timeline.tai_offset();
+      timebase_.steps = tai_timeline.steps();
+      timebase_.last_step_ns = tai_timeline.last_step_ns();
+      end = rt::now_ns();
+      if (t0 + static_cast<int64_t>(index) * period <= end)
+        index = static_cast<uint64_t>((end - t0) / period) + 1;
+    }
     const int64_t next = t0 + static_cast<int64_t>(index) * period;
     if (end > next) {
       // The work ran into the next slot: resume at the first slot still ahead, on the same

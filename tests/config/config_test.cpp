@@ -718,3 +718,15 @@ TEST_CASE("module settings accept exactly the object dictionary's range", "[conf
     }
   }
 }
+
+TEST_CASE("cycle.timebase: monotonic by default, tai on request, nothing else", "[config]") {
+  const ConfigResult def = from("bus: simulated\n");
+  REQUIRE(def.ok());
+  CHECK(def.config().cycle.timebase == TimebaseKind::Monotonic);
+  const ConfigResult tai = from("bus: simulated\ncycle: {timebase: tai}\n");
+  REQUIRE(tai.ok());
+  CHECK(tai.config().cycle.timebase == TimebaseKind::Tai);
+  CHECK_THAT(dump_config(tai.config()), Catch::Contains("  timebase: tai\n"));
+  CHECK_THAT(one_error("cycle: {timebase: ptp}"),
+             Catch::Contains("expected one of: monotonic, tai"));
+}
