@@ -3,7 +3,17 @@
  * user's guide; this comment is the design.
  *
  *   loadrt ds1928 [shm=/ds1928d[,/other...]] [names=ds1928[,...]] [axes=x:y[,...]]
+ *                 [sync=0[,1...]] [sync_period_ns=N]
  *   addf ds1928.read servo-thread
+ *
+ * sync=1 (one instance at most): `ds1928.read` steers the thread it runs in with the RTAPI task
+ * PLL (rtapi_task_pll_get_reference / rtapi_task_pll_set_correction, uspace only) so that each
+ * period starts at a fixed phase of the daemon's bus cycle: the published time base (cycle n
+ * starts at t0 + n·T_bus) plus the measured publication offset plus sync-offset-us. The thread
+ * and the daemon run on the same CLOCK_MONOTONIC, so only the phase is to be corrected: a
+ * proportional step per period, bounded to 1 % of the period (what uspace's rtapi allows) and
+ * slewed by at most 0.1 % of the period per period. Both periods must be whole multiples of one
+ * another; the phase is then taken modulo the shorter one.
  *
  * One instance per daemon (per shm name). The realtime function `ds1928.read` reads every axis
  * of every instance with the seqlock of the header (a bounded number of attempts, each copy also
@@ -17,6 +27,9 @@
  * the function that may have loaded the old pointer is still running (the enter/exit counters
  * below). The realtime function never waits for the helper: until the handover its pins say
  * invalid. */
+/* The loadrt parameter `sync` is a variable of that name: <unistd.h>'s sync() is renamed while
+ * the headers are read. */
+#define sync ds1928_unistd_sync
 #include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -25,6 +38,7 @@
 #include "hal.h"
 #include "rtapi.h"
 #include "rtapi_app.h"
+#undef sync
 
 MODULE_AUTHOR("ds1928d");
 MODULE_DESCRIPTION("ds1928d shared-memory positions (X20DS1928 EnDat) as HAL pins");
@@ -46,6 +60,43 @@ static char* axes[MAX_INSTANCES];
 RTAPI_MP_ARRAY_STRING(axes, MAX_INSTANCES,
                       "axis names of each instance, separated by ':' (default 0, 1, ... "
                       "for every axis the daemon has at load time)");
+
+static int sync[MAX_INSTANCES];
+RTAPI_MP_ARRAY_INT(sync, MAX_INSTANCES,
+                   "1: lock the thread of ds1928.read to this instance's bus cycle (one at most)");
+static int sync_period_ns;
+RTAPI_MP_INT(sync_period_ns,
+             "period of the thread ds1928.read runs in, for the check at load "
+             "(default: the RTAPI clock period)");
+
+/* sync: a period's phase error within this many ns (or 1/500 of the aligned period, whichever is
+ * more) for kSyncLockPeriods periods in a row is a lock; beyond 4 windows the lock is lost. */
+#define SYNC_LOCK_WINDOW_NS 2000
+#define SYNC_LOCK_PERIODS 100
+/* Default sync-offset-us: the publication's jitter (p99 - p50) plus this margin. */
+#define SYNC_DEFAULT_MARGIN_NS 20000
+
+struct sync_pins {
+  hal_bit_t* locked;
+  hal_float_t* error_us;
+  hal_s32_t* correction_ns;
+  hal_float_t* phase_us; /* the target: this long after the bus cycle's start */
+  hal_u32_t* locks;      /* locks acquired since load (a re-lock counts again) */
+  hal_float_t offset_us; /* parameter: after the publication (p50); < 0: p99 - p50 + 20 µs */
+};
+
+/* State of the steering, realtime function only. */
+struct sync_state {
+  int enabled;
+  int refused; /* a run-time refusal was reported; steering stays off */
+  int locked;
+  unsigned good;       /* consecutive periods within the lock window */
+  long correction;     /* the correction set last */
+  uint64_t generation; /* daemon generation and timeline steered to */
+  int64_t t0;
+  int64_t phase_ns; /* target phase after the cycle start, latched while unlocked */
+  uint32_t locks;
+};
 
 struct axis_pins {
   hal_float_t* position;
@@ -73,6 +124,7 @@ struct instance_pins {
   hal_u32_t* read_retries;
   hal_u32_t* read_failures;
   hal_u32_t timeout_us; /* parameter: a daemon silent this long is dead (0: automatic) */
+  struct sync_pins sync;
   struct axis_pins axis[];
 };
 
@@ -94,6 +146,7 @@ struct instance {
   uint32_t retries;           /* realtime function only */
   uint32_t failures;          /* realtime function only */
   int reported;               /* helper only: last open error printed */
+  struct sync_state sync;     /* realtime function only (enabled: set at load) */
 };
 
 static int comp_id = -1;
@@ -202,12 +255,124 @@ static void read_instance(struct instance* in, int64_t now) {
   __atomic_fetch_add(&in->rt_exit, 1, __ATOMIC_SEQ_CST);
 }
 
+/* Two periods fit when one is a whole multiple of the other. */
+static int periods_fit(int64_t servo, int64_t bus) {
+  return servo > 0 && bus > 0 && (servo % bus == 0 || bus % servo == 0);
+}
+
+#ifdef RTAPI_TASK_PLL_SUPPORT
+static void sync_refuse(struct instance* in, const char* why, long servo, int64_t bus) {
+  struct sync_state* st = &in->sync;
+  st->refused = 1;
+  st->locked = 0;
+  *in->pins->sync.locked = 0;
+  (void)rtapi_task_pll_set_correction(0);
+  rtapi_print_msg(RTAPI_MSG_ERR,
+                  "ds1928: %s: sync off: %s (thread period %ld ns, bus period %lld ns)\n",
+                  in->shm_name, why, servo, (long long)bus);
+}
+
+static void sync_unlock(struct sync_state* st) {
+  st->locked = 0;
+  st->good = 0;
+}
+
+/* One period of the steering: the phase of this period's start (the PLL reference, the nominal
+ * start on CLOCK_MONOTONIC) against the bus's timeline, and the correction of the next period.
+ * While the daemon is gone the last correction is held (locked: ~0, both sides run on the same
+ * clock) and the lock is dropped; a new generation or a moved timeline starts a new lock-in. */
+static void sync_step(struct instance* in, const struct mapping* m, long period, int64_t now) {
+  struct sync_state* st = &in->sync;
+  struct sync_pins* sp = &in->pins->sync;
+  if (!st->enabled || st->refused) return;
+  const long long ref = rtapi_task_pll_get_reference();
+  if (ref <= 0) {
+    sync_refuse(in, "this RTAPI gives no task PLL reference", period, 0);
+    return;
+  }
+  const struct ds1928_shm_header* h = m ? m->reader.header : NULL;
+  if (!h || !daemon_publishing(in, h, now) || !ds1928_shm_has_timebase(h)) {
+    if (st->locked) *sp->correction_ns = (hal_s32_t)st->correction; /* held */
+    sync_unlock(st);
+    *sp->locked = 0;
+    return;
+  }
+  const int64_t bus = (int64_t)h->cycle_period_ns;
+  if (!periods_fit(period, bus)) {
+    sync_refuse(in, "the periods are not whole multiples of one another", period, bus);
+    return;
+  }
+  const int64_t t0 = __atomic_load_n(&h->timebase_t0_ns, __ATOMIC_ACQUIRE);
+  const int64_t p50 = (int64_t)__atomic_load_n(&h->publish_offset_p50_ns, __ATOMIC_ACQUIRE);
+  const int64_t p99 = (int64_t)__atomic_load_n(&h->publish_offset_p99_ns, __ATOMIC_ACQUIRE);
+  if (t0 == 0 || p99 == 0) return; /* no timeline or no measurement yet */
+  if (m->reader.generation != st->generation || t0 != st->t0) {
+    st->generation = m->reader.generation;
+    st->t0 = t0;
+    sync_unlock(st);
+  }
+  if (!st->locked) {
+    const int64_t offset = sp->offset_us >= 0.0 ? (int64_t)(sp->offset_us * 1000.0)
+                                                : p99 - p50 + SYNC_DEFAULT_MARGIN_NS;
+    st->phase_ns = p50 + offset;
+  }
+  const int64_t aligned = period < bus ? period : bus;
+  int64_t err = (ref - (t0 + st->phase_ns)) % aligned;
+  if (err < 0) err += aligned;
+  if (err >= aligned / 2) err -= aligned;
+
+  /* Proportional: half the error per period (the correction lengthens or shortens the next
+   * period, so the error shrinks by it), bounded and slewed. */
+  const long bound = period / 100;
+  const long slew = period / 1000 > 0 ? period / 1000 : 1;
+  long want = (long)(-err / 2);
+  if (want > bound) want = bound;
+  if (want < -bound) want = -bound;
+  if (want > st->correction + slew) want = st->correction + slew;
+  if (want < st->correction - slew) want = st->correction - slew;
+  st->correction = want;
+  (void)rtapi_task_pll_set_correction(want);
+
+  const int64_t window = aligned / 500 > SYNC_LOCK_WINDOW_NS ? aligned / 500 : SYNC_LOCK_WINDOW_NS;
+  const int64_t mag = err < 0 ? -err : err;
+  if (mag <= window) {
+    if (!st->locked && ++st->good >= SYNC_LOCK_PERIODS) {
+      st->locked = 1;
+      ++st->locks;
+    }
+  } else if (!st->locked || mag > 4 * window) {
+    sync_unlock(st);
+  }
+  *sp->locked = st->locked;
+  *sp->error_us = (double)err / 1000.0;
+  *sp->correction_ns = (hal_s32_t)want;
+  *sp->phase_us = (double)st->phase_ns / 1000.0;
+  *sp->locks = st->locks;
+}
+#else
+/* sync=1 is refused at load where the RTAPI has no task PLL. */
+static void sync_step(struct instance* in, const struct mapping* m, long period, int64_t now) {
+  (void)in;
+  (void)m;
+  (void)period;
+  (void)now;
+}
+#endif
+
 /* The realtime function: every instance, once per thread period. */
 static void read_all(void* arg, long period) {
   (void)arg;
-  (void)period;
   const int64_t now = ds1928_shm_now_ns(); /* vDSO: no system call */
-  for (unsigned i = 0; i < instance_count; ++i) read_instance(&instances[i], now);
+  for (unsigned i = 0; i < instance_count; ++i) {
+    struct instance* in = &instances[i];
+    read_instance(in, now);
+    if (in->sync.enabled) {
+      /* The mapping read_instance used may be replaced meanwhile: count this use too. */
+      __atomic_fetch_add(&in->rt_enter, 1, __ATOMIC_SEQ_CST);
+      sync_step(in, __atomic_load_n(&in->current, __ATOMIC_SEQ_CST), period, now);
+      __atomic_fetch_add(&in->rt_exit, 1, __ATOMIC_SEQ_CST);
+    }
+  }
 }
 
 /* ---- helper thread (normal priority; the only place with system calls) ---- */
@@ -310,11 +475,47 @@ static int export_axis(const char* prefix, const char* axis, struct axis_pins* p
   return 0;
 }
 
+/* sync=1 at load: refused without a task PLL, with a daemon that publishes no time base, or when
+ * the thread's period and the bus period do not fit (both known: the daemon runs, and
+ * sync_period_ns or the RTAPI clock gives the thread's). What is not known here is checked at
+ * the thread's first period. */
+static int sync_check(const struct instance* in, int64_t bus_period, int has_timebase) {
+#ifndef RTAPI_TASK_PLL_SUPPORT
+  (void)bus_period;
+  (void)has_timebase;
+  rtapi_print_msg(RTAPI_MSG_ERR,
+                  "ds1928: %s: sync=1 refused: this RTAPI has no task PLL "
+                  "(rtapi_task_pll_*: LinuxCNC uspace only, not the kernel realtime builds)\n",
+                  in->shm_name);
+  return -1;
+#else
+  if (!has_timebase) {
+    rtapi_print_msg(RTAPI_MSG_ERR,
+                    "ds1928: %s: sync=1 refused: the daemon publishes no time base (an older "
+                    "ds1928d)\n",
+                    in->shm_name);
+    return -1;
+  }
+  const long servo = sync_period_ns > 0 ? (long)sync_period_ns : rtapi_clock_set_period(0);
+  if (servo > 0 && bus_period > 0 && !periods_fit(servo, bus_period)) {
+    rtapi_print_msg(RTAPI_MSG_ERR,
+                    "ds1928: %s: sync=1 refused: the thread period %ld ns and the bus period "
+                    "%lld ns are not whole multiples of one another (servo = k x bus or bus = "
+                    "k x servo, k = 1, 2, ...)\n",
+                    in->shm_name, servo, (long long)bus_period);
+    return -1;
+  }
+  return 0;
+#endif
+}
+
 /* Axis names of instance i: the axes= entry split at ':', else 0..n-1 for the n axes the daemon
  * has now (read by mapping it once here). */
 static int setup_instance(unsigned i, struct instance* in) {
   static char axis_names[MAX_AXES][NAME_LEN]; /* loading is single-threaded */
   unsigned n = 0;
+  int64_t bus_period = 0; /* known when the daemon runs at load */
+  int has_timebase = 1;
   snprintf(in->shm_name, sizeof in->shm_name, "%s", shm[i]);
   if (names[i] && names[i][0])
     snprintf(in->prefix, sizeof in->prefix, "%s", names[i]);
@@ -352,9 +553,21 @@ static int setup_instance(unsigned i, struct instance* in) {
       return -1;
     }
     n = r.header->axis_count < MAX_AXES ? r.header->axis_count : MAX_AXES;
+    bus_period = (int64_t)r.header->cycle_period_ns;
+    has_timebase = ds1928_shm_has_timebase(r.header);
     ds1928_shm_reader_close(&r);
     for (unsigned a = 0; a < n; ++a) snprintf(axis_names[a], NAME_LEN, "%u", a);
   }
+  if (sync[i] && bus_period == 0) { /* axes named: the daemon's period if it runs already */
+    struct ds1928_shm_reader r;
+    if (ds1928_shm_reader_open(&r, in->shm_name) == 0) {
+      bus_period = (int64_t)r.header->cycle_period_ns;
+      has_timebase = ds1928_shm_has_timebase(r.header);
+      ds1928_shm_reader_close(&r);
+    }
+  }
+  if (sync[i] && sync_check(in, bus_period, has_timebase) != 0) return -1;
+  in->sync.enabled = sync[i] != 0;
   in->axis_count = n;
   in->pins = (struct instance_pins*)hal_malloc(
       (long)(sizeof(struct instance_pins) + n * sizeof(struct axis_pins)));
@@ -372,6 +585,17 @@ static int setup_instance(unsigned i, struct instance* in) {
   r |= hal_pin_u32_newf(HAL_OUT, &p->read_failures, comp_id, "%s.read-failures", pre);
   r |= hal_param_u32_newf(HAL_RW, &p->timeout_us, comp_id, "%s.timeout-us", pre);
   if (r != 0) return -1;
+  if (in->sync.enabled) {
+    struct sync_pins* sp = &p->sync;
+    r |= hal_pin_bit_newf(HAL_OUT, &sp->locked, comp_id, "%s.sync-locked", pre);
+    r |= hal_pin_float_newf(HAL_OUT, &sp->error_us, comp_id, "%s.sync-error-us", pre);
+    r |= hal_pin_s32_newf(HAL_OUT, &sp->correction_ns, comp_id, "%s.sync-correction-ns", pre);
+    r |= hal_pin_float_newf(HAL_OUT, &sp->phase_us, comp_id, "%s.sync-phase-us", pre);
+    r |= hal_pin_u32_newf(HAL_OUT, &sp->locks, comp_id, "%s.sync-locks", pre);
+    r |= hal_param_float_newf(HAL_RW, &sp->offset_us, comp_id, "%s.sync-offset-us", pre);
+    if (r != 0) return -1;
+    sp->offset_us = -1.0;
+  }
   for (unsigned a = 0; a < n; ++a)
     if (export_axis(pre, axis_names[a], &p->axis[a]) != 0) return -1;
   return 0;
@@ -381,6 +605,14 @@ int rtapi_app_main(void) {
   comp_id = hal_init("ds1928");
   if (comp_id < 0) return comp_id;
   instance_count = 0;
+  unsigned leaders = 0;
+  for (unsigned i = 0; i < MAX_INSTANCES; ++i) leaders += sync[i] != 0;
+  if (leaders > 1) {
+    rtapi_print_msg(RTAPI_MSG_ERR, "ds1928: sync=1 on %u instances: one thread follows one bus\n",
+                    leaders);
+    hal_exit(comp_id);
+    return -EINVAL;
+  }
   for (unsigned i = 0; i < MAX_INSTANCES && shm[i] && shm[i][0]; ++i) {
     if (strlen(shm[i]) >= sizeof instances[i].shm_name || shm[i][0] != '/') {
       rtapi_print_msg(RTAPI_MSG_ERR, "ds1928: shm=%s: a POSIX shm name starts with '/'\n", shm[i]);
