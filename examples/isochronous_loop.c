@@ -52,6 +52,9 @@ int main(int argc, char** argv) {
          __atomic_load_n(&h->publish_offset_p99_ns, __ATOMIC_ACQUIRE), every, offset_ns / 1000);
 
   int64_t after = ds1928_shm_now_ns();
+  const uint64_t step = every ? every : 1;
+  uint64_t last = 0;
+  int have_last = 0;
   for (long n = 0; n < count; ++n) {
     int64_t at = 0;
     uint64_t cycle = 0;
@@ -61,6 +64,12 @@ int main(int argc, char** argv) {
       --n;
       continue;
     }
+    if (have_last && cycle <= last) { /* the measured offset grew: the same cycle again */
+      at += (int64_t)(last + step - cycle) * (int64_t)h->cycle_period_ns;
+      cycle = last + step;
+    }
+    last = cycle;
+    have_last = 1;
     sleep_until(at + offset_ns);
     const int64_t woke = ds1928_shm_now_ns();
     if (!ds1928_shm_daemon_alive(h, woke, 10)) {

@@ -53,11 +53,19 @@ int main(int argc, char** argv) {
   uint64_t seen = ds1928_shm_wait_start(r.header);
   int64_t after = ds1928_shm_now_ns();
   size_t n = 0, timed = 0;
+  uint64_t last = 0;
+  int have_last = 0;
   while (n < cap && ds1928_shm_now_ns() < end) {
     uint64_t cycle = 0;
     if (iso) {
       int64_t at = 0;
       if (ds1928_shm_next_publication(r.header, after, every, &at, &cycle) != 0) return 1;
+      if (have_last && cycle <= last) { /* the measured offset grew: the same cycle again */
+        at += (int64_t)(last + every - cycle) * (int64_t)r.header->cycle_period_ns;
+        cycle = last + every;
+      }
+      last = cycle;
+      have_last = 1;
       sleep_until(at + offset);
       after = at;
     } else {

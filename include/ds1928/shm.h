@@ -314,7 +314,9 @@ static inline int ds1928_shm_has_timebase(const struct ds1928_shm_header* h) {
  * been measured yet). An application sleeps with clock_nanosleep(CLOCK_MONOTONIC,
  * TIMER_ABSTIME) until *at_ns plus its own offset, then reads: the record of cycle *cycle is
  * there unless that cycle overran or the daemon is gone (check the record's `cycle`). Pass the
- * *at_ns of one call as `after_ns` of the next to step from publication to publication.
+ * *at_ns of one call as `after_ns` of the next to step from publication to publication; when
+ * the measured offset grew in between, the same cycle comes back: take the next multiple then
+ * (examples/isochronous_loop.c).
  * Returns 0; -ENOTSUP when the daemon publishes no time base; -EAGAIN before its first cycle. */
 static inline int ds1928_shm_next_publication(const struct ds1928_shm_header* h, int64_t after_ns,
                                               uint32_t every, int64_t* at_ns, uint64_t* cycle) {

@@ -317,6 +317,7 @@ class Reader:
         every = max(1, int(every))
         offset_ns = int(offset_us * 1000)
         after = None
+        last = None
         while True:
             nxt = self.next_publication(after, every)
             if nxt is None:
@@ -328,6 +329,10 @@ class Reader:
                              axes=self.axes())
                 continue
             at, cycle = nxt
+            if last is not None and cycle <= last:
+                # The measured offset grew since the last pass: the same cycle again. Next one.
+                at, cycle = at + (last + every - cycle) * self.cycle_period_ns, last + every
+            last = cycle
             _sleep_until(at + offset_ns)
             woke = time.clock_gettime_ns(time.CLOCK_MONOTONIC)
             if self.state == "stopped":

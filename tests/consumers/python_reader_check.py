@@ -168,17 +168,20 @@ def timebase(shm):
           tb is not None and tb.t0_ns > 0 and tb.period_ns == r.cycle_period_ns and
           0 < tb.publish_offset_p50_ns <= tb.publish_offset_p99_ns <= tb.publish_offset_max_ns
           and tb.kind == "monotonic", repr(tb))
+    before = time.clock_gettime_ns(time.CLOCK_MONOTONIC)
     at, cycle = r.next_publication(every=3)
-    check("next_publication(every=3): a multiple of 3 on the timeline, ahead of the last",
-          cycle % 3 == 0 and cycle > r.last_cycle and
-          at == tb.t0_ns + cycle * tb.period_ns + tb.publish_offset_p99_ns, f"{at} {cycle}")
+    tb2 = r.timebase()  # a measurement window may close in between: either figure is right
+    check("next_publication(every=3): a multiple of 3 on the timeline, after now",
+          cycle % 3 == 0 and at > before and
+          at in (tb.t0_ns + cycle * tb.period_ns + p.publish_offset_p99_ns for p in (tb, tb2)),
+          f"{at} {cycle}")
     acq, acq_max = r.acq_to_publish(0)
     check("axis 0's acquisition-to-publication time is measured", 0 < acq_max, f"{acq} {acq_max}")
     # 300 passes of the isochronous loop at every 2nd cycle, 100 µs after the publication.
-    passes, exact = [], 0
+    passes, current = [], 0
     for sample in r.cycles(every=2, offset_us=100):
         passes.append(sample)
-        exact += sample.axes[0].cycle == sample.cycle
+        current += sample.axes[0].cycle >= sample.cycle
         if len(passes) == 300:
             break
     cycles = [p.cycle for p in passes]
@@ -186,11 +189,11 @@ def timebase(shm):
           all(b > a for a, b in zip(cycles, cycles[1:])), f"{cycles[:3]}..{cycles[-1:]}")
     check("cycles(): woke at or after the publication + 100 µs",
           all(p.woke_ns >= p.publication_ns + 100_000 for p in passes))
-    # The record of the cycle the pass was timed for is there in almost every pass (a
-    # publication later than its p99 + 100 µs is rare, a preempted reader too).
-    check("cycles(): the timed cycle's record was read in >= 90 % of the passes",
-          exact >= 270, f"{exact} of 300")
-
+    # The pass reads the cycle it was timed for (or a later one, when the reader itself woke
+    # late) in almost every pass: an older record means a publication later than its p99 +
+    # 100 µs, which is rare.
+    check("cycles(): the timed cycle's record (or a later one) was read in >= 90 % of the passes",
+          current >= 270, f"{current} of 300")
 
 def main():
     mode, args = sys.argv[1], sys.argv[2:]
