@@ -37,6 +37,9 @@ VALIDITY = {0: "valid", 1: "stale", 2: "bus_down", 3: "module_error"}
 TIME_SOURCE = {0: "none", 1: "nettime", 2: "rx_timestamp"}
 STATE = {0: "starting", 1: "running", 2: "stopping", 3: "stopped"}
 FLAG_NEW_POSITION, FLAG_FRACTION_VALID, FLAG_FRESH = 0x01, 0x02, 0x04
+# The module's error bits (docs/registers.md, error bits): a fault- / warning-class bit is set;
+# an analogue error holds the last good position (validity stale).
+FLAG_FAULT, FLAG_WARNING, FLAG_HELD = 0x08, 0x10, 0x20
 _M64 = (1 << 64) - 1
 
 
@@ -96,6 +99,18 @@ class AxisData:
     @property
     def new_position(self):
         return bool(self.flags & FLAG_NEW_POSITION)
+
+    @property
+    def fault(self):
+        return bool(self.flags & FLAG_FAULT)
+
+    @property
+    def warning(self):
+        return bool(self.flags & FLAG_WARNING)
+
+    @property
+    def held(self):
+        return bool(self.flags & FLAG_HELD)
 
     @property
     def position(self):
