@@ -9,6 +9,7 @@ CycleWork::CycleWork(const DaemonConfig& config, BusDriver& bus, shm::Publisher&
       publisher_(publisher),
       io_(config.axes.size()),
       params_(config.axes.size()),
+      policies_(config.axes.size()),
       decode_state_(config.axes.size()),
       status_(config.axes.size()),
       ack_bits_(config.axes.size(), 0),
@@ -31,6 +32,8 @@ CycleWork::CycleWork(const DaemonConfig& config, BusDriver& bus, shm::Publisher&
     fc.timeout_cycles = config.axes[i].flatstream_timeout_cycles;
     tunnels_.push_back(std::make_unique<Tunnel>(fc));
     params_[i].signed_format = config.axes[i].module.position_signed;
+    params_[i].sincos_track = !config.axes[i].module.sincos_unused;
+    policies_[i] = config.axes[i].error_policy();
     params_[i].has_pos_time = config.axes[i].function_model == FunctionModel::Standard;
     params_[i].max_stamp_age_ns = default_max_stamp_age_ns(int64_t{config.cycle.period_us} * 1000);
     // Stalled acquisition (repeats of one position go stale after a limit) on the real buses;
@@ -76,8 +79,13 @@ void CycleWork::run_cycle(const CycleContext& ctx) noexcept {
 
   bool any_fresh = false;
   for (std::size_t i = 0; i < io_.size(); ++i) {
-    const AxisSample sample = decode_axis(io_[i], params_[i], result.net_time, decode_state_[i]);
+    AxisSample sample = decode_axis(io_[i], params_[i], result.net_time, decode_state_[i]);
     AxisCounters& c = counters_[i];
+    const ErrorWords words{sample.error_info,
+                           static_cast<uint16_t>(c.endat_error.load(std::memory_order_relaxed)),
+                           static_cast<uint16_t>(c.endat_warning.load(std::memory_order_relaxed))};
+    const ErrorAssessment errors =
+        apply_error_policy(sample, policies_[i], words, params_[i], decode_state_[i]);
     auto bump = [](std::atomic<uint64_t>& a) {
       a.store(a.load(std::memory_order_relaxed) + 1, std::memory_order_relaxed);
     };
@@ -87,19 +95,21 @@ void CycleWork::run_cycle(const CycleContext& ctx) noexcept {
     if (sample.stalled) bump(c.stalled);
     if (sample.repeated) bump(c.repeats);
     if (sample.fresh && !sample.fraction_valid) bump(c.format_violations);
+    if (sample.held) bump(c.held);
     c.error_info.store(sample.error_info, std::memory_order_relaxed);
     any_fresh |= sample.fresh;
 
     shm::AxisStatus& st = status_[i];
     st.sample = sample;
-    st.endat_error = c.endat_error.load(std::memory_order_relaxed);
-    st.endat_warning = c.endat_warning.load(std::memory_order_relaxed);
+    st.endat_error = words.endat_error;
+    st.endat_warning = words.endat_warning;
+    st.errors = errors;
     // An axis whose encoder is not (yet) the expected one is down: its positions would be another
     // encoder's under this axis' name.
     const bool identity_ok =
         identity_gate_[i] == 0 || c.identity.load(std::memory_order_relaxed) ==
                                       static_cast<uint8_t>(IdentityState::Confirmed);
-    st.validity = shm::classify(sample, result.bus_up && io_[i].axis_up && identity_ok);
+    st.validity = shm::classify(sample, result.bus_up && io_[i].axis_up && identity_ok, errors);
     // A position that breaks the format is never published as valid.
     if (st.validity == shm::AxisValidity::Valid && !sample.fraction_valid)
       st.validity = shm::AxisValidity::ModuleError;

@@ -89,6 +89,7 @@ struct AxisCounters {
   std::atomic<uint64_t> old_stamps{0};  // new positions stamped too long ago (a late PRes), stale
   std::atomic<uint64_t> repeats{0};     // samples repeating the last position (not new)
   std::atomic<uint64_t> stalled{0};     // repeats beyond the stall limit: published stale
+  std::atomic<uint64_t> held{0};  // cycles an analogue error held the last good position (stale)
   std::atomic<uint8_t> error_info{0};
   // Last sample, for human-readable status only (fields are not read as one consistent set;
   // applications read the seqlock record in shared memory).
@@ -164,6 +165,7 @@ class CycleWork final : public CycleTask {
   // Sized once at construction; never resized on the cycle thread.
   std::vector<AxisIo> io_;
   std::vector<AxisDecodeParams> params_;
+  std::vector<ErrorPolicy> policies_;  // the error bits' effects (axes[].invalidate_on)
   std::vector<AxisDecodeState> decode_state_;
   std::vector<shm::AxisStatus> status_;
   std::vector<uint8_t> ack_bits_;

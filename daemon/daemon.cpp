@@ -213,6 +213,7 @@ void Daemon::on_tick() {
     if (const auto kind = incident_of(e)) incidents_->raise(*kind, e.node, e.axis, e.text);
   }
   incidents_->poll();
+  error_journal_.poll(config_, *work_, bus().name());
   const auto now = std::chrono::steady_clock::now();
   if (now - last_log_ >= std::chrono::seconds(1)) {
     last_log_ = now;
@@ -255,7 +256,8 @@ json Daemon::axis_json(std::size_t i, bool with_sample) const {
          {"state", validity_name(c.validity.load(std::memory_order_relaxed))},
          {"error_info", c.error_info.load(std::memory_order_relaxed)},
          {"endat_error", c.endat_error.load(std::memory_order_relaxed)},
-         {"endat_warning", c.endat_warning.load(std::memory_order_relaxed)}};
+         {"endat_warning", c.endat_warning.load(std::memory_order_relaxed)},
+         {"errors", error_bits_json(error_words(c), a.error_policy())}};
   const auto identity = static_cast<IdentityState>(c.identity.load(std::memory_order_relaxed));
   if (identity != IdentityState::Unchecked) {
     j["identity"] = std::string(to_string(identity));
@@ -293,6 +295,7 @@ json Daemon::axis_json(std::size_t i, bool with_sample) const {
   j["old_stamps"] = c.old_stamps.load(std::memory_order_relaxed);
   j["repeats"] = c.repeats.load(std::memory_order_relaxed);
   j["stalled"] = c.stalled.load(std::memory_order_relaxed);
+  j["held"] = c.held.load(std::memory_order_relaxed);
   const TunnelCounters& t = work_->tunnel_counters(i);
   j["flatstream"] = {{"messages_sent", t.messages_sent.load(std::memory_order_relaxed)},
                      {"messages_failed", t.messages_failed.load(std::memory_order_relaxed)},

@@ -21,6 +21,7 @@
 #include "endat_service.hpp"
 #include "incident_service.hpp"
 #include "metrics/http_server.hpp"
+#include "module_errors.hpp"
 #include "register_client.hpp"
 #include "service/systemd_notifier.hpp"
 #include "shm/publisher.hpp"
@@ -100,6 +101,7 @@ class Daemon {
   std::chrono::steady_clock::time_point started_at_;
   std::chrono::steady_clock::time_point stats_reset_at_;
   std::chrono::steady_clock::time_point last_log_;
+  ErrorJournal error_journal_{config_.axes.size()};
   BusWatch bus_watch_;
   bool metrics_failed_ = false;
   bool ready_sent_ = false;

@@ -161,6 +161,7 @@ std::string Daemon::metrics_text(metrics::Format format) const {
   for (std::size_t i = 0; i < axes; ++i)
     out.sample({{"axis", index[i]}, {"name", config_.axes[i].name}},
                work_->counters(i).stalled.load(std::memory_order_relaxed));
+  append_module_error_metrics(out, config_, *work_);
   if (endat_) {
     std::vector<EnDatService::Counters> ec(axes);
     for (std::size_t i = 0; i < axes; ++i) ec[i] = endat_->counters(i);

@@ -1,5 +1,7 @@
 // The endat-* socket commands: argument parsing, privilege check, reply formatting. The command
 // engine itself is in endat_service.cpp.
+#include <spdlog/spdlog.h>
+
 #include <cstdio>
 #include <optional>
 #include <string>
@@ -250,8 +252,54 @@ void EnDatService::register_commands(control::Server& server) {
       reply.ok(identification_reply(axis));
     };
     if (!refresh && identification(axis) && !identifying(axis)) return answer({});
-    refresh_identification(axis, std::move(answer));
+    if (!refresh) return refresh_identification(axis, std::move(answer));
+    // A refresh first makes the module read the encoder's identification again (Rescan), so the
+    // registers are the encoder's of now, not of the last power-up.
+    endat_ack_register(
+        axis, kEnDatAckRescan,
+        [this, axis, answer = std::move(answer), alive = std::weak_ptr<bool>(alive_)](
+            std::error_code ec, bool, unsigned) mutable {
+          if (alive.expired()) return;
+          if (ec) spdlog::warn("axis {}: Rescan before the identification: {}", axis, ec.message());
+          refresh_identification(axis, std::move(answer));
+        });
   });
+
+  // EnDatAck through the module register (§11.6.2.3): bit 1 Rescan, bit 0 acknowledge. Both
+  // change what every client sees: privileged.
+  auto endat_ack_command = [this, privileged](const char* name, uint8_t bits) {
+    return [this, privileged, name, bits](const control::Request& req, control::Reply reply) {
+      if (!privileged(req, reply)) return;
+      if (axes_.empty()) throw control::ArgumentError("argument 'axis': the daemon has no axes");
+      const auto axis = static_cast<std::size_t>(
+          req.has("axis") ? number_arg(req, "axis", 0, axes_.size() - 1) : 0);
+      const auto started = std::chrono::steady_clock::now();
+      endat_ack_register(
+          axis, bits,
+          [this, axis, reply, name, bits, started, alive = std::weak_ptr<bool>(alive_)](
+              std::error_code ec, bool confirmed, unsigned reads) {
+            if (alive.expired()) return;
+            if (ec)
+              return reply.error(
+                  endat_error_code_name(ec),
+                  "axis " + std::to_string(axis) + ": EnDatAck " + name + ": " + ec.message());
+            const auto waited = std::chrono::duration_cast<std::chrono::microseconds>(
+                std::chrono::steady_clock::now() - started);
+            // After a Rescan the identification is read again (and compared with
+            // axes[].expected_encoder).
+            if ((bits & kEnDatAckRescan) != 0) refresh_identification(axis, nullptr);
+            reply.ok({{"axis", axis},
+                      {"command", name},
+                      {"register", "EnDatAck"},
+                      {"bits", bits},
+                      {"confirmed", confirmed},
+                      {"reads", reads},
+                      {"wait_ms", static_cast<double>(waited.count()) / 1000.0}});
+          });
+    };
+  };
+  server.add_command("endat-rescan", endat_ack_command("rescan", kEnDatAckRescan));
+  server.add_command("endat-ack-register", endat_ack_command("ack", kEnDatAckAcknowledge));
 }
 
 }  // namespace ds1928

@@ -133,6 +133,18 @@ class EnDatService {
   // Reads the identification again (registers, else Flatstream); `done` gets the outcome.
   void refresh_identification(std::size_t axis, std::function<void(std::error_code)> done);
 
+  // EnDatAck (§11.6.2.3): writes `bits` (kEnDatAckAcknowledge, kEnDatAckRescan) to the module
+  // register and reads it back until the module cleared them — it clears a bit once it ran the
+  // bit's algorithm (re-read the identification, acknowledged the encoder's errors). `done`
+  // gets the outcome: the write's error, EnDatServiceErrc::timeout when the bits stay set for
+  // kEnDatAckTimeout, or success with `confirmed` false when the register cannot be read back
+  // (the write went through; the completion is then not observable).
+  static constexpr uint8_t kEnDatAckAcknowledge = 0x01;
+  static constexpr uint8_t kEnDatAckRescan = 0x02;
+  static constexpr std::chrono::milliseconds kEnDatAckTimeout{3000};
+  using AckDone = std::function<void(std::error_code, bool confirmed, unsigned reads)>;
+  void endat_ack_register(std::size_t axis, uint8_t bits, AckDone done);
+
   // Peer check for the privileged commands (tests replace it; default peer_is_privileged).
   void set_privilege_check(std::function<bool(const control::PeerCredentials&)> check);
 
@@ -172,6 +184,8 @@ class EnDatService {
   void identify_by_registers(std::size_t index, unsigned attempt);
   void identify_by_flatstream(std::size_t index);
   void identification_done(std::size_t index, std::error_code error);
+  void poll_endat_ack(std::size_t index, uint8_t bits, Clock::time_point deadline, unsigned reads,
+                      AckDone done);
   [[nodiscard]] bool may_change_encoder(const control::Request& request) const;
 
   boost::asio::io_context& io_;

@@ -110,6 +110,8 @@ struct axis_pins {
   hal_u32_t* error_info;
   hal_u32_t* endat_error;
   hal_u32_t* endat_warning;
+  hal_bit_t* fault;   /* a fault-class error bit is set (docs/registers.md, error bits) */
+  hal_bit_t* warning; /* a warning-class error bit is set; the position stays valid */
   hal_float_t* age_us;
   hal_float_t scale;  /* parameter: counts (LSBs of the 64-bit position) per user unit */
   hal_float_t offset; /* parameter: added after scaling */
@@ -243,6 +245,8 @@ static void read_instance(struct instance* in, int64_t now) {
       *ap->error_info = d.error_info;
       *ap->endat_error = d.endat_error;
       *ap->endat_warning = d.endat_warning;
+      *ap->fault = (d.flags & DS1928_AXIS_FAULT) != 0;
+      *ap->warning = (d.flags & DS1928_AXIS_WARNING) != 0;
       const int64_t t = d.pos_time_ns != 0 ? d.pos_time_ns : d.publish_ns;
       *ap->age_us = (double)(now - t) / 1000.0;
       if (a == 0) *p->bus_cycle = (uint32_t)d.cycle;
@@ -465,6 +469,8 @@ static int export_axis(const char* prefix, const char* axis, struct axis_pins* p
   r |= hal_pin_u32_newf(HAL_OUT, &p->error_info, comp_id, "%s.%s.error-info", prefix, axis);
   r |= hal_pin_u32_newf(HAL_OUT, &p->endat_error, comp_id, "%s.%s.endat-error", prefix, axis);
   r |= hal_pin_u32_newf(HAL_OUT, &p->endat_warning, comp_id, "%s.%s.endat-warning", prefix, axis);
+  r |= hal_pin_bit_newf(HAL_OUT, &p->fault, comp_id, "%s.%s.fault", prefix, axis);
+  r |= hal_pin_bit_newf(HAL_OUT, &p->warning, comp_id, "%s.%s.warning", prefix, axis);
   r |= hal_pin_float_newf(HAL_OUT, &p->age_us, comp_id, "%s.%s.age-us", prefix, axis);
   r |= hal_param_float_newf(HAL_RW, &p->scale, comp_id, "%s.%s.scale", prefix, axis);
   r |= hal_param_float_newf(HAL_RW, &p->offset, comp_id, "%s.%s.offset", prefix, axis);

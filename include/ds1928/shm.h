@@ -104,7 +104,7 @@ enum ds1928_axis_validity {
   DS1928_AXIS_VALID = 0,       /* fresh inputs this cycle, no module error */
   DS1928_AXIS_STALE = 1,       /* no fresh inputs this cycle: the data is the last good one */
   DS1928_AXIS_BUS_DOWN = 2,    /* the bus is not cycling */
-  DS1928_AXIS_MODULE_ERROR = 3 /* fresh inputs, but ErrorInfo reports an error */
+  DS1928_AXIS_MODULE_ERROR = 3 /* an error bit that invalidates the position is set (a fault) */
 };
 
 /* Time source of pos_time_ns (core/bus.hpp TimeSource). */
@@ -128,6 +128,12 @@ enum ds1928_timebase_kind {
 #define DS1928_AXIS_NEW_POSITION 0x01u   /* PosCycle changed: a new EnDat position this cycle */
 #define DS1928_AXIS_FRACTION_VALID 0x02u /* the fraction's low 3 bits are zero */
 #define DS1928_AXIS_FRESH 0x04u          /* inputs arrived this cycle */
+/* A fault-class bit of error_info / endat_error is set (docs/registers.md, error bits). */
+#define DS1928_AXIS_FAULT 0x08u
+/* A warning-class bit of error_info / endat_warning is set; the position stays valid. */
+#define DS1928_AXIS_WARNING 0x10u
+/* An analogue error holds the last good position (datasheet 11.7.6): validity stale. */
+#define DS1928_AXIS_HELD 0x20u
 
 /* Payload of one axis record: what a reader gets. 9 words of 64 bits. */
 struct ds1928_axis_data {

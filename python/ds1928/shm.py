@@ -39,6 +39,9 @@ STATE = {0: "starting", 1: "running", 2: "stopping", 3: "stopped"}
 FLAG_NEW_POSITION, FLAG_FRACTION_VALID, FLAG_FRESH = 0x01, 0x02, 0x04
 FEATURE_TIMEBASE = 0x01  # header.features: the time base fields are published
 TIMEBASE_KIND = {0: "monotonic", 1: "tai"}
+# The module's error bits (docs/registers.md, error bits): a fault- / warning-class bit is set;
+# an analogue error holds the last good position (validity stale).
+FLAG_FAULT, FLAG_WARNING, FLAG_HELD = 0x08, 0x10, 0x20
 _M64 = (1 << 64) - 1
 
 
@@ -98,6 +101,18 @@ class AxisData:
     @property
     def new_position(self):
         return bool(self.flags & FLAG_NEW_POSITION)
+
+    @property
+    def fault(self):
+        return bool(self.flags & FLAG_FAULT)
+
+    @property
+    def warning(self):
+        return bool(self.flags & FLAG_WARNING)
+
+    @property
+    def held(self):
+        return bool(self.flags & FLAG_HELD)
 
     @property
     def position(self):

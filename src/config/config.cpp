@@ -185,6 +185,16 @@ void parse_axis(Section s, AxisConfig& a, const BusKindRules& bus, size_t index)
     e.integer("position_bits", a.expected_encoder.position_bits, 1, 64);
     e.finish();
   }
+  if (s.has("invalidate_on")) {
+    Section v = s.section("invalidate_on");
+    for (const ErrorBit& b : error_bits()) {
+      bool on = false;
+      if (!v.boolean(b.name, on)) continue;
+      const auto r = static_cast<std::size_t>(b.reg);
+      (on ? a.invalidate_on : a.flag_only_on)[r] |= static_cast<uint16_t>(1u << b.bit);
+    }
+    v.finish();
+  }
   s.finish();
 }
 
@@ -582,6 +592,15 @@ std::string dump_config(const DaemonConfig& c) {
         << "      serial_number: " << quote(a.expected_encoder.serial_number) << "\n";
     if (a.expected_encoder.position_bits != 0)
       o << "      position_bits: " << a.expected_encoder.position_bits << "\n";
+    if (a.invalidate_on != ErrorMasks{} || a.flag_only_on != ErrorMasks{}) {
+      o << "    invalidate_on:\n";
+      for (const ErrorBit& b : error_bits()) {
+        const auto r = static_cast<std::size_t>(b.reg);
+        const auto m = static_cast<uint16_t>(1u << b.bit);
+        if ((a.invalidate_on[r] & m) != 0) o << "      " << b.name << ": true\n";
+        if ((a.flag_only_on[r] & m) != 0) o << "      " << b.name << ": false\n";
+      }
+    }
     o << "    module:\n"
       << "      endat_enable: " << yes(m.endat_enable) << "\n"
       << "      position_signed: " << yes(m.position_signed) << "\n"

@@ -7,6 +7,7 @@
 #include <optional>
 #include <string>
 
+#include "x20ds1928/error_bits.hpp"
 #include "x20ds1928/module_image.hpp"
 #include "x20ds1928/module_settings.hpp"
 
@@ -36,6 +37,14 @@ struct AxisConfig {
   std::optional<uint16_t> pres_offset;
   std::optional<uint16_t> preq_offset;
   ExpectedEncoder expected_encoder;
+  // axes[].invalidate_on: per error bit (x20ds1928/error_bits.hpp), `true` makes a set bit
+  // invalidate the position (hold it, for an analogue error), `false` only flags it; bits not
+  // named keep their class' effect.
+  ErrorMasks invalidate_on{};
+  ErrorMasks flag_only_on{};
+  [[nodiscard]] ErrorPolicy error_policy() const noexcept {
+    return ds1928::error_policy(invalidate_on, flag_only_on);
+  }
 };
 
 }  // namespace ds1928

@@ -1,18 +1,25 @@
 #include "core/axis_sample.hpp"
 
 namespace ds1928 {
+namespace {
+
+void set_position(AxisSample& s, uint64_t raw, const AxisDecodeParams& params) noexcept {
+  s.position_raw = raw;
+  s.position_sdc = static_cast<int32_t>(static_cast<uint32_t>(raw));
+  s.periods =
+      params.signed_format ? (static_cast<int64_t>(raw) >> 16) : static_cast<int64_t>(raw >> 16);
+  s.fraction = static_cast<uint16_t>(raw & 0xFFFF);
+  s.fraction_valid = !params.sincos_track || (raw & 0x7) == 0;
+}
+
+}  // namespace
 
 AxisSample decode_axis(const AxisIo& io, const AxisDecodeParams& params, const NetTimeRef& net_time,
                        AxisDecodeState& state) noexcept {
   AxisSample s;
   s.fresh = io.inputs_fresh;
   const ModuleInputs& in = io.inputs;
-  s.position_raw = (static_cast<uint64_t>(in.position_hw) << 32) | in.position_lw;
-  s.position_sdc = static_cast<int32_t>(in.position_lw);
-  s.periods = params.signed_format ? (static_cast<int64_t>(s.position_raw) >> 16)
-                                   : static_cast<int64_t>(s.position_raw >> 16);
-  s.fraction = static_cast<uint16_t>(s.position_raw & 0xFFFF);
-  s.fraction_valid = (s.position_raw & 0x7) == 0;
+  set_position(s, (static_cast<uint64_t>(in.position_hw) << 32) | in.position_lw, params);
   s.pos_cycle = in.pos_cycle;
   s.error_info = in.error_info;
   if (!io.inputs_fresh) {
@@ -61,6 +68,24 @@ AxisSample decode_axis(const AxisIo& io, const AxisDecodeParams& params, const N
   state.repeats = 0;
   state.have_last = true;
   return s;
+}
+
+ErrorAssessment apply_error_policy(AxisSample& sample, const ErrorPolicy& policy,
+                                   const ErrorWords& words, const AxisDecodeParams& params,
+                                   AxisDecodeState& state) noexcept {
+  const ErrorAssessment a = assess(policy, words);
+  if (a.hold) {
+    sample.held = true;
+    sample.fresh = false;
+    sample.new_position = false;
+    if (state.have_good) set_position(sample, state.good_position_raw, params);
+    return a;
+  }
+  if (sample.fresh && !a.invalidate && sample.fraction_valid) {
+    state.have_good = true;
+    state.good_position_raw = sample.position_raw;
+  }
+  return a;
 }
 
 }  // namespace ds1928

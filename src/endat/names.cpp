@@ -4,55 +4,24 @@
 #include <cmath>
 #include <cstdio>
 
+#include "x20ds1928/error_bits.hpp"
+
 namespace ds1928::endat {
 namespace {
 
-constexpr std::array<std::string_view, 7> kErrorBits{
-    "light source failed", "signal amplitude", "position value",         "overvoltage",
-    "undervoltage",        "overcurrent",      "battery change required"};
-constexpr std::array<std::string_view, 5> kWarningBits{
-    "frequency collision", "temperature exceeded", "light control reserve", "battery charge low",
-    "reference point not reached"};
-constexpr std::array<std::string_view, 8> kErrorInfoBits{"EncoderSupplyError", "",
-                                                         "VssCheckError",      "PositionError",
-                                                         "EnDatComError",      "EnDatPosError",
-                                                         "EnDatParSetError",   "EnDatRefWarning"};
-
-template <std::size_t N>
-std::vector<std::string> names_of(uint32_t word, unsigned width,
-                                  const std::array<std::string_view, N>& table) {
+std::vector<std::string> labels(ErrorRegister reg, uint16_t word) {
   std::vector<std::string> out;
-  for (unsigned bit = 0; bit < width; ++bit) {
-    if ((word & (1u << bit)) == 0) continue;
-    if (bit < N && !table[bit].empty()) {
-      out.emplace_back(table[bit]);
-    } else {
-      out.push_back("reserved bit " + std::to_string(bit));
-    }
-  }
+  for (const SetErrorBit& b : set_error_bits(reg, word)) out.push_back(b.label());
   return out;
 }
 
 }  // namespace
 
-std::string_view endat_error_bit_name(unsigned bit) noexcept {
-  return bit < kErrorBits.size() ? kErrorBits[bit] : std::string_view{};
-}
-std::string_view endat_warning_bit_name(unsigned bit) noexcept {
-  return bit < kWarningBits.size() ? kWarningBits[bit] : std::string_view{};
-}
-std::string_view error_info_bit_name(unsigned bit) noexcept {
-  return bit < kErrorInfoBits.size() ? kErrorInfoBits[bit] : std::string_view{};
-}
-
 std::vector<std::string> endat_error_names(uint16_t word) {
-  return names_of(word, 16, kErrorBits);
+  return labels(ErrorRegister::EnDatError, word);
 }
 std::vector<std::string> endat_warning_names(uint16_t word) {
-  return names_of(word, 16, kWarningBits);
-}
-std::vector<std::string> error_info_names(uint8_t bits) {
-  return names_of(bits, 8, kErrorInfoBits);
+  return labels(ErrorRegister::EnDatWarning, word);
 }
 
 std::string_view mrs_name(uint8_t mrs) noexcept {
@@ -201,6 +170,14 @@ std::string_view manufacturer_word_name(unsigned w) noexcept {
 
 namespace {
 
+// The meanings of the set bits (the table's words for people), reserved ones by their label.
+std::vector<std::string> meanings(ErrorRegister reg, uint16_t word) {
+  std::vector<std::string> out;
+  for (const SetErrorBit& b : set_error_bits(reg, word))
+    out.push_back(b.info != nullptr ? std::string(b.info->meaning) : b.label());
+  return out;
+}
+
 std::string join(const std::vector<std::string>& names) {
   if (names.empty()) return "none";
   std::string out;
@@ -248,9 +225,9 @@ std::string describe_word(uint8_t mrs, uint8_t param, uint16_t value) {
   if (mrs == 0xB9) {
     switch (param) {
       case 0:
-        return "errors: " + join(endat_error_names(value));
+        return "errors: " + join(meanings(ErrorRegister::EnDatError, value));
       case 1:
-        return "warnings: " + join(endat_warning_names(value));
+        return "warnings: " + join(meanings(ErrorRegister::EnDatWarning, value));
       case 2:
         return "write protection";
       case 3:
@@ -260,7 +237,8 @@ std::string describe_word(uint8_t mrs, uint8_t param, uint16_t value) {
     }
   }
   if (mrs == 0x4C || mrs == 0x4D) return std::string(mrs_name(mrs)) + ": " + celsius_text(value);
-  if (mrs == 0x59) return "operating status errors: " + join(endat_error_names(value));
+  if (mrs == 0x59)
+    return "operating status errors: " + join(meanings(ErrorRegister::EnDatError, value));
   if (mrs >= 0x40 && mrs <= 0x5F) return std::string(mrs_name(mrs));
   return {};
 }

@@ -1,4 +1,4 @@
-// Human-readable names for EnDat status words, the module's ErrorInfo bits, memory areas
+// Human-readable names for EnDat status words, memory areas
 // (MRS codes) and temperature words. For status output and ds1928ctl; not for the cycle thread.
 #pragma once
 
@@ -9,17 +9,10 @@
 
 namespace ds1928::endat {
 
-// EnDatError (= operating status word 0) bit name, "" for reserved bits.
-[[nodiscard]] std::string_view endat_error_bit_name(unsigned bit) noexcept;
-// EnDatWarning (= operating status word 1) bit name, "" for reserved bits.
-[[nodiscard]] std::string_view endat_warning_bit_name(unsigned bit) noexcept;
-// ErrorInfo / AckErrorInfo bit name (module_image.hpp error_info), "" for the reserved bit 1.
-[[nodiscard]] std::string_view error_info_bit_name(unsigned bit) noexcept;
-
-// Names of the set bits; a set reserved bit appears as "reserved bit N".
+// Names of the set bits of the EnDatError / EnDatWarning words (x20ds1928/error_bits.hpp); a set
+// reserved bit appears as "<register> reserved bit N".
 [[nodiscard]] std::vector<std::string> endat_error_names(uint16_t word);
 [[nodiscard]] std::vector<std::string> endat_warning_names(uint16_t word);
-[[nodiscard]] std::vector<std::string> error_info_names(uint8_t bits);
 
 // Memory area or additional-information selection of an MRS code (endat.md §3), "" if unknown.
 [[nodiscard]] std::string_view mrs_name(uint8_t mrs) noexcept;

@@ -31,6 +31,7 @@ constexpr std::array<EventInfo, kLogEventCount> kEvents{{
     {"identification_failed", "83c17cdff8bd4698868c621efd5a4fb6"},
     {"node_silent", "a087dc98f1514459aad81575e8f216ce"},
     {"incident", "bd8f2cbbc56241e084502e014a44e6c9"},
+    {"module_error_bits", "ec549993faa44af181fe75161bcdaba9"},
 }};
 
 // syslog priorities (sd-journal's PRIORITY field).

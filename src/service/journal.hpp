@@ -33,9 +33,10 @@ enum class LogEvent : uint8_t {
   ConfigurationFailed,
   IdentificationFailed,
   NodeSilent,
-  Incident,  // the flight recorder wrote the frames around an incident to a file
+  Incident,         // the flight recorder wrote the frames around an incident to a file
+  ModuleErrorBits,  // an axis' ErrorInfo / EnDatError / EnDatWarning bits changed
 };
-inline constexpr std::size_t kLogEventCount = 12;
+inline constexpr std::size_t kLogEventCount = 13;
 
 // The 128-bit id (32 lowercase hex digits, journald's form) of an event kind; empty for None.
 // Stable: tools and saved journalctl filters depend on them (docs/operations.md).

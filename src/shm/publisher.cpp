@@ -131,9 +131,11 @@ ds1928_axis_data to_data(const AxisStatus& status, uint64_t cycle, int64_t now_n
   d.pos_cycle = s.pos_cycle;
   d.error_info = s.error_info;
   d.validity = static_cast<uint8_t>(status.validity);
-  d.flags = static_cast<uint8_t>((s.new_position ? DS1928_AXIS_NEW_POSITION : 0u) |
-                                 (s.fraction_valid ? DS1928_AXIS_FRACTION_VALID : 0u) |
-                                 (s.fresh ? DS1928_AXIS_FRESH : 0u));
+  d.flags = static_cast<uint8_t>(
+      (s.new_position ? DS1928_AXIS_NEW_POSITION : 0u) |
+      (s.fraction_valid ? DS1928_AXIS_FRACTION_VALID : 0u) | (s.fresh ? DS1928_AXIS_FRESH : 0u) |
+      (status.errors.fault ? DS1928_AXIS_FAULT : 0u) |
+      (status.errors.warning ? DS1928_AXIS_WARNING : 0u) | (s.held ? DS1928_AXIS_HELD : 0u));
   d.check = ds1928_shm_check(&d);
   return d;
 }

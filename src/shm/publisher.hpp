@@ -32,12 +32,14 @@ enum class AxisValidity : uint8_t {
   ModuleError = DS1928_AXIS_MODULE_ERROR,
 };
 
-// The usual classification of a cycle's sample: bus state first, then freshness, then
-// ErrorInfo.
-[[nodiscard]] constexpr AxisValidity classify(const AxisSample& sample, bool bus_up) noexcept {
+// The usual classification of a cycle's sample: bus state first, then the error bits that
+// invalidate (x20ds1928/error_bits.hpp: faults by default), then freshness (a held position after
+// an analogue error is not fresh). Warnings leave a fresh position valid.
+[[nodiscard]] constexpr AxisValidity classify(const AxisSample& sample, bool bus_up,
+                                              const ErrorAssessment& errors) noexcept {
   if (!bus_up) return AxisValidity::BusDown;
+  if (errors.invalidate && (sample.fresh || sample.held)) return AxisValidity::ModuleError;
   if (!sample.fresh) return AxisValidity::Stale;
-  if (sample.error_info != 0) return AxisValidity::ModuleError;
   return AxisValidity::Valid;
 }
 
@@ -47,6 +49,7 @@ struct AxisStatus {
   uint32_t endat_error = 0;    // last EnDat error word read from the module
   uint32_t endat_warning = 0;  // last EnDat warning word
   AxisValidity validity = AxisValidity::Stale;
+  ErrorAssessment errors;  // the flags' fault / warning bits
 };
 
 // Largest axis count the daemon will map (a record is 128 bytes).

@@ -80,7 +80,10 @@ struct Ds1928Module::State {
   ModuleInputs in;
   ModuleOutputs out;
   uint8_t latched_errors = 0;  // present until acknowledged
-  uint8_t prev_ack = 0;        // AckErrorInfo acts on rising edges
+  uint32_t vss_mv = 1000;      // sin/cos amplitude (set_vss_mv)
+  bool vss_bad = false;        // the last EnDat cycle saw the amplitude outside the window
+  int64_t vss_good_from_ns = INT64_MIN;  // end of SinCosQuitTime after the window was left
+  uint8_t prev_ack = 0;                  // AckErrorInfo acts on rising edges
   bool started = false;
   int64_t origin_ns = 0;     // motion profile time zero
   int64_t next_tick_ns = 0;  // next module system tick
@@ -116,6 +119,8 @@ void Ds1928Module::power_up() noexcept {
   s.in = ModuleInputs{};
   s.out = ModuleOutputs{};
   s.latched_errors = s.sim.inject_error_info;
+  s.vss_bad = false;
+  s.vss_good_from_ns = INT64_MIN;
   s.prev_ack = 0;
   s.started = false;
   s.ticks = 0;
@@ -146,6 +151,10 @@ void Ds1928Module::inject_error(uint8_t bits) noexcept {
   state_->latched_errors |= bits;
 }
 
+void Ds1928Module::set_vss_mv(uint32_t millivolts) noexcept {
+  state_->vss_mv = millivolts;
+}
+
 namespace {
 
 [[nodiscard]] double profile_position(const SimAxisConfig& sim, double t_s) noexcept {
@@ -165,6 +174,19 @@ namespace {
 [[nodiscard]] uint64_t to_fixed_point(double periods) noexcept {
   const auto scaled = static_cast<int64_t>(std::floor(periods * 65536.0));
   return static_cast<uint64_t>(scaled) & ~uint64_t{7};
+}
+
+// The sin/cos track off (EnDatMode bit 3): the 64 bits carry the EnDat position itself, one count
+// per measuring step (§11.5.2 "the absolute position of the encoder in 64 bits"; the datasheet
+// draws no layout for this case). Strict reading, docs/registers.md §Position formats: the
+// encoder's `bits`-bit value right-aligned, zero-extended — or, in the signed format (EnDatMode
+// bit 1), sign-extended from its top bit.
+[[nodiscard]] uint64_t to_endat_position(uint64_t steps, unsigned bits, bool is_signed) noexcept {
+  if (bits == 0 || bits >= 64) return steps;
+  const uint64_t mask = (uint64_t{1} << bits) - 1;
+  steps &= mask;
+  if (is_signed && (steps >> (bits - 1)) != 0) steps |= ~mask;
+  return steps;
 }
 
 }  // namespace
@@ -195,14 +217,34 @@ void Ds1928Module::tick(int64_t monotonic_ns, uint64_t net_time_us) noexcept {
     if (s.ticks % prescaler != 0) continue;
     // One EnDat cycle: acquire a position when the interface is enabled.
     if ((s.regs[reg::kEnDatMode] & endat_mode::kEnable) == 0) continue;
+    const uint8_t mode = static_cast<uint8_t>(s.regs[reg::kEnDatMode]);
+    if ((mode & endat_mode::kSinCosUnused) == 0 &&
+        (s.regs[reg::kErrorEnable] & error_info::kVssCheckError) != 0) {
+      // §11.7.6: after an error on the analogue interface the last good values stay; good
+      // values count again only SinCosQuitTime after the error.
+      if (s.vss_mv < s.regs[reg::kSinCosVssMin] || s.vss_mv > s.regs[reg::kSinCosVssMax]) {
+        s.vss_bad = true;
+        s.latched_errors |= error_info::kVssCheckError;
+        continue;
+      }
+      if (s.vss_bad) {
+        s.vss_bad = false;
+        s.vss_good_from_ns = at_ns + int64_t{s.regs[reg::kSinCosQuitTime]} * 1000;
+      }
+      if (at_ns < s.vss_good_from_ns) continue;
+    }
     const double t_s = static_cast<double>(at_ns - s.origin_ns) * 1e-9;
     const double periods = profile_position(s.sim, t_s);
-    const uint64_t raw = to_fixed_point(periods);
     // The absolute position comes over the EnDat wire (position frame with CRC); a frame that
     // fails leaves the last good position in place and no new PosCycle, as the module does.
     s.bridge.set_position(
         static_cast<uint64_t>(static_cast<int64_t>(periods * s.steps_per_period)));
-    if (s.bridge.read_position(at_ns).error) continue;
+    const PositionReading reading = s.bridge.read_position(at_ns);
+    if (reading.error) continue;
+    const uint64_t raw = (mode & endat_mode::kSinCosUnused) == 0
+                             ? to_fixed_point(periods)
+                             : to_endat_position(reading.steps, s.bridge.position_bits(),
+                                                 (mode & endat_mode::kSigned) != 0);
     s.in.position_hw = static_cast<uint32_t>(raw >> 32);
     s.in.position_lw = static_cast<uint32_t>(raw);
     // PosTime = NetTime of the acquisition instant (µs).
@@ -282,7 +324,8 @@ std::error_code Ds1928Module::read_register(uint16_t reg, uint8_t size,
   const State& s = *state_;
   if (const RegisterInfo* r = find_register(reg); r && kept(*r) && r->in_model(s.model)) {
     if (size != r->size()) return make_error_code(SimErrc::wrong_size);
-    v = r->direction == RegisterDirection::Command ? 0 : s.regs[reg];
+    v = r->direction == RegisterDirection::Command ? s.bridge.endat_ack_pending(s.now_ns)
+                                                   : s.regs[reg];
     return {};
   }
   // Identification, EnDatError/EnDatWarning: the encoder's words (UINT).

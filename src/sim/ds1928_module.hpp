@@ -44,6 +44,12 @@ class Ds1928Module {
 
   // Fault injection: ErrorInfo bits that appear now and stay until acknowledged (AckErrorInfo).
   void inject_error(uint8_t error_info_bits) noexcept;
+  // The sin/cos track's peak-to-peak amplitude in mV (1000 at power-up, a healthy encoder). With
+  // the track in use, outside SinCosVssMin..SinCosVssMax the module sets VssCheckError (while
+  // ErrorEnable bit 2 allows it) and keeps the last good position: no new position, PosCycle
+  // stands. Back inside the window it ignores good values for SinCosQuitTime before it takes
+  // positions again (§11.7.4–11.7.6).
+  void set_vss_mv(uint32_t millivolts) noexcept;
 
   [[nodiscard]] FunctionModel function_model() const noexcept;
 

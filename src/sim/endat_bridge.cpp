@@ -311,10 +311,12 @@ void EnDatBridge::service(int64_t now_ns) {
       pending_rescan_ = false;
       t = std::max(free, rescan_request_ns_);
       (void)run_rescan(t);
+      rescan_done_ns_ = t;
     } else if (pending_ack_) {
       pending_ack_ = false;
       t = std::max(free, ack_request_ns_);
       (void)run_acknowledge(t);
+      ack_done_ns_ = t;
     } else if (pending_) {
       t = std::max(free, pending_->submitted_ns);
       const bool is_reset = !pending_->bytes.span().empty() && pending_->bytes.span()[0] == 0x00;

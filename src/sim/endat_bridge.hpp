@@ -87,9 +87,18 @@ class EnDatBridge {
   // One position frame (the module's EnDat cycle).
   PositionReading read_position(int64_t now_ns);
   void set_position(uint64_t steps) noexcept { encoder_.set_position(steps); }
+  // Clock pulses of the position value (from the identification; 0 before it was read).
+  [[nodiscard]] unsigned position_bits() const noexcept { return position_bits_; }
 
   // EnDatAck register write: bit 0 acknowledge EnDat errors/warnings, bit 1 rescan.
   void endat_ack(uint8_t bits, int64_t now_ns);
+  // EnDatAck as read back: a bit stays set until its algorithm has run on the wire (§11.6.2.3:
+  // "the system resets the bit automatically and runs the algorithm"; the strict reading is that
+  // the bit clears once the algorithm is done).
+  [[nodiscard]] uint8_t endat_ack_pending(int64_t now_ns) const noexcept {
+    return static_cast<uint8_t>(((pending_ack_ || now_ns < ack_done_ns_) ? 0x01 : 0) |
+                                ((pending_rescan_ || now_ns < rescan_done_ns_) ? 0x02 : 0));
+  }
 
   [[nodiscard]] uint16_t endat_error() const noexcept { return ident_.operating_status[0]; }
   [[nodiscard]] uint16_t endat_warning() const noexcept { return ident_.operating_status[1]; }
@@ -155,6 +164,8 @@ class EnDatBridge {
   int64_t status_due_ns_ = 0;
   int64_t ack_request_ns_ = 0;
   int64_t rescan_request_ns_ = 0;
+  int64_t ack_done_ns_ = INT64_MIN;
+  int64_t rescan_done_ns_ = INT64_MIN;
   int64_t channel_free_ns_ = INT64_MIN;
   int64_t last_status_ns_ = 0;
 

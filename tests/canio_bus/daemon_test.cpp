@@ -162,6 +162,16 @@ TEST_CASE("ds1928d on bus canio: configured at start, positions, status, EnDat c
   INFO(param.dump(2));
   CHECK(param.value("ok", false));
 
+  // Rescan over SDO (EnDatAck bit 1): written, read back until the module cleared it.
+  const json rescan = request(c.socket.path, {{"cmd", "endat-rescan"}, {"axis", 0}});
+  INFO(rescan.dump(2));
+  CHECK(rescan.value("ok", false));
+  CHECK(rescan.value("confirmed", false));
+  const json ack = request(c.socket.path, {{"cmd", "endat-ack-register"}, {"axis", 0}});
+  INFO(ack.dump(2));
+  CHECK(ack.value("ok", false));
+  CHECK(ack.value("confirmed", false));
+
   // The module really holds the configuration the daemon wrote (EnDat enabled, MTU 5).
   node.stop_serving();
   uint32_t v = 0;

@@ -730,3 +730,29 @@ TEST_CASE("cycle.timebase: monotonic by default, tai on request, nothing else", 
   CHECK_THAT(one_error("cycle: {timebase: ptp}"),
              Catch::Contains("expected one of: monotonic, tai"));
 }
+
+TEST_CASE("axes[].invalidate_on: per error bit by the table's names", "[config][errors]") {
+  const ConfigResult r = from(
+      "axes: [{name: a, invalidate_on: {EnDatRefWarning: true, Battery: false, "
+      "Temperature: true}}]");
+  INFO(r.error_report());
+  REQUIRE(r.ok());
+  const AxisConfig& a = r.config().axes[0];
+  CHECK(a.invalidate_on[0] == 0x80);  // ErrorInfo bit 7
+  CHECK(a.invalidate_on[2] == 0x02);  // EnDatWarning bit 1
+  CHECK(a.flag_only_on[1] == 0x40);   // EnDatError bit 6
+  const ErrorPolicy p = a.error_policy();
+  CHECK((p.invalidate[0] & 0x80) != 0);
+  CHECK((p.invalidate[1] & 0x40) == 0);
+  // Survives dump_config.
+  const ConfigResult again = from(dump_config(r.config()));
+  INFO(again.error_report());
+  REQUIRE(again.ok());
+  CHECK(again.config().axes[0].invalidate_on == a.invalidate_on);
+  CHECK(again.config().axes[0].flag_only_on == a.flag_only_on);
+  // An unknown bit and a non-boolean are named.
+  CHECK_THAT(one_error("axes: [{invalidate_on: {EnDatRefWarnin: true}}]"),
+             Catch::Contains("unknown key 'EnDatRefWarnin' (did you mean 'EnDatRefWarning'?)"));
+  CHECK_THAT(one_error("axes: [{invalidate_on: {Battery: sometimes}}]"),
+             Catch::Contains("expected true or false"));
+}

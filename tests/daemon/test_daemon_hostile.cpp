@@ -109,6 +109,8 @@ const std::map<std::string, json>& command_args() {
       {"endat-read-info", {{"axis", 0}, {"word", 1}, {"mrs", 0x40}}},
       {"endat-dump", {{"axis", 0}, {"mrs", 0xA1}, {"count", 1}}},
       {"endat-ident", {{"axis", 0}, {"refresh", false}}},
+      {"endat-rescan", {{"axis", 0}}},
+      {"endat-ack-register", {{"axis", 0}}},
   };
   return args;
 }

@@ -162,3 +162,71 @@ TEST_CASE("a new position stamped too long before its cycle is a late answer: st
   AxisDecodeState invalid_ref;
   CHECK(decode_axis(image(0x10000, 7, 900'000), p, NetTimeRef{}, invalid_ref).fresh);
 }
+
+TEST_CASE("error bits: a warning keeps the position, an analogue error holds the last good one",
+          "[decode][errors]") {
+  AxisDecodeState st;
+  const AxisDecodeParams params;
+  const ErrorPolicy policy = error_policy();
+  auto step = [&](uint64_t raw, int8_t cycle, ErrorWords w) {
+    AxisSample s = decode_axis(image(raw, cycle), params, {}, st);
+    const ErrorAssessment a = apply_error_policy(s, policy, w, params, st);
+    return std::pair{s, a};
+  };
+  auto [s0, a0] = step(0x0000'0000'0005'8000, 1, {});
+  CHECK(s0.fresh);
+  CHECK_FALSE(s0.held);
+  // EnDatRefWarning: flagged, the position is this cycle's and fresh.
+  auto [s1, a1] = step(0x0000'0000'0006'0000, 2, {error_info::kEnDatRefWarning, 0, 0});
+  CHECK(s1.fresh);
+  CHECK(s1.position_raw == 0x0000'0000'0006'0000ULL);
+  CHECK(a1.warning);
+  CHECK_FALSE(a1.invalidate);
+  // VssCheckError: the bus sends another value, the sample carries the last good one, not fresh.
+  auto [s2, a2] = step(0x0000'0000'0123'0000, 3, {error_info::kVssCheckError, 0, 0});
+  CHECK(a2.hold);
+  CHECK(s2.held);
+  CHECK_FALSE(s2.fresh);
+  CHECK_FALSE(s2.new_position);
+  CHECK(s2.position_raw == 0x0000'0000'0006'0000ULL);
+  CHECK(s2.periods == 6);
+  CHECK(s2.fraction == 0);
+  // Cleared: the new position counts again.
+  auto [s3, a3] = step(0x0000'0000'0007'0000, 4, {});
+  CHECK(s3.fresh);
+  CHECK_FALSE(s3.held);
+  CHECK(s3.position_raw == 0x0000'0000'0007'0000ULL);
+  // A fault invalidates but does not become the last good position.
+  auto [s4, a4] = step(0x0000'0000'0999'0000, 5, {error_info::kEnDatComError, 0, 0});
+  CHECK(a4.invalidate);
+  auto [s5, a5] = step(0x0000'0000'0888'0000, 6, {error_info::kVssCheckError, 0, 0});
+  CHECK(s5.position_raw == 0x0000'0000'0007'0000ULL);
+}
+
+TEST_CASE("position formats follow EnDatMode: sin/cos 48.16, or the EnDat position in steps",
+          "[decode][format]") {
+  // Low 3 bits set: a format violation in 48.16, an ordinary step count with the track off.
+  const uint64_t raw = 0x0000'0012'3456'789FULL;
+  AxisDecodeParams sincos;
+  AxisDecodeParams steps;
+  steps.sincos_track = false;
+  for (const bool is_signed : {false, true}) {
+    sincos.signed_format = steps.signed_format = is_signed;
+    AxisDecodeState a, b;
+    const auto s = decode_axis(image(raw), sincos, kRef, a);
+    CHECK_FALSE(s.fraction_valid);
+    const auto e = decode_axis(image(raw), steps, kRef, b);
+    CHECK(e.fraction_valid);
+    CHECK(e.position_raw == raw);
+    // periods:fraction are the bits 63..16:15..0 in both formats (readers rebuild the 64 bits).
+    CHECK(e.periods == 0x12'3456);
+    CHECK(e.fraction == 0x789F);
+  }
+  // Signed, track off: the module sign-extends the encoder's position; read back negative.
+  AxisDecodeState c;
+  steps.signed_format = true;
+  const auto n = decode_axis(image(static_cast<uint64_t>(int64_t{-5})), steps, kRef, c);
+  CHECK(n.fraction_valid);
+  CHECK(static_cast<int64_t>(n.position_raw) == -5);
+  CHECK(n.periods * 65536 + n.fraction == -5);
+}

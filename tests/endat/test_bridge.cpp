@@ -231,8 +231,7 @@ TEST_CASE("Bridge: acknowledge, EnDatAck and persistent faults", "[endat][sim][b
   (void)b.poll(h.now);
   CHECK(b.endat_error() == 0x0004);
   CHECK(b.endat_warning() == 0x0008);
-  CHECK(endat::endat_warning_names(b.endat_warning()) ==
-        std::vector<std::string>{"battery charge low"});
+  CHECK(endat::endat_warning_names(b.endat_warning()) == std::vector<std::string>{"BatteryCharge"});
 
   // Acknowledge while both persist: both come back.
   REQUIRE(h.run(Request::acknowledge()));

@@ -88,20 +88,11 @@ TEST_CASE("Identification: inconsistent words are refused", "[endat][ident]") {
 TEST_CASE("Status bit names", "[endat][names]") {
   using V = std::vector<std::string>;
   CHECK(endat_error_names(0) == V{});
-  CHECK(endat_error_names(0x0041) == V{"light source failed", "battery change required"});
-  CHECK(endat_error_names(0x0104) == V{"position value", "reserved bit 8"});
-  CHECK(endat_warning_names(0x0008) == V{"battery charge low"});
-  CHECK(endat_warning_names(0x0012) == V{"temperature exceeded", "reference point not reached"});
-  using namespace ds1928::error_info;
-  CHECK(error_info_names(kEnDatComError | kEnDatPosError) == V{"EnDatComError", "EnDatPosError"});
-  CHECK(error_info_names(0x02) == V{"reserved bit 1"});
-  CHECK(error_info_names(kEncoderSupplyError | kEnDatRefWarning) ==
-        V{"EncoderSupplyError", "EnDatRefWarning"});
-  // The names table and module_image.hpp's bit constants agree.
-  CHECK(error_info_bit_name(4) == "EnDatComError");
-  CHECK(kEnDatComError == (1u << 4));
-  CHECK(error_info_bit_name(6) == "EnDatParSetError");
-  CHECK(kEnDatParSetError == (1u << 6));
+  // The names are the error table's (x20ds1928/error_bits.hpp); reserved bits by register.
+  CHECK(endat_error_names(0x0041) == V{"Lighting", "Battery"});
+  CHECK(endat_error_names(0x0104) == V{"PositionValue", "EnDatError reserved bit 8"});
+  CHECK(endat_warning_names(0x0008) == V{"BatteryCharge"});
+  CHECK(endat_warning_names(0x0012) == V{"Temperature", "ReferencePoint"});
 }
 
 TEST_CASE("MRS names", "[endat][names]") {
@@ -156,7 +147,7 @@ TEST_CASE("Words read from the encoder described for humans", "[endat][names]") 
   CHECK(describe_word(0xA5, 5, 0x0001) == "EnDat command set: EnDat 2.2");  // word 37
   CHECK(describe_word(0xA5, 15, 0xABCD) == "checksum");
   CHECK(describe_word(0xA1, 0, 0).empty());
-  CHECK(describe_word(0xB9, 0, 0x0041) == "errors: light source failed, battery change required");
+  CHECK(describe_word(0xB9, 0, 0x0041) == "errors: light source failed, battery must be replaced");
   CHECK(describe_word(0xB9, 1, 0) == "warnings: none");
   CHECK(describe_word(0xA7, 6, 3582) == "temperature warning threshold: 85.0 °C");
   CHECK(describe_word(0x4C, 0, 3147) == "additional information 1: temperature 1: 41.5 °C");

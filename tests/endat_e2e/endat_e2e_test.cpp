@@ -121,6 +121,34 @@ TEST_CASE("ident, read-param, write-param round trip and protected write over th
   CHECK(status["commands"]["timeouts"] == 0);
 }
 
+TEST_CASE("Rescan and acknowledge through EnDatAck wait for the module, then identify again",
+          "[endat_e2e][endat_ack]") {
+  Rig rig;
+  REQUIRE(rig.wait_identified());
+  LineClient c(rig.socket_path(), kClientTimeoutMs);
+  REQUIRE(c.connected());
+  const json rescan = c.request({{"cmd", "endat-rescan"}, {"axis", 0}});
+  INFO(rescan.dump());
+  REQUIRE(rescan.value("ok", false));
+  CHECK(rescan["command"] == "rescan");
+  CHECK(rescan["bits"] == 2);
+  // The simulated module keeps the bit set while it reads the identification on the wire: the
+  // daemon saw it clear, so it read back at least once.
+  CHECK(rescan["confirmed"] == true);
+  CHECK(rescan["reads"].get<unsigned>() >= 1);
+  const json ack = c.request({{"cmd", "endat-ack-register"}, {"axis", 0}});
+  INFO(ack.dump());
+  REQUIRE(ack.value("ok", false));
+  CHECK(ack["bits"] == 1);
+  CHECK(ack["confirmed"] == true);
+  // ident --refresh: Rescan, then the identification read again.
+  const json ident = c.request({{"cmd", "endat-ident"}, {"axis", 0}, {"refresh", true}});
+  INFO(ident.dump());
+  REQUIRE(ident.value("ok", false));
+  CHECK(ident["identification"]["serial"] == "S36845217");
+  CHECK(error_code_of(c.request({{"cmd", "endat-rescan"}, {"axis", 3}})) == "bad_argument");
+}
+
 TEST_CASE("privileged commands need the privileged group", "[endat_e2e]") {
   Rig rig;
   rig.run([&] {
@@ -132,6 +160,8 @@ TEST_CASE("privileged commands need the privileged group", "[endat_e2e]") {
   CHECK(error_code_of(w) == "permission_denied");
   CHECK(error_code_of(c.request({{"cmd", "endat-reset"}})) == "permission_denied");
   CHECK(error_code_of(c.request({{"cmd", "endat-ack"}})) == "permission_denied");
+  CHECK(error_code_of(c.request({{"cmd", "endat-rescan"}})) == "permission_denied");
+  CHECK(error_code_of(c.request({{"cmd", "endat-ack-register"}})) == "permission_denied");
   CHECK(error_code_of(c.request({{"cmd", "endat-write-block"},
                                  {"mrs", 0xB1},
                                  {"block", 0},

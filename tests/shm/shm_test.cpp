@@ -102,7 +102,8 @@ TEST_CASE("a reader gets exactly what was published, field by field") {
   a0.sample.error_info = error_info::kEnDatComError;
   a0.endat_error = 0xbeef;
   a0.endat_warning = 0x12;
-  a0.validity = classify(a0.sample, true);
+  a0.errors = assess(error_policy(), ErrorWords{a0.sample.error_info, 0xbeef, 0x12});
+  a0.validity = classify(a0.sample, true, a0.errors);
   const AxisStatus a1 = status_for(41, 1);
   const AxisStatus all[] = {a0, a1};
   const int64_t before = now_ns();
@@ -116,7 +117,9 @@ TEST_CASE("a reader gets exactly what was published, field by field") {
   CHECK(d.fraction == 0xcde8);
   CHECK(d.time_source == DS1928_TIME_RX_TIMESTAMP);
   CHECK(d.pos_cycle == -3);
-  CHECK(d.flags == (DS1928_AXIS_NEW_POSITION | DS1928_AXIS_FRESH));
+  // 0xbeef: EnDatError faults; 0x12: EnDatWarning temperature (a warning).
+  CHECK(d.flags ==
+        (DS1928_AXIS_NEW_POSITION | DS1928_AXIS_FRESH | DS1928_AXIS_FAULT | DS1928_AXIS_WARNING));
   CHECK(d.error_info == error_info::kEnDatComError);
   CHECK(d.endat_error == 0xbeef);
   CHECK(d.endat_warning == 0x12);
@@ -138,15 +141,23 @@ TEST_CASE("a reader gets exactly what was published, field by field") {
   CHECK(d.check != ds1928_shm_check(&d));
 }
 
-TEST_CASE("validity classification follows bus, freshness, ErrorInfo") {
+TEST_CASE("validity classification follows bus, the error bits' effect, freshness") {
+  const ErrorPolicy p = error_policy();
+  const auto errors = [&p](uint8_t ei) { return assess(p, ErrorWords{ei, 0, 0}); };
   AxisSample s;
   s.fresh = true;
-  CHECK(classify(s, true) == AxisValidity::Valid);
-  CHECK(classify(s, false) == AxisValidity::BusDown);
-  s.error_info = error_info::kPositionError;
-  CHECK(classify(s, true) == AxisValidity::ModuleError);
+  CHECK(classify(s, true, errors(0)) == AxisValidity::Valid);
+  CHECK(classify(s, false, errors(0)) == AxisValidity::BusDown);
+  CHECK(classify(s, true, errors(error_info::kEnDatComError)) == AxisValidity::ModuleError);
+  // A warning leaves a fresh position valid.
+  CHECK(classify(s, true, errors(error_info::kEnDatRefWarning)) == AxisValidity::Valid);
   s.fresh = false;
-  CHECK(classify(s, true) == AxisValidity::Stale);
+  CHECK(classify(s, true, errors(error_info::kEnDatComError)) == AxisValidity::Stale);
+  // An analogue error holds (apply_error_policy: not fresh, held): stale.
+  s.held = true;
+  CHECK(classify(s, true, errors(error_info::kVssCheckError)) == AxisValidity::Stale);
+  CHECK(classify(s, true, errors(error_info::kVssCheckError | error_info::kEnDatComError)) ==
+        AxisValidity::ModuleError);
 }
 
 TEST_CASE("publishing allocates nothing, takes no mutex, and makes no futex call without waiters") {

@@ -195,3 +195,136 @@ TEST_CASE("function model 254: MTUs power up unset and take 3..5 only, identific
   CHECK(m.endat().identification().has_value());
   CHECK(m.inputs().pos_cycle != 0);
 }
+
+TEST_CASE("EnDatAck reads back its bits until the module ran them (Rescan, acknowledge)",
+          "[sim][endat_ack]") {
+  Ds1928Module m(FunctionModel::BusController, constant(100));
+  REQUIRE_FALSE(m.write_register(reg::kEnDatMode, 1, endat_mode::kEnable));
+  int64_t t = 1'000'000;
+  m.tick(t, static_cast<uint64_t>(t / kUs));
+  uint32_t v = 0;
+  REQUIRE_FALSE(m.read_register(reg::kEnDatAck, 1, v));
+  CHECK(v == 0);
+  REQUIRE_FALSE(m.write_register(reg::kEnDatAck, 1, 0x02));
+  // Reading the identification takes dozens of EnDat transactions on the wire: the bit stays
+  // set for as long.
+  REQUIRE_FALSE(m.read_register(reg::kEnDatAck, 1, v));
+  CHECK(v == 0x02);
+  int reads = 0;
+  while (v != 0 && reads < 100000) {
+    step(m, t);
+    REQUIRE_FALSE(m.read_register(reg::kEnDatAck, 1, v));
+    ++reads;
+  }
+  CHECK(v == 0);
+  CHECK(reads > 1);
+  CHECK(m.endat().identification().has_value());
+  uint32_t word = 0;
+  REQUIRE_FALSE(m.read_register(reg::kParamManuf0 + 13, 2, word));
+  CHECK((word & 0x3F) == m.endat().identification()->position_bits);  // clock pulses
+  // Acknowledge (bit 0): set until the acknowledge ran on the wire.
+  REQUIRE_FALSE(m.write_register(reg::kEnDatAck, 1, 0x01));
+  REQUIRE_FALSE(m.read_register(reg::kEnDatAck, 1, v));
+  CHECK((v & 0x01) != 0);
+  for (int i = 0; i < 1000 && v != 0; ++i) {
+    step(m, t);
+    REQUIRE_FALSE(m.read_register(reg::kEnDatAck, 1, v));
+  }
+  CHECK(v == 0);
+}
+
+namespace {
+// Runs a module for `seconds` with EnDatMode `mode` and returns PositionHW:PositionLW, and whether
+// any position had one of the low 3 bits set.
+std::pair<uint64_t, bool> run_format(uint8_t mode, double velocity, double seconds) {
+  Ds1928Module m(FunctionModel::Standard, constant(velocity));
+  REQUIRE_FALSE(m.write_register(reg::kSystemCyclePrescaler, 2, 2));
+  REQUIRE_FALSE(m.write_register(reg::kEnDatMode, 1, mode));
+  int64_t t = 0;
+  bool low_bits = false;
+  for (int i = 0; i < static_cast<int>(seconds * 10000); ++i) {
+    t += 100 * kUs;
+    m.tick(t, static_cast<uint64_t>(t / kUs));
+    low_bits |= (m.inputs().position_lw & 7u) != 0;
+  }
+  const auto in = m.inputs();
+  return {(uint64_t{in.position_hw} << 32) | in.position_lw, low_bits};
+}
+}  // namespace
+
+TEST_CASE("each EnDatMode position format: sin/cos 48.16, or the EnDat position in steps",
+          "[sim][format]") {
+  using namespace endat_mode;
+  // The default simulated encoder: 2^25 steps per revolution, 2048 signal periods, 37 bits
+  // (12 multiturn): 16384 steps per sine period.
+  const auto encoder = sim::default_encoder_description();
+  const double steps_per_period =
+      static_cast<double>(encoder.steps_per_revolution) / encoder.signal_periods;
+  for (const uint8_t clock : {uint8_t{0}, kFastClockOff}) {  // timing only: same values
+    INFO("fast clock off: " << (clock != 0));
+    const auto [fixed, fixed_low] = run_format(kEnable | clock, 1000.0, 0.5);
+    CHECK_FALSE(fixed_low);
+    CHECK(static_cast<double>(fixed) / 65536.0 == Approx(500.0).margin(0.25));
+    const auto [steps, steps_low] = run_format(kEnable | kSinCosUnused | clock, 1000.0, 0.5);
+    // The position in measuring steps: every bit counts, the low ones move too.
+    CHECK(steps_low);
+    CHECK(static_cast<double>(steps) ==
+          Approx(500.0 * steps_per_period).margin(0.25 * steps_per_period));
+    CHECK(steps < (uint64_t{1} << 37));
+    // Backwards from zero: unsigned = the encoder's 37-bit two's complement; signed =
+    // sign-extended to 64 bits.
+    const auto [uns, u_low] = run_format(kEnable | kSinCosUnused | clock, -10.0, 0.5);
+    CHECK(uns < (uint64_t{1} << 37));
+    CHECK(uns > (uint64_t{1} << 36));
+    const auto [sgn, s_low] = run_format(kEnable | kSinCosUnused | kSigned | clock, -10.0, 0.5);
+    CHECK(static_cast<double>(static_cast<int64_t>(sgn)) ==
+          Approx(-5.0 * steps_per_period).margin(0.25 * steps_per_period));
+    CHECK((sgn & ((uint64_t{1} << 37) - 1)) == uns);
+    // Signed sin/cos: two's complement of the fixed point.
+    const auto [sfix, sf_low] = run_format(kEnable | kSigned | clock, -10.0, 0.5);
+    CHECK(static_cast<double>(static_cast<int64_t>(sfix)) / 65536.0 == Approx(-5.0).margin(0.25));
+  }
+}
+
+TEST_CASE(
+    "sin/cos amplitude outside the Vss window: VssCheckError, the last good position held "
+    "until SinCosQuitTime after the fault",
+    "[sim][faults]") {
+  Ds1928Module m(FunctionModel::Standard, constant(1000.0));
+  REQUIRE_FALSE(m.write_register(reg::kEnDatMode, 1, endat_mode::kEnable));
+  REQUIRE_FALSE(m.write_register(reg::kSinCosQuitTime, 4, 50'000));  // 50 ms
+  int64_t t = 0;
+  for (int i = 0; i < 100; ++i) step(m, t);
+  CHECK(m.inputs().error_info == 0);
+  m.set_vss_mv(500);  // below SinCosVssMin (800)
+  for (int i = 0; i < 10; ++i) step(m, t);
+  const ModuleInputs held = m.inputs();
+  CHECK((held.error_info & error_info::kVssCheckError) != 0);
+  for (int i = 0; i < 100; ++i) step(m, t);  // 10 ms: held, PosCycle stands
+  CHECK(m.inputs().pos_cycle == held.pos_cycle);
+  CHECK(m.inputs().position_lw == held.position_lw);
+  m.set_vss_mv(1300);  // above SinCosVssMax (1200): still a fault
+  for (int i = 0; i < 20; ++i) step(m, t);
+  CHECK(m.inputs().pos_cycle == held.pos_cycle);
+  m.set_vss_mv(1000);  // good again: ignored for QuitTime (50 ms = 500 ticks)
+  for (int i = 0; i < 450; ++i) step(m, t);
+  CHECK(m.inputs().pos_cycle == held.pos_cycle);
+  CHECK(m.inputs().position_lw == held.position_lw);
+  for (int i = 0; i < 100; ++i) step(m, t);
+  CHECK(m.inputs().pos_cycle != held.pos_cycle);
+  CHECK(m.inputs().position_lw != held.position_lw);
+  // Latched until acknowledged (AckErrorInfo bit 2, a rising edge).
+  CHECK((m.inputs().error_info & error_info::kVssCheckError) != 0);
+  ModuleOutputs out;
+  out.ack_error_info = error_info::kVssCheckError;
+  m.apply_outputs(out);
+  step(m, t);
+  CHECK((m.inputs().error_info & error_info::kVssCheckError) == 0);
+  // Detection disabled (ErrorEnable bit 2 clear): the amplitude is not judged.
+  REQUIRE_FALSE(m.write_register(reg::kErrorEnable, 1, 0xFB));
+  m.set_vss_mv(100);
+  const int8_t before = m.inputs().pos_cycle;
+  for (int i = 0; i < 20; ++i) step(m, t);
+  CHECK(m.inputs().pos_cycle != before);
+  CHECK((m.inputs().error_info & error_info::kVssCheckError) == 0);
+}

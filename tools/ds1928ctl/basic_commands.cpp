@@ -7,6 +7,7 @@
 #include "client.hpp"
 #include "commands.hpp"
 #include "endat/number.hpp"
+#include "error_bits_text.hpp"
 
 namespace ds1928::ctl {
 namespace {
@@ -77,6 +78,7 @@ void print_axis_line(const json& a) {
   if (a.contains("identity_reason"))
     std::printf("        encoder %s: %s\n", get<std::string>(a, "identity", "").c_str(),
                 get<std::string>(a, "identity_reason", "").c_str());
+  print_error_bits(a.value("errors", json::array()));
 }
 
 void print_status(const json& r) {
@@ -172,15 +174,34 @@ void add_basic_commands(CLI::App& app, Context& ctx) {
     };
   });
 
-  auto* ack = app.add_subcommand("ack", "Acknowledge module errors: write BITS to AckErrorInfo");
+  auto* ack = app.add_subcommand(
+      "ack",
+      "Acknowledge module errors: write BITS to AckErrorInfo, or --register: EnDatAck bit 0");
   auto axis = std::make_shared<std::string>();
   auto bits = std::make_shared<std::string>();
+  auto via_register = std::make_shared<bool>(false);
   ack->add_option("AXIS", *axis, "Axis index (0-based)")->required();
-  ack->add_option("BITS", *bits, "ErrorInfo bits to acknowledge, decimal or 0x hex (0..255)")
-      ->required();
-  ack->callback([&ctx, axis, bits] {
+  ack->add_option("BITS", *bits, "ErrorInfo bits to acknowledge, decimal or 0x hex (0..255)");
+  ack->add_flag("--register", *via_register,
+                "Acknowledge the encoder's EnDatError/EnDatWarning through the module register "
+                "EnDatAck bit 0 (and wait until the module did)");
+  ack->callback([&ctx, axis, bits, via_register] {
     const auto a = endat::parse_number(*axis, 0, 0xFFFF);
     if (!a) throw CLI::ValidationError("AXIS", "'" + *axis + "': " + a.error().message());
+    if (*via_register) {
+      if (!bits->empty()) throw CLI::ValidationError("BITS", "not with --register");
+      ctx.action = [&ctx, a = *a] {
+        return request_and_print(
+            ctx, {{"cmd", "endat-ack-register"}, {"axis", a}}, [](const json& r) {
+              std::cout << "axis " << get<uint64_t>(r, "axis", 0) << ": EnDatAck acknowledge "
+                        << (get<bool>(r, "confirmed", false) ? "done"
+                                                             : "written (completion not readable)")
+                        << "\n";
+            });
+      };
+      return;
+    }
+    if (bits->empty()) throw CLI::ValidationError("BITS", "required (or --register)");
     const auto b = endat::parse_u8(*bits);
     if (!b) throw CLI::ValidationError("BITS", "'" + *bits + "': " + b.error().message());
     ctx.action = [&ctx, a = *a, b = *b] {

@@ -158,6 +158,26 @@ void add_endat_commands(CLI::App& app, Context& ctx) {
           std::cout << "axis " << num(r, "axis") << ": encoder errors acknowledged\n";
         });
       });
+  {
+    // Rescan (EnDatAck bit 1, a module register, not a Flatstream command): the module reads the
+    // encoder's identification again; the daemon waits until it did, then identifies anew.
+    auto* c = endat->add_subcommand(
+        "rescan", "Make the module read the encoder's identification again (EnDatAck bit 1)");
+    auto pos = std::make_shared<std::string>();
+    c->add_option("AXIS", *pos, "Axis index (0-based; default --axis)");
+    c->callback([&ctx, axis, pos] {
+      Number n;
+      n.text = pos->empty() ? axis->text : *pos;
+      json request{{"cmd", "endat-rescan"}, {"axis", parse("AXIS", n, 0, 0xFFFF)}};
+      ctx.action = [&ctx, request = std::move(request)] {
+        return request_and_print(ctx, request, [](const json& r) {
+          std::cout << "axis " << num(r, "axis") << ": rescan "
+                    << (r.value("confirmed", false) ? "done" : "written (completion not readable)")
+                    << " after " << r.value("wait_ms", 0.0) << " ms\n";
+        });
+      };
+    });
+  }
 
   {
     auto* c = endat->add_subcommand("read-param", "Read a parameter word (0x04)");
@@ -237,7 +257,8 @@ void add_endat_commands(CLI::App& app, Context& ctx) {
   {
     auto* c = endat->add_subcommand("ident", "The encoder's identification (read at daemon start)");
     auto refresh = std::make_shared<bool>(false);
-    c->add_flag("--refresh", *refresh, "Read it from the encoder again");
+    c->add_flag("--refresh", *refresh,
+                "Rescan (EnDatAck bit 1), then read it from the encoder again");
     c->callback([action, refresh] {
       json request{{"cmd", "endat-ident"}};
       if (*refresh) request["refresh"] = true;

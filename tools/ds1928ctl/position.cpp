@@ -1,5 +1,6 @@
 // `position`: reads the axis records straight from shared memory; with --follow waits on the
 // futex for each (N-th) publication, says so when the daemon stops or restarts and resumes.
+#include <algorithm>
 #include <cinttypes>
 #include <cstdio>
 #include <ctime>
@@ -9,9 +10,11 @@
 #include <optional>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include "commands.hpp"
 #include "ds1928/shm.hpp"
+#include "error_bits_text.hpp"
 
 namespace ds1928::ctl {
 namespace {
@@ -50,6 +53,11 @@ const char* time_source_name(uint8_t v) {
   }
 }
 
+ErrorWords words_of(const ds1928_axis_data& d) {
+  return {d.error_info, static_cast<uint16_t>(d.endat_error),
+          static_cast<uint16_t>(d.endat_warning)};
+}
+
 json axis_json(uint32_t axis, const ds1928_axis_data& d) {
   return {{"axis", axis},
           {"cycle", d.cycle},
@@ -67,6 +75,10 @@ json axis_json(uint32_t axis, const ds1928_axis_data& d) {
           {"error_info", d.error_info},
           {"endat_error", d.endat_error},
           {"endat_warning", d.endat_warning},
+          {"fault", (d.flags & DS1928_AXIS_FAULT) != 0},
+          {"warning", (d.flags & DS1928_AXIS_WARNING) != 0},
+          {"held", (d.flags & DS1928_AXIS_HELD) != 0},
+          {"errors", error_bits_json(words_of(d))},
           {"publish_ns", d.publish_ns}};
 }
 
@@ -77,9 +89,28 @@ void print_axis(const Context& ctx, uint32_t axis, const ds1928_axis_data& d) {
   }
   const double position = static_cast<double>(d.periods) + d.fraction / 65536.0;
   std::printf("cycle %-10" PRIu64 " axis %-2u %-12s %18.6f periods  raw 0x%016" PRIx64
-              "  sdc %11" PRId32 "  PosCycle %4d%s  ErrorInfo 0x%02x\n",
+              "  sdc %11" PRId32 "  PosCycle %4d%s  ErrorInfo 0x%02x%s\n",
               d.cycle, axis, validity_name(d.validity), position, d.position_raw, d.position_sdc,
-              d.pos_cycle, (d.flags & DS1928_AXIS_NEW_POSITION) ? " new" : "    ", d.error_info);
+              d.pos_cycle, (d.flags & DS1928_AXIS_NEW_POSITION) ? " new" : "    ", d.error_info,
+              (d.flags & DS1928_AXIS_HELD) ? "  held" : "");
+  // Every set bit by name and remedy, printed again only when the bits change (--follow).
+  static std::vector<std::pair<uint32_t, ErrorWords>> shown;
+  const ErrorWords w = words_of(d);
+  auto it =
+      std::find_if(shown.begin(), shown.end(), [axis](const auto& e) { return e.first == axis; });
+  if (it == shown.end()) {
+    shown.emplace_back(axis, ErrorWords{});
+    it = shown.end() - 1;
+    if (w == ErrorWords{}) return;
+  } else if (it->second == w) {
+    return;
+  }
+  it->second = w;
+  if (w == ErrorWords{}) {
+    std::printf("        error bits cleared\n");
+    return;
+  }
+  print_error_bits(error_bits_json(w));
 }
 
 // Stdout in --json mode (scripts follow one stream), stderr otherwise.

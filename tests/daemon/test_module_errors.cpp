@@ -1,0 +1,202 @@
+// The module's error bits end to end, in-process and deterministic: simulated module (its faults)
+// → the simulated bus → CycleWork (decode, validity by class) → shared memory (validity, flags,
+// the held position) → status JSON, metrics and journal records by bit name. The cycles run on
+// the test's thread, one at a time.
+#include <spdlog/sinks/ringbuffer_sink.h>
+#include <spdlog/spdlog.h>
+#include <unistd.h>
+
+#include <catch2/catch.hpp>
+#include <chrono>
+#include <string>
+#include <thread>
+
+#include "cycle_work.hpp"
+#include "ds1928/shm.hpp"
+#include "metrics/exposition.hpp"
+#include "module_errors.hpp"
+#include "sim/simulated_bus.hpp"
+
+using namespace ds1928;
+
+namespace {
+
+class Bench {
+ public:
+  Bench() {
+    static int serial = 0;
+    config.cycle.period_us = 1000;
+    AxisConfig axis;
+    axis.name = "x";
+    axis.module.endat_enable = true;
+    config.axes.push_back(axis);
+    config.shm.name = "/ds1928-errors-" + std::to_string(getpid()) + "-" + std::to_string(++serial);
+    bus = std::make_unique<sim::SimulatedBus>(config.axes, config.simulated);
+    REQUIRE_FALSE(bus->start());
+    REQUIRE_FALSE(publisher.open(config.shm, 1, 1'000'000));
+    work = std::make_unique<CycleWork>(config, *bus, publisher);
+    REQUIRE_FALSE(reader.open(config.shm.name));
+  }
+  ~Bench() { publisher.close(); }
+  // Runs `n` cycles at least 1 ms apart: the simulated bus ticks its modules on CLOCK_MONOTONIC,
+  // so at least n ms of module time pass (more on a loaded machine: every check below holds for
+  // any longer time).
+  ds1928_axis_data run(int n) {
+    for (int i = 0; i < n; ++i) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+      CycleContext ctx;
+      ctx.index = ++index_;
+      ctx.start_ns = t0_ + static_cast<int64_t>(index_) * 1'000'000;
+      ctx.woke_ns = ctx.start_ns;
+      work->run_cycle(ctx);
+    }
+    ds1928_axis_data d{};
+    REQUIRE_FALSE(reader.read(0, d));
+    return d;
+  }
+  sim::Ds1928Module& module() { return bus->module(0); }
+
+  DaemonConfig config;
+  std::unique_ptr<sim::SimulatedBus> bus;
+  shm::Publisher publisher;
+  std::unique_ptr<CycleWork> work;
+  ShmReader reader;
+
+ private:
+  uint64_t index_ = 0;
+  int64_t t0_ = 1'000'000'000;
+};
+
+std::string metrics_of(Bench& b) {
+  metrics::Exposition out(metrics::Format::Prometheus);
+  append_module_error_metrics(out, b.config, *b.work);
+  return out.finish();
+}
+
+}  // namespace
+
+TEST_CASE(
+    "error classes end to end: a warning stays valid, an analogue error holds the last "
+    "good position stale, a fault is module_error",
+    "[errors][e2e]") {
+  Bench b;
+  ds1928_axis_data d = b.run(300);
+  REQUIRE(d.validity == DS1928_AXIS_VALID);
+  CHECK((d.flags & (DS1928_AXIS_FAULT | DS1928_AXIS_WARNING | DS1928_AXIS_HELD)) == 0);
+
+  // Warning: EnDatRefWarning. Flagged, the position moves on and stays valid.
+  b.module().inject_error(error_info::kEnDatRefWarning);
+  const ds1928_axis_data before = b.run(1);
+  d = b.run(20);
+  CHECK(d.validity == DS1928_AXIS_VALID);
+  CHECK((d.flags & DS1928_AXIS_WARNING) != 0);
+  CHECK((d.flags & DS1928_AXIS_FAULT) == 0);
+  CHECK(d.error_info == error_info::kEnDatRefWarning);
+  CHECK(d.position_raw != before.position_raw);
+  const nlohmann::json bits =
+      error_bits_json(error_words(b.work->counters(0)), b.config.axes[0].error_policy());
+  REQUIRE(bits.size() == 1);
+  CHECK(bits[0]["name"] == "EnDatRefWarning");
+  CHECK(bits[0]["class"] == "warning");
+  CHECK(bits[0]["effect"] == "flag");
+  CHECK(bits[0]["remedy"].get<std::string>().find("referenced again") != std::string::npos);
+  std::string text = metrics_of(b);
+  CHECK(text.find("ds1928_axis_module_error{axis=\"0\",name=\"x\",register=\"ErrorInfo\","
+                  "bit=\"EnDatRefWarning\",class=\"warning\"} 1") != std::string::npos);
+  CHECK(text.find("bit=\"VssCheckError\",class=\"fault\"} 0") != std::string::npos);
+  // Acknowledged (AckErrorInfo bit 7 through the cycle's command queue): gone.
+  REQUIRE(b.work->post({AxisCommand::Kind::AckErrors, 0, error_info::kEnDatRefWarning}));
+  d = b.run(20);
+  CHECK(d.error_info == 0);
+  CHECK((d.flags & DS1928_AXIS_WARNING) == 0);
+
+  // Analogue error: the amplitude leaves the Vss window. The module holds (PosCycle stands); the
+  // daemon publishes the last good position as stale with the HELD flag.
+  const ds1928_axis_data good = b.run(1);
+  REQUIRE(good.validity == DS1928_AXIS_VALID);
+  b.module().set_vss_mv(300);
+  d = b.run(30);
+  CHECK(d.validity == DS1928_AXIS_STALE);
+  CHECK((d.flags & DS1928_AXIS_HELD) != 0);
+  CHECK((d.flags & DS1928_AXIS_FAULT) != 0);
+  CHECK((d.error_info & error_info::kVssCheckError) != 0);
+  CHECK(d.position_raw == good.position_raw);
+  CHECK(b.work->counters(0).held.load() > 0);
+  // Amplitude good again, acknowledged: after SinCosQuitTime (100 ms) positions flow again.
+  b.module().set_vss_mv(1000);
+  REQUIRE(b.work->post({AxisCommand::Kind::AckErrors, 0, error_info::kVssCheckError}));
+  d = b.run(150);
+  CHECK(d.validity == DS1928_AXIS_VALID);
+  CHECK((d.flags & DS1928_AXIS_HELD) == 0);
+  CHECK(d.position_raw != good.position_raw);
+
+  // Fault: EnDatComError → module_error.
+  b.module().inject_error(error_info::kEnDatComError);
+  d = b.run(5);
+  CHECK(d.validity == DS1928_AXIS_MODULE_ERROR);
+  CHECK((d.flags & DS1928_AXIS_FAULT) != 0);
+  REQUIRE(b.work->post({AxisCommand::Kind::AckErrors, 0, error_info::kEnDatComError}));
+  d = b.run(20);
+  CHECK(d.validity == DS1928_AXIS_VALID);
+
+  // The encoder's words (read acyclically by the EnDat service into the counters): an EnDatWarning
+  // bit is a warning, an EnDatError bit a fault.
+  b.work->counters(0).endat_warning.store(0x0002);  // Temperature
+  d = b.run(2);
+  CHECK(d.validity == DS1928_AXIS_VALID);
+  CHECK((d.flags & DS1928_AXIS_WARNING) != 0);
+  CHECK(d.endat_warning == 0x0002);
+  b.work->counters(0).endat_error.store(0x0040);  // Battery
+  d = b.run(2);
+  CHECK(d.validity == DS1928_AXIS_MODULE_ERROR);
+  text = metrics_of(b);
+  CHECK(text.find("register=\"EnDatError\",bit=\"Battery\",class=\"fault\"} 1") !=
+        std::string::npos);
+  CHECK(text.find("register=\"EnDatWarning\",bit=\"Temperature\",class=\"warning\"} 1") !=
+        std::string::npos);
+}
+
+TEST_CASE("axes[].invalidate_on overrides the class per bit", "[errors][e2e]") {
+  Bench b;
+  DaemonConfig& c = b.config;
+  // A new CycleWork with the override: EnDatRefWarning invalidates, EnDatComError only flags.
+  c.axes[0].invalidate_on[0] = error_info::kEnDatRefWarning;
+  c.axes[0].flag_only_on[0] = error_info::kEnDatComError;
+  b.work = std::make_unique<CycleWork>(c, *b.bus, b.publisher);
+  REQUIRE(b.run(300).validity == DS1928_AXIS_VALID);
+  b.module().inject_error(error_info::kEnDatRefWarning);
+  CHECK(b.run(5).validity == DS1928_AXIS_MODULE_ERROR);
+  REQUIRE(b.work->post({AxisCommand::Kind::AckErrors, 0, error_info::kEnDatRefWarning}));
+  REQUIRE(b.run(20).validity == DS1928_AXIS_VALID);
+  b.module().inject_error(error_info::kEnDatComError);
+  const ds1928_axis_data d = b.run(5);
+  CHECK(d.validity == DS1928_AXIS_VALID);
+  CHECK((d.flags & DS1928_AXIS_FAULT) != 0);
+}
+
+TEST_CASE("the journal gets one record per change of an axis' error bits, with their names",
+          "[errors][journal]") {
+  Bench b;
+  auto sink = std::make_shared<spdlog::sinks::ringbuffer_sink_mt>(64);
+  auto previous = spdlog::default_logger();
+  spdlog::set_default_logger(std::make_shared<spdlog::logger>("test", sink));
+  ErrorJournal journal(1);
+  b.run(300);
+  journal.poll(b.config, *b.work, "simulated");
+  journal.poll(b.config, *b.work, "simulated");
+  CHECK(sink->last_formatted().empty());  // nothing set, nothing changed
+  b.module().inject_error(error_info::kEnDatRefWarning | error_info::kEnDatComError);
+  b.run(5);
+  journal.poll(b.config, *b.work, "simulated");
+  journal.poll(b.config, *b.work, "simulated");  // no change: no second record
+  REQUIRE(b.work->post({AxisCommand::Kind::AckErrors, 0, 0xFF}));
+  b.run(20);
+  journal.poll(b.config, *b.work, "simulated");
+  const auto lines = sink->last_formatted();
+  spdlog::set_default_logger(previous);
+  REQUIRE(lines.size() == 2);
+  CHECK(lines[0].find("error bits EnDatComError,EnDatRefWarning") != std::string::npos);
+  CHECK(lines[0].find("came: EnDatComError,EnDatRefWarning") != std::string::npos);
+  CHECK(lines[1].find("error bits none") != std::string::npos);
+  CHECK(lines[1].find("went: EnDatComError,EnDatRefWarning") != std::string::npos);
+}
