@@ -68,7 +68,8 @@ void register_powerlink_commands(control::Server& server, PowerlinkBus& bus,
     if (!pl->pres_snapshot(node, *snap))
       throw control::ArgumentError("argument 'node': " + std::to_string(node) +
                                    " is not a configured POWERLINK CN");
-    nlohmann::json j{{"node", node}, {"size", snap->size}, {"fresh", snap->fresh}};
+    nlohmann::json j{
+        {"node", node}, {"size", snap->size}, {"fresh", snap->fresh}, {"ready", snap->ready}};
     if (snap->received) {
       j["age_us"] = (rt::now_ns() - snap->rx_time_ns) / 1000;
       j["cycle"] = snap->cycle;

@@ -412,6 +412,7 @@ void ManagingNode::begin_cycle(int64_t now_ns) noexcept {
     mc_flag_ = !mc_flag_;
   for (auto& cn : cns_) {
     cn->polled = cn->pres_seen = cn->pres_usable = cn->timed_out = cn->late = false;
+    cn->outputs_written = false;
     if (!full_cycle() || !cn->st->in_isochronous) continue;
     if (cn->st->prc) {
       prc_list_[prc_count_++] = cn->cfg.node_id;
@@ -481,12 +482,18 @@ uint32_t ManagingNode::pres_timeout_us(uint8_t node) const noexcept {
   return cn ? cn->cfg.pres_timeout_us : 0;
 }
 
+void ManagingNode::outputs_written(uint8_t node) noexcept {
+  if (Cn* cn = find(node)) cn->outputs_written = true;
+}
+
 Result<std::size_t> ManagingNode::build_preq(uint8_t node, std::span<uint8_t> out) noexcept {
   Cn* cn = find(node);
   if (!cn) return MnError::kNodeNotConfigured;
   cn->polled = true;
   PReq preq;
-  preq.ready = mn_state_ == NmtState::kOperational;
+  // RD: the outputs this PReq carries are valid (EPSG DS 301): the MN is OPERATIONAL and wrote
+  // them this cycle. A CN takes no outputs from a PReq with RD = 0.
+  preq.ready = mn_state_ == NmtState::kOperational && cn->outputs_written;
   preq.multiplexed_slot = cn->cfg.multiplex > 1;
   preq.exception_acknowledge = cn->errsig.exception_acknowledge();
   preq.payload = std::span<const uint8_t>(cn->preq.data(), cn->st->preq_size);
@@ -551,8 +558,13 @@ void ManagingNode::handle_pres(Cn& cn, const PRes& pres, std::span<const uint8_t
     ++cn.st->pres_size_mismatches;
     cn.st->last_error = make_error_code(MnError::kPresSizeMismatch);
   }
-  // Inputs are usable when the modules' bytes are all there, whatever else the CN appends.
-  cn.pres_usable = size >= cn.layout.pres_size;
+  // RD = 0: the CN's TPDO data is not ready (openPOWERLINK's pdok.c drops such a PRes's RPDO
+  // too). Before OPERATIONAL every CN sends RD = 0; counted only from a CN that says it runs.
+  cn.st->pres_ready = pres.ready;
+  if (!pres.ready && pres.nmt_state == NmtState::kOperational) ++cn.st->pres_not_ready;
+  // Inputs are usable when the modules' bytes are all there, whatever else the CN appends, and
+  // the CN says they are valid.
+  cn.pres_usable = pres.ready && size >= cn.layout.pres_size;
   reported_state(cn, pres.nmt_state);
 }
 

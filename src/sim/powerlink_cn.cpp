@@ -432,7 +432,8 @@ void PowerlinkCn::send_pres(int64_t now_ns, int64_t offset_ns) noexcept {
   }
   pl::PRes pres;
   pres.nmt_state = state_;
-  pres.ready = state_ == NmtState::kOperational;
+  pres.ready = state_ == NmtState::kOperational && !faults.pres_not_ready;
+  if (state_ == NmtState::kOperational && faults.pres_not_ready) ++stats_.pres_not_ready;
   pres.exception_new = errsig_.exception_new();
   pres.request_count = request_count();
   pres.priority = request_priority();

@@ -56,6 +56,9 @@ struct PowerlinkCnFaults {
   double delay_pres = 0.0;  // PRes sent `delay_pres_ns` late
   int64_t delay_pres_ns = 0;
   int pres_size_delta = 0;  // PRes payload this many bytes longer (or shorter)
+  // PRes with RD = 0 also in OPERATIONAL: the node's application has no valid TPDO data (EPSG
+  // DS 301); an MN must not take its inputs.
+  bool pres_not_ready = false;
   uint64_t seed = 1;
 };
 
@@ -101,7 +104,8 @@ struct PowerlinkCnStats {
   uint64_t preq = 0;
   uint64_t pres_sent = 0;
   uint64_t pres_dropped = 0;
-  uint64_t pres_delayed = 0;  // by the delay fault or the software response model
+  uint64_t pres_delayed = 0;    // by the delay fault or the software response model
+  uint64_t pres_not_ready = 0;  // PRes sent in OPERATIONAL with RD = 0 (the fault)
   uint64_t soa = 0;
   uint64_t asnd_sent = 0;
   uint64_t nmt_commands = 0;

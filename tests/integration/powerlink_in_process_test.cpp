@@ -11,6 +11,7 @@
 #include "core/axis_sample.hpp"
 #include "powerlink/link.hpp"
 #include "powerlink/powerlink_bus.hpp"
+#include "shm/publisher.hpp"
 #include "sim/powerlink_cn.hpp"
 #include "x20ds1928/object_dictionary.hpp"
 
@@ -188,6 +189,41 @@ TEST_CASE("With random PRes loss the MN never hands out stale inputs as fresh") 
   CHECK(lost > 50);
   CHECK(fresh > 1800);
   CHECK(s.mn->managing_node().node(1)->resets == 0);
+}
+
+TEST_CASE("PRes with RD = 0 from the simulated CN for 100 cycles publish no valid sample") {
+  Setup s;
+  REQUIRE(s.run_until_operational(3000));
+  ds1928::AxisDecodeState state;
+  const ds1928::AxisDecodeParams params;
+  auto validity = [&](const ds1928::ExchangeResult& r) {
+    return ds1928::shm::classify(ds1928::decode_axis(s.io[0], params, r.net_time, state), r.bus_up);
+  };
+  for (int i = 0; i < 5; ++i) REQUIRE(validity(s.step()) == ds1928::shm::AxisValidity::Valid);
+  const pl::CnStatus* st = s.mn->managing_node().node(1);
+  REQUIRE(st != nullptr);
+
+  sim::PowerlinkCnFaults not_ready;
+  not_ready.pres_not_ready = true;
+  s.cn->set_faults(not_ready);
+  const uint64_t sent_before = s.cn->stats().pres_sent;
+  for (int i = 0; i < 100; ++i) {
+    const auto r = s.step();
+    REQUIRE(r.bus_up);  // the CN answers and stays OPERATIONAL: only its data is not ready
+    CHECK_FALSE(s.io[0].inputs_fresh);
+    CHECK(validity(r) == ds1928::shm::AxisValidity::Stale);
+  }
+  CHECK(s.cn->stats().pres_sent - sent_before == 100);
+  CHECK(s.cn->stats().pres_not_ready == 100);
+  CHECK(st->pres_not_ready == 100);
+  CHECK_FALSE(st->pres_ready);
+  CHECK(st->boot == pl::CnBootState::kOperational);
+  CHECK(st->resets == 0);
+  CHECK(st->loss_of_pres.events == 0);
+
+  s.cn->set_faults({});
+  CHECK(validity(s.step()) == ds1928::shm::AxisValidity::Valid);
+  CHECK(st->pres_ready);
 }
 
 TEST_CASE("The simulated CN asks for its own reset and the MN serves it") {
