@@ -101,8 +101,7 @@ void register_powerlink_commands(control::Server& server, PowerlinkBus& bus,
                              std::to_string(c.preq_size) + " bytes" +
                              (c.preq_size == 0 ? ", CN not identified yet)" : ")"));
     if (c.error == MnError::kPreqRegionOwnedByModule) {
-      const std::size_t end =
-          c.module.preq_offset + powerlink::preq_module_size(c.module.output_mtu);
+      const std::size_t end = powerlink::preq_end(c.module);
       return reply.error(
           "preq_module_region",
           "bytes " + std::to_string(offset) + ".." + std::to_string(offset + bytes.size() - 1) +

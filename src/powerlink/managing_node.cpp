@@ -8,6 +8,7 @@
 
 #include "powerlink/concise_dcf.hpp"
 #include "powerlink/managing_node_cn.hpp"
+#include "powerlink/pdo_image.hpp"
 #include "x20ds1928/object_dictionary.hpp"
 
 namespace ds1928::powerlink {
@@ -90,6 +91,40 @@ const ManagingNode::Handler ManagingNode::kHandlers[] = {
      true},
 };
 
+// The process image of a CN (docs/powerlink.md §Process image): from the PDO mapping its objects
+// write (0x1A00/0x1600, its concise DCF or sdo_writes) through the object scheme, or packed.
+// Throws what names the node and the entry, slot or register at fault.
+NodeImageLayout ManagingNode::image_layout(const PowerlinkNodeConfig& nc,
+                                           std::span<const CdcEntry> written,
+                                           std::span<const ModuleSpec> specs) const {
+  const std::string node = "process image of node " + std::to_string(nc.node_id);
+  const auto tpdo = mapping_from_objects(written, obj::kTxPdoMapping);
+  const auto rpdo = mapping_from_objects(written, obj::kRxPdoMapping);
+  const bool has_mapping = tpdo && !tpdo->empty();
+  if (nc.layout == ImageLayout::kMapping || (nc.layout == ImageLayout::kAuto && has_mapping)) {
+    if (!has_mapping)
+      throw std::system_error(make_error_code(MnError::kPdoRegisterNotMapped),
+                              node + ": layout mapping, but its objects map no TPDO (0x1A00)");
+    PdoMappingLists lists;
+    lists.tpdo = *tpdo;
+    if (rpdo) lists.rpdo = *rpdo;
+    PdoBindIssue issue;
+    auto layout =
+        bind_pdo_mapping(lists, nc.object_scheme.value_or(config_.bus.object_scheme), specs, issue);
+    if (!layout) throw std::system_error(issue.error, node + ", " + issue.what);
+    return *layout;
+  }
+  LayoutIssue issue;
+  auto layout = make_layout(specs, &issue);
+  if (!layout) {
+    std::string what =
+        node + ", " + (issue.in_preq ? "PReq" : "PRes") + ": slot " + std::to_string(issue.slot);
+    if (issue.other_slot != 0) what += " and slot " + std::to_string(issue.other_slot);
+    throw std::system_error(layout.error(), what);
+  }
+  return *layout;
+}
+
 ManagingNode::ManagingNode(const MnConfig& config)
     : config_(config), mapping_(config.bus.sdo_overrides) {
   status_view_.reserve(config_.bus.nodes.size());
@@ -103,10 +138,10 @@ ManagingNode::ManagingNode(const MnConfig& config)
     // Payload sizes the objects written to the CN define (NMT_CycleTiming /4,5 or its PDO
     // mappings), when the configuration gives none: the CN's IdentResponse predates its
     // configuration.
+    std::vector<CdcEntry> written;
+    for (const CnObjectWrite& w : nc.object_writes)
+      written.push_back({w.index, w.subindex, w.data});
     if (!nc.preq_size || !nc.pres_size) {
-      std::vector<CdcEntry> written;
-      for (const CnObjectWrite& w : nc.object_writes)
-        written.push_back({w.index, w.subindex, w.data});
       const ImageSizes sizes = image_sizes_from_objects(written);
       if (!cn->cfg.preq_size) cn->cfg.preq_size = sizes.preq_size;
       if (!cn->cfg.pres_size) cn->cfg.pres_size = sizes.pres_size;
@@ -129,20 +164,11 @@ ManagingNode::ManagingNode(const MnConfig& config)
       for (const RegisterWrite& w : startup_writes(a.module))
         cn->boot_ops.push_back({a.slot, RegisterRequest{0, 0, w.reg, w.size, true, w.value}});
     }
-    LayoutIssue issue;
-    auto layout = make_layout(specs, &issue);
-    if (!layout) {
-      std::string what = "process image of node " + std::to_string(nc.node_id) + ", " +
-                         (issue.in_preq ? "PReq" : "PRes") + ": slot " + std::to_string(issue.slot);
-      if (issue.other_slot != 0) what += " and slot " + std::to_string(issue.other_slot);
-      throw std::system_error(layout.error(), what);
-    }
+    cn->layout = image_layout(nc, written, specs);
     // A configured payload size is what goes on the wire: every block must fit inside it.
-    for (const ModuleMapping& m : layout->mappings()) {
-      const bool pres_out =
-          nc.pres_size && m.pres_offset + pres_module_size(m.input_mtu) > *nc.pres_size;
-      const bool preq_out =
-          nc.preq_size && m.preq_offset + preq_module_size(m.output_mtu) > *nc.preq_size;
+    for (const ModuleMapping& m : cn->layout.mappings()) {
+      const bool pres_out = nc.pres_size && pres_end(m) > *nc.pres_size;
+      const bool preq_out = nc.preq_size && preq_end(m) > *nc.preq_size;
       if (pres_out || preq_out) {
         throw std::system_error(make_error_code(MnError::kModuleBlockOutsidePayload),
                                 "process image of node " + std::to_string(nc.node_id) + ", " +
@@ -152,7 +178,6 @@ ManagingNode::ManagingNode(const MnConfig& config)
                                     std::to_string(pres_out ? *nc.pres_size : *nc.preq_size));
       }
     }
-    cn->layout = *layout;
     // Identity read back by SDO where configured (as a configuration manager does), then the
     // cycle objects, then the configured objects in the order given.
     auto identity = [&](uint16_t index, uint8_t sub, const std::optional<uint32_t>& expected) {

@@ -20,6 +20,7 @@
 
 #include "core/axis_config.hpp"
 #include "core/register_path.hpp"
+#include "powerlink/concise_dcf.hpp"
 #include "powerlink/error_signalling.hpp"
 #include "powerlink/frames.hpp"
 #include "powerlink/powerlink_options.hpp"
@@ -257,6 +258,9 @@ class ManagingNode {
   struct Handler;
   static const Handler kHandlers[];
 
+  [[nodiscard]] NodeImageLayout image_layout(const PowerlinkNodeConfig& nc,
+                                             std::span<const CdcEntry> written,
+                                             std::span<const ModuleSpec> specs) const;
   Cn* find(uint8_t node) noexcept;
   const Cn* find(uint8_t node) const noexcept;
   void enter(Cn& cn, CnBootState state) noexcept;

@@ -81,9 +81,7 @@ PreqWriteCheck PowerlinkBus::set_preq(uint8_t node, uint16_t offset,
     return check;
   }
   for (const ModuleMapping& m : r->layout.mappings()) {
-    const std::size_t lo = m.preq_offset;
-    const std::size_t hi = lo + preq_module_size(m.output_mtu);
-    if (offset < hi && end > lo) {
+    if (preq_overlaps(m, offset, end)) {
       check.error = make_error_code(MnError::kPreqRegionOwnedByModule);
       check.module = m;
       return check;
