@@ -68,7 +68,8 @@ void register_powerlink_commands(control::Server& server, PowerlinkBus& bus,
     if (!pl->pres_snapshot(node, *snap))
       throw control::ArgumentError("argument 'node': " + std::to_string(node) +
                                    " is not a configured POWERLINK CN");
-    nlohmann::json j{{"node", node}, {"size", snap->size}, {"fresh", snap->fresh}};
+    nlohmann::json j{
+        {"node", node}, {"size", snap->size}, {"fresh", snap->fresh}, {"ready", snap->ready}};
     if (snap->received) {
       j["age_us"] = (rt::now_ns() - snap->rx_time_ns) / 1000;
       j["cycle"] = snap->cycle;
@@ -100,8 +101,7 @@ void register_powerlink_commands(control::Server& server, PowerlinkBus& bus,
                              std::to_string(c.preq_size) + " bytes" +
                              (c.preq_size == 0 ? ", CN not identified yet)" : ")"));
     if (c.error == MnError::kPreqRegionOwnedByModule) {
-      const std::size_t end =
-          c.module.preq_offset + powerlink::preq_module_size(c.module.output_mtu);
+      const std::size_t end = powerlink::preq_end(c.module);
       return reply.error(
           "preq_module_region",
           "bytes " + std::to_string(offset) + ".." + std::to_string(offset + bytes.size() - 1) +

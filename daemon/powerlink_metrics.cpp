@@ -64,6 +64,9 @@ void PowerlinkService::append_metrics(metrics::Exposition& out) const {
            [](const Cn& n) { return n.late_pres.events; });
   per_node("ds1928_powerlink_pres_stale", "Late PRes of an earlier PReq, dropped.",
            [](const Cn& n) { return n.stale_pres_dropped; });
+  per_node("ds1928_powerlink_pres_not_ready",
+           "PRes with RD = 0 from an OPERATIONAL CN: data not ready, not taken as inputs.",
+           [](const Cn& n) { return n.pres_not_ready; });
   per_node("ds1928_powerlink_cn_resets", "NMTResetNode commands the MN sent to the CN.",
            [](const Cn& n) { return n.resets; });
   per_node("ds1928_powerlink_cn_boots", "Times the CN reached OPERATIONAL.",

@@ -50,6 +50,14 @@ nlohmann::json exception_json(const powerlink::CnStatus& n) {
           {"entries", std::move(entries)}};
 }
 
+// Whether the CN's inputs reach its axes, and why not: its axes are published stale while it is
+// not OPERATIONAL, or while its PRes says RD = 0 (data not ready).
+std::string inputs_state(const powerlink::CnStatus& n) {
+  if (n.boot != powerlink::CnBootState::kOperational) return "node_not_operational";
+  if (!n.pres_ready) return "pres_not_ready";
+  return "taken";
+}
+
 }  // namespace
 
 PowerlinkService::PowerlinkService(std::unique_ptr<powerlink::PowerlinkBus> bus)
@@ -92,6 +100,9 @@ void PowerlinkService::status_extra(nlohmann::json& j) const {
                        {"threshold", n.loss_of_pres_threshold}}},
                      {"late_pres", {{"events", n.late_pres.events}, {"fired", n.late_pres.fired}}},
                      {"stale_pres_dropped", n.stale_pres_dropped},
+                     {"pres_not_ready", n.pres_not_ready},
+                     {"pres_ready", n.pres_ready},
+                     {"inputs", inputs_state(n)},
                      {"pres_size_mismatches", n.pres_size_mismatches},
                      {"last_pres_size", n.last_pres_size},
                      {"status_error_entries", n.status_error_entries},

@@ -17,6 +17,17 @@
 namespace ds1928::config_detail {
 namespace {
 
+// The node's modules sit where the PDO mapping its objects write says (not packed).
+bool image_from_mapping(const PowerlinkNodeConfig& n) {
+  if (n.layout == ImageLayout::kPacked) return false;
+  if (n.layout == ImageLayout::kMapping) return true;
+  std::vector<powerlink::CdcEntry> written;
+  for (const auto& w : n.object_writes) written.push_back({w.index, w.subindex, w.data});
+  const auto* count = powerlink::find_cdc_entry(written, powerlink::obj::kTxPdoMapping, 0);
+  const auto v = count ? count->as_unsigned() : std::nullopt;
+  return v && *v > 0;
+}
+
 // POWERLINK process image of each CN (docs/powerlink.md §Process image): a module sits at its
 // pres_offset/preq_offset or at its offset in the all-default packed layout (slot order). Two
 // blocks must not share a byte and each must end within 1490 bytes and the node's configured
@@ -40,6 +51,8 @@ void check_process_image(Diagnostics& diag, const DaemonConfig& c,
     const PowerlinkNodeConfig* nc = nullptr;
     for (const auto& n : c.powerlink.nodes)
       if (n.node_id == node) nc = &n;
+    // From the PDO mapping: the MN binds and checks it at start, naming entry, slot and register.
+    if (nc && image_from_mapping(*nc)) continue;
     std::vector<Block> blocks;
     size_t packed[2] = {0, 0};
     for (size_t i : members) {
@@ -267,6 +280,13 @@ void apply_mn_cdc(Section& n, PowerlinkNodeConfig& node, std::span<const powerli
       node.pres_size = static_cast<uint16_t>(std::min(*v, 1490u));
 }
 
+// The bus controller's object scheme (docs/powerlink.md §Process image from the PDO mapping).
+void parse_object_scheme(Section os, PdoObjectScheme& scheme) {
+  os.integer("input_index", scheme.input_index, 0x2000, 0xFFEF, "(slot s's inputs: index + s)");
+  os.integer("output_index", scheme.output_index, 0x2000, 0xFFEF, "(slot s's outputs: index + s)");
+  os.finish();
+}
+
 }  // namespace
 
 void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
@@ -276,6 +296,7 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
   } else if (!p.interface.empty() && !valid_interface_name(p.interface)) {
     s.error("interface", "'" + p.interface + "' is not a network interface name");
   }
+  parse_object_scheme(s.section("object_scheme"), p.object_scheme);
   std::vector<powerlink::CdcEntry> mn_cdc;
   if (s.text("cdc", p.cdc) && !p.cdc.empty()) {
     if (auto entries = load_cdc(s, "cdc", p.cdc, base_dir)) mn_cdc = std::move(*entries);
@@ -311,6 +332,15 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
     n.boolean("prc", node.prc);
     n.optional_integer("preq_size", node.preq_size, 0, 1490);
     n.optional_integer("pres_size", node.pres_size, 0, 1490);
+    n.choice("layout", node.layout,
+             {{"auto", ImageLayout::kAuto},
+              {"packed", ImageLayout::kPacked},
+              {"mapping", ImageLayout::kMapping}});
+    if (n.has("object_scheme")) {
+      PdoObjectScheme scheme = p.object_scheme;
+      parse_object_scheme(n.section("object_scheme"), scheme);
+      node.object_scheme = scheme;
+    }
     for (auto& w : n.list("sdo_writes"))
       parse_sdo_write(Section(n.diag(), w.node, w.path, w.at), node.object_writes);
     if (have_id && !mn_cdc.empty()) apply_mn_cdc(n, node, mn_cdc, own_cdc);
@@ -327,6 +357,14 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
       } else {
         *size = from;
       }
+    }
+    if (node.layout == ImageLayout::kMapping) {
+      const auto* count = powerlink::find_cdc_entry(written, powerlink::obj::kTxPdoMapping, 0);
+      const auto v = count ? count->as_unsigned() : std::nullopt;
+      if (!v || *v == 0)
+        n.error("layout",
+                "layout mapping needs the node's TPDO mapping (0x1A00) among the objects written "
+                "to it (its cdc or sdo_writes)");
     }
     if (node.prc && node.multiplex > 1) {
       n.error("multiplex",
@@ -478,7 +516,15 @@ void dump_powerlink(std::ostream& o, const PowerlinkBusConfig& p) {
       << "      multiplex: " << n.multiplex << "\n"
       << "      prc: " << yes(n.prc) << "\n"
       << "      preq_size: " << opt_dec(n.preq_size) << "\n"
-      << "      pres_size: " << opt_dec(n.pres_size) << "\n";
+      << "      pres_size: " << opt_dec(n.pres_size) << "\n"
+      << "      layout: "
+      << (n.layout == ImageLayout::kPacked    ? "packed"
+          : n.layout == ImageLayout::kMapping ? "mapping"
+                                              : "auto")
+      << "\n";
+    if (n.object_scheme)
+      o << "      object_scheme: {input_index: " << hex(n.object_scheme->input_index)
+        << ", output_index: " << hex(n.object_scheme->output_index) << "}\n";
     // The YAML writes as items; the concise DCF's objects (loaded again from `cdc` when this is
     // read back) as comments, so the dump shows everything the MN writes.
     std::size_t own = 0;
@@ -516,6 +562,8 @@ void dump_powerlink(std::ostream& o, const PowerlinkBusConfig& p) {
     << "  rx_spin_us: " << p.rx_spin_us << "\n"
     << "  sdo_timeout_ms: " << p.sdo_timeout_ms << "\n"
     << "  nettime_offset_us: " << p.nettime_offset_us << "\n"
+    << "  object_scheme: {input_index: " << hex(p.object_scheme.input_index)
+    << ", output_index: " << hex(p.object_scheme.output_index) << "}\n"
     << "  sdo_overrides:" << (p.sdo_overrides.empty() ? " []" : "") << "\n";
   for (const auto& [reg, target] : p.sdo_overrides) {
     o << "    - {register: " << reg << ", index: " << hex(target.first)

@@ -130,6 +130,10 @@ class MnCategory final : public std::error_category {
         return "configuration not verified: after NMTResetConfiguration the node reports another "
                "configuration date/time (CFM_VerifyConfiguration) than expected "
                "(CFM_ExpConfDateList/TimeList); written again";
+      case MnError::kPdoMappingEntryInvalid:
+        return "PDO mapping entry with an unusable length or offset";
+      case MnError::kPdoRegisterNotMapped:
+        return "PDO mapping lacks a register the axis needs";
     }
     return "unknown MN error";
   }

@@ -77,6 +77,8 @@ enum class MnError : int {
   kConfigurationNotVerified,  // after NMTResetConfiguration the CN's IdentResponse reports
                               // another configuration date/time (0x1020) than expected
                               // (0x1F26/0x1F27): it lost the download (power cycle), written again
+  kPdoMappingEntryInvalid,    // process image: a PDO mapping entry's length or offset is unusable
+  kPdoRegisterNotMapped,      // process image: the PDO mapping lacks a register an axis needs
 };
 
 [[nodiscard]] const std::error_category& frame_category() noexcept;

@@ -8,6 +8,7 @@
 
 #include "powerlink/concise_dcf.hpp"
 #include "powerlink/managing_node_cn.hpp"
+#include "powerlink/pdo_image.hpp"
 #include "x20ds1928/object_dictionary.hpp"
 
 namespace ds1928::powerlink {
@@ -90,6 +91,40 @@ const ManagingNode::Handler ManagingNode::kHandlers[] = {
      true},
 };
 
+// The process image of a CN (docs/powerlink.md §Process image): from the PDO mapping its objects
+// write (0x1A00/0x1600, its concise DCF or sdo_writes) through the object scheme, or packed.
+// Throws what names the node and the entry, slot or register at fault.
+NodeImageLayout ManagingNode::image_layout(const PowerlinkNodeConfig& nc,
+                                           std::span<const CdcEntry> written,
+                                           std::span<const ModuleSpec> specs) const {
+  const std::string node = "process image of node " + std::to_string(nc.node_id);
+  const auto tpdo = mapping_from_objects(written, obj::kTxPdoMapping);
+  const auto rpdo = mapping_from_objects(written, obj::kRxPdoMapping);
+  const bool has_mapping = tpdo && !tpdo->empty();
+  if (nc.layout == ImageLayout::kMapping || (nc.layout == ImageLayout::kAuto && has_mapping)) {
+    if (!has_mapping)
+      throw std::system_error(make_error_code(MnError::kPdoRegisterNotMapped),
+                              node + ": layout mapping, but its objects map no TPDO (0x1A00)");
+    PdoMappingLists lists;
+    lists.tpdo = *tpdo;
+    if (rpdo) lists.rpdo = *rpdo;
+    PdoBindIssue issue;
+    auto layout =
+        bind_pdo_mapping(lists, nc.object_scheme.value_or(config_.bus.object_scheme), specs, issue);
+    if (!layout) throw std::system_error(issue.error, node + ", " + issue.what);
+    return *layout;
+  }
+  LayoutIssue issue;
+  auto layout = make_layout(specs, &issue);
+  if (!layout) {
+    std::string what =
+        node + ", " + (issue.in_preq ? "PReq" : "PRes") + ": slot " + std::to_string(issue.slot);
+    if (issue.other_slot != 0) what += " and slot " + std::to_string(issue.other_slot);
+    throw std::system_error(layout.error(), what);
+  }
+  return *layout;
+}
+
 ManagingNode::ManagingNode(const MnConfig& config)
     : config_(config), mapping_(config.bus.sdo_overrides) {
   status_view_.reserve(config_.bus.nodes.size());
@@ -103,10 +138,10 @@ ManagingNode::ManagingNode(const MnConfig& config)
     // Payload sizes the objects written to the CN define (NMT_CycleTiming /4,5 or its PDO
     // mappings), when the configuration gives none: the CN's IdentResponse predates its
     // configuration.
+    std::vector<CdcEntry> written;
+    for (const CnObjectWrite& w : nc.object_writes)
+      written.push_back({w.index, w.subindex, w.data});
     if (!nc.preq_size || !nc.pres_size) {
-      std::vector<CdcEntry> written;
-      for (const CnObjectWrite& w : nc.object_writes)
-        written.push_back({w.index, w.subindex, w.data});
       const ImageSizes sizes = image_sizes_from_objects(written);
       if (!cn->cfg.preq_size) cn->cfg.preq_size = sizes.preq_size;
       if (!cn->cfg.pres_size) cn->cfg.pres_size = sizes.pres_size;
@@ -133,20 +168,11 @@ ManagingNode::ManagingNode(const MnConfig& config)
       if (a.module.endat_enable)
         cn->boot_ops.push_back({a.slot, RegisterRequest{0, 0, reg::kEnDatAck, 1, true, 0x02}});
     }
-    LayoutIssue issue;
-    auto layout = make_layout(specs, &issue);
-    if (!layout) {
-      std::string what = "process image of node " + std::to_string(nc.node_id) + ", " +
-                         (issue.in_preq ? "PReq" : "PRes") + ": slot " + std::to_string(issue.slot);
-      if (issue.other_slot != 0) what += " and slot " + std::to_string(issue.other_slot);
-      throw std::system_error(layout.error(), what);
-    }
+    cn->layout = image_layout(nc, written, specs);
     // A configured payload size is what goes on the wire: every block must fit inside it.
-    for (const ModuleMapping& m : layout->mappings()) {
-      const bool pres_out =
-          nc.pres_size && m.pres_offset + pres_module_size(m.input_mtu) > *nc.pres_size;
-      const bool preq_out =
-          nc.preq_size && m.preq_offset + preq_module_size(m.output_mtu) > *nc.preq_size;
+    for (const ModuleMapping& m : cn->layout.mappings()) {
+      const bool pres_out = nc.pres_size && pres_end(m) > *nc.pres_size;
+      const bool preq_out = nc.preq_size && preq_end(m) > *nc.preq_size;
       if (pres_out || preq_out) {
         throw std::system_error(make_error_code(MnError::kModuleBlockOutsidePayload),
                                 "process image of node " + std::to_string(nc.node_id) + ", " +
@@ -156,7 +182,6 @@ ManagingNode::ManagingNode(const MnConfig& config)
                                     std::to_string(pres_out ? *nc.pres_size : *nc.preq_size));
       }
     }
-    cn->layout = *layout;
     // Identity read back by SDO where configured (as a configuration manager does), then the
     // cycle objects, then the configured objects in the order given.
     auto identity = [&](uint16_t index, uint8_t sub, const std::optional<uint32_t>& expected) {
@@ -416,6 +441,7 @@ void ManagingNode::begin_cycle(int64_t now_ns) noexcept {
     mc_flag_ = !mc_flag_;
   for (auto& cn : cns_) {
     cn->polled = cn->pres_seen = cn->pres_usable = cn->timed_out = cn->late = false;
+    cn->outputs_written = false;
     if (!full_cycle() || !cn->st->in_isochronous) continue;
     if (cn->st->prc) {
       prc_list_[prc_count_++] = cn->cfg.node_id;
@@ -485,12 +511,18 @@ uint32_t ManagingNode::pres_timeout_us(uint8_t node) const noexcept {
   return cn ? cn->cfg.pres_timeout_us : 0;
 }
 
+void ManagingNode::outputs_written(uint8_t node) noexcept {
+  if (Cn* cn = find(node)) cn->outputs_written = true;
+}
+
 Result<std::size_t> ManagingNode::build_preq(uint8_t node, std::span<uint8_t> out) noexcept {
   Cn* cn = find(node);
   if (!cn) return MnError::kNodeNotConfigured;
   cn->polled = true;
   PReq preq;
-  preq.ready = mn_state_ == NmtState::kOperational;
+  // RD: the outputs this PReq carries are valid (EPSG DS 301): the MN is OPERATIONAL and wrote
+  // them this cycle. A CN takes no outputs from a PReq with RD = 0.
+  preq.ready = mn_state_ == NmtState::kOperational && cn->outputs_written;
   preq.multiplexed_slot = cn->cfg.multiplex > 1;
   preq.exception_acknowledge = cn->errsig.exception_acknowledge();
   preq.payload = std::span<const uint8_t>(cn->preq.data(), cn->st->preq_size);
@@ -555,8 +587,13 @@ void ManagingNode::handle_pres(Cn& cn, const PRes& pres, std::span<const uint8_t
     ++cn.st->pres_size_mismatches;
     cn.st->last_error = make_error_code(MnError::kPresSizeMismatch);
   }
-  // Inputs are usable when the modules' bytes are all there, whatever else the CN appends.
-  cn.pres_usable = size >= cn.layout.pres_size;
+  // RD = 0: the CN's TPDO data is not ready (openPOWERLINK's pdok.c drops such a PRes's RPDO
+  // too). Before OPERATIONAL every CN sends RD = 0; counted only from a CN that says it runs.
+  cn.st->pres_ready = pres.ready;
+  if (!pres.ready && pres.nmt_state == NmtState::kOperational) ++cn.st->pres_not_ready;
+  // Inputs are usable when the modules' bytes are all there, whatever else the CN appends, and
+  // the CN says they are valid.
+  cn.pres_usable = pres.ready && size >= cn.layout.pres_size;
   reported_state(cn, pres.nmt_state);
 }
 

@@ -20,6 +20,7 @@
 
 #include "core/axis_config.hpp"
 #include "core/register_path.hpp"
+#include "powerlink/concise_dcf.hpp"
 #include "powerlink/error_signalling.hpp"
 #include "powerlink/frames.hpp"
 #include "powerlink/powerlink_options.hpp"
@@ -95,6 +96,10 @@ struct CnStatus {
   // (frames carry no cycle number), dropped instead of being taken as this cycle's inputs.
   uint32_t stale_pres_dropped = 0;
   uint32_t pres_size_mismatches = 0;  // PRes payload size differed from pres_size
+  // PRes with RD = 0 from a CN that reports OPERATIONAL: its TPDO data is not ready (EPSG DS 301),
+  // so its inputs are not taken, and the CN's axes are not published valid from them.
+  uint32_t pres_not_ready = 0;
+  bool pres_ready = false;  // RD of the last PRes
   uint16_t last_pres_size = 0;
   uint32_t status_error_entries = 0;  // error entries fetched from the CN (new ones only)
   uint16_t last_error_code = 0;       // code of the last such entry
@@ -197,6 +202,9 @@ class ManagingNode {
   [[nodiscard]] std::span<const uint8_t> prc_nodes() const noexcept;
   [[nodiscard]] Result<std::size_t> build_pres_mn(std::span<uint8_t> out) noexcept;
   [[nodiscard]] int64_t prc_slot_ns() const noexcept { return prc_slot_ns_; }
+  // The driver wrote the whole output image of `node` for this cycle (after begin_cycle): only
+  // then does its PReq, or the PResMN that carries its outputs, say RD = 1.
+  void outputs_written(uint8_t node) noexcept;
   [[nodiscard]] Result<std::size_t> build_preq(uint8_t node, std::span<uint8_t> out) noexcept;
   [[nodiscard]] uint32_t pres_timeout_us(uint8_t node) const noexcept;
   // The PRes of `node` did not arrive in time.
@@ -215,9 +223,9 @@ class ManagingNode {
   // ---- Process data (valid between begin_cycle and build_preq / after on_frame) ----
   [[nodiscard]] std::span<uint8_t> preq_payload(uint8_t node) noexcept;
   [[nodiscard]] std::span<const uint8_t> pres_payload(uint8_t node) const noexcept;
-  // The PRes of `node` arrived in this cycle (with a usable size).
+  // The PRes of `node` arrived in this cycle with a usable size and RD = 1.
   [[nodiscard]] bool pres_fresh(uint8_t node) const noexcept;
-  // The PRes of `node` arrived in this cycle (whatever its size).
+  // The PRes of `node` arrived in this cycle (whatever its size and RD).
   [[nodiscard]] bool pres_seen(uint8_t node) const noexcept;
   [[nodiscard]] const NodeImageLayout* layout(uint8_t node) const noexcept;
   // NetTime of this cycle's SoC (RelativeTime µs + offset), µs.
@@ -250,6 +258,9 @@ class ManagingNode {
   struct Handler;
   static const Handler kHandlers[];
 
+  [[nodiscard]] NodeImageLayout image_layout(const PowerlinkNodeConfig& nc,
+                                             std::span<const CdcEntry> written,
+                                             std::span<const ModuleSpec> specs) const;
   Cn* find(uint8_t node) noexcept;
   const Cn* find(uint8_t node) const noexcept;
   void enter(Cn& cn, CnBootState state) noexcept;

@@ -56,12 +56,13 @@ struct ManagingNode::Cn {
   NodeImageLayout layout;
   std::array<uint8_t, kMaxIsoPayload> preq{};
   std::array<uint8_t, kMaxIsoPayload> pres{};
-  bool polled = false;          // PReq sent this cycle
-  uint32_t loss_threshold = 0;  // DLL_MNCNLossPResThreshold (0x1C09) in effect
-  bool pres_seen = false;       // its PRes arrived this cycle
-  bool pres_usable = false;     // ... with a payload the layout fits in
-  bool timed_out = false;       // the driver gave up waiting for it this cycle
-  bool late = false;            // a PRes came after its timeout
+  bool polled = false;           // PReq sent this cycle
+  uint32_t loss_threshold = 0;   // DLL_MNCNLossPResThreshold (0x1C09) in effect
+  bool pres_seen = false;        // its PRes arrived this cycle
+  bool pres_usable = false;      // ... with a payload the layout fits in and RD = 1
+  bool outputs_written = false;  // the driver wrote the output image this cycle
+  bool timed_out = false;        // the driver gave up waiting for it this cycle
+  bool late = false;             // a PRes came after its timeout
   int64_t state_since_ns = 0;
   uint64_t last_status_request = 0;
   uint8_t rs = 0;  // CN's pending async requests (RS) and their priority (PR)

@@ -181,14 +181,20 @@ std::span<const uint8_t> ManagingNode::prc_nodes() const noexcept {
 }
 
 Result<std::size_t> ManagingNode::build_pres_mn(std::span<uint8_t> out) noexcept {
-  for (std::size_t i = 0; i < prc_count_; ++i)
-    if (Cn* cn = find(prc_list_[i])) cn->polled = true;
+  // RD only when the outputs of every chained node it stands for were written this cycle.
+  bool written = true;
+  for (std::size_t i = 0; i < prc_count_; ++i) {
+    if (Cn* cn = find(prc_list_[i])) {
+      cn->polled = true;
+      written = written && cn->outputs_written;
+    }
+  }
   // The MN's own PDO: no object of this MN is mapped into it, so it carries zeros; it is the
   // PRC CNs' time reference.
   static constexpr std::array<uint8_t, kMaxIsoPayload> kZeros{};
   PRes pres;
   pres.nmt_state = mn_state_;
-  pres.ready = mn_state_ == NmtState::kOperational;
+  pres.ready = mn_state_ == NmtState::kOperational && written;
   pres.payload = std::span<const uint8_t>(kZeros.data(), config_.bus.pres_mn_size);
   return build_pres(out, pres_header(config_.mac, kNodeMn), pres);
 }

@@ -81,9 +81,7 @@ PreqWriteCheck PowerlinkBus::set_preq(uint8_t node, uint16_t offset,
     return check;
   }
   for (const ModuleMapping& m : r->layout.mappings()) {
-    const std::size_t lo = m.preq_offset;
-    const std::size_t hi = lo + preq_module_size(m.output_mtu);
-    if (offset < hi && end > lo) {
+    if (preq_overlaps(m, offset, end)) {
       check.error = make_error_code(MnError::kPreqRegionOwnedByModule);
       check.module = m;
       return check;
@@ -161,11 +159,17 @@ ExchangeResult PowerlinkBus::exchange(std::span<AxisIo> axes, int64_t cycle_star
   // stale); late ASnds are still served, they identify themselves (SDO sequence numbers).
   drain(0);
   const std::size_t n_axes = std::min(axes.size(), axis_map_.size());
+  for (NodeRaw& r : raw_) r.outputs_ok = true;
   for (std::size_t i = 0; i < n_axes; ++i) {
     const AxisMap& am = axis_map_[i];
-    if (am.valid) (void)write_outputs(mn_.preq_payload(am.node), am.mapping, axes[i].outputs);
+    if (am.valid && !write_outputs(mn_.preq_payload(am.node), am.mapping, axes[i].outputs))
+      if (NodeRaw* r = raw(am.node)) r->outputs_ok = false;  // payload smaller than its image
     rx_time_[i] = 0;
   }
+  // A node's PReq (or the PResMN for a chained one) says RD = 1 only with its whole image
+  // written; bytes set through set_preq() are copied in before each PReq.
+  for (const NodeRaw& r : raw_)
+    if (r.outputs_ok) mn_.outputs_written(r.node);
   if (mn_.full_cycle()) {
     // RelativeTime and the NetTimeRef describe the instant the SoC leaves, which is the cycle
     // thread's wake-up latency (tens of µs, ms in a stall) after the nominal cycle start.
@@ -254,6 +258,7 @@ void PowerlinkBus::note_pres(uint8_t node, int64_t t, int64_t sent_ns,
   if (NodeRaw* nr = raw(node)) {
     pres_latency_[static_cast<std::size_t>(nr - raw_.data())].record(t - sent_ns);
     nr->pres_fresh = nr->pres_received = true;
+    if (const CnStatus* st = mn_.node(node)) nr->pres_ready = st->pres_ready;
     nr->pres_rx_ns = t;
     nr->pres_cycle = mn_.counters().cycles;
   }
@@ -306,6 +311,7 @@ void PowerlinkBus::publish_status() noexcept {
     const NodeRaw& r = raw_[i];
     PresSnapshot& p = snap.pres[i];
     p.fresh = r.pres_fresh;
+    p.ready = r.pres_ready;
     p.received = r.pres_received;
     p.cycle = r.pres_cycle;
     p.rx_time_ns = r.pres_rx_ns;

@@ -39,6 +39,7 @@ struct PresSnapshot {
   uint8_t node = 0;
   bool received = false;   // a PRes has arrived since the start
   bool fresh = false;      // ... in the last published cycle
+  bool ready = false;      // its RD flag: 0 = the CN's data is not ready (not taken as inputs)
   uint64_t cycle = 0;      // MN cycle count when it arrived
   int64_t rx_time_ns = 0;  // CLOCK_MONOTONIC reception time
   uint16_t size = 0;
@@ -113,6 +114,8 @@ class PowerlinkBus final : public BusDriver, private RegisterTarget {
     uint16_t set_lo = 0, set_hi = 0;                 // [lo, hi) spans every set byte
     bool pres_fresh = false;
     bool pres_received = false;
+    bool pres_ready = false;  // RD of the last PRes
+    bool outputs_ok = true;   // every axis of the node wrote its outputs this cycle
     uint64_t pres_cycle = 0;
     int64_t pres_rx_ns = 0;
   };

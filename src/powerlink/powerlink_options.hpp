@@ -21,6 +21,22 @@ struct CnObjectWrite {
   friend bool operator==(const CnObjectWrite&, const CnObjectWrite&) = default;
 };
 
+// The bus controller's object scheme: which object of the CN holds which register of the
+// X20DS1928 in which slot (docs/powerlink.md §Process image from the PDO mapping). The inputs of
+// slot s are object input_index + s, its outputs output_index + s; the sub-indices per register
+// are a table (powerlink/pdo_image.hpp). The default is an assumption.
+struct PdoObjectScheme {
+  uint16_t input_index = 0x2000;
+  uint16_t output_index = 0x2100;
+  friend bool operator==(const PdoObjectScheme&, const PdoObjectScheme&) = default;
+};
+// Where a CN's modules sit in its PRes/PReq.
+enum class ImageLayout : uint8_t {
+  kAuto,     // from the PDO mapping the node's objects write (0x1A00/0x1600), else packed
+  kPacked,   // packed in slot order (or at pres_offset/preq_offset): the simulator, older setups
+  kMapping,  // from the PDO mapping the node's objects write; refused without one
+};
+
 // POWERLINK Controlled Node as the MN sees it.
 struct PowerlinkNodeConfig {
   uint8_t node_id = 1;
@@ -55,6 +71,8 @@ struct PowerlinkNodeConfig {
   bool prc = false;
   std::optional<uint16_t> preq_size;  // default: from IdentResponse PollOutSize / module list
   std::optional<uint16_t> pres_size;  // default: from IdentResponse PollInSize / module list
+  ImageLayout layout = ImageLayout::kAuto;
+  std::optional<PdoObjectScheme> object_scheme;  // unset: powerlink.object_scheme
 };
 // DLL threshold counters (+8 per cycle with the error, −1 per cycle without; 0 = disabled).
 struct DllThresholds {
@@ -111,6 +129,7 @@ struct PowerlinkBusConfig {
   int64_t nettime_offset_us = 0;
   // Register → (index, subindex) overrides; default scheme in docs/powerlink.md.
   std::map<uint16_t, std::pair<uint16_t, uint8_t>> sdo_overrides;
+  PdoObjectScheme object_scheme;  // of every CN without its own
 };
 
 }  // namespace ds1928

@@ -39,8 +39,12 @@ Result<NodeImageLayout> make_layout(std::span<const ModuleSpec> modules,
       return fail(MnError::kModuleBlockOutsidePayload, s.slot, 0, false);
     if (preq + preq_module_size(s.output_mtu) > kMaxIsoPayload)
       return fail(MnError::kModuleBlockOutsidePayload, s.slot, 0, true);
-    const ModuleMapping m{s.slot, s.input_mtu, s.output_mtu, static_cast<uint16_t>(pres),
-                          static_cast<uint16_t>(preq)};
+    ModuleMapping m;
+    m.slot = s.slot;
+    m.input_mtu = s.input_mtu;
+    m.output_mtu = s.output_mtu;
+    m.pres_offset = static_cast<uint16_t>(pres);
+    m.preq_offset = static_cast<uint16_t>(preq);
     for (std::size_t j = 0; j < i; ++j) {
       const ModuleMapping& o = layout.modules[j];
       if (m.pres_offset < o.pres_offset + pres_module_size(o.input_mtu) &&
@@ -60,8 +64,47 @@ Result<NodeImageLayout> make_layout(std::span<const ModuleSpec> modules,
   return layout;
 }
 
+namespace {
+
+// Registers at the offsets of the CN's PDO mapping (fields already checked to lie below pres_end
+// / preq_end, which the caller compared with the payload).
+template <class T>
+void put(uint8_t* p, uint16_t at, T v) noexcept {
+  if (at == kNotMapped) return;
+  if constexpr (sizeof(T) == 4) {
+    store_le32(p + at, static_cast<uint32_t>(v));
+  } else {
+    p[at] = static_cast<uint8_t>(v);
+  }
+}
+uint32_t get32(const uint8_t* p, uint16_t at) noexcept {
+  return at == kNotMapped ? 0 : load_le32(p + at);
+}
+uint8_t get8(const uint8_t* p, uint16_t at) noexcept {
+  return at == kNotMapped ? 0 : p[at];
+}
+constexpr std::size_t f(ImageField x) noexcept {
+  return static_cast<std::size_t>(x);
+}
+
+}  // namespace
+
 bool write_inputs(std::span<uint8_t> payload, const ModuleMapping& m,
                   const ModuleInputs& in) noexcept {
+  if (m.by_fields) {
+    const FieldOffsets& o = m.fields;
+    if (o.pres_end > payload.size()) return false;
+    uint8_t* p = payload.data();
+    put(p, o.fixed[f(ImageField::kPositionHW)], in.position_hw);
+    put(p, o.fixed[f(ImageField::kPositionLW)], in.position_lw);
+    put(p, o.fixed[f(ImageField::kPosTime)], in.pos_time_us);
+    put(p, o.fixed[f(ImageField::kPosCycle)], static_cast<uint8_t>(in.pos_cycle));
+    put(p, o.fixed[f(ImageField::kSdcLifeCount)], static_cast<uint8_t>(in.sdc_life_count));
+    put(p, o.fixed[f(ImageField::kErrorInfo)], in.error_info);
+    put(p, o.fixed[f(ImageField::kInputSequence)], in.input_sequence);
+    for (std::size_t b = 0; b < m.input_mtu; ++b) put(p, o.rx[b], in.rx_bytes[b]);
+    return true;
+  }
   if (m.pres_offset + pres_module_size(m.input_mtu) > payload.size()) return false;
   uint8_t* p = payload.data() + m.pres_offset;
   store_le32(p + fm0::kPositionHw, in.position_hw);
@@ -77,6 +120,21 @@ bool write_inputs(std::span<uint8_t> payload, const ModuleMapping& m,
 
 bool read_inputs(std::span<const uint8_t> payload, const ModuleMapping& m,
                  ModuleInputs& in) noexcept {
+  if (m.by_fields) {
+    const FieldOffsets& o = m.fields;
+    if (o.pres_end > payload.size()) return false;
+    const uint8_t* p = payload.data();
+    in.position_hw = get32(p, o.fixed[f(ImageField::kPositionHW)]);
+    in.position_lw = get32(p, o.fixed[f(ImageField::kPositionLW)]);
+    in.pos_time_us = get32(p, o.fixed[f(ImageField::kPosTime)]);
+    in.pos_cycle = static_cast<int8_t>(get8(p, o.fixed[f(ImageField::kPosCycle)]));
+    in.sdc_life_count = static_cast<int8_t>(get8(p, o.fixed[f(ImageField::kSdcLifeCount)]));
+    in.error_info = get8(p, o.fixed[f(ImageField::kErrorInfo)]);
+    in.input_sequence = get8(p, o.fixed[f(ImageField::kInputSequence)]);
+    in.rx_bytes.fill(0);
+    for (std::size_t b = 0; b < m.input_mtu; ++b) in.rx_bytes[b] = get8(p, o.rx[b]);
+    return true;
+  }
   if (m.pres_offset + pres_module_size(m.input_mtu) > payload.size()) return false;
   const uint8_t* p = payload.data() + m.pres_offset;
   in.position_hw = load_le32(p + fm0::kPositionHw);
@@ -93,6 +151,15 @@ bool read_inputs(std::span<const uint8_t> payload, const ModuleMapping& m,
 
 bool write_outputs(std::span<uint8_t> payload, const ModuleMapping& m,
                    const ModuleOutputs& out) noexcept {
+  if (m.by_fields) {
+    const FieldOffsets& o = m.fields;
+    if (o.preq_end > payload.size()) return false;
+    uint8_t* p = payload.data();
+    put(p, o.fixed[f(ImageField::kOutputSequence)], out.output_sequence);
+    for (std::size_t b = 0; b < m.output_mtu; ++b) put(p, o.tx[b], out.tx_bytes[b]);
+    put(p, o.fixed[f(ImageField::kAckErrorInfo)], out.ack_error_info);
+    return true;
+  }
   if (m.preq_offset + preq_module_size(m.output_mtu) > payload.size()) return false;
   uint8_t* p = payload.data() + m.preq_offset;
   p[fm0::kOutputSequence] = out.output_sequence;
@@ -103,6 +170,16 @@ bool write_outputs(std::span<uint8_t> payload, const ModuleMapping& m,
 
 bool read_outputs(std::span<const uint8_t> payload, const ModuleMapping& m,
                   ModuleOutputs& out) noexcept {
+  if (m.by_fields) {
+    const FieldOffsets& o = m.fields;
+    if (o.preq_end > payload.size()) return false;
+    const uint8_t* p = payload.data();
+    out.output_sequence = get8(p, o.fixed[f(ImageField::kOutputSequence)]);
+    out.tx_bytes.fill(0);
+    for (std::size_t b = 0; b < m.output_mtu; ++b) out.tx_bytes[b] = get8(p, o.tx[b]);
+    out.ack_error_info = get8(p, o.fixed[f(ImageField::kAckErrorInfo)]);
+    return true;
+  }
   if (m.preq_offset + preq_module_size(m.output_mtu) > payload.size()) return false;
   const uint8_t* p = payload.data() + m.preq_offset;
   out.output_sequence = p[fm0::kOutputSequence];
@@ -110,6 +187,17 @@ bool read_outputs(std::span<const uint8_t> payload, const ModuleMapping& m,
   std::memcpy(out.tx_bytes.data(), p + fm0::kTxBytes, m.output_mtu);
   out.ack_error_info = p[fm0::kTxBytes + m.output_mtu];
   return true;
+}
+
+bool preq_overlaps(const ModuleMapping& m, std::size_t lo, std::size_t hi) noexcept {
+  auto in = [&](uint16_t at) { return at != kNotMapped && at >= lo && at < hi; };
+  if (!m.by_fields) return lo < preq_end(m) && hi > m.preq_offset;
+  if (in(m.fields.fixed[static_cast<std::size_t>(ImageField::kOutputSequence)]) ||
+      in(m.fields.fixed[static_cast<std::size_t>(ImageField::kAckErrorInfo)]))
+    return true;
+  for (std::size_t b = 0; b < m.output_mtu; ++b)
+    if (in(m.fields.tx[b])) return true;
+  return false;
 }
 
 }  // namespace ds1928::powerlink

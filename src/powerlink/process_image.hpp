@@ -56,13 +56,54 @@ struct LayoutIssue {
   bool in_preq = false;    // overlap/overflow in the PReq (else the PRes)
 };
 
+// A module's registers, each at its own offset when the image comes from the CN's PDO mapping
+// (powerlink/pdo_image.hpp); the Rx/Tx bytes are numbered separately.
+enum class ImageField : uint8_t {
+  kPositionHW,
+  kPositionLW,
+  kPosTime,
+  kPosCycle,
+  kSdcLifeCount,
+  kErrorInfo,
+  kInputSequence,
+  kOutputSequence,
+  kAckErrorInfo,
+};
+inline constexpr std::size_t kImageFieldCount = 9;
+inline constexpr uint16_t kNotMapped = 0xFFFF;
+struct FieldOffsets {
+  FieldOffsets() noexcept {
+    fixed.fill(kNotMapped);
+    rx.fill(kNotMapped);
+    tx.fill(kNotMapped);
+  }
+  std::array<uint16_t, kImageFieldCount> fixed{};  // byte offset per ImageField
+  std::array<uint16_t, kMaxFlatstreamMtu> rx{};    // RxByte1.. in the PRes
+  std::array<uint16_t, kMaxFlatstreamMtu> tx{};    // TxByte1.. in the PReq
+  uint16_t pres_end = 0;                           // end of the last mapped byte
+  uint16_t preq_end = 0;
+};
+
 struct ModuleMapping {
   uint8_t slot = 0;
   uint8_t input_mtu = 0;
   uint8_t output_mtu = 0;
-  uint16_t pres_offset = 0;  // in the PRes payload
-  uint16_t preq_offset = 0;  // in the PReq payload
+  uint16_t pres_offset = 0;  // in the PRes payload (packed block)
+  uint16_t preq_offset = 0;  // in the PReq payload (packed block)
+  // From the PDO mapping: every register at fields' offsets instead of the packed block.
+  bool by_fields = false;
+  FieldOffsets fields;
 };
+
+// Where a module's bytes end in the PRes / PReq payload.
+[[nodiscard]] constexpr std::size_t pres_end(const ModuleMapping& m) noexcept {
+  return m.by_fields ? m.fields.pres_end : m.pres_offset + pres_module_size(m.input_mtu);
+}
+[[nodiscard]] constexpr std::size_t preq_end(const ModuleMapping& m) noexcept {
+  return m.by_fields ? m.fields.preq_end : m.preq_offset + preq_module_size(m.output_mtu);
+}
+// A module's output bytes in the PReq payload include one of [lo, hi).
+[[nodiscard]] bool preq_overlaps(const ModuleMapping& m, std::size_t lo, std::size_t hi) noexcept;
 
 struct NodeImageLayout {
   std::array<ModuleMapping, kMaxModulesPerNode> modules{};

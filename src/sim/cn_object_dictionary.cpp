@@ -202,6 +202,15 @@ uint16_t CnObjectDictionary::mapped_end_bytes(uint16_t mapping_index) const noex
   return static_cast<uint16_t>((end_bits + 7) / 8);
 }
 
+std::size_t CnObjectDictionary::mapping(uint16_t mapping_index,
+                                        std::span<powerlink::PdoMapEntry> out) const noexcept {
+  const std::size_t count =
+      std::min<std::size_t>(static_cast<uint8_t>(value(mapping_index, 0)), out.size());
+  for (std::size_t i = 0; i < count; ++i)
+    out[i] = powerlink::PdoMapEntry::from_u64(value(mapping_index, static_cast<uint8_t>(i + 1)));
+  return count;
+}
+
 uint16_t CnObjectDictionary::pres_size(uint16_t fallback) const noexcept {
   if (const auto v = value(obj::kCycleTiming, obj::kCycleTimingPResActPayload); v != 0)
     return static_cast<uint16_t>(v);

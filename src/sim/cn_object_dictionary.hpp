@@ -15,6 +15,7 @@
 #include <cstdint>
 #include <span>
 
+#include "powerlink/concise_dcf.hpp"
 #include "powerlink/standard_objects.hpp"
 
 namespace ds1928::sim {
@@ -42,6 +43,10 @@ class CnObjectDictionary {
   // mapped objects of the TPDO (RPDO) mapping when mapped, else `fallback` (the modules' layout).
   [[nodiscard]] uint16_t pres_size(uint16_t fallback) const noexcept;
   [[nodiscard]] uint16_t preq_size(uint16_t fallback) const noexcept;
+  // The entries of PDO mapping `mapping_index` (0x1600 RPDO, 0x1A00 TPDO), as many as its sub 0
+  // says (at most out.size()); 0 = the mapping is disabled.
+  [[nodiscard]] std::size_t mapping(uint16_t mapping_index,
+                                    std::span<powerlink::PdoMapEntry> out) const noexcept;
   [[nodiscard]] uint32_t cycle_length_us() const noexcept;
   [[nodiscard]] uint8_t multiplexed_cycle_count() const noexcept;
   [[nodiscard]] uint32_t loss_of_frame_tolerance_ns() const noexcept;

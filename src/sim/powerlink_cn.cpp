@@ -9,6 +9,7 @@
 #include <cstring>
 
 #include "core/sdo_abort.hpp"
+#include "powerlink/pdo_image.hpp"
 #include "powerlink/sync_frames.hpp"
 #include "sim/sim_error.hpp"
 
@@ -136,6 +137,7 @@ PowerlinkCn::PowerlinkCn(const PowerlinkCnConfig& config, FrameSink send)
     hosted.module = std::make_unique<Ds1928Module>(FunctionModel::Standard, m.sim);
     modules_.push_back(std::move(hosted));
   }
+  specs_ = specs;
   auto layout = pl::make_layout(specs);
   if (layout) {
     layout_ = *layout;
@@ -175,6 +177,30 @@ void PowerlinkCn::boot(int64_t now_ns) noexcept {
   reset(pl::NmtCommandId::kSwReset, now_ns);
 }
 
+void PowerlinkCn::take_mapping() noexcept {
+  std::array<pl::PdoMapEntry, CnObjectDictionary::kMaxMapped> tpdo{}, rpdo{};
+  const std::size_t nt = comm_.mapping(pl::obj::kTxPdoMapping, tpdo);
+  const std::size_t nr = comm_.mapping(pl::obj::kRxPdoMapping, rpdo);
+  by_mapping_ = false;
+  if (nt > 0) {
+    pl::PdoMappingLists lists;
+    lists.tpdo = std::span<const pl::PdoMapEntry>(tpdo.data(), nt);
+    lists.rpdo = std::span<const pl::PdoMapEntry>(rpdo.data(), nr);
+    pl::PdoBindIssue issue;
+    try {
+      if (auto bound = pl::bind_pdo_mapping(lists, config_.object_scheme, specs_, issue)) {
+        mapped_layout_ = *bound;
+        by_mapping_ = true;
+      }
+    } catch (const std::bad_alloc&) {
+      // the message could not be built: refused like any other unusable mapping
+    }
+    ++(by_mapping_ ? stats_.mappings_taken : stats_.mappings_refused);
+  }
+  const pl::NodeImageLayout& use = layout();
+  for (HostedModule& m : modules_) m.mapping = use.find(m.slot);
+}
+
 void PowerlinkCn::reset(pl::NmtCommandId command, int64_t now_ns) noexcept {
   ++stats_.resets;
   switch (command) {
@@ -199,6 +225,7 @@ void PowerlinkCn::reset(pl::NmtCommandId command, int64_t now_ns) noexcept {
   // RESET_CONFIGURATION (which every reset passes): the DLL takes what the objects say now.
   dll_ = {comm_.pres_size(layout_.pres_size), comm_.preq_size(layout_.preq_size),
           comm_.multiplexed_cycle_count()};
+  take_mapping();
   sdo_->reset();
   async_head_ = 0;
   async_count_ = 0;
@@ -432,7 +459,8 @@ void PowerlinkCn::send_pres(int64_t now_ns, int64_t offset_ns) noexcept {
   }
   pl::PRes pres;
   pres.nmt_state = state_;
-  pres.ready = state_ == NmtState::kOperational;
+  pres.ready = state_ == NmtState::kOperational && !faults.pres_not_ready;
+  if (state_ == NmtState::kOperational && faults.pres_not_ready) ++stats_.pres_not_ready;
   pres.exception_new = errsig_.exception_new();
   pres.request_count = request_count();
   pres.priority = request_priority();

@@ -10,9 +10,10 @@
 //   --NMTEnableReadyToOperate--> READY_TO_OPERATE --NMTStartNode--> OPERATIONAL
 //   loss of SoC in PRE_OPERATIONAL_2 and above → PRE_OPERATIONAL_1; reset commands → the
 //   matching RESET_* state → NOT_ACTIVE.
-// Process image: powerlink/process_image.hpp's layout, fixed at construction from the modules'
-// MTUs and offset overrides (the same make_layout() the MN uses), reported as
-// PollInSize/PollOutSize in the IdentResponse. NetTime: a module's NetTime at instant t is
+// Process image: powerlink/process_image.hpp's layout from the modules' MTUs and offset
+// overrides (the same make_layout() the MN uses), reported as PollInSize/PollOutSize in the
+// IdentResponse; after an MN wrote a PDO mapping and NMTResetConfiguration, the registers where
+// that mapping puts them (powerlink/pdo_image.hpp, take_mapping()). NetTime: a module's NetTime at instant t is
 // low32(RelativeTime of the last SoC + offset) plus the time elapsed since that SoC arrived — the
 // relation the MN maps PosTime back with.
 #pragma once
@@ -31,6 +32,7 @@
 #include "powerlink/error_signalling.hpp"
 #include "powerlink/frames.hpp"
 #include "powerlink/link.hpp"
+#include "powerlink/powerlink_options.hpp"
 #include "powerlink/process_image.hpp"
 #include "powerlink/sdo.hpp"
 #include "sim/cn_object_dictionary.hpp"
@@ -56,6 +58,9 @@ struct PowerlinkCnFaults {
   double delay_pres = 0.0;  // PRes sent `delay_pres_ns` late
   int64_t delay_pres_ns = 0;
   int pres_size_delta = 0;  // PRes payload this many bytes longer (or shorter)
+  // PRes with RD = 0 also in OPERATIONAL: the node's application has no valid TPDO data (EPSG
+  // DS 301); an MN must not take its inputs.
+  bool pres_not_ready = false;
   uint64_t seed = 1;
 };
 
@@ -94,6 +99,10 @@ struct PowerlinkCnConfig {
   // PollResponse Chaining (EPSG DS 302-C): advertised in the IdentResponse's feature flags; an MN
   // may then switch the node to PRC with SyncRequests (powerlink_cn_prc.cpp).
   bool prc_capable = true;
+  // The bus controller's object scheme: an MN that writes a PDO mapping (0x1A00/0x1600) names
+  // the modules' registers by it; after NMTResetConfiguration the node sends and takes each
+  // register where that mapping puts it (powerlink/pdo_image.hpp). Without a mapping: packed.
+  PdoObjectScheme object_scheme;
 };
 
 struct PowerlinkCnStats {
@@ -101,7 +110,10 @@ struct PowerlinkCnStats {
   uint64_t preq = 0;
   uint64_t pres_sent = 0;
   uint64_t pres_dropped = 0;
-  uint64_t pres_delayed = 0;  // by the delay fault or the software response model
+  uint64_t pres_delayed = 0;      // by the delay fault or the software response model
+  uint64_t pres_not_ready = 0;    // PRes sent in OPERATIONAL with RD = 0 (the fault)
+  uint64_t mappings_taken = 0;    // PDO mappings written by an MN and in use
+  uint64_t mappings_refused = 0;  // ... that do not bind to the modules (packed image kept)
   uint64_t soa = 0;
   uint64_t asnd_sent = 0;
   uint64_t nmt_commands = 0;
@@ -167,7 +179,11 @@ class PowerlinkCn {
   [[nodiscard]] const PowerlinkCnStats& stats() const noexcept { return stats_; }
   // The communication objects an MN writes (0x1006, 0x1020, 0x1F98...), as they are now.
   [[nodiscard]] const CnObjectDictionary& communication_objects() const noexcept { return comm_; }
-  [[nodiscard]] const powerlink::NodeImageLayout& layout() const noexcept { return layout_; }
+  // The image in use: from the PDO mapping an MN wrote, else packed.
+  [[nodiscard]] const powerlink::NodeImageLayout& layout() const noexcept {
+    return by_mapping_ ? mapped_layout_ : layout_;
+  }
+  [[nodiscard]] bool image_by_mapping() const noexcept { return by_mapping_; }
   [[nodiscard]] std::size_t module_count() const noexcept { return modules_.size(); }
   [[nodiscard]] Ds1928Module& module(std::size_t i) noexcept { return *modules_[i].module; }
   // Learned SoC period (0 until two SoCs arrived).
@@ -195,6 +211,7 @@ class PowerlinkCn {
   [[nodiscard]] const StateHandler& handler() const noexcept;
   void enter(powerlink::NmtState next, int64_t now_ns) noexcept;
   void boot(int64_t now_ns) noexcept;
+  void take_mapping() noexcept;  // the modules' registers where the PDO mapping says
   void reset(powerlink::NmtCommandId command, int64_t now_ns) noexcept;
 
   // Handlers.
@@ -239,7 +256,10 @@ class PowerlinkCn {
   StateListener listener_;
   powerlink::NmtState state_ = powerlink::NmtState::kOff;
   std::vector<HostedModule> modules_;
-  powerlink::NodeImageLayout layout_;
+  std::vector<powerlink::ModuleSpec> specs_;
+  powerlink::NodeImageLayout layout_;         // packed (or at the configured offsets)
+  powerlink::NodeImageLayout mapped_layout_;  // from a PDO mapping an MN wrote
+  bool by_mapping_ = false;
   SdoMapping mapping_;
   CnObjectDictionary comm_;  // communication objects an MN configures
   std::unique_ptr<Objects> objects_;

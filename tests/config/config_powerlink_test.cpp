@@ -311,3 +311,33 @@ TEST_CASE("The cycle budget counts PRC nodes in the PRC slot", "[config][powerli
   CHECK_THAT(e, Catch::Contains("PRC slot of 1 node(s) 214.4"));
   CHECK_THAT(e, Catch::Contains("1 PReq/PRes"));
 }
+
+TEST_CASE("The process image layout and the object scheme per node", "[config][powerlink][pdo]") {
+  ConfigResult r = from(kHead +
+                        "    - {node_id: 1, layout: packed}\n"
+                        "    - {node_id: 2, object_scheme: {input_index: 0x3000}}\n"
+                        "  object_scheme: {input_index: 0x2400, output_index: 0x2500}\n");
+  INFO(r.error_report());
+  REQUIRE(r.ok());
+  const PowerlinkBusConfig& p = r.config().powerlink;
+  CHECK(p.object_scheme == PdoObjectScheme{0x2400, 0x2500});
+  CHECK(p.nodes[0].layout == ImageLayout::kPacked);
+  CHECK_FALSE(p.nodes[0].object_scheme);
+  CHECK(p.nodes[1].layout == ImageLayout::kAuto);
+  // Keys left out come from powerlink.object_scheme.
+  CHECK(p.nodes[1].object_scheme == PdoObjectScheme{0x3000, 0x2500});
+  const std::string dumped = dump_config(r.config());
+  CHECK_THAT(dumped, Catch::Contains("layout: packed"));
+  const ConfigResult again = from(dumped);
+  INFO(again.error_report());
+  REQUIRE(again.ok());
+  CHECK(dump_config(again.config()) == dumped);
+
+  CHECK_THAT(one_error(kHead + "    - {node_id: 1, layout: mapping}\n"),
+             Catch::Contains("powerlink.nodes[0].layout: layout mapping needs the node's TPDO "
+                             "mapping (0x1A00)"));
+  CHECK_THAT(one_error(kHead + "    - {node_id: 1, layout: fixed}\n"),
+             Catch::Contains("powerlink.nodes[0].layout"));
+  CHECK_THAT(one_error(kHead + "    - {node_id: 1}\n  object_scheme: {input_index: 0x1000}\n"),
+             Catch::Contains("powerlink.object_scheme.input_index"));
+}

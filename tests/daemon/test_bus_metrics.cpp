@@ -64,4 +64,18 @@ TEST_CASE("POWERLINK metrics: NMT state, PRes counters and latency per node", "[
   rig.cns[0]->drop_pres = false;
   rig.step();
   CHECK(value_of(render(service), "ds1928_powerlink_pres_lost_total{node=\"1\"}") == 1);
+
+  // RD = 0 from an OPERATIONAL CN: counted, and status says why its axes get no inputs.
+  rig.cns[0]->pres_not_ready = true;
+  for (int i = 0; i < 3; ++i) rig.step();
+  CHECK(value_of(render(service), "ds1928_powerlink_pres_not_ready_total{node=\"1\"}") == 3);
+  CHECK(value_of(render(service), "ds1928_powerlink_pres_not_ready_total{node=\"2\"}") == 0);
+  nlohmann::json j = service.status_json();
+  CHECK(j["nodes"][0]["pres_not_ready"] == 3);
+  CHECK(j["nodes"][0]["inputs"] == "pres_not_ready");
+  CHECK(j["nodes"][1]["inputs"] == "taken");
+  rig.cns[0]->pres_not_ready = false;
+  rig.step();
+  j = service.status_json();
+  CHECK(j["nodes"][0]["inputs"] == "taken");
 }

@@ -11,6 +11,7 @@
 #include "core/axis_sample.hpp"
 #include "powerlink/link.hpp"
 #include "powerlink/powerlink_bus.hpp"
+#include "shm/publisher.hpp"
 #include "sim/powerlink_cn.hpp"
 #include "x20ds1928/object_dictionary.hpp"
 
@@ -32,8 +33,13 @@ class WireToCn final : public pl::Link {
   std::vector<sim::PowerlinkCn*> nodes;
   std::deque<std::vector<uint8_t>> to_mn;
 
+  std::vector<uint8_t> last_preq;  // payload of the last PReq on the wire
+
   std::error_code send(std::span<const uint8_t> frame) noexcept override {
     g_now_ns += kWireNs;
+    if (auto f = pl::parse_frame(frame))
+      if (const auto* preq = std::get_if<pl::PReq>(&f->message))
+        last_preq.assign(preq->payload.begin(), preq->payload.end());
     for (auto* n : nodes) n->receive(frame, g_now_ns);
     return {};
   }
@@ -190,6 +196,41 @@ TEST_CASE("With random PRes loss the MN never hands out stale inputs as fresh") 
   CHECK(s.mn->managing_node().node(1)->resets == 0);
 }
 
+TEST_CASE("PRes with RD = 0 from the simulated CN for 100 cycles publish no valid sample") {
+  Setup s;
+  REQUIRE(s.run_until_operational(3000));
+  ds1928::AxisDecodeState state;
+  const ds1928::AxisDecodeParams params;
+  auto validity = [&](const ds1928::ExchangeResult& r) {
+    return ds1928::shm::classify(ds1928::decode_axis(s.io[0], params, r.net_time, state), r.bus_up);
+  };
+  for (int i = 0; i < 5; ++i) REQUIRE(validity(s.step()) == ds1928::shm::AxisValidity::Valid);
+  const pl::CnStatus* st = s.mn->managing_node().node(1);
+  REQUIRE(st != nullptr);
+
+  sim::PowerlinkCnFaults not_ready;
+  not_ready.pres_not_ready = true;
+  s.cn->set_faults(not_ready);
+  const uint64_t sent_before = s.cn->stats().pres_sent;
+  for (int i = 0; i < 100; ++i) {
+    const auto r = s.step();
+    REQUIRE(r.bus_up);  // the CN answers and stays OPERATIONAL: only its data is not ready
+    CHECK_FALSE(s.io[0].inputs_fresh);
+    CHECK(validity(r) == ds1928::shm::AxisValidity::Stale);
+  }
+  CHECK(s.cn->stats().pres_sent - sent_before == 100);
+  CHECK(s.cn->stats().pres_not_ready == 100);
+  CHECK(st->pres_not_ready == 100);
+  CHECK_FALSE(st->pres_ready);
+  CHECK(st->boot == pl::CnBootState::kOperational);
+  CHECK(st->resets == 0);
+  CHECK(st->loss_of_pres.events == 0);
+
+  s.cn->set_faults({});
+  CHECK(validity(s.step()) == ds1928::shm::AxisValidity::Valid);
+  CHECK(st->pres_ready);
+}
+
 TEST_CASE("The simulated CN asks for its own reset and the MN serves it") {
   Setup s;
   REQUIRE(s.run_until_operational(3000));
@@ -246,4 +287,83 @@ TEST_CASE(
   CHECK(st->resets == 0);
   CHECK(s.cn->communication_objects().configuration_date() == kDate);
   CHECK(s.cn->communication_objects().configuration_time() == kTime);
+}
+
+namespace {
+pl::PdoMapEntry map_entry(uint16_t index, uint8_t sub, unsigned byte_offset, unsigned bytes) {
+  return {index, sub, static_cast<uint16_t>(byte_offset * 8), static_cast<uint16_t>(bytes * 8)};
+}
+// The objects a CDC writes for a mapping: sub 0 = 0 (disabled), the entries, sub 0 = count.
+void write_mapping(ds1928::PowerlinkNodeConfig& n, uint16_t index,
+                   const std::vector<pl::PdoMapEntry>& entries) {
+  n.object_writes.push_back({index, 0, {0}, true});
+  for (std::size_t i = 0; i < entries.size(); ++i) {
+    std::vector<uint8_t> d(8);
+    const uint64_t v = entries[i].to_u64();
+    for (int b = 0; b < 8; ++b) d[b] = static_cast<uint8_t>(v >> (8 * b));
+    n.object_writes.push_back({index, static_cast<uint8_t>(i + 1), d, true});
+  }
+  n.object_writes.push_back({index, 0, {static_cast<uint8_t>(entries.size())}, true});
+}
+}  // namespace
+
+TEST_CASE("A CN mapped with PosCycle before PositionLW and gaps is decoded exactly") {
+  // TPDO: PosCycle at 0, a gap, PositionLW before PositionHW, PosTime, ErrorInfo, InputSequence,
+  // another gap, the Rx bytes; no SDCLifeCount. RPDO: AckErrorInfo first, a gap, OutputSequence,
+  // the Tx bytes.
+  std::vector<pl::PdoMapEntry> tpdo = {map_entry(0x2001, 4, 0, 1),  map_entry(0x2001, 2, 4, 4),
+                                       map_entry(0x2001, 1, 8, 4),  map_entry(0x2001, 3, 12, 4),
+                                       map_entry(0x2001, 6, 16, 1), map_entry(0x2001, 7, 17, 1)};
+  for (uint8_t b = 0; b < 7; ++b) tpdo.push_back(map_entry(0x2001, 8 + b, 20 + b, 1));
+  std::vector<pl::PdoMapEntry> rpdo = {map_entry(0x2101, 2, 0, 1), map_entry(0x2101, 1, 3, 1)};
+  for (uint8_t b = 0; b < 7; ++b) rpdo.push_back(map_entry(0x2101, 3 + b, 4 + b, 1));
+  Setup s({}, 15, [&](ds1928::PowerlinkNodeConfig& n) {
+    write_mapping(n, 0x1A00, tpdo);
+    write_mapping(n, 0x1600, rpdo);
+  });
+  REQUIRE(s.mn->managing_node().layout(1)->modules[0].by_fields);
+  REQUIRE(s.run_until_operational(5000));
+  REQUIRE(s.cn->image_by_mapping());  // took the mapping at NMTResetConfiguration
+  CHECK(s.cn->stats().mappings_taken >= 1);
+  const pl::CnStatus* st = s.mn->managing_node().node(1);
+  CHECK(st->pres_size == 27);
+  CHECK(st->preq_size == 11);
+
+  ds1928::AxisDecodeState state;
+  const ds1928::AxisDecodeParams params;
+  double first = 0, last = 0;
+  int64_t first_t = 0, last_t = 0;
+  for (int i = 0; i < 200; ++i) {
+    s.io[0].outputs.output_sequence = static_cast<uint8_t>(i);
+    s.io[0].outputs.ack_error_info = 0;
+    const auto r = s.step();
+    REQUIRE(r.bus_up);
+    REQUIRE(s.io[0].inputs_fresh);
+    // The registers are the bytes at their mapped offsets, as the CN put them on the wire.
+    const auto pres = s.mn->managing_node().pres_payload(1);
+    REQUIRE(pres.size() == 27);
+    CHECK(s.io[0].inputs.pos_cycle == static_cast<int8_t>(pres[0]));
+    CHECK(s.io[0].inputs.position_lw == pl::load_le32(pres.data() + 4));
+    CHECK(s.io[0].inputs.position_hw == pl::load_le32(pres.data() + 8));
+    CHECK(s.io[0].inputs.pos_time_us == pl::load_le32(pres.data() + 12));
+    // ... and the PReq carries the outputs where the RPDO mapping puts them.
+    REQUIRE(s.wire.last_preq.size() == 11);
+    CHECK(s.wire.last_preq[3] == static_cast<uint8_t>(i));
+    CHECK(s.wire.last_preq[0] == 0);
+    auto sample = ds1928::decode_axis(s.io[0], params, r.net_time, state);
+    REQUIRE(sample.fresh);
+    REQUIRE(sample.error_info == 0);
+    const double pos = static_cast<double>(sample.periods) + sample.fraction / 65536.0;
+    if (i == 0) {
+      first = pos;
+      first_t = sample.pos_time_ns;
+    }
+    last = pos;
+    last_t = sample.pos_time_ns;
+  }
+  // The simulator's motion, 100 periods/s: positions and NetTime stamps agree only when every
+  // register came from its own bytes.
+  const double dt = static_cast<double>(last_t - first_t) / 1e9;
+  CHECK(dt > 0.15);
+  CHECK(std::fabs((last - first) - 100.0 * dt) < 0.02);
 }

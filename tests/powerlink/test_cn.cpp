@@ -70,7 +70,7 @@ void TestCn::on_frame(std::span<const uint8_t> bytes, std::deque<std::vector<uin
                    pres_extra.begin(), pres_extra.end());
     PRes pres;
     pres.nmt_state = state;
-    pres.ready = state == NmtState::kOperational;
+    pres.ready = state == NmtState::kOperational && !pres_not_ready;
     pres.exception_new = exception_new;
     pres.request_count = static_cast<uint8_t>(std::min<std::size_t>(
         sdo_out_.size() + static_cast<std::size_t>(fake_request_count) + (nmt_request ? 1 : 0), 7));
@@ -97,7 +97,7 @@ void TestCn::on_frame(std::span<const uint8_t> bytes, std::deque<std::vector<uin
         r.device_type = device_type;
         r.serial_no = serial_no;
         r.poll_in_size = layout.pres_size;
-        r.poll_out_size = layout.preq_size;
+        r.poll_out_size = poll_out_size.value_or(layout.preq_size);
         // VerifyConfigurationDate/Time: the CN's 0x1020/1, /2 (0 when never written).
         const auto u32 = [this](uint8_t sub) {
           uint32_t v = 0;

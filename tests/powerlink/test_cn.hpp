@@ -40,6 +40,8 @@ class TestCn : public SdoObjectAccess {
   uint64_t last_relative_time_us = 0;
   // Faults.
   bool drop_pres = false;
+  bool pres_not_ready = false;            // PRes with RD = 0 also in OPERATIONAL
+  std::optional<uint16_t> poll_out_size;  // PollOutSize reported instead of the layout's
   bool ignore_status_requests = false;
   int fake_request_count = 0;                  // RS reported in the PRes although nothing is queued
   bool hold_pres = false;                      // answer, but into held_pres (a late PRes)

@@ -1,6 +1,6 @@
 // ds1928-sim: standalone simulated node, the test peer of ds1928d.
 //   ds1928-sim powerlink --iface IF --node N [--modules K] [--profile hardware|software-cn]
-//                        [--drop-pres P] [--delay-pres-us U]
+//                        [--drop-pres P] [--delay-pres-us U] [--pres-not-ready]
 //                        [--power-cycle-after S] [--config FILE] ...
 // runs POWERLINK Controlled Node(s) with simulated X20DS1928 modules on a raw socket and prints
 // every NMT state change. SIGUSR1 power-cycles the node(s); SIGUSR2 makes them ask the MN for
@@ -70,6 +70,7 @@ struct PowerlinkOptions {
   uint32_t delay_pres_us = 0;
   double delay_pres_prob = 1.0;
   int wrong_pres_size = 0;
+  bool pres_not_ready = false;
   double power_cycle_after_s = 0.0;
   double raise_error_after_s = 0.0;
   uint16_t error_code = 0x1928;
@@ -227,6 +228,7 @@ int run_powerlink(const PowerlinkOptions& o) {
     cn.faults.delay_pres_ns = static_cast<int64_t>(o.delay_pres_us) * 1000;
     cn.faults.delay_pres = o.delay_pres_us > 0 ? o.delay_pres_prob : 0.0;
     cn.faults.pres_size_delta = o.wrong_pres_size;
+    cn.faults.pres_not_ready = o.pres_not_ready;
     cn.faults.seed = o.seed + static_cast<uint64_t>(k);
     cn.response.pres_latency_median_ns = static_cast<int64_t>(o.pres_latency_us * 1000);
     cn.response.pres_latency_sigma = o.pres_latency_sigma;
@@ -383,6 +385,8 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0.0, 1.0));
   plk->add_option("--wrong-pres-size", o.wrong_pres_size,
                   "PRes payload this many bytes longer (negative: shorter)");
+  plk->add_flag("--pres-not-ready", o.pres_not_ready,
+                "PRes with RD = 0 also in OPERATIONAL (data not ready: the MN must not take it)");
   plk->add_option("--power-cycle-after", o.power_cycle_after_s,
                   "power-cycle the node(s) once after S seconds (SIGUSR1: now)");
   plk->add_option("--raise-error-after", o.raise_error_after_s,

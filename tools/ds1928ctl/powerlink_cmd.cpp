@@ -23,7 +23,8 @@ void add_powerlink_commands(CLI::App& app, Context& ctx) {
     ctx.action = [&ctx, n = *n] {
       return request_and_print(ctx, {{"cmd", "pl-pres"}, {"node", n}}, [](const nlohmann::json& r) {
         std::cout << "node " << r.value("node", 0) << ": " << r.value("size", 0) << " bytes"
-                  << (r.value("fresh", false) ? " (fresh)" : " (not fresh)") << "\n  "
+                  << (r.value("fresh", false) ? " (fresh" : " (not fresh")
+                  << (r.value("ready", true) ? ")" : ", RD = 0: data not ready)") << "\n  "
                   << r.value("hex", std::string()) << "\n";
       });
     };
