@@ -123,8 +123,8 @@ TEST_CASE("ident, read-param, write-param round trip and protected write over th
   CHECK(error_code_of(page) == "bad_argument");
   CHECK_THAT(control::test::error_message_of(page),
              Catch::Contains("99 is outside MRS 0xA1") && Catch::Contains("0..15"));
-  const json status_word = c.request(
-      {{"cmd", "endat-write-param"}, {"mrs", 0xB9}, {"param", 4}, {"value", 0}});
+  const json status_word =
+      c.request({{"cmd", "endat-write-param"}, {"mrs", 0xB9}, {"param", 4}, {"value", 0}});
   CHECK(error_code_of(status_word) == "bad_argument");
   CHECK_THAT(control::test::error_message_of(status_word), Catch::Contains("0..3"));
   CHECK(rig.counters().commands_sent == sent);
