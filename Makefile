@@ -130,7 +130,10 @@ run-canio: build
 test: deps-test
 	cmake -S . -B $(BUILD) -DCMAKE_BUILD_TYPE=$(BUILD_TYPE) -DDS1928_WERROR=ON $(LAUNCHER)
 	cmake --build $(BUILD) -j $(JOBS)
-	cd $(BUILD) && ctest --output-on-failure --timeout 900 -j 2
+	@# ctest names skipped tests without their reason: list each one's SKIP line after the summary.
+	cd $(BUILD) || exit 1; rc=0; ctest --output-on-failure --timeout 900 -j 2 \
+	  --output-junit "$$PWD/Testing/junit.xml" || rc=$$?; \
+	  python3 $(CURDIR)/tests/ctest/skipped_reasons.py Testing/junit.xml || true; exit $$rc
 
 # Sanitizer builds: their own build directories, the same ctest suite (unit and integration).
 check-asan: deps-test

@@ -44,6 +44,58 @@ using nlohmann::json;
   return v;
 }
 
+// The number of parameter words of a memory area where the EnDat specification gives it (the
+// manufacturer pages 16 words each, the operating status 4, the EnDat 2.2 manufacturer area 64);
+// 256 (the whole 8-bit address) for the areas whose size is the encoder's own.
+[[nodiscard]] unsigned known_area_words(uint8_t mrs) noexcept {
+  switch (mrs) {
+    case 0xA1:
+    case 0xA3:
+    case 0xA5:
+      return 16;
+    case 0xB9:
+      return 4;
+    case 0xBD:
+      return 64;
+    default:
+      return 256;
+  }
+}
+
+// A parameter number of memory area `mrs`: beyond the area's end is a range error, not a
+// command sent to the encoder (which would answer nothing, or another area's word).
+[[nodiscard]] uint8_t param_arg(const control::Request& req, uint8_t mrs) {
+  const auto param = number_arg(req, "param", 0, 0xFF);
+  const unsigned words = known_area_words(mrs);
+  if (param >= words) {
+    std::string area = hex(mrs, 2);
+    if (const auto name = endat::mrs_name(mrs); !name.empty())
+      area += " (" + std::string(name) + ")";
+    throw control::ArgumentError("argument 'param': " + std::to_string(param) + " is outside MRS " +
+                                 area + ": its parameters are 0.." + std::to_string(words - 1));
+  }
+  return static_cast<uint8_t>(param);
+}
+
+// The axis argument, named against the configured axes ("axis 1 does not exist; the axes are
+// 0 (x)") rather than as a bare number range.
+[[nodiscard]] std::size_t axis_arg(const control::Request& req, const DaemonConfig& config,
+                                   std::size_t count) {
+  if (count == 0) throw control::ArgumentError("argument 'axis': the daemon has no axes");
+  if (!req.has("axis")) return 0;
+  const auto axis = number_arg(req, "axis", 0, 0xFFFF);
+  if (axis < count) return static_cast<std::size_t>(axis);
+  std::string list;
+  for (std::size_t i = 0; i < count; ++i) {
+    list += (i == 0 ? "" : ", ") + std::to_string(i);
+    if (i < config.axes.size() && !config.axes[i].name.empty())
+      list += " (" + config.axes[i].name + ")";
+  }
+  throw control::ArgumentError("argument 'axis': axis " + std::to_string(axis) +
+                               " does not exist; the configured " +
+                               (count == 1 ? "axis is " : "axes are ") + list);
+}
+
 [[nodiscard]] json area_json(uint8_t mrs) {
   json j{{"mrs", mrs}, {"mrs_hex", hex(mrs, 2)}};
   if (const auto name = endat::mrs_name(mrs); !name.empty()) j["area"] = std::string(name);
@@ -108,9 +160,7 @@ void EnDatService::register_commands(control::Server& server) {
   // Runs a job for a socket request and completes the reply with `format` or the error.
   auto run = [this](const control::Request& req, const control::Reply& reply, JobKind kind,
                     std::vector<Request> steps, std::function<json(const JobResult&)> format) {
-    if (axes_.empty()) throw control::ArgumentError("argument 'axis': the daemon has no axes");
-    const auto axis = static_cast<std::size_t>(
-        req.has("axis") ? number_arg(req, "axis", 0, axes_.size() - 1) : 0);
+    const std::size_t axis = axis_arg(req, config_, axes_.size());
     const JobId id = submit(axis, kind, std::move(steps),
                             [reply, axis, format = std::move(format)](const JobResult& r) {
                               if (r.error) return reply_error(reply, r);
@@ -151,7 +201,7 @@ void EnDatService::register_commands(control::Server& server) {
 
   server.add_command("endat-read-param", [run](const control::Request& req, control::Reply reply) {
     const auto mrs = static_cast<uint8_t>(number_arg(req, "mrs", 0, 0xFF));
-    const auto param = static_cast<uint8_t>(number_arg(req, "param", 0, 0xFF));
+    const uint8_t param = param_arg(req, mrs);
     run(req, reply, JobKind::Single, {Request::read(mrs, param)}, [mrs, param](const JobResult& r) {
       return param_reply("read-param", mrs, param, r, false);
     });
@@ -160,7 +210,7 @@ void EnDatService::register_commands(control::Server& server) {
   server.add_command(
       "endat-write-param", [run, privileged](const control::Request& req, control::Reply reply) {
         const auto mrs = static_cast<uint8_t>(number_arg(req, "mrs", 0, 0xFF));
-        const auto param = static_cast<uint8_t>(number_arg(req, "param", 0, 0xFF));
+        const uint8_t param = param_arg(req, mrs);
         const auto value = static_cast<uint16_t>(number_arg(req, "value", 0, 0xFFFF));
         if (!privileged(req, reply)) return;
         run(req, reply, JobKind::WriteVerify,
@@ -238,9 +288,7 @@ void EnDatService::register_commands(control::Server& server) {
   });
 
   server.add_command("endat-ident", [this](const control::Request& req, control::Reply reply) {
-    if (axes_.empty()) throw control::ArgumentError("argument 'axis': the daemon has no axes");
-    const auto axis = static_cast<std::size_t>(
-        req.has("axis") ? number_arg(req, "axis", 0, axes_.size() - 1) : 0);
+    const std::size_t axis = axis_arg(req, config_, axes_.size());
     const bool refresh = req.opt_bool("refresh").value_or(false);
     auto answer = [this, axis, reply, alive = std::weak_ptr<bool>(alive_)](std::error_code ec) {
       if (alive.expired()) return;

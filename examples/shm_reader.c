@@ -1,10 +1,14 @@
 /* A control application's cycle in C: wait for every N-th publication of ds1928d, read one
- * axis consistently, print it. Follows a restarted daemon and notices a dead one.
+ * axis consistently, print it. A daemon that stops (normally, or dies without a word) is
+ * waited for: the reader maps the next one (a new generation) and carries on.
  *
  *   shm_reader [NAME [AXIS [EVERY [COUNT]]]]     defaults: /ds1928d 0 1 10 */
+#include <errno.h>
 #include <inttypes.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
+#include <time.h>
 
 #include "ds1928/shm.h"
 
@@ -37,6 +41,7 @@ int main(int argc, char** argv) {
   }
   printf("%s: generation %" PRIu64 ", %" PRIu32 " axes, cycle %" PRIu64 " ns\n", name,
          reader.generation, reader.header->axis_count, reader.header->cycle_period_ns);
+  fflush(stdout);
 
   uint64_t seen = ds1928_shm_wait_start(reader.header);
   for (long n = 0; n < count;) {
@@ -46,14 +51,22 @@ int main(int argc, char** argv) {
       if (rc == DS1928_SHM_TIMEOUT &&
           ds1928_shm_daemon_alive(reader.header, ds1928_shm_now_ns(), 10))
         continue;
-      fprintf(stderr, "daemon %s\n", rc == DS1928_SHM_STOPPED ? "stopped" : "not publishing");
-      if (ds1928_shm_reader_reopen(&reader, name) == 1) {
-        printf("daemon restarted: generation %" PRIu64 "\n", reader.generation);
-        seen = ds1928_shm_wait_start(reader.header);
-        continue;
+      fprintf(stderr, "daemon %s; waiting for it to start again\n",
+              rc == DS1928_SHM_STOPPED ? "stopped" : "not publishing");
+      /* The stopped daemon removed its object, or its generation is still there: look again
+       * every 200 ms until a new generation is mapped. */
+      const struct timespec pause = {0, 200000000};
+      while ((rc = ds1928_shm_reader_reopen(&reader, name)) == 0 || rc == -ENOENT)
+        nanosleep(&pause, NULL);
+      if (rc < 0) {
+        fprintf(stderr, "cannot map %s: %s\n", name, strerror(-rc));
+        ds1928_shm_reader_close(&reader);
+        return 3;
       }
-      ds1928_shm_reader_close(&reader);
-      return 3;
+      printf("daemon restarted: generation %" PRIu64 "\n", reader.generation);
+      fflush(stdout);
+      seen = ds1928_shm_wait_start(reader.header);
+      continue;
     }
     if (rc < 0) {
       fprintf(stderr, "wait: %s\n", strerror(-rc));

@@ -12,8 +12,8 @@ Pure Python (mmap + struct on the ABI of include/ds1928/shm.h, docs/shared-memor
 """
 from .shm import (ABI_VERSION, AbiMismatch, AxisData, DaemonStopped, NotReady, Reader, Sample,
                   Timebase, TornRead, check_value)
-from .control import Control, ControlError
+from .control import Control, ControlError, DaemonUnreachable
 
 __all__ = ["ABI_VERSION", "AbiMismatch", "AxisData", "Control", "ControlError", "DaemonStopped",
-           "NotReady", "Reader", "Sample", "Timebase", "TornRead", "check_value"]
+           "DaemonUnreachable", "NotReady", "Reader", "Sample", "Timebase", "TornRead", "check_value"]
 __version__ = "0.1.0"

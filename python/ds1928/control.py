@@ -14,14 +14,58 @@ class ControlError(Exception):
         self.code, self.message, self.reply = code, message, reply
 
 
+class DaemonUnreachable(ConnectionError):
+    """No daemon listens on any of the socket paths tried: .paths lists them, .errors the
+    OSError of each."""
+
+    def __init__(self, paths, errors):
+        tried = ", nor to ".join(f"{p} ({e.strerror or e})" for p, e in zip(paths, errors))
+        absent = all(isinstance(e, (FileNotFoundError, ConnectionRefusedError)) for e in errors)
+        super().__init__(f"cannot connect to {tried}"
+                         + (": is ds1928d running?" if absent else ""))
+        self.paths, self.errors = list(paths), list(errors)
+
+
+def fallback_socket_path(path):
+    """Where a daemon that cannot create `path`'s directory (started without root) puts its
+    socket: the same file name in $XDG_RUNTIME_DIR/ds1928d/, or /tmp/ds1928d-<uid>/ (as the
+    daemon's ds1928::fallback_socket_path())."""
+    name = path.rsplit("/", 1)[-1] or "control.sock"
+    xdg = os.environ.get("XDG_RUNTIME_DIR", "")
+    if xdg.startswith("/"):
+        return f"{xdg}/ds1928d/{name}"
+    return f"/tmp/ds1928d-{os.getuid()}/{name}"
+
+
+def socket_paths(path=None):
+    """The paths Control tries, in order: `path`, else $DS1928_SOCKET, else the default; then
+    that path's fallback (as ds1928ctl)."""
+    chosen = path or os.environ.get("DS1928_SOCKET") or DEFAULT_SOCKET
+    fallback = fallback_socket_path(chosen)
+    return [chosen] if fallback == chosen else [chosen, fallback]
+
+
 class Control:
-    """Control(path=None, timeout=30): path defaults to $DS1928_SOCKET or the package's path."""
+    """Control(path=None, timeout=30): path defaults to $DS1928_SOCKET or the package's path,
+    each followed by the daemon's per-user fallback. Raises DaemonUnreachable naming every path
+    tried when none answers."""
 
     def __init__(self, path=None, timeout=30.0):
-        self.path = path or os.environ.get("DS1928_SOCKET", DEFAULT_SOCKET)
-        self._sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-        self._sock.settimeout(timeout)
-        self._sock.connect(self.path)
+        errors = []
+        paths = socket_paths(path)
+        for candidate in paths:
+            sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+            sock.settimeout(timeout)
+            try:
+                sock.connect(candidate)
+            except OSError as e:
+                sock.close()
+                errors.append(e)
+                continue
+            self.path, self._sock = candidate, sock
+            break
+        else:
+            raise DaemonUnreachable(paths, errors)
         self._buffer = b""
         self._next_id = 1
 

@@ -7,6 +7,7 @@
 #include <atomic>
 #include <catch2/catch.hpp>
 #include <cstdio>
+#include <filesystem>
 #include <memory>
 #include <thread>
 
@@ -38,10 +39,47 @@ Run ctl(const std::string& args) {
   return r;
 }
 
+// Runs ds1928ctl with `args` under `env` (assignments for env(1), e.g. "DS1928_SOCKET=/x"; the
+// variables the tool reads are cleared first), stdout and stderr captured together.
+Run ctl_env(const std::string& env, const std::string& args) {
+  Run r;
+  const std::string cmd = "env -u DS1928_SOCKET -u XDG_RUNTIME_DIR " + env + " " +
+                          std::string(DS1928CTL) + " " + args + " 2>&1";
+  FILE* p = popen(cmd.c_str(), "r");
+  if (p == nullptr) return r;
+  char buf[4096];
+  size_t n;
+  while ((n = fread(buf, 1, sizeof(buf), p)) > 0) r.out.append(buf, n);
+  const int status = pclose(p);
+  r.exit = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return r;
+}
+
+// A status reply like the daemon's: one axis in `state`, shared memory `shm`.
+json status_reply(const std::string& axis_state, const std::string& shm) {
+  return {{"daemon",
+           {{"version", "0.1.0"},
+            {"pid", 1},
+            {"state", "running"},
+            {"uptime_s", 3.5},
+            {"realtime", true},
+            {"rt_status", "real-time: SCHED_FIFO 80, CPU 1, memory locked"}}},
+          {"shm", {{"name", shm}, {"generation", 7}}},
+          {"bus", {{"kind", "simulated"}, {"state", "operational"}}},
+          {"cycle", {{"period_us", 1000}, {"count", 3500}, {"overruns", 0}, {"skipped", 0}}},
+          {"axes", json::array({{{"axis", 0},
+                                 {"name", "x"},
+                                 {"state", axis_state},
+                                 {"error_info", 0},
+                                 {"endat_error", 0},
+                                 {"endat_warning", 0}}})}};
+}
+
 // Publishes one axis every millisecond on its own thread while alive.
 class Publishing {
  public:
-  explicit Publishing(shm::Publisher& pub) : pub_(pub), thread_([this] { loop(); }) {}
+  explicit Publishing(shm::Publisher& pub, shm::AxisValidity validity = shm::AxisValidity::Valid)
+      : validity(validity), pub_(pub), thread_([this] { loop(); }) {}
   ~Publishing() { stop(); }
   void stop() {
     run_ = false;
@@ -55,11 +93,12 @@ class Publishing {
       st[0].sample.position_raw = c << 16;
       st[0].sample.periods = static_cast<int64_t>(c);
       st[0].sample.fresh = true;
-      st[0].validity = shm::AxisValidity::Valid;
+      st[0].validity = validity;
       pub_.publish(c, st);
       std::this_thread::sleep_for(std::chrono::milliseconds(1));
     }
   }
+  const shm::AxisValidity validity;
   shm::Publisher& pub_;
   std::atomic<bool> run_{true};
   std::thread thread_;
@@ -255,4 +294,213 @@ TEST_CASE("position --follow says when the daemon stops, hangs or restarts, and 
   CHECK(WIFEXITED(status));
   CHECK(WEXITSTATUS(status) == 0);
   CHECK(increasing);
+}
+
+TEST_CASE("ds1928ctl finds the socket: -s, $DS1928_SOCKET, then the per-user fallback") {
+  // The daemon fell back: its socket is in $XDG_RUNTIME_DIR/ds1928d/ under the configured name.
+  const std::string xdg = std::filesystem::path(temp_socket_path("xdg")).parent_path().string();
+  SocketConfig cfg;
+  cfg.path = xdg + "/ds1928d/fallen.sock";
+  ServerThread t(cfg);
+  t.server().add_command("status", [](const Request&, Reply reply) {
+    reply.ok(status_reply("valid", "/ds1928d-none"));
+  });
+  REQUIRE_FALSE(t.start());
+  const std::string env = "XDG_RUNTIME_DIR=" + xdg;
+
+  // The configured path's directory does not exist: the fallback of the same name answers.
+  Run r = ctl_env(env, "-s /nonexistent-ds1928/fallen.sock status --json");
+  INFO(r.out);
+  CHECK(r.exit == 0);
+  CHECK(json::parse(r.out, nullptr, false)["daemon"]["version"] == "0.1.0");
+  // $DS1928_SOCKET: the same, and -s wins over it.
+  CHECK(ctl_env(env + " DS1928_SOCKET=/nonexistent-ds1928/fallen.sock", "status").exit == 0);
+  CHECK(ctl_env(env + " DS1928_SOCKET=" + cfg.path, "status").exit == 0);
+  r = ctl_env(env + " DS1928_SOCKET=" + cfg.path, "-s /nonexistent-ds1928/other.sock status");
+  CHECK(r.exit == 3);
+  // Nobody anywhere: the error names every path tried.
+  CHECK_THAT(r.out, Catch::Contains("/nonexistent-ds1928/other.sock (No such file") &&
+                        Catch::Contains(xdg + "/ds1928d/other.sock (No such file") &&
+                        Catch::Contains("is ds1928d running?"));
+  // Without XDG_RUNTIME_DIR the fallback is /tmp/ds1928d-<uid>/.
+  r = ctl_env("", "-s /nonexistent-ds1928/other.sock status");
+  CHECK(r.exit == 3);
+  CHECK_THAT(r.out, Catch::Contains("/tmp/ds1928d-" + std::to_string(getuid()) + "/other.sock"));
+}
+
+TEST_CASE("-s alone reaches the instance's shared memory, --shm overrides it") {
+  const std::string name = shm_name() + "-inst";
+  ShmConfig shm_cfg;
+  shm_cfg.name = name;
+  shm::Publisher pub;
+  REQUIRE_FALSE(pub.open(shm_cfg, 1, 1'000'000));
+  Publishing publishing(pub);
+
+  SocketConfig cfg;
+  cfg.path = temp_socket_path("inst");
+  ServerThread t(cfg);
+  t.server().add_command(
+      "status", [&](const Request&, Reply reply) { reply.ok(status_reply("valid", name)); });
+  REQUIRE_FALSE(t.start());
+
+  Run r = ctl_env("", "-s " + cfg.path + " position --axis 0 --json");
+  INFO(r.out);
+  CHECK(r.exit == 0);
+  CHECK(json::parse(r.out, nullptr, false)["axis"] == 0);
+  CHECK(ctl_env("DS1928_SOCKET=" + cfg.path, "position --json").exit == 0);
+  // --shm still decides.
+  r = ctl_env("", "-s " + cfg.path + " --shm " + name + "-absent position");
+  CHECK(r.exit == 3);
+  CHECK_THAT(r.out, Catch::Contains("no shared memory " + name + "-absent"));
+  // A named daemon that cannot be asked: no guess at another instance's memory.
+  r = ctl_env("", "-s /nonexistent-ds1928/x.sock position");
+  CHECK(r.exit == 3);
+  CHECK_THAT(r.out, Catch::Contains("give --shm NAME"));
+  publishing.stop();
+}
+
+TEST_CASE("status --check and position --check exit 5 while an axis is not valid") {
+  const std::string name = shm_name() + "-check";
+  ShmConfig shm_cfg;
+  shm_cfg.name = name;
+  shm::Publisher pub;
+  REQUIRE_FALSE(pub.open(shm_cfg, 1, 1'000'000));
+  auto publishing = std::make_unique<Publishing>(pub, shm::AxisValidity::BusDown);
+
+  std::string state = "bus_down";
+  SocketConfig cfg;
+  cfg.path = temp_socket_path("check");
+  ServerThread t(cfg);
+  t.server().add_command("status",
+                         [&](const Request&, Reply reply) { reply.ok(status_reply(state, name)); });
+  REQUIRE_FALSE(t.start());
+  const std::string sock = "-s " + cfg.path + " ";
+
+  Run r = ctl_env("", sock + "status --check");
+  INFO(r.out);
+  CHECK(r.exit == 5);
+  CHECK_THAT(r.out, Catch::Contains("not valid: axis 0 (x): bus_down"));
+  CHECK(ctl_env("", sock + "status").exit == 0);  // without --check: the daemon answered
+  CHECK(ctl_env("", sock + "--json status --check").exit == 5);
+  r = ctl_env("", sock + "position --check");
+  CHECK(r.exit == 5);
+  CHECK_THAT(r.out, Catch::Contains("not valid: axis 0: bus_down"));
+  CHECK(ctl_env("", sock + "position").exit == 0);
+
+  for (const char* bad : {"module_error", "stale"}) {
+    t.run([&] { state = bad; });
+    CHECK(ctl_env("", sock + "status --check").exit == 5);
+  }
+  t.run([&] { state = "valid"; });
+  publishing = std::make_unique<Publishing>(pub, shm::AxisValidity::Valid);
+  CHECK(ctl_env("", sock + "status --check").exit == 0);
+  CHECK(ctl_env("", sock + "position --check").exit == 0);
+  CHECK(ctl_env("", sock + "position --check --follow").exit == 2);  // a verdict ends; --follow not
+  publishing.reset();
+}
+
+TEST_CASE("status prints each bus's own node fields and the bus state's cause") {
+  json reply = status_reply("bus_down", "/ds1928d-none");
+  reply["bus"] = {
+      {"kind", "canio"},
+      {"state", "no_nodes"},
+      {"cause",
+       "register 1025 (SinCosEnable) = 1: no SDO response (node silent or not a CANopen SDO "
+       "server)"},
+      {"interface", "vcan7"},
+      {"transport", "virtual"},
+      {"can_state", "error-active"},
+      {"bitrate", 500000},
+      {"canopen_nodes", json::array({{{"node", 1},
+                                      {"nmt_state", "operational"},
+                                      {"boot_ups", 1},
+                                      {"heartbeat_watched", true},
+                                      {"heartbeats", 120},
+                                      {"heartbeat_misses", 2},
+                                      {"emcys", 0}}})},
+      {"nodes", json::array({{{"axis", 0},
+                              {"node", 1},
+                              {"state", "configured"},
+                              {"reason", ""},
+                              {"samples", 1234},
+                              {"missing", 5},
+                              {"late_frames", 6},
+                              {"last_error", "SDO abort 0x06020000"}}})}};
+  SocketConfig cfg;
+  cfg.path = temp_socket_path("canio");
+  ServerThread t(cfg);
+  t.server().add_command("status", [&](const Request&, Reply r) { r.ok(reply); });
+  REQUIRE_FALSE(t.start());
+
+  Run r = ctl_env("", "-s " + cfg.path + " status");
+  INFO(r.out);
+  CHECK(r.exit == 0);
+  CHECK_THAT(r.out, Catch::Contains("bus:       canio, no_nodes\n    cause: register 1025"));
+  CHECK_THAT(r.out, Catch::Contains("interface vcan7 (virtual), error-active, 500000 bit/s"));
+  CHECK_THAT(r.out, Catch::Contains("node 1: NMT operational, heartbeats 120 (2 missed), "
+                                    "boot-ups 1, EMCY 0"));
+  CHECK_THAT(r.out, Catch::Contains("axis 0: configured, samples 1234, missing 5, late 6"));
+  CHECK_THAT(r.out, Catch::Contains("last error: SDO abort 0x06020000"));
+  CHECK_THAT(r.out, !Catch::Contains("PRes") && !Catch::Contains("NMT ?"));
+  // The engine's text is not repeated after yes/no.
+  CHECK_THAT(r.out, Catch::Contains("real-time: yes (SCHED_FIFO 80, CPU 1, memory locked)"));
+
+  // POWERLINK nodes keep their fields; no cause line while the bus is operational.
+  t.run([&] {
+    reply["bus"] = {{"kind", "powerlink"},
+                    {"state", "operational"},
+                    {"mn_state", "operational"},
+                    {"nodes", json::array({{{"node", 1},
+                                            {"boot", "operational"},
+                                            {"nmt", "operational"},
+                                            {"boots", 1},
+                                            {"resets", 0},
+                                            {"loss_of_pres", {{"events", 3}}}}})}};
+  });
+  r = ctl_env("", "-s " + cfg.path + " status");
+  CHECK_THAT(r.out, Catch::Contains("node 1: operational (NMT operational), boots 1, resets 0, "
+                                    "PRes losses 3"));
+  CHECK_THAT(r.out, !Catch::Contains("cause:"));
+}
+
+TEST_CASE("capture refused by the daemon leaves no output file") {
+  SocketConfig cfg;
+  cfg.path = temp_socket_path("capture");
+  ServerThread t(cfg);
+  t.server().add_command("capture", [](const Request&, Reply reply) {
+    reply.error("no_capture_point", "this bus has no capture point");
+  });
+  REQUIRE_FALSE(t.start());
+  const auto file = std::filesystem::path(cfg.path).parent_path() / "out.pcapng";
+  Run r = ctl_env("", "-s " + cfg.path + " capture -w " + file.string() + " --count 1");
+  INFO(r.out);
+  CHECK(r.exit == 1);
+  CHECK_THAT(r.out, Catch::Contains("no_capture_point"));
+  CHECK_FALSE(std::filesystem::exists(file));
+  // An unwritable place is a usage error before anything is asked.
+  r = ctl_env("", "-s " + cfg.path + " capture -w /nonexistent-ds1928/out.pcapng --count 1");
+  CHECK(r.exit == 2);
+  CHECK_THAT(r.out, Catch::Contains("cannot write /nonexistent-ds1928/out.pcapng"));
+}
+
+TEST_CASE("ds1928ctl's words: did you mean, --version, doctor's default configuration") {
+  Run r = ctl_env("", "stauts");
+  INFO(r.out);
+  CHECK(r.exit == 2);
+  CHECK_THAT(r.out, Catch::Contains("unknown command 'stauts'; did you mean 'status'?"));
+  r = ctl_env("", "-s /x.sock --timeout 5 postion --axis 0");
+  CHECK(r.exit == 2);
+  CHECK_THAT(r.out, Catch::Contains("did you mean 'position'?"));
+  r = ctl_env("", "endat --axis 0 idnet");
+  CHECK(r.exit == 2);
+  CHECK_THAT(r.out, Catch::Contains("unknown command 'idnet' of 'endat'; did you mean 'ident'?"));
+  r = ctl_env("", "frobnicate");
+  CHECK(r.exit == 2);
+  CHECK_THAT(r.out, Catch::Contains("unknown command 'frobnicate'; commands: status, axes"));
+  r = ctl_env("", "--version");
+  CHECK(r.exit == 0);
+  CHECK_THAT(r.out, Catch::StartsWith("ds1928ctl " PROJECT_VERSION));
+  r = ctl_env("", "doctor --help");
+  CHECK(r.exit == 0);
+  CHECK_THAT(r.out, Catch::Contains("/etc/ds1928d/ds1928d.yaml"));
 }

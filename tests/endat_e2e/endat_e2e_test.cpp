@@ -112,7 +112,23 @@ TEST_CASE("ident, read-param, write-param round trip and protected write over th
   const json area =
       c.request({{"cmd", "endat-read-param"}, {"axis", 0}, {"mrs", 0x41}, {"param", 1}});
   CHECK(error_code_of(area) == "bad_argument");  // additional-information code, not a memory area
-  CHECK(error_code_of(c.request({{"cmd", "endat-ident"}, {"axis", 7}})) == "bad_argument");
+  const json axis = c.request({{"cmd", "endat-ident"}, {"axis", 7}});
+  CHECK(error_code_of(axis) == "bad_argument");
+  CHECK_THAT(control::test::error_message_of(axis),
+             Catch::Contains("axis 7 does not exist; the configured axis is 0"));
+  // A parameter past the end of an area the specification sizes is a range error, not a
+  // command to the encoder.
+  const uint64_t sent = rig.counters().commands_sent;
+  const json page = c.request({{"cmd", "endat-read-param"}, {"mrs", 0xA1}, {"param", 99}});
+  CHECK(error_code_of(page) == "bad_argument");
+  CHECK_THAT(control::test::error_message_of(page),
+             Catch::Contains("99 is outside MRS 0xA1") && Catch::Contains("0..15"));
+  const json status_word =
+      c.request({{"cmd", "endat-write-param"}, {"mrs", 0xB9}, {"param", 4}, {"value", 0}});
+  CHECK(error_code_of(status_word) == "bad_argument");
+  CHECK_THAT(control::test::error_message_of(status_word), Catch::Contains("0..3"));
+  CHECK(rig.counters().commands_sent == sent);
+  CHECK(c.request({{"cmd", "endat-read-param"}, {"mrs", 0xA1}, {"param", 15}}).value("ok", false));
 
   // Positions kept flowing: the cycle published all along.
   CHECK(publish_count(rig.shm_name()) > published_before + 50);

@@ -1,8 +1,10 @@
+#include <algorithm>
 #include <cinttypes>
 #include <cstdio>
 #include <iostream>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <vector>
 
 #include "client.hpp"
 #include "commands.hpp"
@@ -81,20 +83,17 @@ void print_axis_line(const json& a) {
   print_error_bits(a.value("errors", json::array()));
 }
 
-void print_status(const json& r) {
-  const json d = r.value("daemon", json::object());
-  std::cout << "ds1928d " << get<std::string>(d, "version", "?") << " (pid "
-            << get<int64_t>(d, "pid", 0) << "), " << get<std::string>(d, "state", "?") << ", up "
-            << duration_text(get<double>(d, "uptime_s", 0.0)) << "\n";
-  std::cout << "  real-time: " << (get<bool>(d, "realtime", false) ? "yes" : "no");
-  if (const auto t = get<std::string>(d, "rt_status", ""); !t.empty())
-    std::cout << " (" << t << ")";
-  std::cout << "\n";
-  const json b = r.value("bus", json::object());
-  std::cout << "  bus:       " << get<std::string>(b, "kind", "?") << ", "
-            << get<std::string>(b, "state", "?");
-  if (b.contains("mn_state")) std::cout << " (MN " << get<std::string>(b, "mn_state", "?") << ")";
-  std::cout << "\n";
+// The cycle engine's text already says "real-time: ..." or "not real-time: ...": shown after
+// the yes/no without saying it twice.
+std::string rt_detail(const std::string& text) {
+  for (const char* prefix : {"real-time: ", "not real-time: "}) {
+    const std::string p(prefix);
+    if (text.compare(0, p.size(), p) == 0) return text.substr(p.size());
+  }
+  return text;
+}
+
+void print_powerlink_nodes(const json& b) {
   for (const auto& n : b.value("nodes", json::array())) {
     std::cout << "    node " << get<uint64_t>(n, "node", 0) << ": "
               << get<std::string>(n, "boot", "?") << " (NMT " << get<std::string>(n, "nmt", "?")
@@ -114,10 +113,102 @@ void print_status(const json& r) {
         std::cout << "        " << get<std::string>(e, "text", "?") << "\n";
     }
   }
+}
+
+// CAN-I/O: the controller, then each CANopen node (NMT state, heartbeat) with its axes'
+// sampling (samples, missing, late frames) and their last error. "nodes" holds one entry per
+// axis, "canopen_nodes" one per node.
+void print_canio_nodes(const json& b) {
+  if (b.contains("interface")) {
+    std::cout << "    interface " << get<std::string>(b, "interface", "?") << " ("
+              << get<std::string>(b, "transport", "?") << "), "
+              << get<std::string>(b, "can_state", "?") << ", " << get<uint64_t>(b, "bitrate", 0)
+              << " bit/s\n";
+  }
+  const json axes = b.value("nodes", json::array());
+  auto print_axes_of = [&](uint64_t node) {
+    for (const auto& a : axes) {
+      if (get<uint64_t>(a, "node", 0) != node) continue;
+      std::cout << "      axis " << get<uint64_t>(a, "axis", 0) << ": "
+                << get<std::string>(a, "state", "?");
+      if (const auto why = get<std::string>(a, "reason", ""); !why.empty())
+        std::cout << " (" << why << ")";
+      std::cout << ", samples " << get<uint64_t>(a, "samples", 0) << ", missing "
+                << get<uint64_t>(a, "missing", 0) << ", late " << get<uint64_t>(a, "late_frames", 0)
+                << "\n";
+      if (const auto last = get<std::string>(a, "last_error", ""); !last.empty())
+        std::cout << "        last error: " << last << "\n";
+    }
+  };
+  std::vector<uint64_t> shown;
+  for (const auto& n : b.value("canopen_nodes", json::array())) {
+    const uint64_t node = get<uint64_t>(n, "node", 0);
+    shown.push_back(node);
+    std::cout << "    node " << node << ": NMT " << get<std::string>(n, "nmt_state", "?");
+    if (get<bool>(n, "heartbeat_watched", false))
+      std::cout << ", heartbeats " << get<uint64_t>(n, "heartbeats", 0) << " ("
+                << get<uint64_t>(n, "heartbeat_misses", 0) << " missed)";
+    else
+      std::cout << ", heartbeat not watched";
+    std::cout << ", boot-ups " << get<uint64_t>(n, "boot_ups", 0) << ", EMCY "
+              << get<uint64_t>(n, "emcys", 0) << "\n";
+    print_axes_of(node);
+  }
+  // Axes of a node the daemon has no CANopen entry for (none today): still shown.
+  for (const auto& a : axes) {
+    const uint64_t node = get<uint64_t>(a, "node", 0);
+    if (std::find(shown.begin(), shown.end(), node) != shown.end()) continue;
+    shown.push_back(node);
+    std::cout << "    node " << node << ":\n";
+    print_axes_of(node);
+  }
+}
+
+void print_status(const json& r) {
+  const json d = r.value("daemon", json::object());
+  std::cout << "ds1928d " << get<std::string>(d, "version", "?") << " (pid "
+            << get<int64_t>(d, "pid", 0) << "), " << get<std::string>(d, "state", "?") << ", up "
+            << duration_text(get<double>(d, "uptime_s", 0.0)) << "\n";
+  std::cout << "  real-time: " << (get<bool>(d, "realtime", false) ? "yes" : "no");
+  if (const auto t = rt_detail(get<std::string>(d, "rt_status", "")); !t.empty())
+    std::cout << " (" << t << ")";
+  std::cout << "\n";
+  const json b = r.value("bus", json::object());
+  const std::string kind = get<std::string>(b, "kind", "?");
+  std::cout << "  bus:       " << kind << ", " << get<std::string>(b, "state", "?");
+  if (b.contains("mn_state")) std::cout << " (MN " << get<std::string>(b, "mn_state", "?") << ")";
+  std::cout << "\n";
+  if (const auto cause = get<std::string>(b, "cause", ""); !cause.empty())
+    std::cout << "    cause: " << cause << "\n";
+  if (kind == "canio")
+    print_canio_nodes(b);
+  else
+    print_powerlink_nodes(b);
   print_cycle(r.value("cycle", json()));
   const json axes = r.value("axes", json::array());
   std::cout << "  axes:      " << axes.size() << "\n";
   for (const auto& a : axes) print_axis_line(a);
+}
+
+// --check: the axes of a status reply that are not valid, as "axis 0 (x): bus_down" lines.
+std::vector<std::string> invalid_axes(const json& r) {
+  std::vector<std::string> bad;
+  for (const auto& a : r.value("axes", json::array())) {
+    const std::string state = get<std::string>(a, "state", "?");
+    if (state == "valid") continue;
+    bad.push_back("axis " + std::to_string(get<uint64_t>(a, "axis", 0)) + " (" +
+                  get<std::string>(a, "name", "") + "): " + state);
+  }
+  return bad;
+}
+
+int run_status(const Context& ctx, bool check) {
+  const Outcome o = send_request(ctx, {{"cmd", "status"}});
+  if (const int rc = print_outcome(ctx, o, print_status); rc != kOk) return rc;
+  if (!check) return kOk;
+  const auto bad = invalid_axes(o.reply);
+  for (const auto& line : bad) std::cerr << "ds1928ctl: not valid: " << line << "\n";
+  return bad.empty() ? kOk : kNotValid;
 }
 
 void print_axes(const json& r) {
@@ -152,10 +243,13 @@ void print_stats(const json& r) {
 }  // namespace
 
 void add_basic_commands(CLI::App& app, Context& ctx) {
-  app.add_subcommand("status", "Daemon, real-time, bus, axis states, cycle counters")
-      ->callback([&ctx] {
-        ctx.action = [&ctx] { return request_and_print(ctx, {{"cmd", "status"}}, print_status); };
-      });
+  auto* status =
+      app.add_subcommand("status", "Daemon, real-time, bus, axis states, cycle counters");
+  auto check = std::make_shared<bool>(false);
+  status->add_flag("--check", *check,
+                   "Exit 5 when any axis is not valid (stale, bus_down, module_error)");
+  status->callback(
+      [&ctx, check] { ctx.action = [&ctx, check] { return run_status(ctx, *check); }; });
 
   app.add_subcommand("axes", "Configuration and last sample of every axis (over the socket)")
       ->callback([&ctx] {

@@ -61,18 +61,34 @@ void print_summary(std::ostream& out, const nlohmann::json& c) {
         << " dropped\n";
 }
 
+// Whether FILE can be written, asked before the capture starts (the file itself is created
+// with the first data, so that a capture the daemon refuses leaves no empty file behind).
+std::string cannot_write(const std::string& path) {
+  if (::access(path.c_str(), F_OK) == 0) {
+    const int fd = ::open(path.c_str(), O_WRONLY | O_CLOEXEC);
+    if (fd < 0) return std::strerror(errno);
+    ::close(fd);
+    return {};
+  }
+  const auto slash = path.find_last_of('/');
+  const std::string dir = slash == std::string::npos ? "."
+                          : slash == 0               ? "/"
+                                                     : path.substr(0, slash);
+  if (::access(dir.c_str(), W_OK | X_OK) != 0) return dir + ": " + std::strerror(errno);
+  return {};
+}
+
 int run_capture(const Context& ctx, const CaptureArgs& a) {
   const bool to_stdout = a.output == "-";
-  int out_fd = STDOUT_FILENO;
+  int out_fd = to_stdout ? STDOUT_FILENO : -1;
   if (!to_stdout) {
-    out_fd = ::open(a.output.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0640);
-    if (out_fd < 0) {
-      std::cerr << "ds1928ctl: cannot write " << a.output << ": " << std::strerror(errno) << "\n";
+    if (const auto why = cannot_write(a.output); !why.empty()) {
+      std::cerr << "ds1928ctl: cannot write " << a.output << ": " << why << "\n";
       return kUsage;
     }
   }
   const std::unique_ptr<int, void (*)(int*)> closer(&out_fd, [](int* fd) {
-    if (*fd != STDOUT_FILENO) ::close(*fd);
+    if (*fd >= 0 && *fd != STDOUT_FILENO) ::close(*fd);
   });
   std::ostream& info = to_stdout ? std::cerr : std::cout;
 
@@ -94,6 +110,14 @@ int run_capture(const Context& ctx, const CaptureArgs& a) {
         if (it == line.end() || !it->is_string()) return true;  // unknown line kinds: skipped
         const auto bytes = capture::base64_decode(it->get_ref<const std::string&>());
         if (!bytes) throw std::runtime_error("capture_data is not base64");
+        if (out_fd < 0) {
+          out_fd = ::open(a.output.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0640);
+          if (out_fd < 0) {
+            std::cerr << "ds1928ctl: cannot write " << a.output << ": " << std::strerror(errno)
+                      << "\n";
+            return false;  // closing the connection ends the capture in the daemon
+          }
+        }
         if (!write_all(out_fd, bytes->data(), bytes->size())) {
           std::cerr << "ds1928ctl: writing " << (to_stdout ? "stdout" : a.output) << ": "
                     << std::strerror(errno) << "\n";
@@ -109,6 +133,10 @@ int run_capture(const Context& ctx, const CaptureArgs& a) {
           if (s.exit != kOk) std::cerr << "ds1928ctl: capture-stop: " << s.problem << "\n";
         }
       });
+  if (o.exit == kOk && out_fd < 0) {  // a capture that ended before any data: still a file
+    out_fd = ::open(a.output.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0640);
+    if (out_fd < 0) std::cerr << "ds1928ctl: cannot write " << a.output << "\n";
+  }
   if (o.exit == kOk && ctx.json) {
     info << o.reply.dump() << std::endl;
   } else if (o.exit == kOk) {

@@ -5,12 +5,16 @@
 #include <sys/un.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <chrono>
 #include <cstdio>
 #include <cstring>
 #include <iostream>
 #include <optional>
+#include <vector>
+
+#include "config/config_loader.hpp"
 
 namespace ds1928::ctl {
 namespace {
@@ -37,27 +41,41 @@ std::string errno_text() {
   return std::strerror(errno);
 }
 
+// Connects to the first of ctx.sockets that accepts; -1 with `out` naming every path tried.
+int connect_first(const Context& ctx, Outcome& out) {
+  std::vector<std::string> paths = ctx.sockets;
+  if (paths.empty()) paths.push_back(ctx.socket_path.empty() ? kDefaultSocket : ctx.socket_path);
+  std::string tried;
+  bool absent = true;  // every path: nothing there, or a stale socket
+  for (const std::string& path : paths) {
+    sockaddr_un addr{};
+    addr.sun_family = AF_UNIX;
+    if (path.size() >= sizeof(addr.sun_path)) {
+      out = {kUsage, nullptr, "socket path too long: " + path};
+      return -1;
+    }
+    std::memcpy(addr.sun_path, path.c_str(), path.size() + 1);
+    const int fd = socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    if (fd < 0) {
+      out = {kUnavailable, nullptr, "socket: " + errno_text()};
+      return -1;
+    }
+    if (connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) == 0) return fd;
+    absent = absent && (errno == ENOENT || errno == ECONNREFUSED);
+    tried += (tried.empty() ? "" : ", nor to ") + path + " (" + errno_text() + ")";
+    ::close(fd);
+  }
+  out = {
+      kUnavailable, nullptr,
+      "cannot connect to " + tried +
+          (absent ? ": is ds1928d running? (-s PATH or $DS1928_SOCKET for another instance)" : "")};
+  return -1;
+}
+
 // Connects and sends `request` as one line; the socket, or -1 with `out` set.
 int connect_and_send(const Context& ctx, const nlohmann::json& request, Outcome& out) {
-  sockaddr_un addr{};
-  addr.sun_family = AF_UNIX;
-  if (ctx.socket_path.size() >= sizeof(addr.sun_path)) {
-    out = {kUsage, nullptr, "socket path too long: " + ctx.socket_path};
-    return -1;
-  }
-  std::memcpy(addr.sun_path, ctx.socket_path.c_str(), ctx.socket_path.size() + 1);
-  const int fd = socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
-  if (fd < 0) {
-    out = {kUnavailable, nullptr, "socket: " + errno_text()};
-    return -1;
-  }
-  if (connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) != 0) {
-    out = {kUnavailable, nullptr,
-           "cannot connect to " + ctx.socket_path + ": " + errno_text() +
-               (errno == ENOENT || errno == ECONNREFUSED ? " (is ds1928d running?)" : "")};
-    ::close(fd);
-    return -1;
-  }
+  const int fd = connect_first(ctx, out);
+  if (fd < 0) return -1;
   const std::string line = request.dump() + "\n";
   for (std::size_t off = 0; off < line.size();) {
     const ssize_t n = ::send(fd, line.data() + off, line.size() - off, MSG_NOSIGNAL);
@@ -95,6 +113,19 @@ void take_reply(const std::string& text, Outcome& out) {
 }
 
 }  // namespace
+
+void resolve_sockets(Context& ctx, const char* env_socket) {
+  std::string chosen = ctx.socket_path;
+  ctx.socket_named = !chosen.empty();
+  if (chosen.empty() && env_socket != nullptr && *env_socket != '\0') {
+    chosen = env_socket;
+    ctx.socket_named = true;
+  }
+  if (chosen.empty()) chosen = kDefaultSocket;
+  ctx.sockets = {chosen};
+  if (std::string fallback = fallback_socket_path(chosen); fallback != chosen)
+    ctx.sockets.push_back(std::move(fallback));
+}
 
 // One recv() into `buffer` once poll() said the socket is readable: empty when bytes (or an
 // EINTR) came, else the failure (closed, error, a line longer than kMaxReplyBytes). Shared by
@@ -185,9 +216,27 @@ StreamOutcome stream_request(const Context& ctx, const nlohmann::json& request,
   }
 }
 
-int request_and_print(const Context& ctx, const nlohmann::json& request,
-                      const HumanPrinter& print_human) {
-  const Outcome o = send_request(ctx, request);
+std::string shm_name_for(const Context& ctx, std::string& problem) {
+  if (!ctx.shm_name.empty()) return ctx.shm_name;
+  Context ask = ctx;
+  ask.timeout_ms = std::min(ctx.timeout_ms, 3000);
+  const Outcome o = send_request(ask, {{"cmd", "status"}});
+  if (o.exit == kOk) {
+    const auto shm = o.reply.find("shm");
+    if (shm != o.reply.end() && shm->is_object()) {
+      const auto name = shm->find("name");
+      if (name != shm->end() && name->is_string() && !name->get<std::string>().empty())
+        return name->get<std::string>();
+    }
+  }
+  if (!ctx.socket_named) return kDefaultShm;  // the default instance, or none: the default name
+  problem = "cannot ask the daemon for its shared memory name (" +
+            (o.exit == kOk ? std::string("its status names none") : o.problem) +
+            "); give --shm NAME";
+  return {};
+}
+
+int print_outcome(const Context& ctx, const Outcome& o, const HumanPrinter& print_human) {
   if (o.exit == kDaemonError && ctx.json) {
     std::cout << o.reply.dump() << std::endl;  // scripts get the error object too
   }
@@ -208,6 +257,11 @@ int request_and_print(const Context& ctx, const nlohmann::json& request,
     }
   }
   return kOk;
+}
+
+int request_and_print(const Context& ctx, const nlohmann::json& request,
+                      const HumanPrinter& print_human) {
+  return print_outcome(ctx, send_request(ctx, request), print_human);
 }
 
 }  // namespace ds1928::ctl

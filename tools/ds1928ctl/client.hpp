@@ -34,5 +34,13 @@ using StreamOutcome = Outcome;
 using HumanPrinter = std::function<void(const nlohmann::json& reply)>;
 [[nodiscard]] int request_and_print(const Context& ctx, const nlohmann::json& request,
                                     const HumanPrinter& print_human);
+// The printing half of request_and_print, for a command that looks at the reply afterwards.
+[[nodiscard]] int print_outcome(const Context& ctx, const Outcome& o,
+                                const HumanPrinter& print_human);
+
+// The shared memory name to read: --shm, else the name the daemon reports in its status, else
+// /ds1928d when the daemon was not named and cannot be asked. Empty with `problem` set when a
+// named daemon (-s, $DS1928_SOCKET) cannot be asked.
+[[nodiscard]] std::string shm_name_for(const Context& ctx, std::string& problem);
 
 }  // namespace ds1928::ctl

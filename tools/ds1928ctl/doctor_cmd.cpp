@@ -78,10 +78,11 @@ int run(const Context& ctx, const DoctorArgs& args) {
                       {"p99", s.wake_latency.p99_ns},
                       {"max", s.wake_latency.max_ns}}}};
     if (!ctx.json)
+      // The engine's text names the priority, the CPU and whether it got them.
       std::printf(
-          "measure  %.0f s at %u µs, SCHED_FIFO %d, CPU %d (%s): %llu cycles, %llu overruns, "
+          "measure  %.0f s at %u µs (%s): %llu cycles, %llu overruns, "
           "wake-up p50 %.1f µs, p99 %.1f µs, max %.1f µs\n",
-          args.measure_s, cc.period_us, cc.rt_priority, cc.cpu, engine.rt_status_text().c_str(),
+          args.measure_s, cc.period_us, engine.rt_status_text().c_str(),
           static_cast<unsigned long long>(s.cycles), static_cast<unsigned long long>(s.overruns),
           s.wake_latency.p50_ns / 1000.0, s.wake_latency.p99_ns / 1000.0,
           s.wake_latency.max_ns / 1000.0);
@@ -119,7 +120,9 @@ void add_doctor_command(CLI::App& app, Context& ctx) {
   auto* doc = app.add_subcommand(
       "doctor",
       "Check the machine's real-time settings against the configuration (exit 1: a check failed)");
-  doc->add_option("--config,-c", args->config, "The daemon's configuration")->capture_default_str();
+  doc->add_option("--config,-c", args->config,
+                  "The daemon's configuration (default: the packaged /etc/ds1928d/ds1928d.yaml)")
+      ->capture_default_str();
   doc->add_option("--root", args->root, "Read /proc, /sys and the unit below this directory")
       ->capture_default_str();
   doc->add_option("--unit", args->unit, "The unit file (below --root); default: the installed one");

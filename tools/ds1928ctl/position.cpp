@@ -12,6 +12,7 @@
 #include <thread>
 #include <vector>
 
+#include "client.hpp"
 #include "commands.hpp"
 #include "ds1928/shm.hpp"
 #include "error_bits_text.hpp"
@@ -26,6 +27,7 @@ struct PositionOptions {
   bool follow = false;
   uint32_t every = 1;
   uint64_t count = 0;  // with --follow: stop after this many publications (0: never)
+  bool check = false;  // exit kNotValid when a printed axis is not valid
 };
 
 const char* validity_name(uint8_t v) {
@@ -142,7 +144,9 @@ std::string open_problem(const std::string& name, std::error_code ec) {
   return "cannot map " + name + ": " + ec.message();
 }
 
-bool print_selected(const Context& ctx, const ShmReader& reader, const PositionOptions& opt) {
+// `not_valid` (when given) counts the printed axes that are not valid.
+bool print_selected(const Context& ctx, const ShmReader& reader, const PositionOptions& opt,
+                    int* not_valid = nullptr) {
   const uint32_t first = opt.axis.value_or(0);
   const uint32_t last = opt.axis ? *opt.axis + 1 : reader.axis_count();
   for (uint32_t a = first; a < last; ++a) {
@@ -152,6 +156,10 @@ bool print_selected(const Context& ctx, const ShmReader& reader, const PositionO
       return false;
     }
     print_axis(ctx, a, d);
+    if (not_valid != nullptr && d.validity != DS1928_AXIS_VALID) {
+      ++*not_valid;
+      std::cerr << "ds1928ctl: not valid: axis " << a << ": " << validity_name(d.validity) << "\n";
+    }
   }
   std::cout.flush();
   return true;
@@ -217,9 +225,15 @@ int follow(const Context& ctx, ShmReader& reader, const PositionOptions& opt) {
 }
 
 int run_position(const Context& ctx, const PositionOptions& opt) {
+  std::string problem;
+  const std::string name = shm_name_for(ctx, problem);
+  if (name.empty()) {
+    std::cerr << "ds1928ctl: " << problem << "\n";
+    return kUnavailable;
+  }
   ShmReader reader;
-  if (auto ec = open_reader(reader, ctx.shm_name)) {
-    std::cerr << "ds1928ctl: " << open_problem(ctx.shm_name, ec) << "\n";
+  if (auto ec = open_reader(reader, name)) {
+    std::cerr << "ds1928ctl: " << open_problem(name, ec) << "\n";
     return kUnavailable;
   }
   if (opt.axis && *opt.axis >= reader.axis_count()) {
@@ -228,14 +242,15 @@ int run_position(const Context& ctx, const PositionOptions& opt) {
     return kUsage;
   }
   if (opt.follow) return follow(ctx, reader, opt);
-  if (!print_selected(ctx, reader, opt)) return kUnavailable;
+  int not_valid = 0;
+  if (!print_selected(ctx, reader, opt, &not_valid)) return kUnavailable;
   if (!reader.daemon_alive()) {
     std::cerr << "ds1928ctl: daemon "
               << (reader.daemon_state() == DS1928_DAEMON_STOPPED ? "stopped" : "not publishing")
               << ": these are its last values\n";
     return kUnavailable;
   }
-  return kOk;
+  return opt.check && not_valid > 0 ? kNotValid : kOk;
 }
 
 }  // namespace
@@ -252,6 +267,9 @@ void add_position_command(CLI::App& app, Context& ctx) {
       ->needs(follow_flag);
   cmd->add_option("--count,-c", opt->count, "With --follow: stop after N publications")
       ->needs(follow_flag);
+  cmd->add_flag("--check", opt->check,
+                "Exit 5 when a printed axis is not valid (stale, bus_down, module_error)")
+      ->excludes(follow_flag);
   cmd->callback([&ctx, opt] { ctx.action = [&ctx, opt] { return run_position(ctx, *opt); }; });
 }
 
