@@ -276,6 +276,7 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
   } else if (!p.interface.empty() && !valid_interface_name(p.interface)) {
     s.error("interface", "'" + p.interface + "' is not a network interface name");
   }
+  s.boolean("allow_shared_interface", p.allow_shared_interface);
   std::vector<powerlink::CdcEntry> mn_cdc;
   if (s.text("cdc", p.cdc) && !p.cdc.empty()) {
     if (auto entries = load_cdc(s, "cdc", p.cdc, base_dir)) mn_cdc = std::move(*entries);
@@ -457,6 +458,7 @@ void check_powerlink(const BusDocument& d) {
 void dump_powerlink(std::ostream& o, const PowerlinkBusConfig& p) {
   o << "powerlink:\n"
     << "  interface: " << quote(p.interface) << "\n"
+    << "  allow_shared_interface: " << (p.allow_shared_interface ? "true" : "false") << "\n"
     << "  cdc: " << quote(p.cdc) << "\n"
     << "  nodes:" << (p.nodes.empty() ? " []" : "") << "\n";
   const auto opt = [](const auto& v) { return v ? hex(*v) : std::string(); };

@@ -149,7 +149,7 @@ void CycleEngine::cycle_loop() noexcept {
   const int64_t period = period_ns_;
   const int64_t spin = int64_t{config_.spin_us} * 1000;
   // One period of margin so that cycle 0 is not already late when the setup took a while.
-  const int64_t t0 = rt::now_ns() + period;
+  int64_t t0 = rt::now_ns() + period;
   uint64_t index = 0;
   uint64_t executed = 0;
 
@@ -164,6 +164,14 @@ void CycleEngine::cycle_loop() noexcept {
     cycle_count_.store(cycle_count_.load(std::memory_order_relaxed) + 1, std::memory_order_relaxed);
 
     ++index;
+    if (index == 1) {
+      // Cycle 0 does the start-up's one-time work (the bus' first exchange, the first touch of
+      // the shared memory and of every code path): its length is reported on its own
+      // (first_cycle_work_ns) and the grid starts one period after it, so that a start is not an
+      // overrun and skipped slots at every boot.
+      first_cycle_work_ns_.store(end - woke, std::memory_order_relaxed);
+      if (end > t0 + period) t0 = end;
+    }
     const int64_t next = t0 + static_cast<int64_t>(index) * period;
     if (end > next) {
       // The work ran into the next slot: resume at the first slot still ahead, on the same
