@@ -247,7 +247,13 @@ BusService::Reported CanioService::reported_state() const {
       }
       if (!why.empty()) continue;
       why = bus_->axis_last_error(i);
-      if (why.empty() && st != canio::CanioAxisState::Configuring) why = bus_->axis_reason(i);
+      // Configuring, and Starting before the first repeated Start, are the normal way up.
+      const std::size_t k = node_index(*bus_, node);
+      const bool start_repeated =
+          k < bus_->node_count() && bus_->node_counters(k).start_retries.load() > 0;
+      if (why.empty() && st != canio::CanioAxisState::Configuring &&
+          (st != canio::CanioAxisState::Starting || start_repeated))
+        why = bus_->axis_reason(i);
     }
     if (answers) {
       ++answering;
