@@ -38,9 +38,33 @@ bool SaidCounter::due(uint64_t value, std::chrono::steady_clock::time_point now,
   return true;
 }
 
+BusService::Reported BusService::reported_state() const {
+  const BusState s = driver().state();
+  Reported r{std::string(to_string(s)), {}};
+  switch (s) {
+    case BusState::Operational:
+      break;
+    case BusState::Booting:
+      r.cause = "the nodes are being started and configured";
+      break;
+    case BusState::Down:
+      r.cause = "the bus is stopped";
+      break;
+    case BusState::Error:
+      r.cause = "the bus driver reports an error";
+      break;
+  }
+  return r;
+}
+
+std::string BusService::axis_cause(std::size_t) const {
+  return {};
+}
+
 nlohmann::json BusService::status_json() const {
-  nlohmann::json j{{"kind", std::string(driver().name())},
-                   {"state", std::string(to_string(driver().state()))}};
+  Reported r = reported_state();
+  nlohmann::json j{{"kind", std::string(driver().name())}, {"state", r.state}};
+  if (r.state != "operational") j["cause"] = std::move(r.cause);
   status_extra(j);
   return j;
 }
@@ -88,15 +112,16 @@ void register_bus_commands(control::Server& server, BusService& bus, const Daemo
 
 std::vector<BusEvent> BusWatch::poll(BusService& bus, std::chrono::steady_clock::time_point now) {
   std::vector<BusEvent> events;
-  const BusState state = bus.driver().state();
-  if (!seen_ || state != state_) {
+  BusService::Reported now_state = bus.reported_state();
+  if (!seen_ || now_state.state != state_) {
     // The first look reports nothing: the start is logged on its own.
     if (seen_)
-      events.push_back({state != BusState::Operational,
-                        fmt::format("bus {}: {} -> {}", bus.driver().name(), to_string(state_),
-                                    to_string(state)),
-                        control::LogEvent::BusState});
-    state_ = state;
+      events.push_back(
+          {now_state.state != "operational",
+           fmt::format("bus {}: {} -> {}{}", bus.driver().name(), state_, now_state.state,
+                       now_state.cause.empty() ? std::string() : ": " + now_state.cause),
+           control::LogEvent::BusState, -1, -1, now_state.cause});
+    state_ = std::move(now_state.state);
   }
   bus.watch(events, !seen_, now);
   seen_ = true;

@@ -63,7 +63,19 @@ class BusService {
     return const_cast<BusService*>(this)->driver();
   }
 
-  // {"kind", "state"} plus what the kind adds (status_extra). Normal thread.
+  // The bus' state as `status` says it, and why when it is not "operational": the driver's
+  // state, refined by the kind (CAN-I/O: "degraded" while some nodes answer and others do not,
+  // "no_nodes" while none does; POWERLINK: "waiting_for_link"). Normal thread.
+  struct Reported {
+    std::string state;
+    std::string cause;  // empty when operational
+  };
+  [[nodiscard]] virtual Reported reported_state() const;
+  // Why the bus gives an axis no data, in the bus' own words (a node's SDO timeout); empty when
+  // the bus knows no reason.
+  [[nodiscard]] virtual std::string axis_cause(std::size_t axis) const;
+
+  // {"kind", "state", "cause"} plus what the kind adds (status_extra). Normal thread.
   [[nodiscard]] nlohmann::json status_json() const;
   // The bus kind's own socket commands (names listed by bus_commands()).
   virtual void register_commands(control::Server& server, const SocketConfig& socket);

@@ -2,6 +2,8 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
+
 #include "can/socketcan_port.hpp"
 #include "capture/capturing_can_port.hpp"
 
@@ -85,7 +87,10 @@ void CanioService::watch(std::vector<BusEvent>& events, bool first,
     events.push_back({true, fmt::format("canio {}: TX queue full (ENOBUFS) {} time(s), frames "
                                         "dropped ({} in total; raise txqueuelen)",
                                         bus_->port_name(), more, full)});
-  if (silent_.size() < bus_->options().axes.size()) silent_.resize(bus_->options().axes.size());
+  if (silent_.size() < bus_->options().axes.size()) {
+    silent_.resize(bus_->options().axes.size());
+    answered_.resize(bus_->options().axes.size());
+  }
   for (std::size_t i = 0; i < bus_->options().axes.size(); ++i) {
     const auto& a = bus_->options().axes[i];
     const auto& ac = bus_->axis_counters(i);
@@ -96,10 +101,16 @@ void CanioService::watch(std::vector<BusEvent>& events, bool first,
            silent ? fmt::format("canio node {}: silent (no complete sample of axis "
                                 "'{}' for {} ms)",
                                 a.node, a.name, bus_->options().bus.input_timeout_ms)
-                  : fmt::format("canio node {}: axis '{}' answering again", a.node, a.name),
+           : answered_[i]
+               ? fmt::format("canio node {}: axis '{}' answering again", a.node, a.name)
+               : fmt::format("canio node {}: axis '{}' answering (first samples)", a.node, a.name),
            silent ? control::LogEvent::NodeSilent : control::LogEvent::NodeOperational,
            static_cast<int>(a.node), static_cast<int>(i)});
     silent_[i] = silent;
+    if (!silent) {
+      answered_[i] = true;
+      note_heard(a.node);
+    }
   }
   canio::CanioNodeEvent e;
   while (bus_->poll_event(e)) on_node_event(e, events);
@@ -110,12 +121,28 @@ void CanioService::watch(std::vector<BusEvent>& events, bool first,
 // and logged here with the node's journal fields. The daemon turns the boot-up and the missed
 // heartbeat into flight-recorder incidents by their reason (incident_of() in daemon.cpp); the
 // driver raises the bus-off itself on its cycle.
-void CanioService::on_node_event(const canio::CanioNodeEvent& e,
-                                 std::vector<BusEvent>& events) const {
+bool CanioService::note_heard(uint8_t node) {
+  if (std::find(heard_.begin(), heard_.end(), node) != heard_.end()) return false;
+  heard_.push_back(node);
+  return true;
+}
+
+void CanioService::on_node_event(const canio::CanioNodeEvent& e, std::vector<BusEvent>& events) {
   using K = canio::CanioNodeEventKind;
   const std::string why(canio::to_string(e.kind));
+  const bool first_contact = note_heard(e.node);
   switch (e.kind) {
     case K::BootUp:
+      // A node's boot-up before anything else of it was heard is how a node powered with (or
+      // after) the daemon says hello: nothing was lost, it is no incident.
+      if (first_contact) {
+        events.push_back({false,
+                          fmt::format("canio node {}: boot-up (first contact): its axes are "
+                                      "configured",
+                                      e.node),
+                          control::LogEvent::None, e.node, -1, "first-contact"});
+        return;
+      }
       events.push_back({true,
                         fmt::format("canio node {}: boot-up (the node reset and lost its "
                                     "configuration): its axes are down and configured again",
@@ -177,6 +204,69 @@ void CanioService::on_node_event(const canio::CanioNodeEvent& e,
                         control::LogEvent::BusState, -1, -1, why});
       return;
   }
+}
+
+std::string CanioService::axis_cause(std::size_t axis) const {
+  if (axis >= bus_->options().axes.size()) return {};
+  const canio::CanioAxisState s = bus_->axis_counters(axis).state.load();
+  if (s == canio::CanioAxisState::Operational) return {};
+  std::string why = bus_->axis_last_error(axis);
+  if (why.empty()) why = bus_->axis_reason(axis);
+  return fmt::format("canio node {}: {}", bus_->options().axes[axis].node, why);
+}
+
+BusService::Reported CanioService::reported_state() const {
+  const BusState s = bus_->state();
+  if (s != BusState::Operational) {
+    Reported r = BusService::reported_state();
+    if (s == BusState::Error)
+      r.cause = fmt::format("canio {}: controller {}", bus_->port_name(),
+                            canio::to_string(bus_->can_state()));
+    return r;
+  }
+  // Per node: it answers when one of its axes is configured (its SDO server answered); it fails
+  // when none is and one has an error or a state that says why; otherwise it is still being
+  // configured for the first time.
+  const auto& axes = bus_->options().axes;
+  std::vector<uint8_t> nodes;
+  for (const auto& a : axes)
+    if (std::find(nodes.begin(), nodes.end(), a.node) == nodes.end()) nodes.push_back(a.node);
+  std::size_t answering = 0;
+  std::size_t failing = 0;
+  std::string causes;
+  for (const uint8_t node : nodes) {
+    bool answers = false;
+    std::string why;
+    for (std::size_t i = 0; i < axes.size(); ++i) {
+      if (axes[i].node != node) continue;
+      const canio::CanioAxisState st = bus_->axis_counters(i).state.load();
+      if (st == canio::CanioAxisState::Operational ||
+          st == canio::CanioAxisState::AwaitingPosCycle) {
+        answers = true;
+        break;
+      }
+      if (!why.empty()) continue;
+      why = bus_->axis_last_error(i);
+      // Configuring, and Starting before the first repeated Start, are the normal way up.
+      const std::size_t k = node_index(*bus_, node);
+      const bool start_repeated =
+          k < bus_->node_count() && bus_->node_counters(k).start_retries.load() > 0;
+      if (why.empty() && st != canio::CanioAxisState::Configuring &&
+          (st != canio::CanioAxisState::Starting || start_repeated))
+        why = bus_->axis_reason(i);
+    }
+    if (answers) {
+      ++answering;
+    } else if (!why.empty()) {
+      ++failing;
+      causes += fmt::format("{}node {}: {}", causes.empty() ? "" : "; ", node, why);
+    }
+  }
+  if (failing == 0 && answering == nodes.size()) return {"operational", {}};
+  if (failing == 0) return {"booting", "the nodes are being configured over SDO"};
+  if (answering == 0)
+    return {"no_nodes", fmt::format("no node answers on {}: {}", bus_->port_name(), causes)};
+  return {"degraded", fmt::format("{} of {} node(s) answer; {}", answering, nodes.size(), causes)};
 }
 
 void CanioService::status_extra(nlohmann::json& j) const {

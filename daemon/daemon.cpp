@@ -4,13 +4,17 @@
 #include <unistd.h>
 
 #include <boost/asio/post.hpp>
+#include <csignal>
 #include <cstdio>
+#include <cstring>
 
 #include "canio/canio_bus.hpp"
 #include "config/config_loader.hpp"
 #include "control/socket_path.hpp"
 #include "endat_service.hpp"
+#include "host_checks.hpp"
 #include "service/journal.hpp"
+#include "shm/shm_error.hpp"
 
 namespace ds1928 {
 
@@ -46,7 +50,13 @@ constexpr auto kTick = std::chrono::milliseconds(10);
 }  // namespace
 
 Daemon::Daemon(DaemonConfig config)
-    : config_(std::move(config)), signals_(io_, SIGINT, SIGTERM), tick_timer_(io_) {}
+    : config_(std::move(config)), signals_(io_, SIGINT, SIGTERM, SIGHUP), tick_timer_(io_) {
+  // A closed terminal (SIGHUP) or a closed pipe on the log's output (SIGPIPE, `ds1928d | head`)
+  // would otherwise end the process at once, leaving the shared memory and the socket behind:
+  // both stop the daemon as SIGTERM does. Sockets send with MSG_NOSIGNAL, so a client that went
+  // away never raises SIGPIPE.
+  signals_.add(SIGPIPE);
+}
 
 Daemon::~Daemon() {
   stop();
@@ -72,7 +82,10 @@ std::error_code Daemon::start() {
   bus().set_incident_sink(&incidents_->sink());
   if (auto ec = publisher_.open(config_.shm, static_cast<uint32_t>(config_.axes.size()),
                                 uint64_t{config_.cycle.period_us} * 1000)) {
-    spdlog::error("shared memory {}: {}", config_.shm.name, ec.message());
+    spdlog::error("shared memory {}: {}", config_.shm.name,
+                  ec == shm::ShmError::kUnknownGroup
+                      ? "shm.group: " + group_missing(config_.shm.group)
+                      : ec.message());
     return ec;
   }
   if (auto ec = bus().start()) {
@@ -88,6 +101,11 @@ std::error_code Daemon::start() {
   // made or written (a daemon started by hand without root). Something planted at the path or a
   // directory others control is refused outright: moving elsewhere would hide it.
   SocketConfig socket = config_.socket;
+  if (!socket.group.empty())
+    if (const std::string missing = group_missing(socket.group); !missing.empty()) {
+      spdlog::error("control socket {}: socket.group: {}", socket.path, missing);
+      return std::make_error_code(std::errc::invalid_argument);
+    }
   server_ = std::make_unique<control::Server>(io_, socket);
   register_commands();
   if (auto ec = server_->start()) {
@@ -131,11 +149,16 @@ std::error_code Daemon::start() {
       [this](std::size_t axis, std::error_code ec, const endat::Identification* found) {
         topology_->on_identified(axis, ec, found);
       });
+  endat_->set_cause_source([this](std::size_t axis) { return bus_->axis_cause(axis); });
   endat_->register_commands(*server_);
   endat_->start();
   notifier_.supervise(
       io_, [this] { return engine_->cycle_count(); }, [this] { return summary_line(); });
   start_metrics();
+  if (const BusService::Reported r = bus_->reported_state(); r.state == "waiting_for_link")
+    control::log_event(spdlog::level::warn,
+                       {control::LogEvent::BusState, bus().name(), -1, -1, r.cause},
+                       fmt::format("bus {}: waiting for the link: {}", bus().name(), r.cause));
   control::log_event(
       spdlog::level::info, {control::LogEvent::Started, bus().name()},
       fmt::format("ds1928d {} cycling: bus {}, {} axis(es), period {} µs; {}; shm {}; socket {}",
@@ -177,7 +200,7 @@ int Daemon::run() {
   }
   signals_.async_wait([this](const boost::system::error_code& ec, int signo) {
     if (ec) return;
-    spdlog::info("signal {} received", signo);
+    spdlog::info("signal {} (SIG{}) received: stopping", signo, sigabbrev_np(signo));
     tick_timer_.cancel();
     io_.stop();
   });
@@ -202,11 +225,22 @@ int Daemon::run() {
 }
 
 void Daemon::on_tick() {
-  // READY=1 once the first cycle exchanged data with the modules.
-  if (!ready_sent_ && work_->data_exchanges() > 0) {
-    ready_sent_ = true;
-    notifier_.ready(summary_line());
-    spdlog::info("first data exchanged: ready");
+  // READY=1 once the first cycle exchanged data with the modules, or once the daemon waits for
+  // a link that is down: it is up and says why nothing moves (STATUS=), and a cable plugged in
+  // later must not find a unit systemd failed for its start timeout.
+  if (!ready_sent_) {
+    if (work_->data_exchanges() > 0) {
+      ready_sent_ = true;
+      notifier_.ready(summary_line());
+      spdlog::info(
+          "first data exchanged: ready (cycle 0, the start-up's one-time work, took {:.0f} "
+          "µs; not counted as an overrun)",
+          static_cast<double>(engine_->first_cycle_work_ns()) / 1000.0);
+    } else if (bus_->reported_state().state == "waiting_for_link") {
+      ready_sent_ = true;
+      notifier_.ready(summary_line());
+      spdlog::info("ready, waiting for the link");
+    }
   }
   for (const BusEvent& e : bus_watch_.poll(*bus_)) {
     log_bus_event(e, bus().name());
@@ -231,12 +265,14 @@ void Daemon::on_tick() {
 
 std::string Daemon::summary_line() const {
   const auto s = engine_->stats_snapshot();
-  std::string line = fmt::format("cycle {} | late p99 {:.1f} µs max {:.1f} µs | overruns {} | {}{}",
-                                 engine_->cycle_count(), s.wake_latency.p99_ns / 1000.0,
-                                 s.wake_latency.max_ns / 1000.0, s.overruns, bus_->driver().name(),
-                                 bus_->driver().state() == BusState::Operational
-                                     ? ""
-                                     : fmt::format(" {}", to_string(bus_->driver().state())));
+  const BusService::Reported bus = bus_->reported_state();
+  std::string line = fmt::format(
+      "cycle {} | late p99 {:.1f} µs max {:.1f} µs | overruns {} | {}{}", engine_->cycle_count(),
+      s.wake_latency.p99_ns / 1000.0, s.wake_latency.max_ns / 1000.0, s.overruns,
+      bus_->driver().name(),
+      bus.state == "operational"
+          ? std::string()
+          : fmt::format(" {}{}", bus.state, bus.cause.empty() ? "" : " (" + bus.cause + ")"));
   if (!engine_->realtime()) line += " | NOT real-time";
   if (work_->axis_count() > 0) {
     const AxisCounters& c = work_->counters(0);
@@ -327,6 +363,7 @@ json Daemon::stats_json() const {
             {"count", s.cycles},
             {"overruns", s.overruns},
             {"skipped", s.skipped_cycles},
+            {"first_cycle_work_ns", engine_->first_cycle_work_ns()},
             {"reset_generation", s.reset_generation},
             {"wake_latency_ns", quantiles_json(s.wake_latency)},
             {"work_ns", quantiles_json(s.work)}}},
@@ -358,6 +395,7 @@ json Daemon::status_json() const {
             {"count", engine_->cycle_count()},
             {"overruns", s.overruns},
             {"skipped", s.skipped_cycles},
+            {"first_cycle_work_ns", engine_->first_cycle_work_ns()},
             {"wake_latency_ns", quantiles_json(s.wake_latency)}}},
           {"axes", std::move(axes)}};
 }

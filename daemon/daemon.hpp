@@ -40,7 +40,7 @@ class BusWatch {
 
  private:
   bool seen_ = false;
-  BusState state_ = BusState::Down;
+  std::string state_;  // as reported (BusService::reported_state())
 };
 
 class Daemon {

@@ -144,6 +144,16 @@ std::string Daemon::metrics_text(metrics::Format format) const {
           {{"axis", index[i]}, {"name", config_.axes[i].name}, {"validity", validity_label(v)}},
           c.published[v].load(std::memory_order_relaxed));
   }
+  // The current state, one series per state (enum style: 1 for the current one), so that an
+  // alert needs no rate: `ds1928_axis_state{state="valid"} == 0`.
+  out.family("ds1928_axis_state", Type::Gauge,
+             "State of each axis as published now: 1 for the current state.");
+  for (std::size_t i = 0; i < axes; ++i) {
+    const std::size_t now = work_->counters(i).validity.load(std::memory_order_relaxed);
+    for (std::size_t v = 0; v < work_->counters(i).published.size(); ++v)
+      out.sample({{"axis", index[i]}, {"name", config_.axes[i].name}, {"state", validity_label(v)}},
+                 uint64_t{v == now ? 1u : 0u});
+  }
   out.family("ds1928_axis_format_violations", Type::Counter,
              "Fresh positions whose fraction broke the format (published as module error).");
   for (std::size_t i = 0; i < axes; ++i)

@@ -127,6 +127,10 @@ class EnDatService {
   using IdentifiedHook =
       std::function<void(std::size_t axis, std::error_code, const endat::Identification*)>;
   void set_identified_hook(IdentifiedHook hook) { identified_hook_ = std::move(hook); }
+  // Why the bus gives an axis no data (BusService::axis_cause), for the log of a failed
+  // identification: the bus' cause says more than "the command did not reach the module".
+  using CauseSource = std::function<std::string(std::size_t axis)>;
+  void set_cause_source(CauseSource source) { cause_source_ = std::move(source); }
   // The `endat-ident` reply body: identification, raw words 4..47 with names, status words.
   [[nodiscard]] nlohmann::json identification_reply(std::size_t axis) const;
   [[nodiscard]] bool identifying(std::size_t axis) const;
@@ -191,6 +195,7 @@ class EnDatService {
   boost::asio::io_context& io_;
   CycleWork& work_;
   IdentifiedHook identified_hook_;
+  CauseSource cause_source_;
   RegisterClient& registers_;
   const DaemonConfig& config_;
   boost::asio::steady_timer poll_timer_;

@@ -110,10 +110,12 @@ void EnDatService::identification_done(std::size_t index, std::error_code error)
   a.ident_error = error;
   if (error) {
     a.ident_state = "failed";
+    const std::string cause = cause_source_ ? cause_source_(index) : std::string();
     control::log_event(
         spdlog::level::warn,
         {control::LogEvent::IdentificationFailed, {}, -1, static_cast<int>(index), error.message()},
-        fmt::format("axis {}: encoder identification failed: {}", index, error.message()));
+        fmt::format("axis {}: encoder identification failed: {}{}", index, error.message(),
+                    cause.empty() ? std::string() : " (" + cause + ")"));
   } else {
     a.ident_state = "ok";
     spdlog::info("axis {}: EnDat {} {} encoder, {} position bits, ID {}, serial {} (from {})",

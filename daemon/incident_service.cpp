@@ -319,11 +319,21 @@ void IncidentService::register_commands(control::Server& server) {
       return p.kind == IncidentKind::Manual;
     });
     raise(IncidentKind::Manual, -1, -1, text.empty() ? "manual mark" : "manual mark: " + text);
-    reply.ok({{"marked",
-               {{"number", joins ? json(nullptr) : json(number)},
+    // Without a directory the incident is kept in the listing only: the reply says so instead of
+    // promising a file in "".
+    const std::string where = dir();
+    json marked{{"number", joins ? json(nullptr) : json(number)},
                 {"joined", joins},
                 {"file_after_ms", fr_.after_ms},
-                {"dir", dir()}}}});
+                {"dir", where.empty() ? json(nullptr) : json(where)},
+                {"file_written", !where.empty()}};
+    marked["note"] =
+        where.empty()
+            ? "no incident directory (flight_recorder.dir is empty and the daemon runs without "
+              "systemd's StateDirectory): the incident is in `ds1928ctl incidents`, no file is "
+              "written"
+            : fmt::format("its file follows in {} ms in {}", fr_.after_ms, where);
+    reply.ok({{"marked", std::move(marked)}});
   });
 }
 

@@ -1,10 +1,12 @@
 #include "powerlink_service.hpp"
 
 #include <fmt/format.h>
+#include <spdlog/spdlog.h>
 
 #include <algorithm>
 
 #include "capture/capturing_link.hpp"
+#include "powerlink/interface_check.hpp"
 #include "powerlink/raw_link.hpp"
 #include "powerlink/rx_wait.hpp"
 #include "powerlink_commands.hpp"
@@ -67,6 +69,31 @@ PowerlinkService::PowerlinkService(powerlink::PowerlinkBus& bus) : bus_(bus) {}
 
 void PowerlinkService::register_commands(control::Server& server, const SocketConfig& socket) {
   register_powerlink_commands(server, bus_, socket.privileged_group);
+}
+
+BusService::Reported PowerlinkService::reported_state() const {
+  const auto st = bus_.status();
+  const BusState s = bus_.state();
+  if (s == BusState::Down) return BusService::reported_state();
+  if (!st.link_up) {
+    const std::string name = interface_.empty() ? std::string("the interface") : interface_;
+    return {"waiting_for_link",
+            fmt::format("link down on '{}' (no carrier, or the interface is down): connect the "
+                        "cable to the POWERLINK segment, or `ip link set {} up`; cycling starts "
+                        "when the carrier comes",
+                        name, name)};
+  }
+  if (s != BusState::Booting) return BusService::reported_state();
+  std::string waiting;
+  for (std::size_t i = 0; i < st.node_count; ++i) {
+    const auto& n = st.nodes[i];
+    if (n.boot == powerlink::CnBootState::kOperational) continue;
+    waiting += fmt::format("{}node {} {}", waiting.empty() ? "" : ", ", n.node,
+                           powerlink::to_string(n.boot));
+    if (n.last_error) waiting += " (" + n.last_error.message() + ")";
+  }
+  return {"booting",
+          waiting.empty() ? "the CNs are being started" : "not yet operational: " + waiting};
 }
 
 void PowerlinkService::status_extra(nlohmann::json& j) const {
@@ -220,6 +247,25 @@ void PowerlinkService::watch(std::vector<BusEvent>& events, bool first,
 
 std::unique_ptr<BusService> make_powerlink_service(const DaemonConfig& config,
                                                    std::string& why_not) {
+  const std::string& interface = config.powerlink.interface;
+  if (std::string missing = powerlink::interface_missing(interface); !missing.empty()) {
+    why_not = "powerlink: " + missing;
+    return nullptr;
+  }
+  if (const std::string shared = powerlink::shared_interface_reason(interface); !shared.empty()) {
+    if (!config.powerlink.allow_shared_interface) {
+      why_not = fmt::format(
+          "powerlink: interface '{}' looks like a port of an IP network, not a POWERLINK segment: "
+          "{}. POWERLINK sends SoC and PReq every cycle and needs a port of its own; choose "
+          "another interface, or set powerlink.allow_shared_interface: true to use this one",
+          interface, shared);
+      return nullptr;
+    }
+    spdlog::warn(
+        "powerlink: interface '{}' is shared ({}); used as powerlink."
+        "allow_shared_interface says",
+        interface, shared);
+  }
   auto link = std::make_unique<powerlink::RawLink>();
   powerlink::RawLinkOptions options;
   options.interface = config.powerlink.interface;
@@ -244,6 +290,7 @@ std::unique_ptr<BusService> make_powerlink_service(const DaemonConfig& config,
     tap.set_description("POWERLINK MN raw socket");
     auto service = std::make_unique<PowerlinkService>(
         std::make_unique<powerlink::PowerlinkBus>(mn, std::move(tapped)));
+    service->set_interface(interface);
     service->add_capture_tap(tap);
     return service;
   } catch (const std::exception& e) {

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "bus_service.hpp"
@@ -18,6 +19,11 @@ class PowerlinkService final : public BusService {
   explicit PowerlinkService(powerlink::PowerlinkBus& bus);
 
   [[nodiscard]] BusDriver& driver() noexcept override { return bus_; }
+  // "waiting_for_link" while the interface has no carrier (named, with the fix); "booting" with
+  // the CNs not yet operational.
+  [[nodiscard]] Reported reported_state() const override;
+  // The interface's name, for the causes (set by the factory).
+  void set_interface(std::string name) { interface_ = std::move(name); }
   void register_commands(control::Server& server, const SocketConfig& socket) override;
   void watch(std::vector<BusEvent>& events, bool first,
              std::chrono::steady_clock::time_point now) override;
@@ -41,6 +47,7 @@ class PowerlinkService final : public BusService {
   powerlink::PowerlinkBus& bus_;
   SaidCounter cycle_time_exceeded_;
   std::vector<NodeSeen> nodes_;
+  std::string interface_;
 };
 
 }  // namespace ds1928

@@ -90,16 +90,17 @@ void Topology::on_identified(std::size_t axis, std::error_code error,
                  found->id.to_string(), found->serial.to_string());
     return;
   }
-  differences_[axis] = "encoder mismatch: " + join(d);
+  // The reason is the difference alone: status shows it beside the state ("mismatch").
+  differences_[axis] = join(d);
   state.store(static_cast<uint8_t>(IdentityState::Mismatch), std::memory_order_relaxed);
-  control::log_event(
-      spdlog::level::err,
-      {control::LogEvent::IdentificationFailed,
-       {},
-       a.node,
-       static_cast<int>(axis),
-       differences_[axis]},
-      fmt::format("axis {} ({}): {}; {}", axis, a.name, differences_[axis], consequence));
+  control::log_event(spdlog::level::err,
+                     {control::LogEvent::IdentificationFailed,
+                      {},
+                      a.node,
+                      static_cast<int>(axis),
+                      differences_[axis]},
+                     fmt::format("axis {} ({}): encoder mismatch: {}; {}", axis, a.name,
+                                 differences_[axis], consequence));
 }
 
 std::string Topology::reason(std::size_t axis) const {

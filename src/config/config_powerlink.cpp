@@ -297,6 +297,7 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
     s.error("interface", "'" + p.interface + "' is not a network interface name");
   }
   parse_object_scheme(s.section("object_scheme"), p.object_scheme);
+  s.boolean("allow_shared_interface", p.allow_shared_interface);
   std::vector<powerlink::CdcEntry> mn_cdc;
   if (s.text("cdc", p.cdc) && !p.cdc.empty()) {
     if (auto entries = load_cdc(s, "cdc", p.cdc, base_dir)) mn_cdc = std::move(*entries);
@@ -495,6 +496,7 @@ void check_powerlink(const BusDocument& d) {
 void dump_powerlink(std::ostream& o, const PowerlinkBusConfig& p) {
   o << "powerlink:\n"
     << "  interface: " << quote(p.interface) << "\n"
+    << "  allow_shared_interface: " << (p.allow_shared_interface ? "true" : "false") << "\n"
     << "  cdc: " << quote(p.cdc) << "\n"
     << "  nodes:" << (p.nodes.empty() ? " []" : "") << "\n";
   const auto opt = [](const auto& v) { return v ? hex(*v) : std::string(); };

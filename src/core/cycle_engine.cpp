@@ -174,6 +174,21 @@ void CycleEngine::cycle_loop() noexcept {
     cycle_count_.store(cycle_count_.load(std::memory_order_relaxed) + 1, std::memory_order_relaxed);
 
     ++index;
+    if (index == 1) {
+      // Cycle 0 does the start-up's one-time work (the bus' first exchange, the first touch of
+      // the shared memory and of every code path): its length is reported on its own
+      // (first_cycle_work_ns) and the grid starts one period after it, so that a start is not an
+      // overrun and skipped slots at every boot. The grid moves by whole periods, so a TAI
+      // timeline keeps its phase; there the index moves instead of t0, which stays the anchor.
+      first_cycle_work_ns_.store(end - woke, std::memory_order_relaxed);
+      if (end > t0 + period) {
+        const int64_t periods = (end - t0) / period + 1;
+        if (tai)
+          index += static_cast<uint64_t>(periods);
+        else
+          t0 += periods * period;
+      }
+    }
     if (tai && tai_timeline.follow(measure_tai_offset()) != 0) {
       // A step of the TAI clock: the timeline moved by less than half a period; the index
       // continues, and a start now behind is skipped once (never a burst).

@@ -94,6 +94,11 @@ class CycleEngine {
     return cycle_count_.load(std::memory_order_relaxed);
   }
   [[nodiscard]] CycleStatsSnapshot stats_snapshot() const noexcept { return stats_.snapshot(); }
+  // How long cycle 0's work took (the start-up's one-time work; not counted as an overrun
+  // however long it is); 0 before it ran.
+  [[nodiscard]] int64_t first_cycle_work_ns() const noexcept {
+    return first_cycle_work_ns_.load(std::memory_order_relaxed);
+  }
   // Full histograms, for readers that want more than the summary (lock-free, any thread).
   [[nodiscard]] const CycleStats& stats() const noexcept { return stats_; }
   // The cycle thread zeroes the statistics between two cycles; snapshot().reset_generation
@@ -121,6 +126,7 @@ class CycleEngine {
   std::atomic<int> setup_{0};
   std::atomic<bool> realtime_{false};
   std::atomic<uint64_t> cycle_count_{0};
+  std::atomic<int64_t> first_cycle_work_ns_{0};
   CycleStats stats_;
   TimebaseStatus timebase_;  // cycle thread
 

@@ -115,8 +115,10 @@ void PowerlinkBus::apply_preq_writes() noexcept {
 }
 
 std::error_code PowerlinkBus::start() {
-  if (!link_.link_up()) return MnError::kLinkDown;
+  // A link without carrier is waited for (a cable plugged in later, an interface brought up):
+  // exchange() sends nothing until it is up, and the status says so (link_up false).
   state_.store(BusState::Booting, std::memory_order_relaxed);
+  publish_status();
   return {};
 }
 

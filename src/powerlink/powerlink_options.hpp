@@ -111,6 +111,9 @@ struct PowerlinkNmtConfig {
 struct PowerlinkBusConfig {
   std::string interface;  // raw-socket interface, e.g. "eth1"
   std::string cdc;        // the MN's concise DCF (openCONFIGURATOR's mnobd.cdc), as given
+  // An interface with an IP address or the default route is refused unless this is set: POWERLINK
+  // wants a segment of its own (powerlink/interface_check.hpp).
+  bool allow_shared_interface = false;
   std::vector<PowerlinkNodeConfig> nodes;
   DllThresholds thresholds;
   PowerlinkNmtConfig nmt;

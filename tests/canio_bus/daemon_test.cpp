@@ -81,8 +81,8 @@ struct TestPlace {
     std::filesystem::remove_all(dir, ec);
     (void)canio::VirtualCanBus::remove_shared(bus);
   }
-  [[nodiscard]] DaemonConfig config() const {
-    DaemonConfig c = test::canio_config(1, 2000);
+  [[nodiscard]] DaemonConfig config(int nodes = 1) const {
+    DaemonConfig c = test::canio_config(nodes, 2000);
     c.canio.virtual_bus = bus;
     // SYNC + 2 input objects take ~540 µs of a 500 kbit/s wire; the rest is the node thread's
     // and the daemon's reaction on a shared machine.
@@ -132,6 +132,7 @@ TEST_CASE("ds1928d on bus canio: configured at start, positions, status, EnDat c
   INFO(status.dump(2));
   REQUIRE(status["bus"]["kind"] == "canio");
   REQUIRE(status["bus"]["state"] == "operational");
+  CHECK_FALSE(status["bus"].contains("cause"));  // only a state other than operational has one
   CHECK(status["bus"]["transport"] == "virtual");
   CHECK(status["bus"]["can_state"] == "error-active");
   CHECK(status["bus"]["nodes"][0]["configured"] == true);
@@ -228,4 +229,55 @@ TEST_CASE(
             .counters(0)
             .published[static_cast<std::size_t>(shm::AxisValidity::Valid)]
             .load() == 0);  // never a position from the wrong node
+}
+
+// The bus' state says what the axes say: with no node answering "no_nodes", with some
+// "degraded", the nodes' SDO errors as the cause (plain `status` shows it), and the log names
+// the same cause where the identification failed.
+TEST_CASE("ds1928d on bus canio: no node answers -> no_nodes with the SDO cause",
+          "[canio][daemon][socket]") {
+  const TestPlace place("nonodes");
+  const DaemonConfig c = place.config();
+  // The bus exists, nobody serves node 1.
+  auto vbus =
+      canio::VirtualCanBus::open_shared(place.bus, canio::virtual_bus_options(c.canio.bitrate));
+  REQUIRE(vbus);
+  RunningDaemon running(c);
+  REQUIRE(test::wait_until([&] { return test::unix_socket_accepts(c.socket.path); }));
+  json status;
+  (void)test::wait_until([&] {
+    status = request(c.socket.path, {{"cmd", "status"}});
+    return status.value("ok", false) && status["bus"]["state"] == "no_nodes";
+  });
+  INFO(status.dump(2));
+  REQUIRE(status["bus"]["state"] == "no_nodes");
+  REQUIRE(status["bus"].contains("cause"));
+  const std::string cause = status["bus"]["cause"];
+  CHECK(cause.find("no node answers") != std::string::npos);
+  CHECK(cause.find("node 1:") != std::string::npos);
+  CHECK(cause.find("no SDO response") != std::string::npos);
+  CHECK(status["axes"][0]["state"] == "bus_down");
+  // The failed identification's log line carries the same cause.
+  CHECK(running.daemon.bus_service().axis_cause(0).find("no SDO response") != std::string::npos);
+}
+
+TEST_CASE("ds1928d on bus canio: one of two nodes answers -> degraded, the silent one named",
+          "[canio][daemon][socket]") {
+  const TestPlace place("degraded");
+  const DaemonConfig c = place.config(2);
+  SimulatedNodeThread node(c, place.bus);  // node 1 only
+  RunningDaemon running(c);
+  REQUIRE(test::wait_until([&] { return test::unix_socket_accepts(c.socket.path); }));
+  json status;
+  (void)test::wait_until([&] {
+    status = request(c.socket.path, {{"cmd", "status"}});
+    return status.value("ok", false) && status["bus"]["state"] == "degraded";
+  });
+  INFO(status.dump(2));
+  REQUIRE(status["bus"]["state"] == "degraded");
+  const std::string cause = status["bus"].value("cause", "");
+  CHECK(cause.find("1 of 2 node(s) answer") != std::string::npos);
+  CHECK(cause.find("node 2:") != std::string::npos);
+  CHECK(cause.find("node 1:") == std::string::npos);
+  node.stop_serving();
 }

@@ -39,7 +39,7 @@ socket:
   privileged_group: ""
 YAML
 grep -q "^cycle:" "$tmp/can.yaml" && sed -i "s/^cycle:/cycle:\n  hold_cpu_dma_latency: false/" "$tmp/can.yaml"
-"$daemon" --check-config "$tmp/can.yaml" >"$tmp/check.log" 2>&1 || fail "check-config refused it"
+"$daemon" --no-host-checks --check-config "$tmp/can.yaml" >"$tmp/check.log" 2>&1 || fail "check-config refused it"
 
 "$sim" canio --virtual "$vbus" --config "$tmp/can.yaml" >"$tmp/sim.log" 2>&1 &
 track $!

@@ -157,6 +157,33 @@ TEST_CASE("cycle timeline is absolute: work does not shift later cycles", "[cycl
   CHECK(e.back().ctx.index - e.front().ctx.index + 1 == kCycles + s.skipped_cycles);
 }
 
+TEST_CASE("a long cycle 0 (start-up work) is no overrun: the grid starts one period after it",
+          "[cycle_engine]") {
+  constexpr std::size_t kCycles = 6;
+  constexpr int64_t kPeriod = 1'000'000;
+  RecordingTask task(kCycles);
+  task.sleep_at_index = 0;
+  task.sleep_ns = 3'500'000;  // what a start's first cycle took (3.4 ms at 1 ms)
+  auto engine = std::make_unique<CycleEngine>(test_config(1000), task);
+  REQUIRE_FALSE(engine->run_cycles(kCycles).error);
+  REQUIRE(task.count == kCycles);
+  const auto& e = task.entries;
+  // Reported on its own, whole.
+  CHECK(engine->first_cycle_work_ns() >= 3'500'000);
+  // The slot after cycle 0 is cycle 1, not the first slot of the old grid still ahead (4).
+  CHECK(e[0].ctx.index == 0);
+  CHECK(e[1].ctx.index == 1);
+  CHECK(e[1].ctx.start_ns >= task.slept_until_ns);
+  CHECK(e[1].ctx.start_ns - e[0].ctx.start_ns >= 3'500'000 + kPeriod);
+  // Overruns and skipped slots are only those of later cycles (none on a quiet machine): the
+  // gaps after cycle 1 are exactly the skipped slots counted.
+  uint64_t gaps = 0;
+  for (std::size_t i = 2; i < kCycles; ++i) gaps += e[i].ctx.index - e[i - 1].ctx.index - 1;
+  const auto s = engine->stats_snapshot();
+  CHECK(s.skipped_cycles == gaps);
+  CHECK(s.cycles == kCycles);
+}
+
 TEST_CASE("overrun is counted and the timeline skips forward on the grid", "[cycle_engine]") {
   constexpr std::size_t kCycles = 20;
   constexpr int64_t kPeriod = 1'000'000;
@@ -175,11 +202,12 @@ TEST_CASE("overrun is counted and the timeline skips forward on the grid", "[cyc
     REQUIRE(task.count == kCycles);
 
     const auto& e = task.entries;
-    const int64_t t0 = e[0].ctx.start_ns - static_cast<int64_t>(e[0].ctx.index) * kPeriod;
+    // The grid is that of cycle 1 on: a cycle 0 stretched by the machine moves it (start-up).
+    const int64_t t0 = e[1].ctx.start_ns - static_cast<int64_t>(e[1].ctx.index) * kPeriod;
     uint64_t gaps = 0;
     uint64_t overrun_cycles = 0;
     std::size_t pos5 = kCycles;
-    for (std::size_t i = 0; i < kCycles; ++i) {
+    for (std::size_t i = 1; i < kCycles; ++i) {
       REQUIRE(e[i].ctx.start_ns == t0 + static_cast<int64_t>(e[i].ctx.index) * kPeriod);
       if (e[i].ctx.index == 5) pos5 = i;
       if (i > 0 && e[i].ctx.index != e[i - 1].ctx.index + 1) {

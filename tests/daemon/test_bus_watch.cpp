@@ -46,7 +46,10 @@ TEST_CASE("BusWatch names state changes, resets with their reason and boots", "[
   INFO(joined(events));
   REQUIRE(events.size() == 2);
   CHECK(events[0].warning);
-  CHECK(events[0].text == "bus powerlink: operational -> booting");
+  // The state change names its cause: the CN that is not operational.
+  CHECK(events[0].text.rfind("bus powerlink: operational -> booting: not yet operational: node 1 ",
+                             0) == 0);
+  CHECK(events[0].reason.rfind("not yet operational: node 1 ", 0) == 0);
   CHECK(events[1].warning);
   CHECK(events[1].text ==
         "powerlink node 1: reset by the MN (loss of PRes threshold reached; resets 1, PRes losses "

@@ -163,6 +163,19 @@ TEST_CASE("A scrape while the daemon cycles passes promtool check metrics", "[da
         "ds1928_bus_state{bus=\"simulated\",state=\"operational\"} 1",
         "ds1928_axis_publications_total{axis=\"0\",name=\"x\",validity=\"valid\"}"})
     CHECK_THAT(text.body, Catch::Contains(family));
+  // The per-axis state gauge: both axes valid now, exactly one state series 1 per axis.
+  CHECK_THAT(text.body, Catch::Contains("# TYPE ds1928_axis_state gauge"));
+  for (const char* axis : {"axis=\"0\",name=\"x\"", "axis=\"1\",name=\"y\""}) {
+    double ones = 0;
+    for (const char* state : {"valid", "stale", "bus_down", "module_error"}) {
+      const double v = value_of(
+          text.body, std::string("ds1928_axis_state{") + axis + ",state=\"" + state + "\"}");
+      CHECK((v == 0 || v == 1));
+      ones += v;
+      if (std::string_view(state) == "valid") CHECK(v == 1);
+    }
+    CHECK(ones == 1);
+  }
   // Every wake-up is in the histogram: +Inf bucket = count.
   CHECK(value_of(text.body, "ds1928_cycle_wakeup_lateness_seconds_bucket{le=\"+Inf\"}") ==
         value_of(text.body, "ds1928_cycle_wakeup_lateness_seconds_count"));

@@ -47,6 +47,8 @@ struct RunningDaemon {
           ("ds1928d-test-" + tag + "-" + std::to_string(::getpid()));
     std::filesystem::create_directories(dir);
     remove_dir.path = dir;
+    // Not under systemd: no StateDirectory for the flight recorder's files.
+    unsetenv("STATE_DIRECTORY");
     DaemonConfig c;
     c.cycle.period_us = 1000;
     c.cycle.hold_cpu_dma_latency = false;
@@ -162,6 +164,14 @@ TEST_CASE("every command answers with its documented fields", "[daemon][socket]"
   CHECK(cap["error"]["code"] == "no_capture_point");
   CHECK(c.request({{"cmd", "capture"}, {"format", "tcpdump"}})["error"]["code"] == "bad_argument");
   CHECK(c.request({{"cmd", "capture-stop"}})["error"]["code"] == "no_capture");
+  // The flight recorder without a directory (no flight_recorder.dir, not under systemd): the mark
+  // is listed, and the reply says that no file follows instead of naming an empty directory.
+  const json mark = c.request({{"cmd", "incident-mark"}, {"text", "by the test"}});
+  REQUIRE(mark.value("ok", false));
+  CHECK(mark["marked"]["dir"].is_null());
+  CHECK(mark["marked"]["file_written"] == false);
+  CHECK(mark["marked"]["note"].get<std::string>().find("no incident directory") !=
+        std::string::npos);
 }
 
 TEST_CASE("bad requests get precise errors and the connection survives", "[daemon][socket]") {

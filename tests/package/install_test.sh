@@ -14,7 +14,10 @@
 #   7. the installed daemon starts in the root as ds1928d with the unit's capabilities (READY=1),
 #      runs real-time, and a member of ds1928 gets its status and positions;
 #   8. that member reads axis 0 with `python3 -c 'import ds1928 ...'`, and LinuxCNC's halcmd loads
-#      the HAL component ds1928 (as that member, RTAPI_UID) with axis 0 valid.
+#      the HAL component ds1928 (as that member, RTAPI_UID) with axis 0 valid;
+#   9. the shipped metrics drop-in (/usr/share/ds1928d/ds1928d-metrics.conf) enabled as
+#      docs/operations.md says: the unit still verifies clean with it, and GET /metrics of the
+#      installed daemon answers with the cycle counter (the address from `status`).
 # Everything runs in a private mount namespace; the root is removed at the end.
 #
 # Usage: install_test.sh DEB_DIR        (root; needs mmdebstrap, network to the Debian mirror
@@ -186,6 +189,23 @@ if [ -n "$pid" ]; then
     check "halcmd loadrt ds1928 in the root: axis 0 valid" \
       grep -Eq 'bit +OUT +TRUE +ds1928\.0\.valid' <<<"$hal"
   fi
+  # --- 9. the metrics drop-in, and a scrape ------------------------------------------------------
+  check "the metrics drop-in is shipped" test -f "$root/usr/share/ds1928d/ds1928d-metrics.conf"
+  in_root install -D -m 0644 /usr/share/ds1928d/ds1928d-metrics.conf \
+    /etc/systemd/system/ds1928d.service.d/metrics.conf
+  out=$(in_root systemd-analyze verify --man=no ds1928d.service 2>&1)
+  [ -n "$out" ] && sed 's/^/  | /' <<<"$out"
+  check "systemd-analyze verify ds1928d.service with the metrics drop-in: clean" test -z "$out"
+  check "the enabled drop-in allows AF_INET" \
+    grep -q '^RestrictAddressFamilies=.*AF_INET' "$root/etc/systemd/system/ds1928d.service.d/metrics.conf"
+  # The root shares the host's network: the daemon's endpoint is reached from here.
+  address=$(python3 -c 'import json,sys; print(json.load(sys.stdin)["daemon"]["metrics"])' <<<"$status" 2>/dev/null)
+  echo "  metrics endpoint: ${address:-?}"
+  scrape=$(python3 -c 'import sys, urllib.request
+print(urllib.request.urlopen("http://" + sys.argv[1] + "/metrics", timeout=5).read().decode())' "$address" 2>&1)
+  check "GET /metrics of the installed daemon: ds1928_cycles_total and the axis state" \
+    grep -q '^ds1928_cycles_total [1-9]' <<<"$scrape"
+  check "GET /metrics: axis 0 valid" grep -q '^ds1928_axis_state{axis="0",name="axis0",state="valid"} 1' <<<"$scrape"
 fi
 
 elapsed=$(( $(date +%s) - start ))
