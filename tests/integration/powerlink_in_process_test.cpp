@@ -202,7 +202,11 @@ TEST_CASE("PRes with RD = 0 from the simulated CN for 100 cycles publish no vali
   ds1928::AxisDecodeState state;
   const ds1928::AxisDecodeParams params;
   auto validity = [&](const ds1928::ExchangeResult& r) {
-    return ds1928::shm::classify(ds1928::decode_axis(s.io[0], params, r.net_time, state), r.bus_up);
+    ds1928::AxisSample sample = ds1928::decode_axis(s.io[0], params, r.net_time, state);
+    const ds1928::ErrorWords words{sample.error_info, 0, 0};
+    const ds1928::ErrorAssessment errors =
+        ds1928::apply_error_policy(sample, ds1928::error_policy(), words, params, state);
+    return ds1928::shm::classify(sample, r.bus_up, errors);
   };
   for (int i = 0; i < 5; ++i) REQUIRE(validity(s.step()) == ds1928::shm::AxisValidity::Valid);
   const pl::CnStatus* st = s.mn->managing_node().node(1);
