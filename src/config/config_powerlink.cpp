@@ -364,7 +364,8 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
       const auto v = count ? count->as_unsigned() : std::nullopt;
       if (!v || *v == 0)
         n.error("layout",
-                "layout mapping needs the node's TPDO mapping (0x1A00) among the objects written "
+                "layout mapping needs the node's TPDO mapping (PDO_TxMappParam) among the objects "
+                "written "
                 "to it (its cdc or sdo_writes)");
     }
     if (node.prc && node.multiplex > 1) {

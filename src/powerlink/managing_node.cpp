@@ -103,8 +103,9 @@ NodeImageLayout ManagingNode::image_layout(const PowerlinkNodeConfig& nc,
   const bool has_mapping = tpdo && !tpdo->empty();
   if (nc.layout == ImageLayout::kMapping || (nc.layout == ImageLayout::kAuto && has_mapping)) {
     if (!has_mapping)
-      throw std::system_error(make_error_code(MnError::kPdoRegisterNotMapped),
-                              node + ": layout mapping, but its objects map no TPDO (0x1A00)");
+      throw std::system_error(
+          make_error_code(MnError::kPdoRegisterNotMapped),
+          node + ": layout mapping, but its objects map no TPDO (PDO_TxMappParam)");
     PdoMappingLists lists;
     lists.tpdo = *tpdo;
     if (rpdo) lists.rpdo = *rpdo;

@@ -19,6 +19,7 @@
 #include "powerlink/concise_dcf.hpp"
 #include "powerlink/powerlink_options.hpp"
 #include "powerlink/process_image.hpp"
+#include "powerlink/standard_objects.hpp"
 
 namespace ds1928::powerlink {
 
@@ -59,10 +60,10 @@ struct PdoBindIssue {
 };
 
 struct PdoMappingLists {
-  std::span<const PdoMapEntry> tpdo;  // 0x1A00/1..n: the PRes
-  std::span<const PdoMapEntry> rpdo;  // 0x1600/1..n: the PReq
-  uint16_t tpdo_index = 0x1A00;       // for messages
-  uint16_t rpdo_index = 0x1600;
+  std::span<const PdoMapEntry> tpdo;         // 0x1A00/1..n: the PRes
+  std::span<const PdoMapEntry> rpdo;         // 0x1600/1..n: the PReq
+  uint16_t tpdo_index = obj::kTxPdoMapping;  // for messages
+  uint16_t rpdo_index = obj::kRxPdoMapping;
 };
 
 // The layout of one CN's modules from its mapping. Each module needs PositionHW, PositionLW,

@@ -24,10 +24,12 @@ trap cleanup EXIT
 fail() { echo "FAIL: $*"; echo "--- status:"; cat "$work/status.txt" 2>/dev/null; exit 1; }
 sed -e "s|^\(  virtual_bus:\) ds1928-sim |\1 $vbus |" \
     -e "s|^\(  name:\) /ds1928d-canio|\1 $shm|" \
-    -e "s|^\(  path:\) /run/ds1928d/control.sock|\1 $work/control.sock|" \
+    -e "s|^\(  path:\) /run/ds1928d/canio.sock|\1 $work/control.sock|" \
+    -e "s|^\(  listen:\) 127.0.0.1:9929|\1 off|" \
     "$src/config/canio-sim.yaml" >"$work/daemon.yaml"
 grep -q "virtual_bus: $vbus " "$work/daemon.yaml" && grep -q "name: $shm" "$work/daemon.yaml" &&
-  grep -q "path: $work/control.sock" "$work/daemon.yaml" || fail "could not derive the configuration"
+  grep -q "path: $work/control.sock" "$work/daemon.yaml" &&
+  grep -q "listen: off" "$work/daemon.yaml" || fail "could not derive the configuration"
 "$sim" canio --virtual "$vbus" --config "$work/daemon.yaml" >"$work/sim.log" 2>&1 &
 spid=$!
 dpid=$(python3 "$src/tests/deploy/notify_start.py" "$work" 60 "$work/daemon.log" -- \

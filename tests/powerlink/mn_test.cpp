@@ -50,7 +50,9 @@ TEST_CASE("MN boots an in-memory CN to OPERATIONAL and configures its modules by
   CHECK(cn.objects[{0x2001, 0x09}].size() == 4);  // SinCosQuitTime UDINT
   CHECK(le(cn.objects[{0x2001, 0x09}]) == 100000);
   CHECK(le(cn.objects[{0x2001, 0x0B}]) == 7);  // InputMTU
-  CHECK(cn.objects.size() == 28);
+  // 28 settings and identity objects, and per module the Rescan (EnDatAck bit 1) written after
+  // EnDatMode (datasheet §11.6.2.3).
+  CHECK(cn.objects.size() == 30);
 
   // The first frame of a boot is a reduced cycle: an SoA with IdentRequest, no SoC.
   REQUIRE_FALSE(rig.link.sent_log.empty());
