@@ -335,7 +335,7 @@ TEST_CASE("The process image layout and the object scheme per node", "[config][p
 
   CHECK_THAT(one_error(kHead + "    - {node_id: 1, layout: mapping}\n"),
              Catch::Contains("powerlink.nodes[0].layout: layout mapping needs the node's TPDO "
-                             "mapping (0x1A00)"));
+                             "mapping (PDO_TxMappParam)"));
   CHECK_THAT(one_error(kHead + "    - {node_id: 1, layout: fixed}\n"),
              Catch::Contains("powerlink.nodes[0].layout"));
   CHECK_THAT(one_error(kHead + "    - {node_id: 1}\n  object_scheme: {input_index: 0x1000}\n"),
