@@ -78,17 +78,67 @@ elif [ "$mode" = mux ]; then
   "$src/tests/peers/opl_cdc.py" "$OPL_MNOBD_CDC" "$cdc" --mux-node 1 --mux-count 4 ||
     fail "cannot write the demo's concise DCF with node 1 multiplexed"
 fi
-start=$(date +%s.%N)
-"$src/tests/peers/opl_run.sh" "$ns_mn" -- "$OPL_DEMO_MN" -d "$if_mn" -c "$cdc" \
-  >"$tmp/opl_mn.log" 2>&1 &
-mn_pid=$!
-pids+=($mn_pid)
+# Frames that reached the sim's end of the veth: the MN's whole output (it sends ~1700 SoAs a
+# second even in PRE_OPERATIONAL_1).
+rx_at_cn() { ip netns exec "$ns_cn" cat "/sys/class/net/$if_cn/statistics/rx_packets"; }
 
-# The boot limit is measured: wall-clock time, however slowly the polling runs.
-until_true "$boot_limit" grep -qE "READY_TO_OPERATE -> OPERATIONAL" "$tmp/sim.log" ||
-  fail "node 1 not OPERATIONAL within $boot_limit s of the MN's start"
+# One boot of the MN: 0 = node 1 OPERATIONAL within the limit, 1 = not, 2 = the MN stopped sending.
+# openPOWERLINK's Linux pcap driver (edrv-pcap_linux.c) releases a transmit buffer only when it
+# sees its own frame come back through its capture handle and compares it with the head of its
+# queue by destination MAC; the send path enqueues and sends in two steps, from more than one
+# thread. Once an echo is missed or comes out of order the head never matches again, every later
+# send is refused, and the MN falls silent for good while its process and its configuration
+# manager's timeouts run on (seen once in CI: the last frame on the wire was the MN's SDO
+# InitResp, then nothing for 30 s). That is the peer's defect, not an answer of ds1928-sim; it is
+# told apart by the sim's receive counter: no frame for 3 s after the MN had started sending.
+boot_once() {
+  start=$(date +%s.%N)
+  "$src/tests/peers/opl_run.sh" "$ns_mn" -- "$OPL_DEMO_MN" -d "$if_mn" -c "$cdc" \
+    >"$tmp/opl_mn.log" 2>&1 &
+  mn_pid=$!
+  pids+=($mn_pid)
+  local end=$((SECONDS + boot_limit)) rx0 rx last_rx quiet_since="" armed=0
+  rx0=$(rx_at_cn)
+  last_rx=$rx0
+  # The boot limit is measured: wall-clock time, however slowly the polling runs.
+  while ((SECONDS < end)); do
+    grep -qE "READY_TO_OPERATE -> OPERATIONAL" "$tmp/sim.log" && return 0
+    rx=$(rx_at_cn)
+    ((rx - rx0 >= 100)) && armed=1
+    if ((rx - last_rx >= 20)); then
+      last_rx=$rx
+      quiet_since=""
+    elif ((armed)); then
+      [ -n "$quiet_since" ] || quiet_since=$SECONDS
+      if ((SECONDS - quiet_since >= 3)) && kill -0 "$mn_pid" 2>/dev/null; then
+        stall="the MN sent $((rx - last_rx)) frame(s) in $((SECONDS - quiet_since)) s while running"
+        return 2
+      fi
+    fi
+    sleep 0.2
+  done
+  grep -qE "READY_TO_OPERATE -> OPERATIONAL" "$tmp/sim.log" && return 0
+  return 1
+}
+
+attempt=1
+while :; do
+  boot_once
+  rc=$?
+  [ "$rc" = 0 ] && break
+  [ "$rc" = 2 ] || fail "node 1 not OPERATIONAL within $boot_limit s of the MN's start"
+  # A peer stall is not a verdict on ds1928-sim: the MN is restarted once (it resets every node
+  # with its first NMT command); a second stall fails the test.
+  [ "$attempt" -lt 2 ] || fail "openPOWERLINK's MN stalled again on attempt $attempt: $stall"
+  echo "PEER STALL (attempt $attempt): $stall; last lines of its log:"
+  tail -n 4 "$tmp/opl_mn.log"
+  kill "$mn_pid" 2>/dev/null
+  wait "$mn_pid" 2>/dev/null
+  mv "$tmp/opl_mn.log" "$tmp/opl_mn.attempt$attempt.log"
+  attempt=$((attempt + 1))
+done
 boot_s=$(awk -v s="$start" -v e="$(date +%s.%N)" 'BEGIN { printf "%.1f", e - s }')
-pass "openPOWERLINK's MN booted ds1928-sim to OPERATIONAL in ${boot_s} s"
+pass "openPOWERLINK's MN booted ds1928-sim to OPERATIONAL in ${boot_s} s (attempt $attempt)"
 lines_at_op=$(wc -l <"$tmp/opl_mn.log")
 sim_lines_at_op=$(wc -l <"$tmp/sim.log")
 
