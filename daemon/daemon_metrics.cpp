@@ -119,10 +119,21 @@ std::string Daemon::metrics_text(metrics::Format format) const {
              "1 when the cycle thread runs with SCHED_FIFO and locked memory.");
   out.sample(uint64_t{engine_->realtime() ? 1u : 0u});
 
-  out.family("ds1928_bus_state", Type::Gauge, "State of the bus: 1 for the current state.");
-  const BusState state = bus_->driver().state();
-  for (BusState st : {BusState::Down, BusState::Booting, BusState::Operational, BusState::Error})
-    out.sample({{"bus", bus_name}, {"state", to_string(st)}}, uint64_t{st == state ? 1u : 0u});
+  // The state `status` reports (the driver's, refined by the bus kind: "degraded", "no_nodes",
+  // "waiting_for_link"), so that an alert and `ds1928ctl status` never disagree. Every state is
+  // a series (0 or 1): a query for one state finds it whether it is current or not.
+  out.family("ds1928_bus_state", Type::Gauge,
+             "State of the bus as status reports it: 1 for the "
+             "current state.");
+  const std::string reported = bus_->reported_state().state;
+  constexpr std::array<std::string_view, 7> kStates{
+      "down", "booting", "operational", "error", "degraded", "no_nodes", "waiting_for_link"};
+  bool known = false;
+  for (std::string_view st : kStates) {
+    known = known || st == reported;
+    out.sample({{"bus", bus_name}, {"state", st}}, uint64_t{st == reported ? 1u : 0u});
+  }
+  if (!known) out.sample({{"bus", bus_name}, {"state", reported}}, uint64_t{1});
   out.family("ds1928_bus_frames_lost", Type::Counter,
              "Expected responses (PRes, CAN-I/O inputs) that did not arrive within their cycle.");
   out.sample({{"bus", bus_name}}, work_->frames_lost());

@@ -259,6 +259,10 @@ TEST_CASE("ds1928d on bus canio: no node answers -> no_nodes with the SDO cause"
   CHECK(status["axes"][0]["state"] == "bus_down");
   // The failed identification's log line carries the same cause.
   CHECK(running.daemon.bus_service().axis_cause(0).find("no SDO response") != std::string::npos);
+  // The metric says what status says (an alert on "operational" fires, and names the state).
+  const std::string metrics = running.daemon.metrics_text(metrics::Format::Prometheus);
+  CHECK_THAT(metrics, Catch::Contains("ds1928_bus_state{bus=\"canio\",state=\"no_nodes\"} 1"));
+  CHECK_THAT(metrics, Catch::Contains("ds1928_bus_state{bus=\"canio\",state=\"operational\"} 0"));
 }
 
 TEST_CASE("ds1928d on bus canio: one of two nodes answers -> degraded, the silent one named",

@@ -399,6 +399,30 @@ TEST_CASE("status --check and position --check exit 5 while an axis is not valid
   publishing.reset();
 }
 
+// Without an incident directory no file is written: the tool prints the daemon's note, not a
+// promise of a file in "-".
+TEST_CASE("incident mark prints the daemon's note on where the file goes") {
+  SocketConfig cfg;
+  cfg.path = temp_socket_path("mark");
+  ServerThread t(cfg);
+  json marked{
+      {"number", 3},
+      {"joined", false},
+      {"file_after_ms", 2000},
+      {"dir", nullptr},
+      {"file_written", false},
+      {"note", "no incident directory (flight_recorder.dir is empty ...): no file is written"}};
+  t.server().add_command("incident-mark", [&](const Request&, Reply r) {
+    r.ok({{"marked", marked}});
+  });
+  REQUIRE_FALSE(t.start());
+  Run r = ctl_env("", "-s " + cfg.path + " incident mark 'by the test'");
+  INFO(r.out);
+  CHECK(r.exit == 0);
+  CHECK_THAT(r.out, Catch::Contains("incident 3 marked; no incident directory"));
+  CHECK_THAT(r.out, !Catch::Contains("follows in"));
+}
+
 TEST_CASE("status prints each bus's own node fields and the bus state's cause") {
   json reply = status_reply("bus_down", "/ds1928d-none");
   reply["bus"] = {

@@ -70,12 +70,17 @@ void add_incident_commands(CLI::App& app, Context& ctx) {
     ctx.action = [&ctx, text] {
       return request_and_print(ctx, {{"cmd", "incident-mark"}, {"text", *text}}, [](const json& r) {
         const json& m = r.at("marked");
-        if (m.value("joined", false))
+        if (m.value("joined", false)) {
           std::cout << "joined the manual incident still pending\n";
-        else
+        } else if (m.contains("note") && m["note"].is_string()) {
+          // The daemon's own words: where the file goes, or why none is written.
+          std::cout << "incident " << or_dash(m.value("number", json())) << " marked; "
+                    << m["note"].get<std::string>() << "\n";
+        } else {
           std::cout << "incident " << or_dash(m.value("number", json()))
                     << " marked; its file follows in " << m.value("file_after_ms", 0) << " ms in "
                     << or_dash(m.value("dir", json())) << "\n";
+        }
       });
     };
   });
