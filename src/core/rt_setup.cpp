@@ -28,7 +28,11 @@ SetupStep pin_to_cpu(int cpu) noexcept {
   return SetupStep{pthread_setaffinity_np(pthread_self(), sizeof(set), &set)};
 }
 
-void for_each_code_mapping(CodeMappingVisitor visit, void* context) noexcept {
+namespace {
+// The file mappings of the process that are never written: code (r-xp) and, with `rodata`,
+// read-only data (r--p: constant tables, string literals, relocation-free data).
+void for_each_unwritten_file_mapping(CodeMappingVisitor visit, void* context,
+                                     bool rodata) noexcept {
   const int fd = ::open("/proc/self/maps", O_RDONLY | O_CLOEXEC);
   if (fd < 0) return;
   // Static: a sanitizer build maps hundreds of regions, more than a stack buffer should hold.
@@ -48,18 +52,29 @@ void for_each_code_mapping(CodeMappingVisitor visit, void* context) noexcept {
     unsigned long lo = 0, hi = 0;
     char perms[8] = {};
     int path_at = 0;
-    // Code (r-xp: never written) of a file (a path), not [vdso] and the like.
+    // Code (r-xp: never written) of a file (a path), not [vdso] and the like; with `rodata` also
+    // the file's read-only data (r--p).
     if (std::sscanf(line, "%lx-%lx %7s %*s %*s %*s %n", &lo, &hi, perms, &path_at) >= 3 &&
-        path_at > 0 && std::strcmp(perms, "r-xp") == 0 && line[path_at] == '/')
+        path_at > 0 && line[path_at] == '/' &&
+        (std::strcmp(perms, "r-xp") == 0 || (rodata && std::strcmp(perms, "r--p") == 0)))
       visit(lo, hi, line + path_at, context);
     line = next;
   }
 }
+}  // namespace
+
+void for_each_code_mapping(CodeMappingVisitor visit, void* context) noexcept {
+  for_each_unwritten_file_mapping(visit, context, false);
+}
+
+void for_each_unwritten_mapping(CodeMappingVisitor visit, void* context) noexcept {
+  for_each_unwritten_file_mapping(visit, context, true);
+}
 
 void lock_code_mappings() noexcept {
-  for_each_code_mapping([](uintptr_t lo, uintptr_t hi, const char*,
-                           void*) { (void)::mlock(reinterpret_cast<void*>(lo), hi - lo); },
-                        nullptr);
+  for_each_unwritten_mapping([](uintptr_t lo, uintptr_t hi, const char*,
+                                void*) { (void)::mlock(reinterpret_cast<void*>(lo), hi - lo); },
+                             nullptr);
 }
 
 namespace {

@@ -55,8 +55,13 @@ std::size_t trim_heap(std::size_t min_free) noexcept;
 // file into one static buffer, so two threads must not call it at once.
 using CodeMappingVisitor = void (*)(uintptr_t lo, uintptr_t hi, const char* path, void* context);
 void for_each_code_mapping(CodeMappingVisitor visit, void* context) noexcept;
-// Loads and locks every code mapping (mlock). With mlockall(MCL_ONFAULT) code is locked as it is
-// first run; after this no branch taken later costs a page fault.
+// Each file mapping that is never written: the code mappings above and the files' read-only data
+// (r--p: constant tables such as libm's __sincostab, which sin() reads a page of only for some
+// arguments). Same rules as for_each_code_mapping.
+void for_each_unwritten_mapping(CodeMappingVisitor visit, void* context) noexcept;
+// Loads and locks every code mapping and every read-only data mapping of a file (mlock). With
+// mlockall(MCL_ONFAULT) both are locked as they are first used; after this no branch taken later,
+// and no table entry read for the first time, costs a page fault.
 void lock_code_mappings() noexcept;
 // Whether `cpu` exists and the process may run on it.
 [[nodiscard]] bool cpu_usable(int cpu) noexcept;

@@ -42,8 +42,11 @@ class CountingTask final : public CycleTask {
       // of code the cycle thread first takes costs one page fault, once; which branches it first
       // takes inside a window depends on how the scheduler shares the cores (a register result
       // held because the normal thread polled late, a tunnel reply that waits one cycle more).
-      // Locked before, a fault the window counts is a data page the cycle touched for the first
-      // time in steady cycles, which is what the proofs are about.
+      // The files' read-only data is locked with it: the simulated encoder's sine profile reads
+      // libm's __sincostab, a page of which only some arguments reach (once counted as the
+      // window's one fault, under memory load). Locked before, a fault the window counts is a
+      // written data page the cycle touched for the first time in steady cycles, which is what
+      // the proofs are about.
       rt::lock_code_mappings();
       faults_at_start_ = thread_faults();
       begin_counting();
