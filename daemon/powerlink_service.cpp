@@ -145,6 +145,8 @@ void PowerlinkService::status_extra(nlohmann::json& j) const {
                        {"sync_delay_ns", n.prc_sync_delay_ns},
                        {"propagation_ns", n.prc_propagation_ns},
                        {"latency_ns", n.prc_latency_ns},
+                       {"outputs_offset", n.prc_outputs_offset},
+                       {"outputs_size", n.prc_outputs_size},
                        {"sync_responses", n.sync_responses}}},
                      {"nmt_requests", n.nmt_requests},
                      {"nmt_requests_refused", n.nmt_requests_refused},

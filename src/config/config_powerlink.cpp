@@ -408,6 +408,7 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
         e && e->as_unsigned())
       p.pres_mn_size = static_cast<uint16_t>(std::min<uint64_t>(*e->as_unsigned(), 1490));
   s.integer("pres_mn_size", p.pres_mn_size, 0, 1490, "bytes");
+  if (s.has("pres_mn_size")) sites.pres_mn_size_at = s.value_at("pres_mn_size");
   s.choice("rx_wait", p.rx_wait,
            {{"block", RxWait::Block}, {"spin", RxWait::Spin}, {"busy_poll", RxWait::BusyPoll}});
   s.integer("rx_spin_us", p.rx_spin_us, 0, 100000, "µs");
@@ -421,15 +422,53 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
 }
 
 // The worst cycle on the wire must fit the period (docs/powerlink.md §Cycle timing).
+// The outputs of a chained node take its PReq image's bytes in the PResMN (docs/powerlink.md
+// §PollResponse Chaining): the end of its packed blocks (or offsets), or of its written RPDO
+// mapping.
+static std::size_t output_image_size(const DaemonConfig& c, const PowerlinkNodeConfig& n) {
+  if (image_from_mapping(n)) {
+    std::vector<powerlink::CdcEntry> written;
+    for (const auto& w : n.object_writes) written.push_back({w.index, w.subindex, w.data});
+    const auto* count = powerlink::find_cdc_entry(written, powerlink::obj::kRxPdoMapping, 0);
+    const auto n_entries = count ? count->as_unsigned().value_or(0) : 0;
+    std::size_t end = 0;
+    for (uint64_t k = 1; k <= n_entries && k <= 254; ++k) {
+      const auto* e = powerlink::find_cdc_entry(written, powerlink::obj::kRxPdoMapping,
+                                                static_cast<uint8_t>(k));
+      if (!e || !e->as_unsigned()) continue;
+      const auto m = powerlink::PdoMapEntry::from_u64(*e->as_unsigned());
+      end = std::max<std::size_t>(end, (std::size_t{m.offset_bits} + m.length_bits + 7u) / 8u);
+    }
+    return end;
+  }
+  std::vector<const AxisConfig*> members;
+  for (const AxisConfig& a : c.axes)
+    if (a.node == n.node_id) members.push_back(&a);
+  std::stable_sort(members.begin(), members.end(),
+                   [](const AxisConfig* x, const AxisConfig* y) { return x->slot < y->slot; });
+  std::size_t packed = 0, end = 0;
+  for (const AxisConfig* a : members) {
+    const std::size_t size = 2u + a->module.output_mtu;
+    end = std::max(end, a->preq_offset.value_or(static_cast<uint16_t>(packed)) + size);
+    packed += size;
+  }
+  return end;
+}
+
 static void check_cycle_budget(Diagnostics& diag, const DaemonConfig& c,
                                const PowerlinkSites& sites) {
   std::vector<powerlink::BudgetNode> nodes;
+  std::vector<powerlink::PresMnNode> chained;
   for (const PowerlinkNodeConfig& n : c.powerlink.nodes) {
     powerlink::BudgetNode b;
     b.node_id = n.node_id;
     b.pres_timeout_us = n.pres_timeout_us;
     b.multiplex = n.multiplex;
     b.prc = n.prc;
+    if (n.prc)
+      chained.push_back(
+          {n.node_id, static_cast<uint16_t>(std::min<std::size_t>(output_image_size(c, n), 1490)),
+           0});
     std::size_t preq = 0, pres = 0;
     for (const AxisConfig& a : c.axes) {
       if (a.node != n.node_id) continue;
@@ -440,8 +479,29 @@ static void check_cycle_budget(Diagnostics& diag, const DaemonConfig& c,
     b.pres_payload = n.pres_size.value_or(static_cast<uint16_t>(std::min<std::size_t>(pres, 1490)));
     nodes.push_back(b);
   }
+  // The PResMN carries the chained nodes' outputs: pres_mn_size is at least their end.
+  const std::size_t outputs_end = powerlink::place_pres_mn_outputs(chained);
+  if (outputs_end > c.powerlink.pres_mn_size && sites.pres_mn_size_at) {
+    std::string where;
+    for (const auto& p : chained)
+      where += (where.empty() ? "" : ", ") + std::string("node ") + std::to_string(p.node_id) +
+               ": " + std::to_string(p.preq_size) + " bytes at " + std::to_string(p.base);
+    diag.error(*sites.pres_mn_size_at, "powerlink.pres_mn_size",
+               std::to_string(c.powerlink.pres_mn_size) +
+                   " bytes cannot carry the outputs of the chained (prc) nodes, " +
+                   std::to_string(outputs_end) + " bytes (" + where +
+                   "); give at least that, or leave it out to have it derived");
+  }
+  if (outputs_end > 1490) {
+    diag.error(sites.async_timeout_at, "powerlink",
+               "the outputs of the chained (prc) nodes take " + std::to_string(outputs_end) +
+                   " bytes, more than a PResMN carries (1490)");
+    return;
+  }
+  const auto pres_mn_size =
+      static_cast<uint16_t>(std::max<std::size_t>(c.powerlink.pres_mn_size, outputs_end));
   const powerlink::CycleBudget b = powerlink::cycle_budget(
-      nodes, c.powerlink.wait_soc_preq_us, c.powerlink.async_timeout_us, c.powerlink.pres_mn_size);
+      nodes, c.powerlink.wait_soc_preq_us, c.powerlink.async_timeout_us, pres_mn_size);
   const double period = c.cycle.period_us;
   if (b.total_us() <= period) return;
   char text[512];

@@ -44,6 +44,27 @@ struct CycleBudget {
   }
 };
 
+// PollResponse Chaining (EPSG DS 302-C): a chained CN takes its outputs from the PResMN, through
+// an RPDO whose NodeID_U8 names the MN. The MN places the output images of the chained nodes one
+// after the other in node-id order, each as its PReq image would be: `base` per node, and the
+// end of the last one (the least PResMN payload, which the PRC slot's budget counts).
+struct PresMnNode {
+  uint8_t node_id = 0;
+  uint16_t preq_size = 0;  // the node's output image (its layout's PReq bytes)
+  uint16_t base = 0;       // filled: where it starts in the PResMN payload
+};
+// Fills each `base` (sorting the nodes by id); returns the end of the last image.
+inline std::size_t place_pres_mn_outputs(std::span<PresMnNode> nodes) noexcept {
+  std::sort(nodes.begin(), nodes.end(),
+            [](const PresMnNode& a, const PresMnNode& b) { return a.node_id < b.node_id; });
+  std::size_t end = 0;
+  for (PresMnNode& n : nodes) {
+    n.base = static_cast<uint16_t>(std::min<std::size_t>(end, 0xFFFF));
+    end += n.preq_size;
+  }
+  return end;
+}
+
 [[nodiscard]] inline CycleBudget cycle_budget(std::span<const BudgetNode> nodes,
                                               uint32_t wait_soc_preq_us,
                                               uint32_t async_slot_timeout_us,

@@ -230,6 +230,7 @@ ManagingNode::ManagingNode(const MnConfig& config)
         [this, raw](std::error_code ec, std::span<const uint8_t> d) { sdo_done(*raw, ec, d); });
     cns_.push_back(std::move(cn));
   }
+  place_prc_outputs();
   for (auto& cn : cns_) enter(*cn, CnBootState::kIdentify);
 }
 
@@ -488,6 +489,8 @@ Result<std::size_t> ManagingNode::build_soc(std::span<uint8_t> out) const noexce
 std::span<uint8_t> ManagingNode::preq_payload(uint8_t node) noexcept {
   Cn* cn = find(node);
   if (!cn) return {};
+  if (cn->st->prc && cn->st->prc_outputs_size > 0)
+    return {pres_mn_.data() + cn->st->prc_outputs_offset, cn->st->prc_outputs_size};
   return {cn->preq.data(), cn->st->preq_size};
 }
 

@@ -32,6 +32,8 @@ struct ObjectOp {
   uint32_t expected = 0;  // identity read
   std::size_t data_offset = 0;
   std::size_t data_size = 0;
+  // The RPDO of the PResMN: written only to a node chained by PRC (not after a fall-back).
+  bool prc_only = false;
 };
 // A register request routed to the module in `slot` of the CN.
 struct SlotRegister {

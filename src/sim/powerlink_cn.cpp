@@ -197,8 +197,33 @@ void PowerlinkCn::take_mapping() noexcept {
     }
     ++(by_mapping_ ? stats_.mappings_taken : stats_.mappings_refused);
   }
+  // PollResponse Chaining: an RPDO channel whose NodeID_U8 names the MN takes the PResMN.
+  outputs_from_pres_mn_ = false;
+  for (const auto& [comm, mapping_index] :
+       {std::pair{pl::obj::kRxPdoCommPresMn, pl::obj::kRxPdoMappingPresMn},
+        std::pair{pl::obj::kRxPdoComm, pl::obj::kRxPdoMapping}}) {
+    if (outputs_from_pres_mn_ || comm_.rpdo_source(comm) != pl::kNodeMn) continue;
+    const std::size_t n = comm_.mapping(mapping_index, rpdo);
+    if (n == 0) continue;
+    pl::PdoMappingLists lists;
+    lists.rpdo = std::span<const pl::PdoMapEntry>(rpdo.data(), n);
+    lists.rpdo_index = mapping_index;
+    lists.outputs_only = true;
+    pl::PdoBindIssue issue;
+    try {
+      if (auto bound = pl::bind_pdo_mapping(lists, config_.object_scheme, specs_, issue)) {
+        pres_mn_layout_ = *bound;
+        outputs_from_pres_mn_ = true;
+      }
+    } catch (const std::bad_alloc&) {
+    }
+    ++(outputs_from_pres_mn_ ? stats_.mappings_taken : stats_.mappings_refused);
+  }
   const pl::NodeImageLayout& use = layout();
-  for (HostedModule& m : modules_) m.mapping = use.find(m.slot);
+  for (HostedModule& m : modules_) {
+    m.mapping = use.find(m.slot);
+    m.pres_mn_mapping = outputs_from_pres_mn_ ? pres_mn_layout_.find(m.slot) : nullptr;
+  }
 }
 
 void PowerlinkCn::reset(pl::NmtCommandId command, int64_t now_ns) noexcept {
@@ -331,10 +356,8 @@ void PowerlinkCn::receive(std::span<const uint8_t> frame, int64_t now_ns) noexce
       on_sync_request(frame, now_ns);
   } else if (const auto* pres = std::get_if<pl::PRes>(&f.message)) {
     // The PResMN: in PRC mode this node's trigger, in the states that answer a PReq.
-    if (f.header.src_node == pl::kNodeMn && prc_mode_ && h.on_preq == &PowerlinkCn::preq_answer) {
-      (void)pres;
-      on_pres_mn(now_ns);
-    }
+    if (f.header.src_node == pl::kNodeMn && prc_mode_ && h.on_preq == &PowerlinkCn::preq_answer)
+      on_pres_mn(*pres, now_ns);
   } else if (const auto* asnd = std::get_if<pl::Asnd>(&f.message)) {
     if (asnd->service == pl::AsndService::kSyncResponse && f.header.src_node != config_.node_id) {
       on_foreign_sync_response(f.header.src_node, now_ns);

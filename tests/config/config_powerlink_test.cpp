@@ -312,6 +312,39 @@ TEST_CASE("The cycle budget counts PRC nodes in the PRC slot", "[config][powerli
   CHECK_THAT(e, Catch::Contains("1 PReq/PRes"));
 }
 
+TEST_CASE("The PResMN carries the chained nodes' outputs: its size derived and checked",
+          "[config][powerlink][prc][timing]") {
+  const std::string head =
+      "bus: powerlink\ncycle: {period_us: 500}\npowerlink:\n  interface: eth1\n  nodes:\n"
+      "    - {node_id: 1, pres_timeout_us: 200, prc: true}\n"
+      "    - {node_id: 2, pres_timeout_us: 200, prc: true}\n";
+  const std::string axes =
+      "axes:\n"
+      "  - {name: a, node: 1, slot: 1}\n"
+      "  - {name: b, node: 2, slot: 1}\n";
+  // Two chained nodes with one module each (OutputSequence | 7 Tx | AckErrorInfo): 18 bytes,
+  // node 1 at 0, node 2 at 9. A pres_mn_size below that is refused with the key.
+  const std::string e = one_error(head + "  pres_mn_size: 10\n" + axes);
+  CHECK_THAT(e, Catch::Contains("powerlink.pres_mn_size"));
+  CHECK_THAT(e, Catch::Contains("18 bytes (node 1: 9 bytes at 0, node 2: 9 bytes at 9)"));
+  const ConfigResult ok = from(head + "  pres_mn_size: 18\n" + axes);
+  INFO(ok.error_report());
+  CHECK(ok.errors().empty());
+  // Unset, the PResMN grows with the outputs, and the budget counts it: node 1 with three modules
+  // of MTU 15 has 51 bytes of outputs, a PResMN of 7.92 µs on the wire instead of 6.72; its PRes
+  // (93 bytes) 11.28 + 0.96; with the 200 µs timeout the PRC slot is 220.16 µs (218.96 with a
+  // PResMN of 36 bytes).
+  const std::string e2 = one_error(
+      "bus: powerlink\ncycle: {period_us: 400}\npowerlink:\n  interface: eth1\n  nodes:\n"
+      "    - {node_id: 1, pres_timeout_us: 200, prc: true}\n"
+      "    - {node_id: 2, pres_timeout_us: 200}\n"
+      "axes:\n"
+      "  - {name: a, node: 1, slot: 1, module: {input_mtu: 15, output_mtu: 15}}\n"
+      "  - {name: b, node: 1, slot: 2, module: {input_mtu: 15, output_mtu: 15}}\n"
+      "  - {name: c, node: 1, slot: 3, module: {input_mtu: 15, output_mtu: 15}}\n");
+  CHECK_THAT(e2, Catch::Contains("PRC slot of 1 node(s) 220.2"));
+}
+
 TEST_CASE("The process image layout and the object scheme per node", "[config][powerlink][pdo]") {
   ConfigResult r = from(kHead +
                         "    - {node_id: 1, layout: packed}\n"
