@@ -136,6 +136,7 @@ void PowerlinkService::status_extra(nlohmann::json& j) const {
                      {"boots", n.boots},
                      {"resets", n.resets},
                      {"sdo_errors", n.sdo_errors},
+                     {"multiplex_slot", n.multiplex_slot},
                      {"prc",
                       {{"configured", n.prc_configured},
                        {"active", n.prc},

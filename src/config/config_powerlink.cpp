@@ -261,6 +261,15 @@ void apply_mn_cdc(Section& n, PowerlinkNodeConfig& node, std::span<const powerli
     if (const auto* e = find_cdc_entry(mn, powerlink::obj::kNodeAssignment, id);
         e && e->as_unsigned())
       node.prc = (*e->as_unsigned() & powerlink::obj::kNodeAssignmentPrc) != 0;
+  // NMT_NodeAssignment/node bit 9: multiplexed; NMT_MultiplCycleAssign/node: its slot (the
+  // YAML's multiplexed / multiplex_slot win).
+  if (!n.has("multiplexed") && !n.has("multiplex_slot")) {
+    if (const auto* e = find_cdc_entry(mn, powerlink::obj::kNodeAssignment, id);
+        e && e->as_unsigned())
+      node.multiplexed = (*e->as_unsigned() & powerlink::obj::kNodeAssignmentMultiplexed) != 0;
+    if (const auto slot = value(powerlink::obj::kMultiplCycleAssign); slot && node.multiplexed)
+      node.multiplex_slot = static_cast<uint8_t>(std::min(*slot, 255u));
+  }
   if (!node.device_type) node.device_type = value(powerlink::obj::kMnDeviceTypeIdList);
   if (!node.vendor_id) node.vendor_id = value(powerlink::obj::kMnVendorIdList);
   if (!node.product_code) node.product_code = value(powerlink::obj::kMnProductCodeList);
@@ -329,7 +338,21 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
     sites.pres_timeout_at.push_back(n.value_at("pres_timeout_us"));
     n.optional_integer("loss_of_pres_threshold", node.loss_of_pres_threshold, 0, kU32);
     n.boolean("mandatory", node.mandatory);
-    n.integer("multiplex", node.multiplex, 0, 255, "(0 = every cycle)");
+    if (n.has("multiplex")) {
+      uint32_t factor = 0;  // read, so the key is known; refused with the way forward
+      n.integer("multiplex", factor, 0, 255);
+      n.error("multiplex",
+              "the per-node multiplex factor is gone: DS 301 has one multiplexed cycle for the "
+              "network; give powerlink.multiplex_cycles (MultiplCycleCnt, 0x1F98/7) and mark this "
+              "node `multiplexed: true` (its slot: multiplex_slot, else the MN assigns one)");
+    }
+    n.boolean("multiplexed", node.multiplexed);
+    n.optional_integer("multiplex_slot", node.multiplex_slot, 1, 255);
+    if (node.multiplex_slot) {
+      if (n.has("multiplexed") && !node.multiplexed)
+        n.error("multiplex_slot", "a slot for a node marked `multiplexed: false`");
+      node.multiplexed = true;
+    }
     n.boolean("prc", node.prc);
     n.optional_integer("preq_size", node.preq_size, 0, 1490);
     n.optional_integer("pres_size", node.pres_size, 0, 1490);
@@ -345,6 +368,9 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
     for (auto& w : n.list("sdo_writes"))
       parse_sdo_write(Section(n.diag(), w.node, w.path, w.at), node.object_writes);
     if (have_id && !mn_cdc.empty()) apply_mn_cdc(n, node, mn_cdc, own_cdc);
+    if (node.multiplexed)
+      sites.multiplexed.emplace_back(
+          n.value_at(node.multiplex_slot ? "multiplex_slot" : "multiplexed"), p.nodes.size());
     // Sizes the written objects define (NMT_CycleTiming /4,5 or the PDO mappings), unless given.
     std::vector<powerlink::CdcEntry> written;
     for (const auto& w : node.object_writes) written.push_back({w.index, w.subindex, w.data});
@@ -368,10 +394,10 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
                 "written "
                 "to it (its cdc or sdo_writes)");
     }
-    if (node.prc && node.multiplex > 1) {
-      n.error("multiplex",
+    if (node.prc && node.multiplexed) {
+      n.error(node.multiplex_slot ? "multiplex_slot" : "multiplexed",
               "a PollResponse Chaining node (prc) answers the PResMN every cycle: "
-              "PRC has no multiplexed slots; remove multiplex or prc");
+              "PRC has no multiplexed slots; remove multiplexed/multiplex_slot or prc");
     }
     if (have_id) {
       if (const auto prev = sites.nodes.find(node.node_id); prev != sites.nodes.end()) {
@@ -407,6 +433,41 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
                                                   powerlink::obj::kCycleTimingPResActPayload);
         e && e->as_unsigned())
       p.pres_mn_size = static_cast<uint16_t>(std::min<uint64_t>(*e->as_unsigned(), 1490));
+  // MultiplCycleCnt: the key, else the MN's CDC (NMT_CycleTiming_REC.MultiplCycleCnt_U8).
+  if (!s.has("multiplex_cycles") && !mn_cdc.empty())
+    if (const auto* e = powerlink::find_cdc_entry(mn_cdc, powerlink::obj::kCycleTiming,
+                                                  powerlink::obj::kCycleTimingMultiplCycleCnt);
+        e && e->as_unsigned())
+      p.multiplex_cycles = static_cast<uint8_t>(std::min<uint64_t>(*e->as_unsigned(), 255));
+  s.integer("multiplex_cycles", p.multiplex_cycles, 0, 255, "(0 = no multiplexing)");
+  for (const auto& [at, i] : sites.multiplexed) {
+    const PowerlinkNodeConfig& node = p.nodes[i];
+    const std::string key = "nodes[" + std::to_string(i) + "]." +
+                            (node.multiplex_slot ? "multiplex_slot" : "multiplexed");
+    if (p.multiplex_cycles < 2) {
+      s.diag().error(at, "powerlink." + key,
+                     "node " + std::to_string(node.node_id) +
+                         " is multiplexed, but powerlink.multiplex_cycles (MultiplCycleCnt) is " +
+                         std::to_string(p.multiplex_cycles) + ": give at least 2");
+    } else if (node.multiplex_slot && *node.multiplex_slot > p.multiplex_cycles) {
+      s.diag().error(at, "powerlink." + key,
+                     "slot " + std::to_string(*node.multiplex_slot) + " of node " +
+                         std::to_string(node.node_id) + " is outside the multiplexed cycle of " +
+                         std::to_string(p.multiplex_cycles) + " (powerlink.multiplex_cycles): 1.." +
+                         std::to_string(p.multiplex_cycles));
+    }
+  }
+  // Slots the configuration leaves open: assigned here as the MN would (--print-config shows
+  // them), so the budget and the MN agree.
+  if (p.multiplex_cycles > 1) {
+    std::vector<powerlink::MultiplexNode> mux;
+    for (const auto& node : p.nodes)
+      if (node.multiplexed) mux.push_back({node.node_id, node.multiplex_slot.value_or(0)});
+    powerlink::assign_multiplex_slots(mux, p.multiplex_cycles);
+    for (auto& node : p.nodes)
+      for (const auto& m : mux)
+        if (node.multiplexed && m.node_id == node.node_id) node.multiplex_slot = m.slot;
+  }
   s.integer("pres_mn_size", p.pres_mn_size, 0, 1490, "bytes");
   if (s.has("pres_mn_size")) sites.pres_mn_size_at = s.value_at("pres_mn_size");
   s.choice("rx_wait", p.rx_wait,
@@ -463,7 +524,7 @@ static void check_cycle_budget(Diagnostics& diag, const DaemonConfig& c,
     powerlink::BudgetNode b;
     b.node_id = n.node_id;
     b.pres_timeout_us = n.pres_timeout_us;
-    b.multiplex = n.multiplex;
+    b.multiplex_slot = n.multiplexed ? n.multiplex_slot.value_or(0) : uint8_t{0};
     b.prc = n.prc;
     if (n.prc)
       chained.push_back(
@@ -500,8 +561,9 @@ static void check_cycle_budget(Diagnostics& diag, const DaemonConfig& c,
   }
   const auto pres_mn_size =
       static_cast<uint16_t>(std::max<std::size_t>(c.powerlink.pres_mn_size, outputs_end));
-  const powerlink::CycleBudget b = powerlink::cycle_budget(
-      nodes, c.powerlink.wait_soc_preq_us, c.powerlink.async_timeout_us, pres_mn_size);
+  const powerlink::CycleBudget b =
+      powerlink::cycle_budget(nodes, c.powerlink.wait_soc_preq_us, c.powerlink.async_timeout_us,
+                              pres_mn_size, c.powerlink.multiplex_cycles);
   const double period = c.cycle.period_us;
   if (b.total_us() <= period) return;
   char text[512];
@@ -576,7 +638,8 @@ void dump_powerlink(std::ostream& o, const PowerlinkBusConfig& p) {
       << "      pres_timeout_us: " << n.pres_timeout_us << "\n"
       << "      mandatory: " << yes(n.mandatory) << "\n"
       << "      loss_of_pres_threshold: " << opt_dec(n.loss_of_pres_threshold) << "\n"
-      << "      multiplex: " << n.multiplex << "\n"
+      << "      multiplexed: " << yes(n.multiplexed) << "\n"
+      << "      multiplex_slot: " << opt_dec(n.multiplex_slot) << "\n"
       << "      prc: " << yes(n.prc) << "\n"
       << "      preq_size: " << opt_dec(n.preq_size) << "\n"
       << "      pres_size: " << opt_dec(n.pres_size) << "\n"
@@ -616,6 +679,7 @@ void dump_powerlink(std::ostream& o, const PowerlinkBusConfig& p) {
     << "    status_request_every: " << p.nmt.status_request_every << "\n"
     << "  async_slot_timeout_us: " << p.async_timeout_us << "\n"
     << "  wait_soc_preq_us: " << p.wait_soc_preq_us << "\n"
+    << "  multiplex_cycles: " << unsigned{p.multiplex_cycles} << "\n"
     << "  pres_mn_size: " << p.pres_mn_size << "\n"
     << "  rx_wait: "
     << (p.rx_wait == RxWait::Block  ? "block"

@@ -8,6 +8,7 @@
 #include <map>
 #include <optional>
 #include <ostream>
+#include <utility>
 #include <vector>
 
 #include "config/config_bus_kinds.hpp"
@@ -22,6 +23,8 @@ struct PowerlinkSites {
   std::vector<Loc> pres_timeout_at;    // per nodes[] entry
   Loc async_timeout_at;                // where the budget check points when the cycle is too long
   std::optional<Loc> pres_mn_size_at;  // where pres_mn_size was given, if it was
+  // Multiplexed nodes: where multiplex_slot (else multiplexed) was given, index in nodes.
+  std::vector<std::pair<Loc, std::size_t>> multiplexed;
 };
 
 // `base_dir`: where relative file names (cdc) are resolved.

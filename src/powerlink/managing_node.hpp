@@ -127,6 +127,9 @@ struct CnStatus {
   uint32_t prc_sync_delay_ns = 0;
   uint32_t prc_propagation_ns = 0;
   uint32_t prc_latency_ns = 0;
+  // Its slot of the multiplexed cycle (NMT_MultiplCycleAssign: configured or assigned), 0 when
+  // it is polled every cycle.
+  uint8_t multiplex_slot = 0;
   // Where its outputs sit in the PResMN payload (bytes; prc_outputs_size 0: none there).
   uint16_t prc_outputs_offset = 0;
   uint16_t prc_outputs_size = 0;
@@ -300,6 +303,7 @@ class ManagingNode {
   [[nodiscard]] uint16_t expected_pres_size(const Cn& cn) const noexcept;
   void update_prc_slot() noexcept;
   void place_prc_outputs();
+  void assign_slots();
   [[nodiscard]] int64_t ms(uint32_t v) const noexcept {
     return static_cast<int64_t>(v) * 1'000'000;
   }
@@ -339,8 +343,8 @@ class ManagingNode {
   int64_t start_ns_ = -1;
   int64_t mn_state_since_ns_ = 0;
   uint64_t relative_time_us_ = 0;
-  uint64_t mux_cycle_len_ = 1;  // cycles of one multiplexed cycle (lcm of the nodes' factors)
-  bool mc_flag_ = false;        // SoC MC, toggled at each multiplexed cycle's end
+  uint64_t mux_cycle_len_ = 1;  // cycles of one multiplexed cycle (MultiplCycleCnt), 1: none
+  bool mc_flag_ = false;        // SoC MC, toggled at the start of each multiplexed cycle
   int64_t soc_time_ns_ = 0;
   NetTime net_time_{};
   MnCounters counters_;

@@ -58,6 +58,7 @@ struct ManagingNode::Cn {
   NodeImageLayout layout;
   std::array<uint8_t, kMaxIsoPayload> preq{};
   std::array<uint8_t, kMaxIsoPayload> pres{};
+  uint8_t mux_slot = 0;          // slot of the multiplexed cycle, 0: polled every cycle
   bool polled = false;           // PReq sent this cycle
   uint32_t loss_threshold = 0;   // DLL_MNCNLossPResThreshold (0x1C09) in effect
   bool pres_seen = false;        // its PRes arrived this cycle

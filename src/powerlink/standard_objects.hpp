@@ -50,6 +50,7 @@ inline constexpr uint16_t kMnPReqPayloadLimitList = 0x1F8B;
 inline constexpr uint16_t kPResPayloadLimitList = 0x1F8D;
 inline constexpr uint16_t kMnCnPResTimeout = 0x1F92;
 inline constexpr uint16_t kCycleTiming = 0x1F98;
+inline constexpr uint16_t kMultiplCycleAssign = 0x1F9B;
 
 // Sub-indices with a meaning of their own.
 inline constexpr uint8_t kCycleTimingPReqActPayload = 4;   // kCycleTiming/4
@@ -57,6 +58,8 @@ inline constexpr uint8_t kCycleTimingPResActPayload = 5;   // kCycleTiming/5
 inline constexpr uint8_t kCycleTimingMultiplCycleCnt = 7;  // kCycleTiming/7
 // NMT_NodeAssignment bit 14: the node is polled by PollResponse Chaining.
 inline constexpr uint32_t kNodeAssignmentPrc = 0x00004000;
+// NMT_NodeAssignment bit 9: the node is polled in a multiplexed slot.
+inline constexpr uint32_t kNodeAssignmentMultiplexed = 0x00000200;
 }  // namespace obj
 
 enum class ObjType : uint8_t { kU8, kU16, kU32, kU64, kDomain };
@@ -169,6 +172,7 @@ inline constexpr std::array kStandardObjects = std::to_array<StandardObject>({
   {kMnPReqPayloadLimitList, 1, 254, "NMT_MNPReqPayloadLimitList_AU16", kU16, kRw, kMn, 0, "PReq payload per node, bytes"},
   {kPResPayloadLimitList, 1, 254, "NMT_PResPayloadLimitList_AU16", kU16, kRw, kMn, 0, "PRes payload per node, bytes"},
   {kMnCnPResTimeout, 1, 254, "NMT_MNCNPResTimeout_AU32", kU32, kRw, kMn, 0, "PRes timeout per node, ns"},
+  {kMultiplCycleAssign, 1, 254, "NMT_MultiplCycleAssign_AU8", kU8, kRw, kMn, 0, "multiplexed cycle slot per node (0: continuous)"},
   {kCycleTiming, 0, 0, "NMT_CycleTiming_REC.NumberOfEntries", kU8, kConst, kCn, 9, "entries"},
   {kCycleTiming, 1, 1, "NMT_CycleTiming_REC.IsochrTxMaxPayload_U16", kU16, kConst, kCn, 1490, "largest PRes payload the device sends"},
   {kCycleTiming, 2, 2, "NMT_CycleTiming_REC.IsochrRxMaxPayload_U16", kU16, kConst, kCn, 1490, "largest PReq payload the device takes"},

@@ -32,6 +32,7 @@
 #include "powerlink/error_signalling.hpp"
 #include "powerlink/frames.hpp"
 #include "powerlink/link.hpp"
+#include "powerlink/pdo_image.hpp"
 #include "powerlink/powerlink_options.hpp"
 #include "powerlink/process_image.hpp"
 #include "powerlink/sdo.hpp"
@@ -130,6 +131,9 @@ struct PowerlinkCnStats {
   uint64_t pres_mn = 0;          // PResMN seen while in PRC mode (each answered with the PRes)
   uint64_t pres_mn_outputs = 0;  // ... whose outputs (RD = 1) the modules took
   uint64_t prc_fallbacks = 0;    // PRC mode left for PReq/PRes: no PResMN within the fallback time
+  // Multiplexed (MultiplCycleCnt > 1): PReqs out of the slot this node was first polled in
+  // (its place in the multiplexed cycle, from the SoC's MC flag); each counts as loss of PReq.
+  uint64_t preq_out_of_slot = 0;
   // Spans in which the simulator's own thread was not run by its host (note_own_stall): not
   // counted as silence on the wire.
   uint64_t own_stalls = 0;
@@ -218,6 +222,9 @@ class PowerlinkCn {
   [[nodiscard]] const StateHandler& handler() const noexcept;
   void enter(powerlink::NmtState next, int64_t now_ns) noexcept;
   void boot(int64_t now_ns) noexcept;
+  // Binds a mapping an MN wrote through the node's object scheme (counted taken or refused).
+  [[nodiscard]] bool bind_mapping(const powerlink::PdoMappingLists& lists,
+                                  powerlink::NodeImageLayout& out) noexcept;
   void take_mapping() noexcept;  // the modules' registers where the PDO mapping says
   void reset(powerlink::NmtCommandId command, int64_t now_ns) noexcept;
 
@@ -236,6 +243,8 @@ class PowerlinkCn {
   void on_sync_request(std::span<const uint8_t> frame, int64_t now_ns) noexcept;
   void on_foreign_sync_response(uint8_t src_node, int64_t now_ns) noexcept;
   void on_pres_mn(const powerlink::PRes& pres, int64_t now_ns) noexcept;
+  void check_slot(int64_t now_ns) noexcept;
+  void count_loss_of_preq(int64_t now_ns) noexcept;
   void check_prc_fallback(int64_t now_ns) noexcept;
   void leave_prc() noexcept;
   void note_polled() noexcept;  // a PReq (or, in PRC mode, a PResMN) polled this node
@@ -297,6 +306,12 @@ class PowerlinkCn {
   } dll_;
   // Loss of PReq: cycles since the last PReq against the interval of 0x1F98/7 (1 when it is 0).
   uint32_t cycles_since_preq_ = 0;
+  // The multiplexed cycle as the SoCs' MC flag shows it: the cycle's place in it (0 = the first,
+  // -1 before MC first toggled) and the place of this node's slot (-1 until first polled).
+  bool mc_seen_ = false;
+  bool last_mc_ = false;
+  int mux_pos_ = -1;
+  int mux_slot_pos_ = -1;
   uint32_t preq_interval_ = 0;  // 0 = not polled since the reset
   uint32_t loss_of_preq_counter_ = 0;
   // Power.

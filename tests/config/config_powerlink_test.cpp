@@ -251,8 +251,9 @@ TEST_CASE("A cycle that does not fit the period is refused, saying by how much",
   // Multiplexed: only the nodes of the worst cycle count.
   const ConfigResult ok = from(
       "bus: powerlink\ncycle: {period_us: 500}\npowerlink:\n  interface: eth1\n  nodes:\n"
-      "    - {node_id: 1, pres_timeout_us: 200, multiplex: 2}\n"
-      "    - {node_id: 2, pres_timeout_us: 200, multiplex: 2}\n");
+      "    - {node_id: 1, pres_timeout_us: 200, multiplexed: true}\n"
+      "    - {node_id: 2, pres_timeout_us: 200, multiplexed: true}\n"
+      "  multiplex_cycles: 2\n");
   INFO(ok.error_report());
   CHECK(ok.errors().empty());
 }
@@ -288,7 +289,8 @@ TEST_CASE("PollResponse Chaining: prc per node, from the MN's CDC, and what it c
   CHECK_THAT(dump_config(r.config()), Catch::Contains("prc: false"));
   // A PRC node answers every PResMN: no multiplexed slot.
   CHECK_THAT(one_error("bus: powerlink\npowerlink:\n  interface: eth1\n  nodes:\n"
-                       "    - {node_id: 1, prc: true, multiplex: 2}\n"),
+                       "    - {node_id: 1, prc: true, multiplexed: true}\n"
+                       "  multiplex_cycles: 2\n"),
              Catch::Contains("PRC has no multiplexed slots"));
 }
 
@@ -343,6 +345,38 @@ TEST_CASE("The PResMN carries the chained nodes' outputs: its size derived and c
       "  - {name: b, node: 1, slot: 2, module: {input_mtu: 15, output_mtu: 15}}\n"
       "  - {name: c, node: 1, slot: 3, module: {input_mtu: 15, output_mtu: 15}}\n");
   CHECK_THAT(e2, Catch::Contains("PRC slot of 1 node(s) 220.2"));
+}
+
+TEST_CASE("One multiplexed cycle: multiplex_cycles, slots given or assigned, refusals by key",
+          "[config][powerlink][multiplex]") {
+  const std::string head = "bus: powerlink\npowerlink:\n  interface: eth1\n";
+  ConfigResult r = from(head +
+                        "  multiplex_cycles: 4\n  nodes:\n"
+                        "    - {node_id: 1}\n"
+                        "    - {node_id: 2, multiplex_slot: 3}\n"
+                        "    - {node_id: 3, multiplexed: true}\n"
+                        "    - {node_id: 4, multiplexed: true}\n");
+  INFO(r.error_report());
+  REQUIRE(r.ok());
+  const auto& n = r.config().powerlink.nodes;
+  CHECK(r.config().powerlink.multiplex_cycles == 4);
+  CHECK_FALSE(n[0].multiplexed);
+  CHECK(n[1].multiplexed);
+  CHECK(n[1].multiplex_slot == 3);
+  CHECK(n[2].multiplex_slot == 1);  // assigned: the least loaded slots, lowest first
+  CHECK(n[3].multiplex_slot == 2);
+  CHECK_THAT(dump_config(r.config()), Catch::Contains("multiplex_slot: 2"));
+  CHECK_THAT(dump_config(r.config()), Catch::Contains("multiplex_cycles: 4"));
+  // A slot outside the multiplexed cycle, a multiplexed node without a count, the old factor.
+  CHECK_THAT(
+      one_error(head + "  multiplex_cycles: 4\n  nodes:\n    - {node_id: 2, multiplex_slot: 5}\n"),
+      Catch::Contains("powerlink.nodes[0].multiplex_slot: slot 5 of node 2 is outside the "
+                      "multiplexed cycle of 4"));
+  CHECK_THAT(one_error(head + "  nodes:\n    - {node_id: 2, multiplexed: true}\n"),
+             Catch::Contains("powerlink.nodes[0].multiplexed: node 2 is multiplexed, but "
+                             "powerlink.multiplex_cycles (MultiplCycleCnt) is 0"));
+  CHECK_THAT(one_error(head + "  nodes:\n    - {node_id: 2, multiplex: 4}\n"),
+             Catch::Contains("per-node multiplex factor is gone"));
 }
 
 TEST_CASE("The process image layout and the object scheme per node", "[config][powerlink][pdo]") {
