@@ -343,7 +343,8 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
       n.integer("multiplex", factor, 0, 255);
       n.error("multiplex",
               "the per-node multiplex factor is gone: DS 301 has one multiplexed cycle for the "
-              "network; give powerlink.multiplex_cycles (MultiplCycleCnt, 0x1F98/7) and mark this "
+              "network; give powerlink.multiplex_cycles (NMT_CycleTiming MultiplCycleCnt) and mark "
+              "this "
               "node `multiplexed: true` (its slot: multiplex_slot, else the MN assigns one)");
     }
     n.boolean("multiplexed", node.multiplexed);
