@@ -264,9 +264,11 @@ int main(int argc, char** argv) {
   {
     std::vector<pl::BudgetNode> budget_nodes;
     for (const auto& n : config.powerlink.nodes)
-      budget_nodes.push_back({n.node_id, 9, 23, n.pres_timeout_us, n.multiplex});
-    const pl::CycleBudget b = pl::cycle_budget(budget_nodes, config.powerlink.wait_soc_preq_us,
-                                               config.powerlink.async_timeout_us);
+      budget_nodes.push_back({n.node_id, 9, 23, n.pres_timeout_us,
+                              n.multiplexed ? n.multiplex_slot.value_or(0) : uint8_t{0}});
+    const pl::CycleBudget b =
+        pl::cycle_budget(budget_nodes, config.powerlink.wait_soc_preq_us,
+                         config.powerlink.async_timeout_us, 36, config.powerlink.multiplex_cycles);
     std::printf(
         "CONFIG period_us=%u rx_wait=%s rx_spin_us=%u ring_spin_ns=%lld rx_mode=%s "
         "wait_soc_preq_us=%u async_slot_timeout_us=%u budget_us=%.1f\n",

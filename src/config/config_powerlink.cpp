@@ -261,6 +261,15 @@ void apply_mn_cdc(Section& n, PowerlinkNodeConfig& node, std::span<const powerli
     if (const auto* e = find_cdc_entry(mn, powerlink::obj::kNodeAssignment, id);
         e && e->as_unsigned())
       node.prc = (*e->as_unsigned() & powerlink::obj::kNodeAssignmentPrc) != 0;
+  // NMT_NodeAssignment/node bit 9: multiplexed; NMT_MultiplCycleAssign/node: its slot (the
+  // YAML's multiplexed / multiplex_slot win).
+  if (!n.has("multiplexed") && !n.has("multiplex_slot")) {
+    if (const auto* e = find_cdc_entry(mn, powerlink::obj::kNodeAssignment, id);
+        e && e->as_unsigned())
+      node.multiplexed = (*e->as_unsigned() & powerlink::obj::kNodeAssignmentMultiplexed) != 0;
+    if (const auto slot = value(powerlink::obj::kMultiplCycleAssign); slot && node.multiplexed)
+      node.multiplex_slot = static_cast<uint8_t>(std::min(*slot, 255u));
+  }
   if (!node.device_type) node.device_type = value(powerlink::obj::kMnDeviceTypeIdList);
   if (!node.vendor_id) node.vendor_id = value(powerlink::obj::kMnVendorIdList);
   if (!node.product_code) node.product_code = value(powerlink::obj::kMnProductCodeList);
@@ -329,7 +338,22 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
     sites.pres_timeout_at.push_back(n.value_at("pres_timeout_us"));
     n.optional_integer("loss_of_pres_threshold", node.loss_of_pres_threshold, 0, kU32);
     n.boolean("mandatory", node.mandatory);
-    n.integer("multiplex", node.multiplex, 0, 255, "(0 = every cycle)");
+    if (n.has("multiplex")) {
+      uint32_t factor = 0;  // read, so the key is known; refused with the way forward
+      n.integer("multiplex", factor, 0, 255);
+      n.error("multiplex",
+              "the per-node multiplex factor is gone: DS 301 has one multiplexed cycle for the "
+              "network; give powerlink.multiplex_cycles (NMT_CycleTiming MultiplCycleCnt) and mark "
+              "this "
+              "node `multiplexed: true` (its slot: multiplex_slot, else the MN assigns one)");
+    }
+    n.boolean("multiplexed", node.multiplexed);
+    n.optional_integer("multiplex_slot", node.multiplex_slot, 1, 255);
+    if (node.multiplex_slot) {
+      if (n.has("multiplexed") && !node.multiplexed)
+        n.error("multiplex_slot", "a slot for a node marked `multiplexed: false`");
+      node.multiplexed = true;
+    }
     n.boolean("prc", node.prc);
     n.optional_integer("preq_size", node.preq_size, 0, 1490);
     n.optional_integer("pres_size", node.pres_size, 0, 1490);
@@ -345,6 +369,9 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
     for (auto& w : n.list("sdo_writes"))
       parse_sdo_write(Section(n.diag(), w.node, w.path, w.at), node.object_writes);
     if (have_id && !mn_cdc.empty()) apply_mn_cdc(n, node, mn_cdc, own_cdc);
+    if (node.multiplexed)
+      sites.multiplexed.emplace_back(
+          n.value_at(node.multiplex_slot ? "multiplex_slot" : "multiplexed"), p.nodes.size());
     // Sizes the written objects define (NMT_CycleTiming /4,5 or the PDO mappings), unless given.
     std::vector<powerlink::CdcEntry> written;
     for (const auto& w : node.object_writes) written.push_back({w.index, w.subindex, w.data});
@@ -368,10 +395,10 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
                 "written "
                 "to it (its cdc or sdo_writes)");
     }
-    if (node.prc && node.multiplex > 1) {
-      n.error("multiplex",
+    if (node.prc && node.multiplexed) {
+      n.error(node.multiplex_slot ? "multiplex_slot" : "multiplexed",
               "a PollResponse Chaining node (prc) answers the PResMN every cycle: "
-              "PRC has no multiplexed slots; remove multiplex or prc");
+              "PRC has no multiplexed slots; remove multiplexed/multiplex_slot or prc");
     }
     if (have_id) {
       if (const auto prev = sites.nodes.find(node.node_id); prev != sites.nodes.end()) {
@@ -407,7 +434,43 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
                                                   powerlink::obj::kCycleTimingPResActPayload);
         e && e->as_unsigned())
       p.pres_mn_size = static_cast<uint16_t>(std::min<uint64_t>(*e->as_unsigned(), 1490));
+  // MultiplCycleCnt: the key, else the MN's CDC (NMT_CycleTiming_REC.MultiplCycleCnt_U8).
+  if (!s.has("multiplex_cycles") && !mn_cdc.empty())
+    if (const auto* e = powerlink::find_cdc_entry(mn_cdc, powerlink::obj::kCycleTiming,
+                                                  powerlink::obj::kCycleTimingMultiplCycleCnt);
+        e && e->as_unsigned())
+      p.multiplex_cycles = static_cast<uint8_t>(std::min<uint64_t>(*e->as_unsigned(), 255));
+  s.integer("multiplex_cycles", p.multiplex_cycles, 0, 255, "(0 = no multiplexing)");
+  for (const auto& [at, i] : sites.multiplexed) {
+    const PowerlinkNodeConfig& node = p.nodes[i];
+    const std::string key = "nodes[" + std::to_string(i) + "]." +
+                            (node.multiplex_slot ? "multiplex_slot" : "multiplexed");
+    if (p.multiplex_cycles < 2) {
+      s.diag().error(at, "powerlink." + key,
+                     "node " + std::to_string(node.node_id) +
+                         " is multiplexed, but powerlink.multiplex_cycles (MultiplCycleCnt) is " +
+                         std::to_string(p.multiplex_cycles) + ": give at least 2");
+    } else if (node.multiplex_slot && *node.multiplex_slot > p.multiplex_cycles) {
+      s.diag().error(at, "powerlink." + key,
+                     "slot " + std::to_string(*node.multiplex_slot) + " of node " +
+                         std::to_string(node.node_id) + " is outside the multiplexed cycle of " +
+                         std::to_string(p.multiplex_cycles) + " (powerlink.multiplex_cycles): 1.." +
+                         std::to_string(p.multiplex_cycles));
+    }
+  }
+  // Slots the configuration leaves open: assigned here as the MN would (--print-config shows
+  // them), so the budget and the MN agree.
+  if (p.multiplex_cycles > 1) {
+    std::vector<powerlink::MultiplexNode> mux;
+    for (const auto& node : p.nodes)
+      if (node.multiplexed) mux.push_back({node.node_id, node.multiplex_slot.value_or(0)});
+    powerlink::assign_multiplex_slots(mux, p.multiplex_cycles);
+    for (auto& node : p.nodes)
+      for (const auto& m : mux)
+        if (node.multiplexed && m.node_id == node.node_id) node.multiplex_slot = m.slot;
+  }
   s.integer("pres_mn_size", p.pres_mn_size, 0, 1490, "bytes");
+  if (s.has("pres_mn_size")) sites.pres_mn_size_at = s.value_at("pres_mn_size");
   s.choice("rx_wait", p.rx_wait,
            {{"block", RxWait::Block}, {"spin", RxWait::Spin}, {"busy_poll", RxWait::BusyPoll}});
   s.integer("rx_spin_us", p.rx_spin_us, 0, 100000, "µs");
@@ -421,15 +484,53 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
 }
 
 // The worst cycle on the wire must fit the period (docs/powerlink.md §Cycle timing).
+// The outputs of a chained node take its PReq image's bytes in the PResMN (docs/powerlink.md
+// §PollResponse Chaining): the end of its packed blocks (or offsets), or of its written RPDO
+// mapping.
+static std::size_t output_image_size(const DaemonConfig& c, const PowerlinkNodeConfig& n) {
+  if (image_from_mapping(n)) {
+    std::vector<powerlink::CdcEntry> written;
+    for (const auto& w : n.object_writes) written.push_back({w.index, w.subindex, w.data});
+    const auto* count = powerlink::find_cdc_entry(written, powerlink::obj::kRxPdoMapping, 0);
+    const auto n_entries = count ? count->as_unsigned().value_or(0) : 0;
+    std::size_t end = 0;
+    for (uint64_t k = 1; k <= n_entries && k <= 254; ++k) {
+      const auto* e = powerlink::find_cdc_entry(written, powerlink::obj::kRxPdoMapping,
+                                                static_cast<uint8_t>(k));
+      if (!e || !e->as_unsigned()) continue;
+      const auto m = powerlink::PdoMapEntry::from_u64(*e->as_unsigned());
+      end = std::max<std::size_t>(end, (std::size_t{m.offset_bits} + m.length_bits + 7u) / 8u);
+    }
+    return end;
+  }
+  std::vector<const AxisConfig*> members;
+  for (const AxisConfig& a : c.axes)
+    if (a.node == n.node_id) members.push_back(&a);
+  std::stable_sort(members.begin(), members.end(),
+                   [](const AxisConfig* x, const AxisConfig* y) { return x->slot < y->slot; });
+  std::size_t packed = 0, end = 0;
+  for (const AxisConfig* a : members) {
+    const std::size_t size = 2u + a->module.output_mtu;
+    end = std::max(end, a->preq_offset.value_or(static_cast<uint16_t>(packed)) + size);
+    packed += size;
+  }
+  return end;
+}
+
 static void check_cycle_budget(Diagnostics& diag, const DaemonConfig& c,
                                const PowerlinkSites& sites) {
   std::vector<powerlink::BudgetNode> nodes;
+  std::vector<powerlink::PresMnNode> chained;
   for (const PowerlinkNodeConfig& n : c.powerlink.nodes) {
     powerlink::BudgetNode b;
     b.node_id = n.node_id;
     b.pres_timeout_us = n.pres_timeout_us;
-    b.multiplex = n.multiplex;
+    b.multiplex_slot = n.multiplexed ? n.multiplex_slot.value_or(0) : uint8_t{0};
     b.prc = n.prc;
+    if (n.prc)
+      chained.push_back(
+          {n.node_id, static_cast<uint16_t>(std::min<std::size_t>(output_image_size(c, n), 1490)),
+           0});
     std::size_t preq = 0, pres = 0;
     for (const AxisConfig& a : c.axes) {
       if (a.node != n.node_id) continue;
@@ -440,8 +541,30 @@ static void check_cycle_budget(Diagnostics& diag, const DaemonConfig& c,
     b.pres_payload = n.pres_size.value_or(static_cast<uint16_t>(std::min<std::size_t>(pres, 1490)));
     nodes.push_back(b);
   }
-  const powerlink::CycleBudget b = powerlink::cycle_budget(
-      nodes, c.powerlink.wait_soc_preq_us, c.powerlink.async_timeout_us, c.powerlink.pres_mn_size);
+  // The PResMN carries the chained nodes' outputs: pres_mn_size is at least their end.
+  const std::size_t outputs_end = powerlink::place_pres_mn_outputs(chained);
+  if (outputs_end > c.powerlink.pres_mn_size && sites.pres_mn_size_at) {
+    std::string where;
+    for (const auto& p : chained)
+      where += (where.empty() ? "" : ", ") + std::string("node ") + std::to_string(p.node_id) +
+               ": " + std::to_string(p.preq_size) + " bytes at " + std::to_string(p.base);
+    diag.error(*sites.pres_mn_size_at, "powerlink.pres_mn_size",
+               std::to_string(c.powerlink.pres_mn_size) +
+                   " bytes cannot carry the outputs of the chained (prc) nodes, " +
+                   std::to_string(outputs_end) + " bytes (" + where +
+                   "); give at least that, or leave it out to have it derived");
+  }
+  if (outputs_end > 1490) {
+    diag.error(sites.async_timeout_at, "powerlink",
+               "the outputs of the chained (prc) nodes take " + std::to_string(outputs_end) +
+                   " bytes, more than a PResMN carries (1490)");
+    return;
+  }
+  const auto pres_mn_size =
+      static_cast<uint16_t>(std::max<std::size_t>(c.powerlink.pres_mn_size, outputs_end));
+  const powerlink::CycleBudget b =
+      powerlink::cycle_budget(nodes, c.powerlink.wait_soc_preq_us, c.powerlink.async_timeout_us,
+                              pres_mn_size, c.powerlink.multiplex_cycles);
   const double period = c.cycle.period_us;
   if (b.total_us() <= period) return;
   char text[512];
@@ -516,7 +639,8 @@ void dump_powerlink(std::ostream& o, const PowerlinkBusConfig& p) {
       << "      pres_timeout_us: " << n.pres_timeout_us << "\n"
       << "      mandatory: " << yes(n.mandatory) << "\n"
       << "      loss_of_pres_threshold: " << opt_dec(n.loss_of_pres_threshold) << "\n"
-      << "      multiplex: " << n.multiplex << "\n"
+      << "      multiplexed: " << yes(n.multiplexed) << "\n"
+      << "      multiplex_slot: " << opt_dec(n.multiplex_slot) << "\n"
       << "      prc: " << yes(n.prc) << "\n"
       << "      preq_size: " << opt_dec(n.preq_size) << "\n"
       << "      pres_size: " << opt_dec(n.pres_size) << "\n"
@@ -556,6 +680,7 @@ void dump_powerlink(std::ostream& o, const PowerlinkBusConfig& p) {
     << "    status_request_every: " << p.nmt.status_request_every << "\n"
     << "  async_slot_timeout_us: " << p.async_timeout_us << "\n"
     << "  wait_soc_preq_us: " << p.wait_soc_preq_us << "\n"
+    << "  multiplex_cycles: " << unsigned{p.multiplex_cycles} << "\n"
     << "  pres_mn_size: " << p.pres_mn_size << "\n"
     << "  rx_wait: "
     << (p.rx_wait == RxWait::Block  ? "block"

@@ -6,7 +6,9 @@
 #include <cstdint>
 #include <filesystem>
 #include <map>
+#include <optional>
 #include <ostream>
+#include <utility>
 #include <vector>
 
 #include "config/config_bus_kinds.hpp"
@@ -16,10 +18,13 @@ namespace ds1928::config_detail {
 
 // Where the parts of the section were written, for messages of later cross-field checks.
 struct PowerlinkSites {
-  bool interface_refused = false;    // given but invalid: reported already, not "missing"
-  std::map<uint8_t, Loc> nodes;      // node id → where it is listed
-  std::vector<Loc> pres_timeout_at;  // per nodes[] entry
-  Loc async_timeout_at;              // where the budget check points when the cycle is too long
+  bool interface_refused = false;      // given but invalid: reported already, not "missing"
+  std::map<uint8_t, Loc> nodes;        // node id → where it is listed
+  std::vector<Loc> pres_timeout_at;    // per nodes[] entry
+  Loc async_timeout_at;                // where the budget check points when the cycle is too long
+  std::optional<Loc> pres_mn_size_at;  // where pres_mn_size was given, if it was
+  // Multiplexed nodes: where multiplex_slot (else multiplexed) was given, index in nodes.
+  std::vector<std::pair<Loc, std::size_t>> multiplexed;
 };
 
 // `base_dir`: where relative file names (cdc) are resolved.

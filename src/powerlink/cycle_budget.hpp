@@ -1,17 +1,17 @@
 // Does a POWERLINK cycle fit its period? The worst case on the wire at 100 Mbit/s (seed 001):
 // SoC, WaitSoCPReq, then per polled CN its PReq, PResTimeout and PRes, then SoA and the
-// asynchronous slot (AsyncSlotTimeout plus the longest ASnd). Multiplexed CNs count in the
-// cycles that poll them (slot = node % multiplex); the worst cycle is what must fit. PRC nodes
+// asynchronous slot (AsyncSlotTimeout plus the longest ASnd). Multiplexed CNs (EPSG DS 301) count
+// in the cycle of their slot of the multiplexed cycle; the worst cycle is what must fit. PRC nodes
 // (PollResponse Chaining) take the PRC slot instead: the PResMN, each PRC node's PRes with an
 // inter-frame gap before it (the propagation delay the MN assigns, at least that), and the
 // longest PRes timeout among them (how long the MN waits past the last PRes time).
-// Header-only and pure: the configuration check and the benchmarks use it.
+// Header-only and pure: the configuration check, the Managing Node and the benchmarks use it.
 #pragma once
 
 #include <algorithm>
+#include <array>
 #include <cstddef>
 #include <cstdint>
-#include <numeric>
 #include <span>
 
 namespace ds1928::powerlink {
@@ -27,8 +27,8 @@ struct BudgetNode {
   uint16_t preq_payload = 0;
   uint16_t pres_payload = 0;
   uint32_t pres_timeout_us = 0;
-  uint32_t multiplex = 0;  // 0/1 = every cycle
-  bool prc = false;        // PollResponse Chaining: in the PRC slot, not polled with PReq
+  uint8_t multiplex_slot = 0;  // 0 = every cycle, k = cycle k of each multiplexed cycle
+  bool prc = false;            // PollResponse Chaining: in the PRC slot, not polled with PReq
 };
 
 struct CycleBudget {
@@ -44,10 +44,57 @@ struct CycleBudget {
   }
 };
 
+// Multiplexed CNs (EPSG DS 301): one multiplexed cycle of `cycles` cycles for the network, each
+// multiplexed CN polled in one of them, its slot (NMT_MultiplCycleAssign 0x1F9B/node, 1..cycles).
+// A node without a slot (0) gets the one with the fewest nodes so far, the lowest of equals, in
+// node-id order, after the given slots counted: the load spread over the multiplexed cycle.
+struct MultiplexNode {
+  uint8_t node_id = 0;
+  uint8_t slot = 0;  // 0: to assign
+};
+inline void assign_multiplex_slots(std::span<MultiplexNode> nodes, uint8_t cycles) noexcept {
+  if (cycles == 0) return;
+  std::array<std::size_t, 256> load{};
+  for (const MultiplexNode& n : nodes)
+    if (n.slot != 0) ++load[n.slot];
+  std::sort(nodes.begin(), nodes.end(),
+            [](const MultiplexNode& a, const MultiplexNode& b) { return a.node_id < b.node_id; });
+  for (MultiplexNode& n : nodes) {
+    if (n.slot != 0) continue;
+    uint8_t best = 1;
+    for (unsigned k = 2; k <= cycles; ++k)
+      if (load[k] < load[best]) best = static_cast<uint8_t>(k);
+    n.slot = best;
+    ++load[best];
+  }
+}
+
+// PollResponse Chaining (EPSG DS 302-C): a chained CN takes its outputs from the PResMN, through
+// an RPDO whose NodeID_U8 names the MN. The MN places the output images of the chained nodes one
+// after the other in node-id order, each as its PReq image would be: `base` per node, and the
+// end of the last one (the least PResMN payload, which the PRC slot's budget counts).
+struct PresMnNode {
+  uint8_t node_id = 0;
+  uint16_t preq_size = 0;  // the node's output image (its layout's PReq bytes)
+  uint16_t base = 0;       // filled: where it starts in the PResMN payload
+};
+// Fills each `base` (sorting the nodes by id); returns the end of the last image.
+inline std::size_t place_pres_mn_outputs(std::span<PresMnNode> nodes) noexcept {
+  std::sort(nodes.begin(), nodes.end(),
+            [](const PresMnNode& a, const PresMnNode& b) { return a.node_id < b.node_id; });
+  std::size_t end = 0;
+  for (PresMnNode& n : nodes) {
+    n.base = static_cast<uint16_t>(std::min<std::size_t>(end, 0xFFFF));
+    end += n.preq_size;
+  }
+  return end;
+}
+
 [[nodiscard]] inline CycleBudget cycle_budget(std::span<const BudgetNode> nodes,
                                               uint32_t wait_soc_preq_us,
                                               uint32_t async_slot_timeout_us,
-                                              uint16_t pres_mn_payload = 36) noexcept {
+                                              uint16_t pres_mn_payload = 36,
+                                              uint8_t multiplex_cycles = 0) noexcept {
   CycleBudget b;
   uint32_t prc_timeout_us = 0;
   for (const BudgetNode& n : nodes) {
@@ -60,17 +107,14 @@ struct CycleBudget {
   b.soc_us = wire_time_us(36);
   b.wait_soc_preq_us = wait_soc_preq_us;
   b.async_us = wire_time_us(23) + async_slot_timeout_us + wire_time_us(1514);
-  // Cycles repeat with the least common multiple of the multiplex factors (bounded: a factor
-  // set whose multiple is huge is checked over its first 4096 cycles).
-  uint64_t period = 1;
-  for (const BudgetNode& n : nodes)
-    if (n.multiplex > 1) period = std::min<uint64_t>(std::lcm(period, uint64_t{n.multiplex}), 4096);
-  for (uint64_t cycle = 0; cycle < period; ++cycle) {
+  // The continuous CNs in every cycle, the multiplexed ones in the cycle of their slot.
+  const unsigned cycles = multiplex_cycles > 1 ? multiplex_cycles : 1;
+  for (unsigned cycle = 1; cycle <= cycles; ++cycle) {
     double iso = 0;
     std::size_t polled = 0;
     for (const BudgetNode& n : nodes) {
       if (n.prc) continue;
-      if (n.multiplex > 1 && cycle % n.multiplex != n.node_id % n.multiplex) continue;
+      if (n.multiplex_slot != 0 && n.multiplex_slot != cycle) continue;
       iso += wire_time_us(24u + n.preq_payload) + n.pres_timeout_us +
              wire_time_us(24u + n.pres_payload);
       ++polled;

@@ -150,8 +150,6 @@ ManagingNode::ManagingNode(const MnConfig& config)
     cn->loss_threshold =
         nc.loss_of_pres_threshold.value_or(config_.bus.thresholds.loss_of_pres.value_or(
             default_loss_of_pres_threshold(config_.cycle_us)));
-    if (nc.multiplex > 1)
-      mux_cycle_len_ = std::min<uint64_t>(std::lcm(mux_cycle_len_, uint64_t{nc.multiplex}), 4096);
     status_view_.emplace_back();
     cn->st = &status_view_.back();
     cn->st->node = nc.node_id;
@@ -212,13 +210,13 @@ ManagingNode::ManagingNode(const MnConfig& config)
       cn->object_data.insert(cn->object_data.end(), w.data.begin(), w.data.end());
     }
     // A multiplexed CN checks its PReqs against NMT_CycleTiming.MultiplCycleCnt (0x1F98/7): the
-    // PReq due every n-th cycle after the last one. Written last, so it is the polling the MN
-    // does whatever a concise DCF said.
-    if (nc.multiplex > 1) {
+    // PReq due in its slot of every multiplexed cycle. The same count to every multiplexed CN,
+    // written last, so it is the polling the MN does whatever a concise DCF said.
+    if (nc.multiplexed && config_.bus.multiplex_cycles > 1) {
       cn->object_ops.push_back({OpKind::kObjectWrite, obj::kCycleTiming,
                                 obj::kCycleTimingMultiplCycleCnt, ValueSource::kData, 0,
                                 cn->object_data.size(), 1});
-      cn->object_data.push_back(static_cast<uint8_t>(nc.multiplex));
+      cn->object_data.push_back(config_.bus.multiplex_cycles);
     }
     Cn* raw = cn.get();
     SdoClientConfig sc;
@@ -230,7 +228,37 @@ ManagingNode::ManagingNode(const MnConfig& config)
         [this, raw](std::error_code ec, std::span<const uint8_t> d) { sdo_done(*raw, ec, d); });
     cns_.push_back(std::move(cn));
   }
+  place_prc_outputs();
+  assign_slots();
   for (auto& cn : cns_) enter(*cn, CnBootState::kIdentify);
+}
+
+void ManagingNode::assign_slots() {
+  // One multiplexed cycle for the network (EPSG DS 301): MultiplCycleCnt cycles, each multiplexed
+  // CN polled in its slot of them (given, else assigned: cycle_budget.hpp).
+  const uint8_t cycles = config_.bus.multiplex_cycles;
+  std::vector<MultiplexNode> mux;
+  for (const auto& cn : cns_) {
+    if (!cn->cfg.multiplexed) continue;
+    const uint8_t slot = cn->cfg.multiplex_slot.value_or(0);
+    if (cycles < 2 || slot > cycles || cn->cfg.prc)
+      throw std::system_error(
+          make_error_code(MnError::kNodeNotConfigured),
+          "node " + std::to_string(cn->cfg.node_id) +
+              (cn->cfg.prc ? ": a PollResponse Chaining node has no multiplexed slot"
+                           : ": multiplexed slot " + std::to_string(slot) +
+                                 " outside the multiplexed cycle of " + std::to_string(cycles) +
+                                 " (multiplex_cycles)"));
+    mux.push_back({cn->cfg.node_id, slot});
+  }
+  if (mux.empty()) return;
+  assign_multiplex_slots(mux, cycles);
+  mux_cycle_len_ = cycles;
+  for (const MultiplexNode& m : mux) {
+    Cn& cn = *find(m.node_id);
+    cn.mux_slot = m.slot;
+    cn.st->multiplex_slot = m.slot;
+  }
 }
 
 ManagingNode::~ManagingNode() = default;
@@ -443,14 +471,21 @@ void ManagingNode::begin_cycle(int64_t now_ns) noexcept {
   for (auto& cn : cns_) {
     cn->polled = cn->pres_seen = cn->pres_usable = cn->timed_out = cn->late = false;
     cn->outputs_written = false;
-    if (!full_cycle() || !cn->st->in_isochronous) continue;
-    if (cn->st->prc) {
-      prc_list_[prc_count_++] = cn->cfg.node_id;
-      continue;
+  }
+  // The continuous CNs first, then the multiplexed CNs of this cycle's slot (EPSG DS 301); the
+  // multiplexed cycle's first cycle is slot 1.
+  const uint64_t slot = counters_.cycles % mux_cycle_len_ + 1;
+  for (const bool multiplexed : {false, true}) {
+    for (auto& cn : cns_) {
+      if (!full_cycle() || !cn->st->in_isochronous) continue;
+      if ((cn->mux_slot != 0) != multiplexed) continue;
+      if (cn->st->prc) {
+        prc_list_[prc_count_++] = cn->cfg.node_id;
+        continue;
+      }
+      if (multiplexed && cn->mux_slot != slot) continue;
+      iso_list_[iso_count_++] = cn->cfg.node_id;
     }
-    const uint32_t mux = cn->cfg.multiplex;
-    if (mux > 1 && counters_.cycles % mux != cn->cfg.node_id % mux) continue;
-    iso_list_[iso_count_++] = cn->cfg.node_id;
   }
   update_prc_slot();
 }
@@ -488,6 +523,8 @@ Result<std::size_t> ManagingNode::build_soc(std::span<uint8_t> out) const noexce
 std::span<uint8_t> ManagingNode::preq_payload(uint8_t node) noexcept {
   Cn* cn = find(node);
   if (!cn) return {};
+  if (cn->st->prc && cn->st->prc_outputs_size > 0)
+    return {pres_mn_.data() + cn->st->prc_outputs_offset, cn->st->prc_outputs_size};
   return {cn->preq.data(), cn->st->preq_size};
 }
 
@@ -524,7 +561,7 @@ Result<std::size_t> ManagingNode::build_preq(uint8_t node, std::span<uint8_t> ou
   // RD: the outputs this PReq carries are valid (EPSG DS 301): the MN is OPERATIONAL and wrote
   // them this cycle. A CN takes no outputs from a PReq with RD = 0.
   preq.ready = mn_state_ == NmtState::kOperational && cn->outputs_written;
-  preq.multiplexed_slot = cn->cfg.multiplex > 1;
+  preq.multiplexed_slot = cn->mux_slot != 0;
   preq.exception_acknowledge = cn->errsig.exception_acknowledge();
   preq.payload = std::span<const uint8_t>(cn->preq.data(), cn->st->preq_size);
   return powerlink::build_preq(out, preq_header(config_.mac, cn->st->mac, node), preq);

@@ -127,6 +127,12 @@ struct CnStatus {
   uint32_t prc_sync_delay_ns = 0;
   uint32_t prc_propagation_ns = 0;
   uint32_t prc_latency_ns = 0;
+  // Its slot of the multiplexed cycle (NMT_MultiplCycleAssign: configured or assigned), 0 when
+  // it is polled every cycle.
+  uint8_t multiplex_slot = 0;
+  // Where its outputs sit in the PResMN payload (bytes; prc_outputs_size 0: none there).
+  uint16_t prc_outputs_offset = 0;
+  uint16_t prc_outputs_size = 0;
   uint32_t sync_responses = 0;
   uint32_t nmt_requests = 0;          // NMTRequests received from the CN
   uint32_t nmt_requests_refused = 0;  // ... of them not served
@@ -202,6 +208,9 @@ class ManagingNode {
   [[nodiscard]] std::span<const uint8_t> prc_nodes() const noexcept;
   [[nodiscard]] Result<std::size_t> build_pres_mn(std::span<uint8_t> out) noexcept;
   [[nodiscard]] int64_t prc_slot_ns() const noexcept { return prc_slot_ns_; }
+  // PResMN payload in bytes: powerlink.pres_mn_size, or more when the chained nodes' outputs
+  // (each at its prc_outputs_offset) need more.
+  [[nodiscard]] uint16_t pres_mn_size() const noexcept { return pres_mn_size_; }
   // The driver wrote the whole output image of `node` for this cycle (after begin_cycle): only
   // then does its PReq, or the PResMN that carries its outputs, say RD = 1.
   void outputs_written(uint8_t node) noexcept;
@@ -221,6 +230,8 @@ class ManagingNode {
   void end_cycle(bool cycle_time_exceeded) noexcept;
 
   // ---- Process data (valid between begin_cycle and build_preq / after on_frame) ----
+  // The outputs of `node` this cycle: its PReq payload, or for a chained node (PRC) its part of
+  // the PResMN payload, laid out as its PReq would be (its layout's offsets apply to both).
   [[nodiscard]] std::span<uint8_t> preq_payload(uint8_t node) noexcept;
   [[nodiscard]] std::span<const uint8_t> pres_payload(uint8_t node) const noexcept;
   // The PRes of `node` arrived in this cycle with a usable size and RD = 1.
@@ -291,6 +302,8 @@ class ManagingNode {
   [[nodiscard]] uint32_t prc_time_of(const Cn& cn) const noexcept;
   [[nodiscard]] uint16_t expected_pres_size(const Cn& cn) const noexcept;
   void update_prc_slot() noexcept;
+  void place_prc_outputs();
+  void assign_slots();
   [[nodiscard]] int64_t ms(uint32_t v) const noexcept {
     return static_cast<int64_t>(v) * 1'000'000;
   }
@@ -323,13 +336,15 @@ class ManagingNode {
   std::vector<uint8_t> prc_list_;
   std::size_t prc_count_ = 0;
   int64_t prc_slot_ns_ = 0;
+  std::array<uint8_t, kMaxIsoPayload> pres_mn_{};  // the PResMN payload: chained nodes' outputs
+  uint16_t pres_mn_size_ = 0;
   NmtState mn_state_ = NmtState::kPreOperational1;
   int64_t now_ns_ = 0;
   int64_t start_ns_ = -1;
   int64_t mn_state_since_ns_ = 0;
   uint64_t relative_time_us_ = 0;
-  uint64_t mux_cycle_len_ = 1;  // cycles of one multiplexed cycle (lcm of the nodes' factors)
-  bool mc_flag_ = false;        // SoC MC, toggled at each multiplexed cycle's end
+  uint64_t mux_cycle_len_ = 1;  // cycles of one multiplexed cycle (MultiplCycleCnt), 1: none
+  bool mc_flag_ = false;        // SoC MC, toggled at the start of each multiplexed cycle
   int64_t soc_time_ns_ = 0;
   NetTime net_time_{};
   MnCounters counters_;

@@ -32,6 +32,8 @@ struct ObjectOp {
   uint32_t expected = 0;  // identity read
   std::size_t data_offset = 0;
   std::size_t data_size = 0;
+  // The RPDO of the PResMN: written only to a node chained by PRC (not after a fall-back).
+  bool prc_only = false;
 };
 // A register request routed to the module in `slot` of the CN.
 struct SlotRegister {
@@ -56,6 +58,7 @@ struct ManagingNode::Cn {
   NodeImageLayout layout;
   std::array<uint8_t, kMaxIsoPayload> preq{};
   std::array<uint8_t, kMaxIsoPayload> pres{};
+  uint8_t mux_slot = 0;          // slot of the multiplexed cycle, 0: polled every cycle
   bool polled = false;           // PReq sent this cycle
   uint32_t loss_threshold = 0;   // DLL_MNCNLossPResThreshold (0x1C09) in effect
   bool pres_seen = false;        // its PRes arrived this cycle

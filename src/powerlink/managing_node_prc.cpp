@@ -13,9 +13,13 @@
 // against its loss-of-PRes threshold like a missing answer to a PReq. A missing or wrong
 // SyncResponse is retried once, the second failure resets the CN.
 #include <algorithm>
+#include <string>
+#include <system_error>
+#include <vector>
 
 #include "powerlink/managing_node.hpp"
 #include "powerlink/managing_node_cn.hpp"
+#include "powerlink/pdo_image.hpp"
 #include "powerlink/sync_frames.hpp"
 
 namespace ds1928::powerlink {
@@ -180,6 +184,44 @@ std::span<const uint8_t> ManagingNode::prc_nodes() const noexcept {
   return {prc_list_.data(), prc_count_};
 }
 
+void ManagingNode::place_prc_outputs() {
+  // Each chained node's outputs in the PResMN, placed by node id (place_pres_mn_outputs()); the
+  // node is told where by its RPDO for the PResMN (PDO_RxCommParam_01h NodeID_U8 = 240, its
+  // mapping at those offsets), written in "configure" like its other objects.
+  std::vector<PresMnNode> chained;
+  for (const auto& cn : cns_)
+    if (cn->cfg.prc) chained.push_back({cn->cfg.node_id, cn->layout.preq_size, 0});
+  const std::size_t end = place_pres_mn_outputs(chained);
+  if (end > kMaxIsoPayload)
+    throw std::system_error(make_error_code(MnError::kModuleBlockOutsidePayload),
+                            "PResMN: the outputs of the chained nodes take " + std::to_string(end) +
+                                " bytes, more than the " + std::to_string(kMaxIsoPayload) +
+                                "-byte payload");
+  pres_mn_size_ = static_cast<uint16_t>(std::max<std::size_t>(config_.bus.pres_mn_size, end));
+  for (const PresMnNode& p : chained) {
+    Cn& cn = *find(p.node_id);
+    cn.st->prc_outputs_offset = p.base;
+    cn.st->prc_outputs_size = p.preq_size;
+    if (p.preq_size == 0) continue;
+    const auto entries = rpdo_mapping_of(
+        cn.layout, cn.cfg.object_scheme.value_or(config_.bus.object_scheme), p.base);
+    auto write = [&](uint16_t index, uint8_t sub, uint64_t value, std::size_t size) {
+      ObjectOp op{OpKind::kObjectWrite,  index, sub, ValueSource::kData, 0,
+                  cn.object_data.size(), size};
+      op.prc_only = true;
+      cn.object_ops.push_back(op);
+      for (std::size_t b = 0; b < size; ++b)
+        cn.object_data.push_back(static_cast<uint8_t>(value >> (8 * b)));
+    };
+    // DS 301: a mapping is written while disabled (NumberOfEntries 0), then enabled.
+    write(obj::kRxPdoMappingPresMn, 0, 0, 1);
+    for (std::size_t k = 0; k < entries.size(); ++k)
+      write(obj::kRxPdoMappingPresMn, static_cast<uint8_t>(k + 1), entries[k].to_u64(), 8);
+    write(obj::kRxPdoMappingPresMn, 0, entries.size(), 1);
+    write(obj::kRxPdoCommPresMn, 1, kNodeMn, 1);
+  }
+}
+
 Result<std::size_t> ManagingNode::build_pres_mn(std::span<uint8_t> out) noexcept {
   // RD only when the outputs of every chained node it stands for were written this cycle.
   bool written = true;
@@ -189,13 +231,12 @@ Result<std::size_t> ManagingNode::build_pres_mn(std::span<uint8_t> out) noexcept
       written = written && cn->outputs_written;
     }
   }
-  // The MN's own PDO: no object of this MN is mapped into it, so it carries zeros; it is the
-  // PRC CNs' time reference.
-  static constexpr std::array<uint8_t, kMaxIsoPayload> kZeros{};
+  // The chained nodes' outputs, each where place_prc_outputs() put it (the driver wrote them
+  // through preq_payload()); the PResMN is also the PRC CNs' time reference.
   PRes pres;
   pres.nmt_state = mn_state_;
   pres.ready = mn_state_ == NmtState::kOperational && written;
-  pres.payload = std::span<const uint8_t>(kZeros.data(), config_.bus.pres_mn_size);
+  pres.payload = std::span<const uint8_t>(pres_mn_.data(), pres_mn_size_);
   return build_pres(out, pres_header(config_.mac, kNodeMn), pres);
 }
 
@@ -209,10 +250,9 @@ void ManagingNode::update_prc_slot() noexcept {
         last_end, uint64_t{cn->st->prc_pres_time_ns} + prc_frame_time_ns(expected_pres_size(*cn)));
     timeout_us = std::max(timeout_us, cn->cfg.pres_timeout_us);
   }
-  prc_slot_ns_ = prc_count_ == 0
-                     ? 0
-                     : static_cast<int64_t>(prc_frame_time_ns(config_.bus.pres_mn_size) + last_end +
-                                            uint64_t{timeout_us} * 1000);
+  prc_slot_ns_ = prc_count_ == 0 ? 0
+                                 : static_cast<int64_t>(prc_frame_time_ns(pres_mn_size_) +
+                                                        last_end + uint64_t{timeout_us} * 1000);
 }
 
 }  // namespace ds1928::powerlink

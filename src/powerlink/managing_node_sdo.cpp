@@ -51,6 +51,10 @@ void ManagingNode::start_next_sdo(Cn& cn) noexcept {
         b == CnBootState::kResetConfiguration)
       return;
     if (cn.configuring && cn.object_next < cn.object_ops.size()) {
+      if (cn.object_ops[cn.object_next].prc_only && !uses_prc(cn)) {
+        ++cn.object_next;
+        continue;
+      }
       start_object_op(cn);
       continue;
     }

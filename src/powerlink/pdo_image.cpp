@@ -122,12 +122,13 @@ std::optional<NodeImageLayout> bind_pdo_mapping(const PdoMappingLists& lists,
     const uint16_t in_obj = static_cast<uint16_t>(scheme.input_index + m.slot);
     const uint16_t out_obj = static_cast<uint16_t>(scheme.output_index + m.slot);
     for (const SchemeRegister& r : kSchemeInputs) {
+      if (lists.outputs_only) break;
       const bool needed = r.field != ImageField::kSdcLifeCount &&
                           (r.field != ImageField::kInputSequence || m.input_mtu > 0);
       if (needed && m.fields.fixed[static_cast<std::size_t>(r.field)] == kNotMapped)
         return missing(r.name, in_obj, r.subindex);
     }
-    for (uint8_t b = 0; b < m.input_mtu; ++b)
+    for (uint8_t b = 0; b < m.input_mtu && !lists.outputs_only; ++b)
       if (m.fields.rx[b] == kNotMapped)
         return missing("RxByte" + std::to_string(b + 1), in_obj,
                        static_cast<uint8_t>(kSchemeRxByteFirstSub + b));
@@ -195,18 +196,29 @@ std::vector<PdoMapEntry> tpdo_mapping_of(const NodeImageLayout& layout,
   return out;
 }
 
-std::vector<PdoMapEntry> rpdo_mapping_of(const NodeImageLayout& layout,
-                                         const ObjectScheme& scheme) {
+std::vector<PdoMapEntry> rpdo_mapping_of(const NodeImageLayout& layout, const ObjectScheme& scheme,
+                                         uint16_t base) {
   std::vector<PdoMapEntry> out;
   for (const ModuleMapping& m : layout.mappings()) {
     const auto obj = static_cast<uint16_t>(scheme.output_index + m.slot);
-    // The packed PReq block: OutputSequence | TxBytes | AckErrorInfo.
-    out.push_back(entry(obj, kSchemeOutputs[0].subindex, m.preq_offset, 1));
-    for (uint8_t b = 0; b < m.output_mtu; ++b)
-      out.push_back(entry(obj, static_cast<uint8_t>(kSchemeTxByteFirstSub + b),
-                          std::size_t{m.preq_offset} + 1 + b, 1));
+    // Where the layout has each output register: the PDO mapping's offsets, or the packed PReq
+    // block OutputSequence | TxBytes | AckErrorInfo.
+    auto at = [&](ImageField f, std::size_t packed) -> std::size_t {
+      return m.by_fields ? m.fields.fixed[static_cast<std::size_t>(f)] : m.preq_offset + packed;
+    };
+    auto tx_at = [&](uint8_t b) -> std::size_t {
+      return m.by_fields ? m.fields.tx[b] : std::size_t{m.preq_offset} + 1 + b;
+    };
+    if (m.by_fields && m.output_mtu == 0 &&
+        m.fields.fixed[static_cast<std::size_t>(ImageField::kOutputSequence)] == kNotMapped)
+      continue;  // a module whose mapping carries no outputs
     out.push_back(
-        entry(obj, kSchemeOutputs[1].subindex, std::size_t{m.preq_offset} + 1 + m.output_mtu, 1));
+        entry(obj, kSchemeOutputs[0].subindex, base + at(ImageField::kOutputSequence, 0), 1));
+    for (uint8_t b = 0; b < m.output_mtu; ++b)
+      out.push_back(
+          entry(obj, static_cast<uint8_t>(kSchemeTxByteFirstSub + b), base + tx_at(b), 1));
+    out.push_back(entry(obj, kSchemeOutputs[1].subindex,
+                        base + at(ImageField::kAckErrorInfo, std::size_t{1} + m.output_mtu), 1));
   }
   return out;
 }

@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "powerlink/concise_dcf.hpp"
+#include "powerlink/cycle_budget.hpp"
 #include "powerlink/powerlink_options.hpp"
 #include "powerlink/process_image.hpp"
 #include "powerlink/standard_objects.hpp"
@@ -64,6 +65,8 @@ struct PdoMappingLists {
   std::span<const PdoMapEntry> rpdo;         // 0x1600/1..n: the PReq
   uint16_t tpdo_index = obj::kTxPdoMapping;  // for messages
   uint16_t rpdo_index = obj::kRxPdoMapping;
+  // Only the outputs are bound (the RPDO of the PResMN a chained CN reads): no input is needed.
+  bool outputs_only = false;
 };
 
 // The layout of one CN's modules from its mapping. Each module needs PositionHW, PositionLW,
@@ -87,7 +90,12 @@ struct PdoMappingLists {
 // with these modules would report; the simulator serves it and tests build rearranged ones.
 [[nodiscard]] std::vector<PdoMapEntry> tpdo_mapping_of(const NodeImageLayout& layout,
                                                        const ObjectScheme& scheme);
+// The RPDO entries of the layout's outputs, `base` bytes further on: with base 0 the PReq's,
+// else where the MN places a chained node's outputs in the PResMN (pres_mn_outputs()).
 [[nodiscard]] std::vector<PdoMapEntry> rpdo_mapping_of(const NodeImageLayout& layout,
-                                                       const ObjectScheme& scheme);
+                                                       const ObjectScheme& scheme,
+                                                       uint16_t base = 0);
+
+// Where a chained node's outputs go in the PResMN: place_pres_mn_outputs() (cycle_budget.hpp).
 
 }  // namespace ds1928::powerlink

@@ -64,7 +64,12 @@ struct PowerlinkNodeConfig {
   // DLL_MNCNLossPResThreshold (0x1C09/node); unset: powerlink.thresholds.loss_of_pres.
   std::optional<uint32_t> loss_of_pres_threshold;
   bool mandatory = true;
-  uint32_t multiplex = 0;  // 0 = continuous, n = polled every n-th cycle
+  // Multiplexed (EPSG DS 301): polled in one cycle of each multiplexed cycle of
+  // PowerlinkBusConfig::multiplex_cycles, its slot (NMT_MultiplCycleAssign 0x1F9B/node,
+  // 1..multiplex_cycles); unset with `multiplexed`, the MN assigns one (the least loaded, lowest
+  // first, in node-id order) and reports it.
+  bool multiplexed = false;
+  std::optional<uint8_t> multiplex_slot;
   // PollResponse Chaining (EPSG DS 302-C): the CN sends its PRes at an assigned time after the
   // MN's PResMN instead of after a PReq (NodeAssignment 0x1F81/node bit 14 of the MN's CDC).
   // A CN without the PRC feature flag is polled with PReq/PRes instead (reported).
@@ -122,6 +127,9 @@ struct PowerlinkBusConfig {
   // WaitSoCPReq (0x1F8A/1): pause between the SoC and the first PReq, for CNs that need time to
   // take the SoC (a software CN) before they can answer a PReq.
   uint32_t wait_soc_preq_us = 0;
+  // NMT_CycleTiming.MultiplCycleCnt (0x1F98/7): cycles of one multiplexed cycle, written to every
+  // multiplexed CN (the same value to all of them); 0 = no multiplexing.
+  uint8_t multiplex_cycles = 0;
   // PResMN payload (NMT_CycleTiming PResActPayloadLimit, 0x1F98/5 of the MN): the MN's PRes after
   // the SoC when PRC nodes are present; 36 bytes fill the minimum frame.
   uint16_t pres_mn_size = 36;

@@ -23,6 +23,10 @@ inline constexpr uint16_t kIdentity = 0x1018;
 inline constexpr uint16_t kVerifyConfiguration = 0x1020;
 inline constexpr uint16_t kRxPdoComm = 0x1400;
 inline constexpr uint16_t kRxPdoMapping = 0x1600;
+// The second RPDO channel: a PollResponse Chaining node's outputs from the PResMN (its NodeID_U8
+// names the MN, EPSG DS 302-C), beside channel 0 for the PReq.
+inline constexpr uint16_t kRxPdoCommPresMn = 0x1401;
+inline constexpr uint16_t kRxPdoMappingPresMn = 0x1601;
 inline constexpr uint16_t kTxPdoComm = 0x1800;
 inline constexpr uint16_t kTxPdoMapping = 0x1A00;
 inline constexpr uint16_t kMnCycTimeExceed = 0x1C02;
@@ -46,13 +50,16 @@ inline constexpr uint16_t kMnPReqPayloadLimitList = 0x1F8B;
 inline constexpr uint16_t kPResPayloadLimitList = 0x1F8D;
 inline constexpr uint16_t kMnCnPResTimeout = 0x1F92;
 inline constexpr uint16_t kCycleTiming = 0x1F98;
+inline constexpr uint16_t kMultiplCycleAssign = 0x1F9B;
 
 // Sub-indices with a meaning of their own.
-inline constexpr uint8_t kCycleTimingPReqActPayload = 4;  // kCycleTiming/4
-inline constexpr uint8_t kCycleTimingPResActPayload = 5;  // kCycleTiming/5
+inline constexpr uint8_t kCycleTimingPReqActPayload = 4;   // kCycleTiming/4
+inline constexpr uint8_t kCycleTimingPResActPayload = 5;   // kCycleTiming/5
 inline constexpr uint8_t kCycleTimingMultiplCycleCnt = 7;  // kCycleTiming/7
 // NMT_NodeAssignment bit 14: the node is polled by PollResponse Chaining.
 inline constexpr uint32_t kNodeAssignmentPrc = 0x00004000;
+// NMT_NodeAssignment bit 9: the node is polled in a multiplexed slot.
+inline constexpr uint32_t kNodeAssignmentMultiplexed = 0x00000200;
 }  // namespace obj
 
 enum class ObjType : uint8_t { kU8, kU16, kU32, kU64, kDomain };
@@ -121,6 +128,11 @@ inline constexpr std::array kStandardObjects = std::to_array<StandardObject>({
   {kRxPdoComm, 2, 2, "PDO_RxCommParam_00h_REC.MappingVersion_U8", kU8, kRw, kCn, 0, "mapping version"},
   {kRxPdoMapping, 0, 0, "PDO_RxMappParam_00h_AU64.NumberOfEntries", kU8, kRw, kCn, 0, "mapped objects (0: mapping disabled, written first)"},
   {kRxPdoMapping, 1, 254, "PDO_RxMappParam_00h_AU64.ObjectMapping", kU64, kRw, kCn, 0, "PReq payload entry: length|offset bits, subindex, index"},
+  {kRxPdoCommPresMn, 0, 0, "PDO_RxCommParam_01h_REC.NumberOfEntries", kU8, kConst, kCn, 2, "entries"},
+  {kRxPdoCommPresMn, 1, 1, "PDO_RxCommParam_01h_REC.NodeID_U8", kU8, kRw, kCn, 0, "node whose frame the RPDO is (240: the PResMN)"},
+  {kRxPdoCommPresMn, 2, 2, "PDO_RxCommParam_01h_REC.MappingVersion_U8", kU8, kRw, kCn, 0, "mapping version"},
+  {kRxPdoMappingPresMn, 0, 0, "PDO_RxMappParam_01h_AU64.NumberOfEntries", kU8, kRw, kCn, 0, "mapped objects (0: mapping disabled, written first)"},
+  {kRxPdoMappingPresMn, 1, 254, "PDO_RxMappParam_01h_AU64.ObjectMapping", kU64, kRw, kCn, 0, "entry of the frame NodeID_U8 names: length|offset bits, subindex, index"},
   {kTxPdoComm, 0, 0, "PDO_TxCommParam_00h_REC.NumberOfEntries", kU8, kConst, kCn, 2, "entries"},
   {kTxPdoComm, 1, 1, "PDO_TxCommParam_00h_REC.NodeID_U8", kU8, kRw, kCn, 0, "node the TPDO is for (0: the PRes)"},
   {kTxPdoComm, 2, 2, "PDO_TxCommParam_00h_REC.MappingVersion_U8", kU8, kRw, kCn, 0, "mapping version"},
@@ -160,6 +172,7 @@ inline constexpr std::array kStandardObjects = std::to_array<StandardObject>({
   {kMnPReqPayloadLimitList, 1, 254, "NMT_MNPReqPayloadLimitList_AU16", kU16, kRw, kMn, 0, "PReq payload per node, bytes"},
   {kPResPayloadLimitList, 1, 254, "NMT_PResPayloadLimitList_AU16", kU16, kRw, kMn, 0, "PRes payload per node, bytes"},
   {kMnCnPResTimeout, 1, 254, "NMT_MNCNPResTimeout_AU32", kU32, kRw, kMn, 0, "PRes timeout per node, ns"},
+  {kMultiplCycleAssign, 1, 254, "NMT_MultiplCycleAssign_AU8", kU8, kRw, kMn, 0, "multiplexed cycle slot per node (0: continuous)"},
   {kCycleTiming, 0, 0, "NMT_CycleTiming_REC.NumberOfEntries", kU8, kConst, kCn, 9, "entries"},
   {kCycleTiming, 1, 1, "NMT_CycleTiming_REC.IsochrTxMaxPayload_U16", kU16, kConst, kCn, 1490, "largest PRes payload the device sends"},
   {kCycleTiming, 2, 2, "NMT_CycleTiming_REC.IsochrRxMaxPayload_U16", kU16, kConst, kCn, 1490, "largest PReq payload the device takes"},

@@ -152,7 +152,8 @@ uint32_t CnObjectDictionary::write(uint16_t index, uint8_t sub,
     if (v > value(obj::kCycleTiming, sub == obj::kCycleTimingPReqActPayload ? 2 : 1))
       return sdo_abort::kOutOfRange;
   }
-  if (index == obj::kRxPdoMapping || index == obj::kTxPdoMapping) {
+  if (index == obj::kRxPdoMapping || index == obj::kRxPdoMappingPresMn ||
+      index == obj::kTxPdoMapping) {
     if (sub == 0 && v > kMaxMapped) return sdo_abort::kOutOfRange;
     // Mapping written while enabled (sub 0 ≠ 0): DS 301 wants it disabled first.
     if (sub != 0 && value(index, 0) != 0) return sdo_abort::kDeviceState;
@@ -227,6 +228,9 @@ uint16_t CnObjectDictionary::preq_size(uint16_t fallback) const noexcept {
   return fallback;
 }
 
+uint8_t CnObjectDictionary::rpdo_source(uint16_t comm_index) const noexcept {
+  return static_cast<uint8_t>(value(comm_index, 1));
+}
 uint32_t CnObjectDictionary::cycle_length_us() const noexcept {
   return static_cast<uint32_t>(value(obj::kCycleLen, 0));
 }

@@ -47,6 +47,9 @@ class CnObjectDictionary {
   // says (at most out.size()); 0 = the mapping is disabled.
   [[nodiscard]] std::size_t mapping(uint16_t mapping_index,
                                     std::span<powerlink::PdoMapEntry> out) const noexcept;
+  // The node whose frame an RPDO channel takes (PDO_RxCommParam_XXh NodeID_U8 of `comm_index`):
+  // 0 the PReq, 240 the PResMN.
+  [[nodiscard]] uint8_t rpdo_source(uint16_t comm_index) const noexcept;
   [[nodiscard]] uint32_t cycle_length_us() const noexcept;
   [[nodiscard]] uint8_t multiplexed_cycle_count() const noexcept;
   [[nodiscard]] uint32_t loss_of_frame_tolerance_ns() const noexcept;

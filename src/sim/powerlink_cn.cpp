@@ -177,6 +177,22 @@ void PowerlinkCn::boot(int64_t now_ns) noexcept {
   reset(pl::NmtCommandId::kSwReset, now_ns);
 }
 
+bool PowerlinkCn::bind_mapping(const pl::PdoMappingLists& lists,
+                               pl::NodeImageLayout& out) noexcept {
+  pl::PdoBindIssue issue;
+  bool bound = false;
+  try {
+    if (auto layout = pl::bind_pdo_mapping(lists, config_.object_scheme, specs_, issue)) {
+      out = *layout;
+      bound = true;
+    }
+  } catch (const std::bad_alloc&) {
+    // the message could not be built: refused like any other unusable mapping
+  }
+  ++(bound ? stats_.mappings_taken : stats_.mappings_refused);
+  return bound;
+}
+
 void PowerlinkCn::take_mapping() noexcept {
   std::array<pl::PdoMapEntry, CnObjectDictionary::kMaxMapped> tpdo{}, rpdo{};
   const std::size_t nt = comm_.mapping(pl::obj::kTxPdoMapping, tpdo);
@@ -186,19 +202,27 @@ void PowerlinkCn::take_mapping() noexcept {
     pl::PdoMappingLists lists;
     lists.tpdo = std::span<const pl::PdoMapEntry>(tpdo.data(), nt);
     lists.rpdo = std::span<const pl::PdoMapEntry>(rpdo.data(), nr);
-    pl::PdoBindIssue issue;
-    try {
-      if (auto bound = pl::bind_pdo_mapping(lists, config_.object_scheme, specs_, issue)) {
-        mapped_layout_ = *bound;
-        by_mapping_ = true;
-      }
-    } catch (const std::bad_alloc&) {
-      // the message could not be built: refused like any other unusable mapping
-    }
-    ++(by_mapping_ ? stats_.mappings_taken : stats_.mappings_refused);
+    by_mapping_ = bind_mapping(lists, mapped_layout_);
+  }
+  // PollResponse Chaining: an RPDO channel whose NodeID_U8 names the MN takes the PResMN.
+  outputs_from_pres_mn_ = false;
+  for (const auto& [comm, mapping_index] :
+       {std::pair{pl::obj::kRxPdoCommPresMn, pl::obj::kRxPdoMappingPresMn},
+        std::pair{pl::obj::kRxPdoComm, pl::obj::kRxPdoMapping}}) {
+    if (outputs_from_pres_mn_ || comm_.rpdo_source(comm) != pl::kNodeMn) continue;
+    const std::size_t n = comm_.mapping(mapping_index, rpdo);
+    if (n == 0) continue;
+    pl::PdoMappingLists lists;
+    lists.rpdo = std::span<const pl::PdoMapEntry>(rpdo.data(), n);
+    lists.rpdo_index = mapping_index;
+    lists.outputs_only = true;
+    outputs_from_pres_mn_ = bind_mapping(lists, pres_mn_layout_);
   }
   const pl::NodeImageLayout& use = layout();
-  for (HostedModule& m : modules_) m.mapping = use.find(m.slot);
+  for (HostedModule& m : modules_) {
+    m.mapping = use.find(m.slot);
+    m.pres_mn_mapping = outputs_from_pres_mn_ ? pres_mn_layout_.find(m.slot) : nullptr;
+  }
 }
 
 void PowerlinkCn::reset(pl::NmtCommandId command, int64_t now_ns) noexcept {
@@ -237,6 +261,10 @@ void PowerlinkCn::reset(pl::NmtCommandId command, int64_t now_ns) noexcept {
   preq_interval_ = 0;
   loss_of_preq_counter_ = 0;
   pres_pending_ = false;
+  mc_seen_ = false;
+  last_mc_ = false;
+  mux_pos_ = -1;
+  mux_slot_pos_ = -1;
   leave_prc();
   sync_prev_node_ = 0;
   sync_node_number_ = 0;
@@ -331,10 +359,8 @@ void PowerlinkCn::receive(std::span<const uint8_t> frame, int64_t now_ns) noexce
       on_sync_request(frame, now_ns);
   } else if (const auto* pres = std::get_if<pl::PRes>(&f.message)) {
     // The PResMN: in PRC mode this node's trigger, in the states that answer a PReq.
-    if (f.header.src_node == pl::kNodeMn && prc_mode_ && h.on_preq == &PowerlinkCn::preq_answer) {
-      (void)pres;
-      on_pres_mn(now_ns);
-    }
+    if (f.header.src_node == pl::kNodeMn && prc_mode_ && h.on_preq == &PowerlinkCn::preq_answer)
+      on_pres_mn(*pres, now_ns);
   } else if (const auto* asnd = std::get_if<pl::Asnd>(&f.message)) {
     if (asnd->service == pl::AsndService::kSyncResponse && f.header.src_node != config_.node_id) {
       on_foreign_sync_response(f.header.src_node, now_ns);
@@ -363,6 +389,14 @@ void PowerlinkCn::note_soc_timing(const pl::Soc& soc, int64_t now_ns) noexcept {
   last_soc_ns_ = now_ns;
   unobserved_since_soc_ns_ = 0;
   soc_relative_us_ = soc.relative_time_us;
+  // MC toggles at the start of each multiplexed cycle (EPSG DS 301).
+  if (mc_seen_ && soc.multiplexed_cycle_completed != last_mc_) {
+    mux_pos_ = 0;
+  } else if (mux_pos_ >= 0) {
+    ++mux_pos_;
+  }
+  mc_seen_ = true;
+  last_mc_ = soc.multiplexed_cycle_completed;
   // NetTime from the earliest SoC arrival, not the latest (sim/nettime_anchor.hpp).
   net_anchor_.sample(now_ns - static_cast<int64_t>(soc.relative_time_us) * 1000);
 }
@@ -389,19 +423,40 @@ void PowerlinkCn::soc_cycling(const pl::Soc& soc, int64_t now_ns) noexcept {
       (state_ == NmtState::kReadyToOperate || state_ == NmtState::kOperational)) {
     ++cycles_since_preq_;
     if (cycles_since_preq_ > preq_interval_) {
-      ++stats_.loss_of_preq;
       cycles_since_preq_ = 0;
-      loss_of_preq_counter_ += 8;
-      if (config_.loss_of_preq_threshold != 0 &&
-          loss_of_preq_counter_ >= config_.loss_of_preq_threshold) {
-        loss_of_preq_counter_ = 0;
-        log_error(kErrorLossOfPReq, now_ns);
-      }
+      count_loss_of_preq(now_ns);
     }
   }
 }
 
 // ---- PReq / PRes ----------------------------------------------------------------------------
+
+void PowerlinkCn::count_loss_of_preq(int64_t now_ns) noexcept {
+  ++stats_.loss_of_preq;
+  loss_of_preq_counter_ += 8;
+  if (config_.loss_of_preq_threshold != 0 &&
+      loss_of_preq_counter_ >= config_.loss_of_preq_threshold) {
+    loss_of_preq_counter_ = 0;
+    log_error(kErrorLossOfPReq, now_ns);
+  }
+}
+
+void PowerlinkCn::check_slot(int64_t now_ns) noexcept {
+  // Strict (EPSG DS 301): a multiplexed CN is polled in its slot of every multiplexed cycle,
+  // exactly once. Its slot is where it was first polled once READY_TO_OPERATE; a PReq in another
+  // cycle of the multiplexed cycle is a PReq missing from its slot.
+  const uint32_t n = dll_.multiplexed_cycle_count;
+  if (n < 2 || mux_pos_ < 0 ||
+      (state_ != NmtState::kReadyToOperate && state_ != NmtState::kOperational))
+    return;
+  const int pos = mux_pos_ % static_cast<int>(n);
+  if (mux_slot_pos_ < 0) {
+    mux_slot_pos_ = pos;
+  } else if (pos != mux_slot_pos_) {
+    ++stats_.preq_out_of_slot;
+    count_loss_of_preq(now_ns);
+  }
+}
 
 void PowerlinkCn::note_polled() noexcept {
   // Strict: the interval is the configured one (a multiplexed CN is told its MultiplCycleCnt),
@@ -411,6 +466,7 @@ void PowerlinkCn::note_polled() noexcept {
 }
 
 void PowerlinkCn::preq_answer(const pl::PReq& preq, int64_t now_ns) noexcept {
+  check_slot(now_ns);
   note_polled();
   errsig_.on_preq(preq.exception_acknowledge);
   // Outputs are applied only when the MN says they are valid and the node is operational.

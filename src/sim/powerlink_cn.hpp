@@ -13,9 +13,9 @@
 // Process image: powerlink/process_image.hpp's layout from the modules' MTUs and offset
 // overrides (the same make_layout() the MN uses), reported as PollInSize/PollOutSize in the
 // IdentResponse; after an MN wrote a PDO mapping and NMTResetConfiguration, the registers where
-// that mapping puts them (powerlink/pdo_image.hpp, take_mapping()). NetTime: a module's NetTime at instant t is
-// low32(RelativeTime of the last SoC + offset) plus the time elapsed since that SoC arrived — the
-// relation the MN maps PosTime back with.
+// that mapping puts them (powerlink/pdo_image.hpp, take_mapping()). NetTime: a module's NetTime at
+// instant t is low32(RelativeTime of the last SoC + offset) plus the time elapsed since that SoC
+// arrived — the relation the MN maps PosTime back with.
 #pragma once
 
 #include <array>
@@ -32,6 +32,7 @@
 #include "powerlink/error_signalling.hpp"
 #include "powerlink/frames.hpp"
 #include "powerlink/link.hpp"
+#include "powerlink/pdo_image.hpp"
 #include "powerlink/powerlink_options.hpp"
 #include "powerlink/process_image.hpp"
 #include "powerlink/sdo.hpp"
@@ -123,12 +124,16 @@ struct PowerlinkCnStats {
   uint64_t power_cycles = 0;
   uint64_t nmt_requests_sent = 0;
   uint64_t resets = 0;
-  uint64_t errors_raised = 0;  // error entries queued (raise_error, DLL errors)
-  uint64_t bad_frames = 0;     // rejected by the codec
-  uint64_t short_frames = 0;   // accepted although shorter than 60 bytes (unpadded sender)
-  uint64_t sync_requests = 0;  // SyncRequests to this node (answered with a SyncResponse)
-  uint64_t pres_mn = 0;        // PResMN seen while in PRC mode (each answered with the PRes)
-  uint64_t prc_fallbacks = 0;  // PRC mode left for PReq/PRes: no PResMN within the fallback time
+  uint64_t errors_raised = 0;    // error entries queued (raise_error, DLL errors)
+  uint64_t bad_frames = 0;       // rejected by the codec
+  uint64_t short_frames = 0;     // accepted although shorter than 60 bytes (unpadded sender)
+  uint64_t sync_requests = 0;    // SyncRequests to this node (answered with a SyncResponse)
+  uint64_t pres_mn = 0;          // PResMN seen while in PRC mode (each answered with the PRes)
+  uint64_t pres_mn_outputs = 0;  // ... whose outputs (RD = 1) the modules took
+  uint64_t prc_fallbacks = 0;    // PRC mode left for PReq/PRes: no PResMN within the fallback time
+  // Multiplexed (MultiplCycleCnt > 1): PReqs out of the slot this node was first polled in
+  // (its place in the multiplexed cycle, from the SoC's MC flag); each counts as loss of PReq.
+  uint64_t preq_out_of_slot = 0;
   // Spans in which the simulator's own thread was not run by its host (note_own_stall): not
   // counted as silence on the wire.
   uint64_t own_stalls = 0;
@@ -184,6 +189,11 @@ class PowerlinkCn {
     return by_mapping_ ? mapped_layout_ : layout_;
   }
   [[nodiscard]] bool image_by_mapping() const noexcept { return by_mapping_; }
+  // PRC: the modules' outputs from the PResMN, where the RPDO an MN wrote for it
+  // (PDO_RxCommParam NodeID_U8 = 240) puts them; nullptr when none was written.
+  [[nodiscard]] const powerlink::NodeImageLayout* pres_mn_layout() const noexcept {
+    return outputs_from_pres_mn_ ? &pres_mn_layout_ : nullptr;
+  }
   [[nodiscard]] std::size_t module_count() const noexcept { return modules_.size(); }
   [[nodiscard]] Ds1928Module& module(std::size_t i) noexcept { return *modules_[i].module; }
   // Learned SoC period (0 until two SoCs arrived).
@@ -198,6 +208,7 @@ class PowerlinkCn {
     uint8_t slot = 1;
     std::unique_ptr<Ds1928Module> module;
     const powerlink::ModuleMapping* mapping = nullptr;
+    const powerlink::ModuleMapping* pres_mn_mapping = nullptr;  // its outputs in the PResMN
   };
   class Objects;
 
@@ -211,6 +222,9 @@ class PowerlinkCn {
   [[nodiscard]] const StateHandler& handler() const noexcept;
   void enter(powerlink::NmtState next, int64_t now_ns) noexcept;
   void boot(int64_t now_ns) noexcept;
+  // Binds a mapping an MN wrote through the node's object scheme (counted taken or refused).
+  [[nodiscard]] bool bind_mapping(const powerlink::PdoMappingLists& lists,
+                                  powerlink::NodeImageLayout& out) noexcept;
   void take_mapping() noexcept;  // the modules' registers where the PDO mapping says
   void reset(powerlink::NmtCommandId command, int64_t now_ns) noexcept;
 
@@ -228,7 +242,9 @@ class PowerlinkCn {
   // PollResponse Chaining (powerlink_cn_prc.cpp).
   void on_sync_request(std::span<const uint8_t> frame, int64_t now_ns) noexcept;
   void on_foreign_sync_response(uint8_t src_node, int64_t now_ns) noexcept;
-  void on_pres_mn(int64_t now_ns) noexcept;
+  void on_pres_mn(const powerlink::PRes& pres, int64_t now_ns) noexcept;
+  void check_slot(int64_t now_ns) noexcept;
+  void count_loss_of_preq(int64_t now_ns) noexcept;
   void check_prc_fallback(int64_t now_ns) noexcept;
   void leave_prc() noexcept;
   void note_polled() noexcept;  // a PReq (or, in PRC mode, a PResMN) polled this node
@@ -260,6 +276,8 @@ class PowerlinkCn {
   powerlink::NodeImageLayout layout_;         // packed (or at the configured offsets)
   powerlink::NodeImageLayout mapped_layout_;  // from a PDO mapping an MN wrote
   bool by_mapping_ = false;
+  powerlink::NodeImageLayout pres_mn_layout_;  // outputs from the PResMN (PRC)
+  bool outputs_from_pres_mn_ = false;
   SdoMapping mapping_;
   CnObjectDictionary comm_;  // communication objects an MN configures
   std::unique_ptr<Objects> objects_;
@@ -288,6 +306,12 @@ class PowerlinkCn {
   } dll_;
   // Loss of PReq: cycles since the last PReq against the interval of 0x1F98/7 (1 when it is 0).
   uint32_t cycles_since_preq_ = 0;
+  // The multiplexed cycle as the SoCs' MC flag shows it: the cycle's place in it (0 = the first,
+  // -1 before MC first toggled) and the place of this node's slot (-1 until first polled).
+  bool mc_seen_ = false;
+  bool last_mc_ = false;
+  int mux_pos_ = -1;
+  int mux_slot_pos_ = -1;
   uint32_t preq_interval_ = 0;  // 0 = not polled since the reset
   uint32_t loss_of_preq_counter_ = 0;
   // Power.

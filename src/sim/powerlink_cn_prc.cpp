@@ -72,10 +72,20 @@ void PowerlinkCn::on_foreign_sync_response(uint8_t src_node, int64_t now_ns) noe
   sync_prev_node_ = 0;
 }
 
-void PowerlinkCn::on_pres_mn(int64_t now_ns) noexcept {
+void PowerlinkCn::on_pres_mn(const pl::PRes& pres, int64_t now_ns) noexcept {
   ++stats_.pres_mn;
   pres_mn_since_soc_ = true;
   note_polled();
+  // The outputs come from the PResMN through the RPDO that names the MN (a chained node gets no
+  // PReq), taken only when the MN says they are valid and the node is operational.
+  if (pres.ready && state_ == pl::NmtState::kOperational && outputs_from_pres_mn_) {
+    for (HostedModule& m : modules_) {
+      if (m.pres_mn_mapping == nullptr) continue;
+      ModuleOutputs out;
+      if (pl::read_outputs(pres.payload, *m.pres_mn_mapping, out)) m.module->apply_outputs(out);
+    }
+    ++stats_.pres_mn_outputs;
+  }
   // The PRes leaves PResTimeFirst after the end of the PResMN (its arrival instant).
   send_pres(now_ns, pres_time_first_ns_);
 }

@@ -251,8 +251,9 @@ TEST_CASE("A cycle that does not fit the period is refused, saying by how much",
   // Multiplexed: only the nodes of the worst cycle count.
   const ConfigResult ok = from(
       "bus: powerlink\ncycle: {period_us: 500}\npowerlink:\n  interface: eth1\n  nodes:\n"
-      "    - {node_id: 1, pres_timeout_us: 200, multiplex: 2}\n"
-      "    - {node_id: 2, pres_timeout_us: 200, multiplex: 2}\n");
+      "    - {node_id: 1, pres_timeout_us: 200, multiplexed: true}\n"
+      "    - {node_id: 2, pres_timeout_us: 200, multiplexed: true}\n"
+      "  multiplex_cycles: 2\n");
   INFO(ok.error_report());
   CHECK(ok.errors().empty());
 }
@@ -288,7 +289,8 @@ TEST_CASE("PollResponse Chaining: prc per node, from the MN's CDC, and what it c
   CHECK_THAT(dump_config(r.config()), Catch::Contains("prc: false"));
   // A PRC node answers every PResMN: no multiplexed slot.
   CHECK_THAT(one_error("bus: powerlink\npowerlink:\n  interface: eth1\n  nodes:\n"
-                       "    - {node_id: 1, prc: true, multiplex: 2}\n"),
+                       "    - {node_id: 1, prc: true, multiplexed: true}\n"
+                       "  multiplex_cycles: 2\n"),
              Catch::Contains("PRC has no multiplexed slots"));
 }
 
@@ -310,6 +312,71 @@ TEST_CASE("The cycle budget counts PRC nodes in the PRC slot", "[config][powerli
       "    - {node_id: 2, pres_timeout_us: 200}\n");
   CHECK_THAT(e, Catch::Contains("PRC slot of 1 node(s) 214.4"));
   CHECK_THAT(e, Catch::Contains("1 PReq/PRes"));
+}
+
+TEST_CASE("The PResMN carries the chained nodes' outputs: its size derived and checked",
+          "[config][powerlink][prc][timing]") {
+  const std::string head =
+      "bus: powerlink\ncycle: {period_us: 500}\npowerlink:\n  interface: eth1\n  nodes:\n"
+      "    - {node_id: 1, pres_timeout_us: 200, prc: true}\n"
+      "    - {node_id: 2, pres_timeout_us: 200, prc: true}\n";
+  const std::string axes =
+      "axes:\n"
+      "  - {name: a, node: 1, slot: 1}\n"
+      "  - {name: b, node: 2, slot: 1}\n";
+  // Two chained nodes with one module each (OutputSequence | 7 Tx | AckErrorInfo): 18 bytes,
+  // node 1 at 0, node 2 at 9. A pres_mn_size below that is refused with the key.
+  const std::string e = one_error(head + "  pres_mn_size: 10\n" + axes);
+  CHECK_THAT(e, Catch::Contains("powerlink.pres_mn_size"));
+  CHECK_THAT(e, Catch::Contains("18 bytes (node 1: 9 bytes at 0, node 2: 9 bytes at 9)"));
+  const ConfigResult ok = from(head + "  pres_mn_size: 18\n" + axes);
+  INFO(ok.error_report());
+  CHECK(ok.errors().empty());
+  // Unset, the PResMN grows with the outputs, and the budget counts it: node 1 with three modules
+  // of MTU 15 has 51 bytes of outputs, a PResMN of 7.92 µs on the wire instead of 6.72; its PRes
+  // (93 bytes) 11.28 + 0.96; with the 200 µs timeout the PRC slot is 220.16 µs (218.96 with a
+  // PResMN of 36 bytes).
+  const std::string e2 = one_error(
+      "bus: powerlink\ncycle: {period_us: 400}\npowerlink:\n  interface: eth1\n  nodes:\n"
+      "    - {node_id: 1, pres_timeout_us: 200, prc: true}\n"
+      "    - {node_id: 2, pres_timeout_us: 200}\n"
+      "axes:\n"
+      "  - {name: a, node: 1, slot: 1, module: {input_mtu: 15, output_mtu: 15}}\n"
+      "  - {name: b, node: 1, slot: 2, module: {input_mtu: 15, output_mtu: 15}}\n"
+      "  - {name: c, node: 1, slot: 3, module: {input_mtu: 15, output_mtu: 15}}\n");
+  CHECK_THAT(e2, Catch::Contains("PRC slot of 1 node(s) 220.2"));
+}
+
+TEST_CASE("One multiplexed cycle: multiplex_cycles, slots given or assigned, refusals by key",
+          "[config][powerlink][multiplex]") {
+  const std::string head = "bus: powerlink\npowerlink:\n  interface: eth1\n";
+  ConfigResult r = from(head +
+                        "  multiplex_cycles: 4\n  nodes:\n"
+                        "    - {node_id: 1}\n"
+                        "    - {node_id: 2, multiplex_slot: 3}\n"
+                        "    - {node_id: 3, multiplexed: true}\n"
+                        "    - {node_id: 4, multiplexed: true}\n");
+  INFO(r.error_report());
+  REQUIRE(r.ok());
+  const auto& n = r.config().powerlink.nodes;
+  CHECK(r.config().powerlink.multiplex_cycles == 4);
+  CHECK_FALSE(n[0].multiplexed);
+  CHECK(n[1].multiplexed);
+  CHECK(n[1].multiplex_slot == 3);
+  CHECK(n[2].multiplex_slot == 1);  // assigned: the least loaded slots, lowest first
+  CHECK(n[3].multiplex_slot == 2);
+  CHECK_THAT(dump_config(r.config()), Catch::Contains("multiplex_slot: 2"));
+  CHECK_THAT(dump_config(r.config()), Catch::Contains("multiplex_cycles: 4"));
+  // A slot outside the multiplexed cycle, a multiplexed node without a count, the old factor.
+  CHECK_THAT(
+      one_error(head + "  multiplex_cycles: 4\n  nodes:\n    - {node_id: 2, multiplex_slot: 5}\n"),
+      Catch::Contains("powerlink.nodes[0].multiplex_slot: slot 5 of node 2 is outside the "
+                      "multiplexed cycle of 4"));
+  CHECK_THAT(one_error(head + "  nodes:\n    - {node_id: 2, multiplexed: true}\n"),
+             Catch::Contains("powerlink.nodes[0].multiplexed: node 2 is multiplexed, but "
+                             "powerlink.multiplex_cycles (MultiplCycleCnt) is 0"));
+  CHECK_THAT(one_error(head + "  nodes:\n    - {node_id: 2, multiplex: 4}\n"),
+             Catch::Contains("per-node multiplex factor is gone"));
 }
 
 TEST_CASE("The process image layout and the object scheme per node", "[config][powerlink][pdo]") {

@@ -75,7 +75,8 @@ cpu_line=""
 # 200 µs of the demo's CDC would count its late answers as lost PRes and reset it in bursts. What a
 # user sets for such a CN: half the cycle at 1 ms, 1 ms at 10 ms (PRES_TIMEOUT_US overrides).
 pres_timeout_us=${PRES_TIMEOUT_US:-$((period_us >= 10000 ? 1000 : period_us / 2))}
-# Multiplexed (MULTIPLEX=n): nothing but `multiplex: n`. The MN writes the CN its
+# Multiplexed (MULTIPLEX=n): nothing but `multiplex_cycles: n` and `multiplexed: true` on the node
+# (the MN assigns it slot 1). The MN writes the CN its
 # NMT_CycleTiming.MultiplCycleCnt (0x1F98/7 = n) with the CDC's objects and ends the download with
 # NMTResetConfiguration: openPOWERLINK's CN reads 0x1F98/7 into its DLL only then
 # (ctrlu.c updateDllConfig(), called on kNmtGsResetConfiguration) and from then on expects a PReq
@@ -91,11 +92,12 @@ $cpu_line
 powerlink:
   interface: $if_mn
   cdc: mnobd.cdc
+  multiplex_cycles: $mux
   nodes:
     - node_id: 1
       pres_timeout_us: $pres_timeout_us
       prc: $([ "$prc" = 1 ] && echo true || echo false)
-      multiplex: $mux
+      multiplexed: $([ "$mux" -gt 1 ] && echo true || echo false)
 shm:
   name: /ds1928d_plo_$tag
 socket:

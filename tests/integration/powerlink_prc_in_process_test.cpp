@@ -1,153 +1,15 @@
 // PollResponse Chaining between the Managing Node (PowerlinkBus) and simulated CNs
 // (sim::PowerlinkCn) in one process, on simulated time: a mixed cycle (PRC nodes first, then
-// PReq/PRes), the SyncRequest set-up, the fall-back of a CN without the PRC feature, and the
-// loss of a PRC CN's PRes (reset, then set up again).
+// PReq/PRes), the SyncRequest set-up, the fall-back of a CN without the PRC feature, the
+// loss of a PRC CN's PRes (reset, then set up again), and the chained nodes' outputs in the
+// PResMN (error acknowledgement and an EnDat command over Flatstream behind a PRC node).
 #include <catch2/catch.hpp>
-#include <deque>
-#include <map>
-#include <vector>
 
-#include "powerlink/link.hpp"
-#include "powerlink/powerlink_bus.hpp"
+#include "endat/command.hpp"
+#include "pl_sim_rig.hpp"
 #include "powerlink/sync_frames.hpp"
-#include "sim/powerlink_cn.hpp"
 
-namespace pl = ds1928::powerlink;
-namespace sim = ds1928::sim;
-
-namespace {
-
-int64_t g_now_ns = 1'000'000'000;
-int64_t fake_clock() noexcept {
-  return g_now_ns;
-}
-constexpr int64_t kCycleNs = 1'000'000;
-constexpr int64_t kWireNs = 1'000;
-
-// Every frame the MN sends reaches every CN (the invited one last, as PowerlinkCnLoop does);
-// the CNs' frames queue for the MN and reach the other CNs (a SyncResponse is timed by them).
-// receive() runs the CNs' timers up to its deadline, so a PRes due after the PResMN leaves then.
-class Wire final : public pl::Link {
- public:
-  std::vector<sim::PowerlinkCn*> nodes;
-  std::deque<std::vector<uint8_t>> to_mn;
-  std::map<uint8_t, uint64_t> preq_to;  // PReqs per destination node
-  uint64_t pres_mn = 0;
-
-  std::error_code send(std::span<const uint8_t> frame) noexcept override {
-    g_now_ns += kWireNs;
-    const uint8_t type = frame[14] & 0x7F;
-    if (type == 0x03) ++preq_to[frame[15]];
-    if (type == 0x04 && frame[16] == pl::kNodeMn) ++pres_mn;
-    const uint8_t invited = type == 0x05 ? frame[21] : 0;
-    sim::PowerlinkCn* last = nullptr;
-    for (auto* n : nodes) {
-      if (n->node_id() == invited) {
-        last = n;
-        continue;
-      }
-      n->receive(frame, g_now_ns);
-    }
-    if (last) last->receive(frame, g_now_ns);
-    return {};
-  }
-  pl::Received receive(std::span<uint8_t> buffer, int64_t deadline_ns) noexcept override {
-    for (;;) {
-      if (!to_mn.empty()) {
-        auto f = std::move(to_mn.front());
-        to_mn.pop_front();
-        const std::size_t n = std::min(f.size(), buffer.size());
-        std::copy_n(f.begin(), n, buffer.begin());
-        g_now_ns += kWireNs;
-        return {n, g_now_ns, {}};
-      }
-      int64_t next = INT64_MAX;
-      for (auto* n : nodes) next = std::min(next, n->next_deadline_ns());
-      if (next > deadline_ns) {
-        if (deadline_ns > g_now_ns) g_now_ns = deadline_ns;
-        return {};
-      }
-      g_now_ns = std::max(g_now_ns, next);
-      for (auto* n : nodes) n->tick(g_now_ns);
-    }
-  }
-  bool link_up() const noexcept override { return true; }
-  pl::MacAddress mac() const noexcept override { return {0x02, 0, 0, 0, 0, 0xF0}; }
-};
-
-struct NodeSpec {
-  uint8_t id;
-  bool prc;      // configured for PRC at the MN
-  bool capable;  // the CN advertises the PRC feature
-};
-
-struct Setup {
-  Wire wire;
-  std::vector<std::unique_ptr<sim::PowerlinkCn>> cns;
-  std::unique_ptr<pl::PowerlinkBus> mn;
-  std::vector<ds1928::AxisIo> io;
-  uint64_t cycle = 0;
-
-  explicit Setup(const std::vector<NodeSpec>& specs) {
-    pl::MnConfig config;
-    config.cycle_us = 1000;
-    config.mac = wire.mac();
-    config.bus.thresholds.loss_of_pres = 15;
-    for (const NodeSpec& s : specs) {
-      ds1928::PowerlinkNodeConfig node;
-      node.node_id = s.id;
-      node.pres_timeout_us = 100;
-      node.prc = s.prc;
-      config.bus.nodes.push_back(node);
-      ds1928::AxisConfig axis;
-      axis.node = s.id;
-      axis.slot = 1;
-      config.axes.push_back(axis);
-      sim::PowerlinkCnConfig c;
-      c.node_id = s.id;
-      c.mac = {0x02, 0, 0, 0, 0x19, s.id};
-      c.prc_capable = s.capable;
-      c.power_off_ns = 50'000'000;
-      const uint8_t me = s.id;
-      cns.push_back(std::make_unique<sim::PowerlinkCn>(c, [this, me](std::span<const uint8_t> f) {
-        wire.to_mn.emplace_back(f.begin(), f.end());
-        for (auto* other : wire.nodes)
-          if (other->node_id() != me) other->receive(f, g_now_ns);
-      }));
-      wire.nodes.push_back(cns.back().get());
-    }
-    mn = std::make_unique<pl::PowerlinkBus>(config, wire);
-    mn->set_clock(&fake_clock);
-    REQUIRE_FALSE(mn->start());
-    io.resize(config.axes.size());
-  }
-  ds1928::ExchangeResult step() {
-    const int64_t start = (g_now_ns / kCycleNs + 1) * kCycleNs;
-    g_now_ns = start;
-    for (auto& c : cns) c->tick(g_now_ns);
-    auto r = mn->exchange(io, start, cycle++);
-    for (auto& c : cns) c->tick(g_now_ns);
-    return r;
-  }
-  bool run_until_operational(int limit) {
-    for (int i = 0; i < limit; ++i)
-      if (step().bus_up) return true;
-    return false;
-  }
-  const pl::CnStatus& node(uint8_t id) {
-    static pl::CnStatus none;
-    const auto st = mn->status();
-    for (std::size_t i = 0; i < st.node_count; ++i)
-      if (st.nodes[i].node == id) {
-        none = st.nodes[i];
-        return none;
-      }
-    FAIL("node not in status");
-    return none;
-  }
-};
-
-}  // namespace
+using namespace pl_sim_rig;
 
 TEST_CASE("A mixed cycle: PRC nodes answer the PResMN, the others their PReq", "[powerlink][prc]") {
   Setup s({{1, true, true}, {2, true, true}, {3, false, true}});
@@ -262,4 +124,85 @@ TEST_CASE("A CN that does not answer its SyncRequests is reset (PRC set-up faile
   }
   REQUIRE(reset);
   CHECK(s.node(1).last_reset_reason == make_error_code(pl::MnError::kPrcSyncFailed));
+}
+
+TEST_CASE("A chained node takes its outputs from the PResMN at its RPDO's offsets",
+          "[powerlink][prc]") {
+  // Nodes 1 and 2 chained, node 3 polled: each chained node's outputs (OutputSequence | 7 Tx
+  // bytes | AckErrorInfo, 9 bytes) in the PResMN by node id, node 1 at 0 and node 2 at 9; each
+  // learns where from the RPDO the MN wrote to it (0x1401/1 = 240, 0x1601).
+  Setup s({{1, true, true}, {2, true, true}, {3, false, true}});
+  REQUIRE(s.run_until_operational(4000));
+  REQUIRE(s.node(1).prc);
+  REQUIRE(s.node(2).prc);
+  CHECK(s.node(1).prc_outputs_offset == 0);
+  CHECK(s.node(1).prc_outputs_size == 9);
+  CHECK(s.node(2).prc_outputs_offset == 9);
+  CHECK(s.node(3).prc_outputs_size == 0);
+  for (uint8_t n : {1, 2}) {
+    const auto* map = s.cns[n - 1]->pres_mn_layout();
+    REQUIRE(map != nullptr);
+    CHECK(s.cns[n - 1]->communication_objects().rpdo_source(pl::obj::kRxPdoCommPresMn) ==
+          pl::kNodeMn);
+    const pl::ModuleMapping* m = map->find(1);
+    REQUIRE(m != nullptr);
+    const uint16_t base = n == 1 ? 0 : 9;
+    CHECK(m->fields.fixed[static_cast<std::size_t>(pl::ImageField::kOutputSequence)] == base);
+    CHECK(m->fields.tx[0] == base + 1);
+    CHECK(m->fields.fixed[static_cast<std::size_t>(pl::ImageField::kAckErrorInfo)] == base + 8);
+  }
+  // Distinct outputs per node: the PResMN carries them where the RPDOs say, RD = 1.
+  s.io[0].outputs.tx_bytes[0] = 0x11;
+  s.io[1].outputs.tx_bytes[0] = 0x22;
+  s.io[2].outputs.tx_bytes[0] = 0x33;
+  REQUIRE(s.step().bus_up);
+  REQUIRE(s.wire.last_pres_mn.size() == 36);  // 18 bytes of outputs: the minimum frame stays
+  CHECK(s.wire.last_pres_mn[1] == 0x11);
+  CHECK(s.wire.last_pres_mn[10] == 0x22);
+  CHECK(s.wire.last_pres_mn[19] == 0);  // node 3's outputs go in its PReq
+  const uint64_t taken = s.cns[0]->stats().pres_mn_outputs;
+  REQUIRE(s.step().bus_up);
+  CHECK(s.cns[0]->stats().pres_mn_outputs == taken + 1);
+
+  // Error acknowledgement behind each chained node: an injected ErrorInfo bit stays until the MN
+  // writes it to AckErrorInfo, which reaches the module only through the PResMN.
+  constexpr uint8_t kBit = 0x01;
+  for (std::size_t a = 0; a < 2; ++a) s.cns[a]->module(0).inject_error(kBit);
+  for (int i = 0; i < 20; ++i) REQUIRE(s.step().bus_up);
+  for (std::size_t a = 0; a < 2; ++a) REQUIRE((s.io[a].inputs.error_info & kBit) != 0);
+  for (std::size_t a = 0; a < 2; ++a) s.io[a].outputs.ack_error_info = kBit;
+  bool cleared = false;
+  for (int i = 0; i < 50 && !cleared; ++i) {
+    REQUIRE(s.step().bus_up);
+    cleared = (s.io[0].inputs.error_info & kBit) == 0 && (s.io[1].inputs.error_info & kBit) == 0;
+  }
+  CHECK(cleared);
+}
+
+TEST_CASE("An EnDat command over Flatstream to a module behind a PRC node", "[powerlink][prc]") {
+  namespace endat = ds1928::endat;
+  namespace fs = ds1928::flatstream;
+  Setup s({{1, true, true}, {2, false, true}});
+  REQUIRE(s.run_until_operational(4000));
+  REQUIRE(s.node(1).prc);
+  for (std::size_t a = 0; a < 2; ++a)
+    s.tunnels.push_back(std::make_unique<fs::MasterChannel>(fs::MasterConfig{}));
+  // Both axes: the chained one (its TxBytes in the PResMN) and the polled one answer alike.
+  for (std::size_t a = 0; a < 2; ++a) {
+    const auto request = endat::Request::read(0xA1, 13);
+    auto message = endat::encode_request(request, endat::CommandSet::EnDat22);
+    REQUIRE(message);
+    REQUIRE_FALSE(s.tunnels[a]->submit(message->span(), 7));
+    std::optional<fs::Message> reply;
+    for (int i = 0; i < 2000 && !reply; ++i) {
+      REQUIRE(s.step().bus_up);
+      reply = s.tunnels[a]->take_received();
+    }
+    INFO("axis " << a);
+    REQUIRE(reply);
+    auto decoded = endat::decode_reply(request, reply->payload());
+    REQUIRE(decoded);
+    CHECK(decoded->echo.command == endat::Command::ReadParameter);
+    CHECK(decoded->echo.parameter == 13);
+  }
 }

@@ -7,7 +7,11 @@
 #  2. the capture (tshark's POWERLINK dissector): SyncRequests and SyncResponses exchanged, one
 #     PResMN per SoC in the hold, never a PReq to node 1 or 2, PReqs to node 3, each PRC node's
 #     PRes after the PResMN in as many cycles, no malformed frame;
-#  3. the simulator's own view: nodes 1 and 2 in PRC mode at their assigned times, node 3 not.
+#  3. the simulator's own view: nodes 1 and 2 in PRC mode at their assigned times, node 3 not;
+#  4. the daemon's cycle work with a PRC slot allocates nothing;
+#  5. ds1928d as the MN: EnDat commands over Flatstream (read-param), the identification and
+#     error acknowledgement on the modules behind the chained nodes, whose outputs travel in the
+#     PResMN only (the simulator counts the PResMN outputs its modules took).
 # Usage: powerlink_prc_test.sh BUILD_DIR SOURCE_DIR   (root; 77 = skipped)
 set -u
 . "${2:?source dir}/tests/lib/netns.sh"
@@ -201,3 +205,59 @@ kill -TERM "$sim_pid"
 wait "$sim_pid" 2>/dev/null
 [ $rc = 0 ] || fail "cycle work with PRC (exit $rc): $(cat "$tmp/noalloc.log")"
 pass "cycle work with PRC: $(head -n1 "$tmp/noalloc.log" | sed 's/^counted //'); $(sed -n 2p "$tmp/noalloc.log")"
+
+# ---- 5. ds1928d: EnDat and error acknowledgement behind the chained nodes -------------------
+# A chained node gets no PReq: its module's OutputSequence, Tx bytes and AckErrorInfo reach it in
+# the PResMN only. A command timeout is timing (a stall of the daemon or the simulator); any other
+# failure is not.
+daemon=$build/daemon/ds1928d
+ctl=$build/tools/ds1928ctl/ds1928ctl
+[ -x "$daemon" ] && [ -x "$ctl" ] || fail "ds1928d or ds1928ctl not built"
+sock=$tmp/control.sock
+cp "$tmp/prc.yaml" "$tmp/daemon.yaml"
+printf 'shm:\n  name: /ds1928d_plp_%s\nsocket:\n  path: %s\n' "$tag" "$sock" >>"$tmp/daemon.yaml"
+"$daemon" --no-host-checks --check-config "$tmp/daemon.yaml" >"$tmp/check.log" 2>&1 ||
+  fail "ds1928d rejects the PRC configuration: $(cat "$tmp/check.log")"
+ip netns exec "$ns_cn" "$sim" powerlink --iface plp_cn --node 1 --count 3 --config "$tmp/prc.yaml" \
+    >"$tmp/sim5.log" 2>&1 &
+sim_pid=$!
+pids+=($sim_pid)
+ip netns exec "$ns_mn" "$daemon" -c "$tmp/daemon.yaml" >"$tmp/daemon.log" 2>&1 &
+daemon_pid=$!
+pids+=($daemon_pid)
+ctl_do() { ip netns exec "$ns_mn" "$ctl" -s "$sock" "$@"; }
+up=0
+for ((i = 0; i < 300 * ${wait_scale:-1}; i++)); do
+  ctl_do --json status 2>/dev/null | grep -q '"active":true.*"active":true' &&
+    ctl_do status 2>/dev/null | grep -qE "bus: +powerlink, operational" && { up=1; break; }
+  sleep 0.1
+done
+[ $up = 1 ] || fail "ds1928d did not bring the chained nodes to operational: $(ctl_do status 2>&1 | head -n 20)"
+ctl_do --json status >"$tmp/status5.json" 2>&1
+grep -q '"outputs_offset":9,"outputs_size":9' "$tmp/status5.json" ||
+  fail "node 2's outputs not at 9 (9 bytes) in the PResMN: $(grep -o '"prc":{[^}]*}' "$tmp/status5.json" | tr '\n' ' ')"
+for axis in 0 1; do
+  ok=1
+  for ((k = 0; k < 3; k++)); do
+    ctl_do endat -a "$axis" read-param 0xA1 13 >"$tmp/endat$axis.log" 2>&1
+    ok=$?
+    [ $ok = 0 ] && break
+    grep -q "error: timeout" "$tmp/endat$axis.log" || break
+    echo "note: EnDat read-param on axis $axis timed out, again: $(cat "$tmp/endat$axis.log")"
+  done
+  [ $ok = 0 ] || fail "EnDat read-param behind chained node $((axis + 1)) failed: $(cat "$tmp/endat$axis.log")"
+  ctl_do endat -a "$axis" ident >"$tmp/ident$axis.log" 2>&1 ||
+    fail "EnDat ident behind chained node $((axis + 1)) failed: $(cat "$tmp/ident$axis.log")"
+  ctl_do endat -a "$axis" ack >"$tmp/eack$axis.log" 2>&1 ||
+    fail "EnDat error acknowledgement behind chained node $((axis + 1)) failed: $(cat "$tmp/eack$axis.log")"
+  ctl_do ack "$axis" 0x01 >"$tmp/ack$axis.log" 2>&1 ||
+    fail "AckErrorInfo behind chained node $((axis + 1)) failed: $(cat "$tmp/ack$axis.log")"
+done
+pass "behind the chained nodes: $(head -n1 "$tmp/endat0.log"); $(head -n1 "$tmp/endat1.log"); $(head -n1 "$tmp/eack0.log"); $(head -n1 "$tmp/ack1.log"); ident $(head -n1 "$tmp/ident0.log")"
+kill -TERM "$daemon_pid" "$sim_pid"
+wait "$daemon_pid" "$sim_pid" 2>/dev/null
+for n in 1 2; do
+  taken=$(sed -n "s/^node $n stats:.* pres_mn_outputs=\([0-9]*\).*/\1/p" "$tmp/sim5.log")
+  [ "${taken:-0}" -gt 100 ] || fail "node $n took the outputs of ${taken:-no} PResMN: $(grep "^node $n stats" "$tmp/sim5.log")"
+done
+pass "ds1928-sim: the chained nodes took their outputs from the PResMN ($(sed -n 's/^node 1 stats:.*\(pres_mn_outputs=[0-9]*\).*/node 1 \1/p' "$tmp/sim5.log"))"

@@ -98,10 +98,10 @@ TEST_CASE("Objects written in the boot are taken by NMTResetConfiguration before
   // EPSG DS 301: a configuration download ends with NMTResetConfiguration; the CN takes the
   // objects on re-entering its boot (RESET_CONFIGURATION -> NOT_ACTIVE), is identified again and
   // started without a second download.
-  Rig rig({3}, 1, {}, [](PowerlinkNodeConfig& n) {
-    n.cycle_objects = true;
-    n.multiplex = 2;
-  });
+  Rig rig({3}, 1, {}, [](PowerlinkNodeConfig& n) { n.cycle_objects = true; });
+  rig.config.bus.nodes[0].multiplexed = true;
+  rig.config.bus.multiplex_cycles = 2;
+  rig.rebuild();
   REQUIRE(rig.run_until([&] { return operational(rig); }, 5000));
   TestCn& cn = *rig.cns[0];
   const std::vector<NmtCommandId> boot{NmtCommandId::kResetConfiguration,

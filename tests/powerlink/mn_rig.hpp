@@ -80,6 +80,12 @@ struct Rig {
     axes.resize(config.axes.size());
     REQUIRE_FALSE(bus->start());
   }
+  // A new MN for a changed `config` (bus-wide keys such as multiplex_cycles).
+  void rebuild() {
+    bus = std::make_unique<PowerlinkBus>(config, link);
+    bus->set_clock(&fake_clock);
+    REQUIRE_FALSE(bus->start());
+  }
 
   // `wake_ns`: how late the cycle thread starts the exchange after the nominal cycle start.
   ExchangeResult step(int64_t wake_ns = 0) {

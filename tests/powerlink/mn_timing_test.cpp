@@ -1,6 +1,9 @@
 // DLL timing of the MN: threshold counters that count every cycle, the default loss-of-PRes
-// threshold, the SoC MC flag of multiplexed cycles, WaitSoCPReq, the cycle budget.
+// threshold, one multiplexed cycle (slots, order, the SoC MC flag), WaitSoCPReq, the cycle budget.
+#include <algorithm>
 #include <catch2/catch.hpp>
+#include <cstdlib>
+#include <map>
 
 #include "mn_rig.hpp"
 #include "powerlink/cycle_budget.hpp"
@@ -11,9 +14,7 @@ using namespace ds1928::powerlink::test;
 
 namespace {
 void rebuild(Rig& rig) {
-  rig.bus = std::make_unique<PowerlinkBus>(rig.config, rig.link);
-  rig.bus->set_clock(&fake_clock);
-  REQUIRE_FALSE(rig.bus->start());
+  rig.rebuild();
 }
 uint64_t mn_cycles(const Rig& rig) {
   return rig.bus->managing_node().counters().cycles;
@@ -23,7 +24,9 @@ uint64_t mn_cycles(const Rig& rig) {
 TEST_CASE("8:1 counters count down in cycles that do not poll a multiplexed CN",
           "[powerlink][mn][timing]") {
   Rig rig({1}, 1);
-  rig.config.bus.nodes[0].multiplex = 4;  // polled when cycles % 4 == 1
+  rig.config.bus.multiplex_cycles = 4;
+  rig.config.bus.nodes[0].multiplexed = true;
+  rig.config.bus.nodes[0].multiplex_slot = 2;  // polled when cycles % 4 == 1
   rig.config.bus.thresholds.loss_of_pres = 15;
   rebuild(rig);
   REQUIRE(rig.run_until([&] { return rig.bus->state() == BusState::Operational; }));
@@ -90,11 +93,12 @@ TEST_CASE("Per-CN loss-of-PRes threshold (0x1C09) wins over the common one",
   CHECK(rig.st(2).loss_of_pres.events == 50);
 }
 
-TEST_CASE("SoC MC toggles when a multiplexed cycle ends, never without multiplexing",
+TEST_CASE("SoC MC toggles when a multiplexed cycle starts, never without multiplexing",
           "[powerlink][mn][timing]") {
   for (const uint32_t mux : {0u, 4u}) {
     Rig rig({1, 2}, 1);
-    rig.config.bus.nodes[1].multiplex = mux;
+    rig.config.bus.multiplex_cycles = static_cast<uint8_t>(mux);
+    rig.config.bus.nodes[1].multiplexed = mux != 0;
     rebuild(rig);
     std::vector<std::pair<uint64_t, bool>> socs;  // MN cycle, MC
     rig.link.on_send = [&](std::span<const uint8_t> f) {
@@ -110,6 +114,93 @@ TEST_CASE("SoC MC toggles when a multiplexed cycle ends, never without multiplex
       CHECK(mc == want);
     }
   }
+}
+
+TEST_CASE(
+    "One multiplexed cycle: each multiplexed CN polled once in its slot, after the continuous",
+    "[powerlink][mn][timing][multiplex]") {
+  // MultiplCycleCnt 4 (0x1F98/7) for the network: node 1 continuous, node 2 in slot 1, node 3 in
+  // slot 3, node 4 multiplexed without a slot (assigned: slot 2, the lowest of the empty ones).
+  Rig rig({1, 2, 3, 4}, 1);
+  rig.config.bus.multiplex_cycles = 4;
+  for (std::size_t i = 1; i < 4; ++i) rig.config.bus.nodes[i].multiplexed = true;
+  rig.config.bus.nodes[1].multiplex_slot = 1;
+  rig.config.bus.nodes[2].multiplex_slot = 3;
+  rebuild(rig);
+  CHECK(rig.st(1).multiplex_slot == 0);
+  CHECK(rig.st(2).multiplex_slot == 1);
+  CHECK(rig.st(3).multiplex_slot == 3);
+  CHECK(rig.st(4).multiplex_slot == 2);
+  REQUIRE(rig.run_until([&] { return rig.bus->state() == BusState::Operational; }));
+  // Each multiplexed CN took MultiplCycleCnt = 4, the same for all; the continuous one none.
+  for (std::size_t i = 1; i < 4; ++i)
+    CHECK(rig.cns[i]->taken[{0x1F98, 7}] == std::vector<uint8_t>{4});
+  CHECK(rig.cns[0]->taken.count({0x1F98, 7}) == 0);
+  // The PReqs of each cycle in order, with the cycle's position in the multiplexed cycle (from
+  // the SoC MC flag: it toggles at the start of each multiplexed cycle).
+  std::vector<std::vector<uint8_t>> order;  // per cycle: nodes polled
+  std::vector<bool> ms;                     // MS of each PReq, in order
+  std::vector<int> position;                // per cycle: 1..4 within the multiplexed cycle
+  bool have_mc = false, last_mc = false;
+  int pos = 0;
+  rig.link.on_send = [&](std::span<const uint8_t> f) {
+    if (auto soc = parse_soc(f)) {
+      if (have_mc && soc->multiplexed_cycle_completed != last_mc) pos = 0;
+      have_mc = true;
+      last_mc = soc->multiplexed_cycle_completed;
+      ++pos;
+      order.emplace_back();
+      position.push_back(pos);
+    } else if (auto preq = parse_preq(f)) {
+      if (!order.empty()) order.back().push_back(f[15]);
+      ms.push_back(preq->multiplexed_slot);
+    }
+  };
+  constexpr int kCycles = 400;
+  for (int i = 0; i < kCycles; ++i) rig.step();
+  REQUIRE(order.size() == kCycles);
+  // From the first MC toggle on, positions run 1..4 and each multiplexed CN is polled exactly in
+  // its slot, once per 4 cycles, after node 1, which is polled every cycle.
+  std::map<uint8_t, int> polls;
+  int checked = 0;
+  for (std::size_t c = 0; c < order.size(); ++c) {
+    if (c < 8) continue;  // the first multiplexed cycle's start is found by the first toggle
+    INFO("cycle " << c << " position " << position[c]);
+    REQUIRE(position[c] >= 1);
+    REQUIRE(position[c] <= 4);
+    std::vector<uint8_t> want{1};
+    if (position[c] == 1) want.push_back(2);
+    if (position[c] == 2) want.push_back(4);
+    if (position[c] == 3) want.push_back(3);
+    CHECK(order[c] == want);
+    for (uint8_t n : order[c]) ++polls[n];
+    ++checked;
+  }
+  CHECK(polls[1] == checked);
+  for (uint8_t n : {2, 3, 4}) CHECK(std::abs(polls[n] * 4 - checked) <= 4);
+  // MS set in exactly the multiplexed CNs' PReqs: one in every cycle but position 4.
+  CHECK(std::count(ms.begin(), ms.end(), true) > 0);
+  for (uint8_t n : {1, 2, 3, 4}) CHECK(rig.st(n).loss_of_pres.events == 0);
+}
+
+TEST_CASE("The budget counts the multiplexed CNs in their slots' cycles",
+          "[powerlink][timing][multiplex]") {
+  std::vector<MultiplexNode> mux{{5, 0}, {2, 3}, {9, 0}, {7, 0}};
+  assign_multiplex_slots(mux, 3);
+  // Node 2 holds slot 3; 5, 7, 9 in node order take the least loaded, lowest first: 1, 2, 1.
+  std::map<uint8_t, uint8_t> slot;
+  for (const auto& m : mux) slot[m.node_id] = m.slot;
+  CHECK(slot[2] == 3);
+  CHECK(slot[5] == 1);
+  CHECK(slot[7] == 2);
+  CHECK(slot[9] == 1);
+  // Two CNs in slot 1 and one in slot 2 of 2: the worst cycle polls the continuous one and two.
+  const std::vector<BudgetNode> nodes{{1, 10, 10, 100, 0, false},
+                                      {2, 10, 10, 100, 1, false},
+                                      {3, 10, 10, 100, 1, false},
+                                      {4, 10, 10, 100, 2, false}};
+  const CycleBudget b = cycle_budget(nodes, 0, 100, 36, 2);
+  CHECK(b.polled_in_worst_cycle == 3);
 }
 
 TEST_CASE("WaitSoCPReq delays the first PReq after the SoC", "[powerlink][mn][timing]") {
@@ -150,8 +241,9 @@ TEST_CASE("Cycle budget: worst cycle on the wire against the period", "[powerlin
   // Multiplexed CNs count in the cycles that poll them: 1 continuous + nodes 2..9 over 4 slots.
   nodes.clear();
   nodes.push_back({1, 9, 23, 100, 0});
-  for (uint8_t n = 2; n <= 9; ++n) nodes.push_back({n, 9, 23, 100, 4});
-  const CycleBudget mux = cycle_budget(nodes, 10, 100);
+  for (uint8_t n = 2; n <= 9; ++n)
+    nodes.push_back({n, 9, 23, 100, static_cast<uint8_t>((n - 2) % 4 + 1)});
+  const CycleBudget mux = cycle_budget(nodes, 10, 100, 36, 4);
   CHECK(mux.polled_in_worst_cycle == 3);  // node 1 + two of the eight
   CHECK(mux.isochronous_us == Approx(3 * (100 + 2 * 6.72)));
   CHECK(mux.wait_soc_preq_us == 10);

@@ -339,8 +339,10 @@ int run_powerlink(const PowerlinkOptions& o) {
     const sim::PowerlinkCnStats& s = n->stats();
     std::printf(
         "node %u stats: soc=%llu preq=%llu pres=%llu dropped=%llu delayed=%llu soa=%llu "
-        "asnd=%llu nmt=%llu sdo_in=%llu loss_soc=%llu loss_preq=%llu resets=%llu "
-        "bad=%llu short=%llu sync_req=%llu pres_mn=%llu prc=%s prc_fallbacks=%llu "
+        "asnd=%llu nmt=%llu sdo_in=%llu loss_soc=%llu loss_preq=%llu preq_out_of_slot=%llu "
+        "resets=%llu "
+        "bad=%llu short=%llu sync_req=%llu pres_mn=%llu pres_mn_outputs=%llu prc=%s "
+        "prc_fallbacks=%llu "
         "pres_time_first_ns=%u own_stalls=%llu own_stall_max_us=%lld state=%s\n",
         n->node_id(), static_cast<unsigned long long>(s.soc),
         static_cast<unsigned long long>(s.preq), static_cast<unsigned long long>(s.pres_sent),
@@ -350,11 +352,13 @@ int run_powerlink(const PowerlinkOptions& o) {
         static_cast<unsigned long long>(s.nmt_commands),
         static_cast<unsigned long long>(s.sdo_frames_in),
         static_cast<unsigned long long>(s.loss_of_soc),
-        static_cast<unsigned long long>(s.loss_of_preq), static_cast<unsigned long long>(s.resets),
-        static_cast<unsigned long long>(s.bad_frames),
+        static_cast<unsigned long long>(s.loss_of_preq),
+        static_cast<unsigned long long>(s.preq_out_of_slot),
+        static_cast<unsigned long long>(s.resets), static_cast<unsigned long long>(s.bad_frames),
         static_cast<unsigned long long>(s.short_frames),
         static_cast<unsigned long long>(s.sync_requests),
-        static_cast<unsigned long long>(s.pres_mn), n->prc_mode() ? "yes" : "no",
+        static_cast<unsigned long long>(s.pres_mn),
+        static_cast<unsigned long long>(s.pres_mn_outputs), n->prc_mode() ? "yes" : "no",
         static_cast<unsigned long long>(s.prc_fallbacks), n->pres_time_first_ns(),
         static_cast<unsigned long long>(s.own_stalls),
         static_cast<long long>(s.own_stall_max_ns / 1000),
