@@ -7,14 +7,6 @@
 namespace ds1928 {
 namespace {
 
-std::string_view effect_name(const ErrorPolicy& p, ErrorRegister reg, unsigned bit) noexcept {
-  const auto r = static_cast<std::size_t>(reg);
-  const auto m = static_cast<uint16_t>(1u << bit);
-  if ((p.invalidate[r] & m) != 0) return "module_error";
-  if ((p.hold[r] & m) != 0) return "hold";
-  return "flag";
-}
-
 std::string names(const ErrorWords& w) {
   std::string out;
   for (const SetErrorBit& b : set_error_bits(w)) {
@@ -30,25 +22,6 @@ ErrorWords error_words(const AxisCounters& c) noexcept {
   return {c.error_info.load(std::memory_order_relaxed),
           static_cast<uint16_t>(c.endat_error.load(std::memory_order_relaxed)),
           static_cast<uint16_t>(c.endat_warning.load(std::memory_order_relaxed))};
-}
-
-nlohmann::json error_bits_json(const ErrorWords& words, const ErrorPolicy& policy) {
-  nlohmann::json out = nlohmann::json::array();
-  for (const SetErrorBit& b : set_error_bits(words)) {
-    nlohmann::json j{{"register", std::string(to_string(b.reg))},
-                     {"bit", b.bit},
-                     {"name", b.label()},
-                     {"effect", std::string(effect_name(policy, b.reg, b.bit))}};
-    if (b.info != nullptr) {
-      j["class"] = std::string(to_string(b.info->cls));
-      j["meaning"] = std::string(b.info->meaning);
-      j["remedy"] = std::string(b.info->remedy);
-    } else {
-      j["class"] = "reserved";
-    }
-    out.push_back(std::move(j));
-  }
-  return out;
 }
 
 void ErrorJournal::poll(const DaemonConfig& config, CycleWork& work, std::string_view bus) {

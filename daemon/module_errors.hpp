@@ -1,9 +1,8 @@
-// The error bits of every axis for people and tools (x20ds1928/error_bits.hpp): the status JSON
-// with each set bit by name and remedy, one journal record per change, the metrics' per-bit
-// series. Normal thread only; reads what the cycle thread publishes.
+// The error bits of every axis for people and tools (x20ds1928/error_bits.hpp): the words the
+// cycle saw (for the status JSON, x20ds1928/error_bits_json.hpp), one journal record per change,
+// the metrics' per-bit series. Normal thread only; reads what the cycle thread publishes.
 #pragma once
 
-#include <nlohmann/json.hpp>
 #include <string_view>
 #include <vector>
 
@@ -11,15 +10,12 @@
 #include "cycle_work.hpp"
 #include "metrics/exposition.hpp"
 #include "x20ds1928/error_bits.hpp"
+#include "x20ds1928/error_bits_json.hpp"
 
 namespace ds1928 {
 
 // The words as the cycle thread last saw them.
 [[nodiscard]] ErrorWords error_words(const AxisCounters& c) noexcept;
-
-// [{register, bit, name, class, effect, meaning, remedy}, ...] of the set bits; the effect is the
-// axis' (its class, or axes[].invalidate_on): "module_error", "hold" or "flag".
-[[nodiscard]] nlohmann::json error_bits_json(const ErrorWords& words, const ErrorPolicy& policy);
 
 // Logs one record (LogEvent::ModuleErrorBits) per axis whose bits changed since the last poll.
 class ErrorJournal {

@@ -26,6 +26,7 @@
 
 #include "config/config_bus_kinds.hpp"
 #include "config/config_canio.hpp"
+#include "config/config_info.hpp"
 #include "config/config_loader.hpp"
 #include "config/config_metrics.hpp"
 #include "config/config_powerlink.hpp"
@@ -195,6 +196,7 @@ void parse_axis(Section s, AxisConfig& a, const BusKindRules& bus, size_t index)
     }
     v.finish();
   }
+  parse_info(s, "info", a);
   s.finish();
 }
 
@@ -600,6 +602,13 @@ std::string dump_config(const DaemonConfig& c) {
         if ((a.invalidate_on[r] & m) != 0) o << "      " << b.name << ": true\n";
         if ((a.flag_only_on[r] & m) != 0) o << "      " << b.name << ": false\n";
       }
+    }
+    if (!a.info.empty()) o << "    info:\n";
+    for (const InfoChannelConfig& ch : a.info) {
+      o << "      - {name: " << ch.name << ", command: " << hex(ch.request.command)
+        << ", mrs: " << hex(ch.request.mrs) << ", parameter: " << +ch.request.parameter;
+      if (ch.request.block) o << ", block: " << +*ch.request.block;
+      o << ", signed: " << yes(ch.is_signed) << "}\n";
     }
     o << "    module:\n"
       << "      endat_enable: " << yes(m.endat_enable) << "\n"

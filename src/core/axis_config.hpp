@@ -6,8 +6,10 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "x20ds1928/error_bits.hpp"
+#include "x20ds1928/info_channels.hpp"
 #include "x20ds1928/module_image.hpp"
 #include "x20ds1928/module_settings.hpp"
 
@@ -22,6 +24,14 @@ struct ExpectedEncoder {
   [[nodiscard]] bool any() const noexcept {
     return !id_number.empty() || !serial_number.empty() || position_bits != 0;
   }
+};
+
+// One additional-information channel (axes[].info, x20ds1928/info_channels.hpp): its name (the
+// HAL pin's and metric's label), what EnDatInfoCmd0N asks for and how EnDatInfo0N reads.
+struct InfoChannelConfig {
+  std::string name;
+  InfoRequest request;
+  bool is_signed = false;
 };
 
 struct AxisConfig {
@@ -41,6 +51,9 @@ struct AxisConfig {
   // invalidate the position (hold it, for an analogue error), `false` only flags it; bits not
   // named keep their class' effect.
   ErrorMasks invalidate_on{};
+  // axes[].info: channel N-1 is EnDatInfoCmd0N/EnDatInfo0N (module.info_cmd carries the
+  // registers' values); at most kInfoChannels.
+  std::vector<InfoChannelConfig> info;
   ErrorMasks flag_only_on{};
   [[nodiscard]] ErrorPolicy error_policy() const noexcept {
     return ds1928::error_policy(invalidate_on, flag_only_on);

@@ -4,6 +4,7 @@
 #include <numbers>
 
 #include "sim/sim_error.hpp"
+#include "x20ds1928/info_channels.hpp"
 #include "x20ds1928/object_dictionary.hpp"
 
 namespace ds1928::sim {
@@ -12,8 +13,8 @@ namespace {
 
 // The acyclic registers the simulated module keeps: the configuration a master writes at start
 // (every object-dictionary entry with a setting) and the self-clearing commands (EnDatAck, which
-// reads back 0). The EnDatInfo channels are not simulated; identification and status words come
-// from the EnDat bridge.
+// reads back 0). The EnDatInfo channels are kept apart (State::info_cmd, ModuleInputs::info);
+// identification and status words come from the EnDat bridge.
 [[nodiscard]] constexpr bool kept(const RegisterInfo& r) noexcept {
   return !r.view && r.count == 1 &&
          (r.setting != Setting::None || r.direction == RegisterDirection::Command);
@@ -84,6 +85,7 @@ struct Ds1928Module::State {
   bool vss_bad = false;        // the last EnDat cycle saw the amplitude outside the window
   int64_t vss_good_from_ns = INT64_MIN;  // end of SinCosQuitTime after the window was left
   uint8_t prev_ack = 0;                  // AckErrorInfo acts on rising edges
+  std::array<uint32_t, kInfoChannels> info_cmd{};  // EnDatInfoCmd01..04 (0 at power-up)
   bool started = false;
   int64_t origin_ns = 0;     // motion profile time zero
   int64_t next_tick_ns = 0;  // next module system tick
@@ -122,6 +124,7 @@ void Ds1928Module::power_up() noexcept {
   s.vss_bad = false;
   s.vss_good_from_ns = INT64_MIN;
   s.prev_ack = 0;
+  s.info_cmd = {};
   s.started = false;
   s.ticks = 0;
   s.channel.configure(channel_config(s.regs));
@@ -252,10 +255,37 @@ void Ds1928Module::tick(int64_t monotonic_ns, uint64_t net_time_us) noexcept {
     if (s.model == FunctionModel::Standard)
       s.in.pos_time_us = static_cast<uint32_t>(net_time_us - static_cast<uint64_t>(behind_us));
     s.in.pos_cycle = static_cast<int8_t>(s.in.pos_cycle + 1);
+    serve_info_channels();
   }
   s.now_ns = monotonic_ns;
   run_flatstream(monotonic_ns);
   update_error_info();
+}
+
+// §11.8.3: the four channels are served with the position frames of each EnDat cycle. The
+// simulator takes each channel's word from the encoder's model directly (the wire carries the
+// position; the additional information's frames are the bridge's to test); a request the encoder
+// cannot answer — an EnDat 2.2 read of a 2.1 encoder, a parameter it lacks — leaves the channel's
+// EnDatInfoOK bit 0, as does a channel left off.
+void Ds1928Module::serve_info_channels() noexcept {
+  State& s = *state_;
+  const EnDatEncoder& enc = s.bridge.encoder();
+  uint8_t ok = 0;
+  for (std::size_t i = 0; i < kInfoChannels; ++i) {
+    if (s.info_cmd[i] == 0) continue;
+    const InfoRequest r = decode_info_command(s.info_cmd[i]);
+    if (!info_request_problem(r).empty()) continue;
+    std::optional<uint16_t> word;
+    if (r.command >= info_command::kReadInfoWord1) {
+      if (enc.command_set() == endat::CommandSet::EnDat22) word = enc.additional_info(r.mrs);
+    } else {
+      word = enc.word(r.mrs, r.block.value_or(0), r.parameter);
+    }
+    if (!word) continue;
+    s.in.info[i] = *word;
+    ok = static_cast<uint8_t>(ok | (1u << i));
+  }
+  s.in.info_ok = ok;
 }
 
 void Ds1928Module::update_error_info() noexcept {
@@ -303,6 +333,12 @@ ModuleInputs Ds1928Module::inputs() const noexcept {
 std::error_code Ds1928Module::write_register(uint16_t reg, uint8_t size, uint32_t v) noexcept {
   State& s = *state_;
   const RegisterInfo* r = find_register(reg);
+  if (r && r->contains(reg::kEnDatInfoCmd01) && r->in_model(s.model)) {
+    if (size != r->size()) return make_error_code(SimErrc::wrong_size);
+    s.info_cmd[r->member(reg)] = v;
+    s.in.info_ok = static_cast<uint8_t>(s.in.info_ok & ~(1u << r->member(reg)));
+    return {};
+  }
   if (!r || !kept(*r) || !r->in_model(s.model)) {
     uint32_t ignored = 0;
     if (!read_register(reg, size, ignored)) return make_error_code(SimErrc::read_only);
@@ -328,6 +364,23 @@ std::error_code Ds1928Module::read_register(uint16_t reg, uint8_t size,
                                                    : s.regs[reg];
     return {};
   }
+  if (const RegisterInfo* r = find_register(reg); r && r->in_model(s.model)) {
+    if (r->contains(reg::kEnDatInfoCmd01)) {
+      if (size != r->size()) return make_error_code(SimErrc::wrong_size);
+      v = s.info_cmd[r->member(reg)];
+      return {};
+    }
+    if (r->contains(reg::kEnDatInfoOk)) {
+      if (size != r->size()) return make_error_code(SimErrc::wrong_size);
+      v = s.in.info_ok;
+      return {};
+    }
+    if (r->contains(reg::kEnDatInfo01)) {
+      if (size != r->size()) return make_error_code(SimErrc::wrong_size);
+      v = s.in.info[r->member(reg)];
+      return {};
+    }
+  }
   // Identification, EnDatError/EnDatWarning: the encoder's words (UINT).
   if (auto word = s.bridge.read_register(reg)) {
     if (size != 2) return make_error_code(SimErrc::wrong_size);
@@ -339,6 +392,9 @@ std::error_code Ds1928Module::read_register(uint16_t reg, uint8_t size,
 
 std::error_code configure_module(Ds1928Module& m, const ModuleSettings& s) {
   for (const RegisterWrite& w : startup_writes(s)) {
+    if (auto ec = m.write_register(w.reg, w.size, w.value)) return ec;
+  }
+  for (const RegisterWrite& w : info_command_writes(s).span()) {
     if (auto ec = m.write_register(w.reg, w.size, w.value)) return ec;
   }
   // Function model 254 boots with EnDat disabled and the identification unread: after enabling

@@ -60,6 +60,7 @@ class Ds1928Module {
  private:
   void run_flatstream(int64_t now_ns) noexcept;
   void update_error_info() noexcept;
+  void serve_info_channels() noexcept;
   struct State;
   std::unique_ptr<State> state_;
 };

@@ -155,16 +155,20 @@ void EnDatEncoder::reset_state() {
 
 uint16_t EnDatEncoder::info_data(uint8_t code) const {
   const uint64_t p = position_;
+  const uint64_t p2 = position2_.value_or(position_);
   switch (code) {
     case 0x41:
       return 100;  // diagnosis: function reserve in percent
     case 0x42:
+      return static_cast<uint16_t>(p2 & 0xFFFF);
     case 0x56:
       return static_cast<uint16_t>(p & 0xFFFF);
     case 0x43:
+      return static_cast<uint16_t>((p2 >> 16) & 0xFFFF);
     case 0x57:
       return static_cast<uint16_t>((p >> 16) & 0xFFFF);
     case 0x44:
+      return static_cast<uint16_t>((p2 >> 32) & 0xFFFF);
     case 0x58:
       return static_cast<uint16_t>((p >> 32) & 0xFFFF);
     case 0x47:

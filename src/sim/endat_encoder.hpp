@@ -101,6 +101,13 @@ class EnDatEncoder {
   void set_position_error(bool on) noexcept { description_.faults.position_error = on; }
   void set_battery_warning(bool on) noexcept { description_.faults.battery_warning = on; }
   void set_battery_error(bool on) noexcept { description_.faults.battery_error = on; }
+  // Additional information a test can move: the temperatures (°C) and position value 2 (MRS
+  // 0x42–0x44; unset, it follows the position).
+  void set_temperature_c(double c) noexcept { description_.temperature_c = c; }
+  void set_temperature2_c(double c) noexcept { description_.temperature2_c = c; }
+  void set_position2(std::optional<uint64_t> steps) noexcept { position2_ = steps; }
+  // The data word of additional information `code` (0x41..0x5E) as the next frame would carry it.
+  [[nodiscard]] uint16_t additional_info(uint8_t code) const { return info_data(code); }
   // The next `n` transactions get no answer (cable unplugged).
   void inject_no_response(unsigned n) noexcept { forced_silence_ = n; }
 
@@ -140,6 +147,7 @@ class EnDatEncoder {
   EncoderDescription description_;
   unsigned position_bits_ = 0;
   uint64_t position_ = 0;
+  std::optional<uint64_t> position2_;
   std::optional<Selection> selection_;
   std::optional<InfoSelection> ai1_;
   std::optional<InfoSelection> ai2_;

@@ -1,7 +1,5 @@
 #include "sim/simulated_bus.hpp"
 
-#include "core/clock.hpp"
-
 namespace ds1928::sim {
 
 SimulatedBus::SimulatedBus(std::span<const AxisConfig> axes, const SimulatedBusConfig& simulated) {
@@ -40,10 +38,13 @@ void SimulatedBus::stop() noexcept {
   state_.store(BusState::Down, std::memory_order_release);
 }
 
-ExchangeResult SimulatedBus::exchange(std::span<AxisIo> axes, int64_t /*cycle_start_ns*/,
+ExchangeResult SimulatedBus::exchange(std::span<AxisIo> axes, int64_t cycle_start_ns,
                                       uint64_t /*cycle_index*/) noexcept {
-  const int64_t now_ns = rt::now_ns();  // vDSO: no kernel entry
-  // The simulated node's NetTime is CLOCK_MONOTONIC in µs: the mapping back is exact.
+  // The modules run on the cycle's time (its nominal start on CLOCK_MONOTONIC), not on the clock
+  // read here: the bus exchanges at the start of the cycle, and whoever drives the cycles (the
+  // engine, or a test stepping time itself) decides how much module time passes.
+  const int64_t now_ns = cycle_start_ns;
+  // The simulated node's NetTime is that time in µs: the mapping back is exact.
   const uint64_t net_us = static_cast<uint64_t>(now_ns / 1000);
 
   // Acyclic accesses run between cycles on this thread, which owns the modules.

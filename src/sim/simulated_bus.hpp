@@ -1,5 +1,6 @@
 // The in-process bus: the daemon's default when no hardware is configured. It owns one simulated
-// X20DS1928 per axis and offers exactly the per-cycle interface of the real buses.
+// X20DS1928 per axis and offers exactly the per-cycle interface of the real buses. Its modules'
+// clock is the cycle's start time passed to exchange(): deterministic under a test's own steps.
 #pragma once
 
 #include <memory>

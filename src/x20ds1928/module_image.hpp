@@ -23,6 +23,10 @@ struct ModuleInputs {
   uint8_t error_info = 0;      // ErrorInfo
   uint8_t input_sequence = 0;  // InputSequence
   std::array<uint8_t, kMaxFlatstreamMtu> rx_bytes{};  // RxByte1..
+  // The additional-information channels (§11.8.3): EnDatInfoOK bits 0..3 and EnDatInfo01..04.
+  // Read acyclically on the buses the daemon drives (docs/registers.md §Additional information).
+  uint8_t info_ok = 0;
+  std::array<uint16_t, 4> info{};
 };
 
 // Cyclic outputs (master → module).

@@ -3,6 +3,7 @@
 // object dictionary (x20ds1928/object_dictionary.hpp).
 #pragma once
 
+#include <array>
 #include <cstdint>
 
 #include "x20ds1928/module_image.hpp"
@@ -27,6 +28,9 @@ struct ModuleSettings {
   uint8_t flatstream_mode = 0;     // bit 0 MultiSegmentMTU, bit 1 large segments
   uint8_t forward = 1;             // 1..7
   uint16_t forward_delay_us = 0;   // ForwardDelay
+  // EnDatInfoCmd01..04 (x20ds1928/info_channels.hpp's layout); 0 = channel off, the datasheet's
+  // default. From axes[].info.
+  std::array<uint32_t, 4> info_cmd{};
 
   [[nodiscard]] uint8_t endat_mode() const noexcept {
     return static_cast<uint8_t>((endat_enable ? endat_mode::kEnable : 0) |

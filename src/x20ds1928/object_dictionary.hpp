@@ -327,6 +327,27 @@ inline constexpr std::size_t kStartupWriteCount = startup_write_count();
 [[nodiscard]] std::array<RegisterWrite, kStartupWriteCount> startup_writes(
     const ModuleSettings& settings) noexcept;
 
+// The additional-information channels a master writes after the start-up configuration:
+// EnDatInfoCmd0N for each configured channel (ModuleSettings::info_cmd ≠ 0), in channel order.
+// Channels left off keep the module's default 0 and are not written.
+struct InfoCommandWrites {
+  std::array<RegisterWrite, 4> writes{};
+  std::size_t count = 0;
+  [[nodiscard]] std::span<const RegisterWrite> span() const noexcept {
+    return {writes.data(), count};
+  }
+};
+[[nodiscard]] constexpr InfoCommandWrites info_command_writes(const ModuleSettings& s) noexcept {
+  constexpr const RegisterInfo& r = od_entry("EnDatInfoCmd01..04");
+  static_assert(r.count == std::tuple_size_v<decltype(ModuleSettings::info_cmd)>);
+  InfoCommandWrites out;
+  for (std::size_t i = 0; i < r.count; ++i)
+    if (s.info_cmd[i] != 0)
+      out.writes[out.count++] = {static_cast<uint16_t>(r.number + i * r.stride), r.size(),
+                                 s.info_cmd[i]};
+  return out;
+}
+
 // The table as the Markdown of docs/registers.md (between its markers).
 [[nodiscard]] std::string object_dictionary_markdown();
 

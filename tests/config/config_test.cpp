@@ -756,3 +756,54 @@ TEST_CASE("axes[].invalidate_on: per error bit by the table's names", "[config][
   CHECK_THAT(one_error("axes: [{invalidate_on: {Battery: sometimes}}]"),
              Catch::Contains("expected true or false"));
 }
+
+TEST_CASE("axes[].info: the channels by name or raw, written as EnDatInfoCmd01..04",
+          "[config][info]") {
+  const ConfigResult r = from(
+      "axes: [{name: a, info: [temperature1, {name: pos2, info: position2_word1}, "
+      "{name: scale, command: 0x06, mrs: 0xA5, block: 1, parameter: 3}, "
+      "{name: delta, command: 0x09, mrs: 0x52, signed: true}]}]");
+  INFO(r.error_report());
+  REQUIRE(r.ok());
+  const AxisConfig& a = r.config().axes[0];
+  REQUIRE(a.info.size() == 4);
+  CHECK(a.info[0].name == "temperature1");
+  CHECK(a.info[0].request == InfoRequest{0x08, 0x4C, 0, std::nullopt});
+  CHECK(a.info[1].name == "pos2");
+  CHECK(a.info[1].request.mrs == 0x42);
+  CHECK(a.info[3].is_signed);
+  // §11.8.3.1: command, MRS, then parameter (unblocked) or block and parameter (blocked).
+  CHECK(a.module.info_cmd[0] == 0x0000'4C08u);
+  CHECK(a.module.info_cmd[1] == 0x0000'4208u);
+  CHECK(a.module.info_cmd[2] == 0x0301'A506u);
+  CHECK(a.module.info_cmd[3] == 0x0000'5209u);
+  CHECK(from("axes: [{name: a}]").config().axes[0].module.info_cmd == std::array<uint32_t, 4>{});
+  // Survives dump_config.
+  const ConfigResult again = from(dump_config(r.config()));
+  INFO(again.error_report());
+  REQUIRE(again.ok());
+  CHECK(again.config().axes[0].module.info_cmd == a.module.info_cmd);
+  CHECK(again.config().axes[0].info[3].is_signed);
+  CHECK(again.config().axes[0].info[2].name == "scale");
+}
+
+TEST_CASE("axes[].info: a bad channel is named precisely", "[config][info]") {
+  CHECK_THAT(one_error("axes: [{info: [temprature1]}]"),
+             Catch::Contains("'temprature1' is not a known additional information"));
+  CHECK_THAT(one_error("axes: [{info: [a, b, c, d, e]}]"),
+             Catch::Contains("5 entries; the module has 4 channels"));
+  CHECK_THAT(one_error("axes: [{info: [{name: t, command: 0x08, mrs: 0xA5}]}]"),
+             Catch::Contains("MRS code 0x40..0x5E"));
+  CHECK_THAT(one_error("axes: [{info: [{name: t, command: 0x06, mrs: 0xA5, parameter: 1}]}]"),
+             Catch::Contains("a block is needed"));
+  CHECK_THAT(one_error("axes: [{info: [{name: t, command: 0x02, mrs: 0xA5}]}]"),
+             Catch::Contains("command must be 0x04, 0x06 or 0x08..0x0B"));
+  CHECK_THAT(one_error("axes: [{info: [{command: 0x08, mrs: 0x4C}]}]"),
+             Catch::Contains("a map entry needs a name"));
+  CHECK_THAT(one_error("axes: [{info: [temperature1, temperature1]}]"),
+             Catch::Contains("channel name 'temperature1' is used twice"));
+  CHECK_THAT(one_error("axes: [{info: [{name: t, info: temperature1, mrs: 0x4D}]}]"),
+             Catch::Contains("not with info"));
+  CHECK_THAT(one_error("axes: [{info: [{name: 't x', info: temperature1}]}]"),
+             Catch::Contains("is not a valid name"));
+}

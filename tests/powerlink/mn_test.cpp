@@ -694,3 +694,21 @@ TEST_CASE("overlapping or oversized module blocks are refused, naming the slots"
           }) == "constructed");
   }
 }
+
+TEST_CASE("MN writes the configured EnDatInfoCmd channels at boot, and only those",
+          "[powerlink][mn][info]") {
+  Rig rig({1}, 2, [](AxisConfig& a) {
+    if (a.slot != 2) return;
+    a.module.info_cmd[0] = 0x0000'4C08;  // temperature 1
+    a.module.info_cmd[2] = 0x0301'A506;  // a blocked parameter
+  });
+  TestCn& cn = *rig.cns[0];
+  REQUIRE(rig.run_until([&] { return rig.bus->state() == BusState::Operational; }));
+  // EnDatInfoCmd01..04 are subindices 0x12..0x15 of the slot's object (docs/registers.md).
+  CHECK(cn.objects[{0x2002, 0x12}].size() == 4);
+  CHECK(le(cn.objects[{0x2002, 0x12}]) == 0x0000'4C08u);
+  CHECK(le(cn.objects[{0x2002, 0x14}]) == 0x0301'A506u);
+  CHECK(cn.objects.count({0x2002, 0x13}) == 0);  // off: not written
+  CHECK(cn.objects.count({0x2001, 0x12}) == 0);  // slot 1 has none
+  CHECK(cn.objects.size() == 32);                // the boot's 30 and the two channels
+}

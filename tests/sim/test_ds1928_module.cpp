@@ -1,9 +1,11 @@
 // The simulated X20DS1928 against the datasheet's register behaviour (X20DS1928.md §2–§5).
 #include <catch2/catch.hpp>
 
+#include "endat/names.hpp"
 #include "sim/ds1928_module.hpp"
 #include "sim/sim_error.hpp"
 #include "sim/simulated_bus.hpp"
+#include "x20ds1928/info_channels.hpp"
 #include "x20ds1928/object_dictionary.hpp"
 
 using namespace ds1928;
@@ -327,4 +329,48 @@ TEST_CASE(
   for (int i = 0; i < 20; ++i) step(m, t);
   CHECK(m.inputs().pos_cycle != before);
   CHECK((m.inputs().error_info & error_info::kVssCheckError) == 0);
+}
+
+TEST_CASE("the four EnDatInfo channels answer the encoder's additional information (§11.8.3)",
+          "[sim][info]") {
+  for (const FunctionModel fm : {FunctionModel::Standard, FunctionModel::BusController}) {
+    Ds1928Module m(fm, constant(100));
+    ModuleSettings s;
+    s.input_mtu = s.output_mtu = 5;  // within function model 254's range too
+    s.info_cmd[0] = encode_info_command(named_info_request(*find_named_info("temperature1")));
+    s.info_cmd[1] = encode_info_command(named_info_request(*find_named_info("position2_word1")));
+    // Channel 3 off; channel 4 an EnDat 2.1 read of a manufacturer word (MRS 0xA1, word 13).
+    s.info_cmd[3] = encode_info_command({info_command::kReadParameter, 0xA1, 13, std::nullopt});
+    REQUIRE_FALSE(configure_module(m, s));
+    uint32_t v = 0;
+    REQUIRE_FALSE(m.read_register(reg::kEnDatInfoCmd01 + 8, 4, v));
+    CHECK(v == s.info_cmd[1]);
+    m.endat().encoder().set_temperature_c(55.0);
+    m.endat().encoder().set_position2(0x1234'ABCDu);
+    int64_t t = 1'000'000;
+    for (int i = 0; i < 20; ++i) step(m, t);
+    const ModuleInputs in = m.inputs();
+    CHECK(in.info_ok == 0x0B);  // 1, 2 and 4 valid; 3 off
+    CHECK(in.info[0] == endat::temperature_raw(55.0));
+    CHECK(in.info[1] == 0xABCD);
+    CHECK(in.info[3] == *m.endat().encoder().word(0xA1, 0, 13));
+    CHECK(in.info[2] == 0);
+    // The registers read the same words.
+    REQUIRE_FALSE(m.read_register(reg::kEnDatInfoOk, 1, v));
+    CHECK(v == 0x0B);
+    REQUIRE_FALSE(m.read_register(reg::kEnDatInfo01, 2, v));
+    CHECK(v == endat::temperature_raw(55.0));
+    REQUIRE_FALSE(m.read_register(reg::kEnDatInfo01 + 16, 2, v));
+    CHECK(v == 0xABCD);
+    // The value follows the encoder; a new request is invalid until served.
+    m.endat().encoder().set_temperature_c(-10.0);
+    REQUIRE_FALSE(m.write_register(reg::kEnDatInfoCmd01 + 16, 4,
+                                   encode_info_command({0x08, 0x4D, 0, std::nullopt})));
+    CHECK((m.inputs().info_ok & 0x04) == 0);
+    for (int i = 0; i < 20; ++i) step(m, t);
+    CHECK(m.inputs().info[0] == endat::temperature_raw(-10.0));
+    CHECK(m.inputs().info[2] == endat::temperature_raw(38.0));  // temperature 2's default
+    CHECK(m.inputs().info_ok == 0x0F);
+    CHECK(m.write_register(reg::kEnDatInfoCmd01, 2, 0));  // UDINT: a 2-byte write is refused
+  }
 }

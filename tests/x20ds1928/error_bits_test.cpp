@@ -8,6 +8,7 @@
 #include <set>
 #include <sstream>
 
+#include "x20ds1928/error_bits_json.hpp"
 #include "x20ds1928/module_image.hpp"
 
 using namespace ds1928;
@@ -112,6 +113,36 @@ TEST_CASE("Error bits: set bits by name, reserved ones by register", "[errors]")
   CHECK(bits[3].label() == "EnDatError reserved bit 8");
   CHECK(error_bit_list(ErrorRegister::EnDatWarning, 0) == "none");
   CHECK(error_bit_list(ErrorRegister::EnDatWarning, 0x0A) == "Temperature, BatteryCharge");
+}
+
+TEST_CASE("Error bits: the JSON list of the daemon's status and of ds1928ctl position",
+          "[errors][json]") {
+  const ErrorWords w{static_cast<uint8_t>(error_info::kVssCheckError | 0x02), 0x0040, 0};
+  const nlohmann::json plain = error_bits_json(w);
+  REQUIRE(plain.size() == 3);
+  CHECK(plain[0]["name"] == "ErrorInfo reserved bit 1");
+  CHECK(plain[0]["class"] == "reserved");
+  CHECK_FALSE(plain[0].contains("remedy"));
+  CHECK(plain[1]["name"] == "VssCheckError");
+  CHECK(plain[1]["register"] == "ErrorInfo");
+  CHECK(plain[1]["bit"] == 2);
+  CHECK(plain[1]["class"] == "fault");
+  CHECK(plain[1]["remedy"] == std::string(find_error_bit("VssCheckError")->remedy));
+  CHECK_FALSE(plain[1].contains("effect"));  // no policy: no effect
+  CHECK(plain[2]["register"] == "EnDatError");
+  CHECK(plain[2]["name"] == "Battery");
+
+  // With the axis' policy each bit says what it does: analogue hold, fault module_error, and a
+  // fault turned into a flag by axes[].invalidate_on.
+  ErrorMasks off{};
+  off[1] = 0x0040;
+  const nlohmann::json with = error_bits_json(w, error_policy({}, off));
+  REQUIRE(with.size() == 3);
+  CHECK(with[0]["effect"] == "flag");
+  CHECK(with[1]["effect"] == "hold");
+  CHECK(with[2]["effect"] == "flag");
+  CHECK(error_bits_json(w, error_policy())[2]["effect"] == "module_error");
+  CHECK(error_bits_json(ErrorWords{}).empty());
 }
 
 TEST_CASE("Error bits: docs/registers.md holds the table's rendering", "[errors][docs]") {
