@@ -107,6 +107,21 @@ positions() {
   timeout 90 "$ctl" --json --timeout 60000 --shm "$shm" position --axis 0 --follow --count "$2" \
     > "$1" 2>> "$tmp/ctl.log"
 }
+# positions_fresh FILE: batches of 200 publications appended to FILE until they hold 20 fresh
+# samples (at most 10 batches). How many of a batch are fresh depends on how the emulated guest
+# keeps its 10 ms cycle on a loaded host (15 of 200 seen under a concurrent build, 87 without);
+# what the check judges is each fresh sample, so the window grows instead of the verdict depending
+# on the host's load.
+positions_fresh() {
+  : > "$1"
+  local batch
+  for batch in 1 2 3 4 5 6 7 8 9 10; do
+    positions "$1.batch" 200 || return 1
+    cat "$1.batch" >> "$1"
+    [ "$(python3 -c 'import json,sys; print(sum(1 for l in sys.stdin if l.strip().startswith("{") and json.loads(l).get("fresh") is True))' < "$1")" -ge 20 ] && return 0
+  done
+  return 0
+}
 # frames_between FIRST SECOND ID: input objects with ID on the wire between the n-th boot-up and
 # the n-th NMT Start (awk over the candump log); prints "boot-ups starts inputs-between".
 wire_order() {
@@ -129,7 +144,7 @@ read -r boots starts early closed < <(wire_order 1)
 pass "pre-operational at start: boot-up, SDO configuration, then NMT Start (nmt_starts $cn_nmt_starts); no input object before it"
 
 # ---- 2. positions before the reset ---------------------------------------------------------------
-positions "$tmp/positions_before.txt" 200 || fail "ds1928ctl position --follow failed: $(tail -n 3 "$tmp/ctl.log")"
+positions_fresh "$tmp/positions_before.txt" || fail "ds1928ctl position --follow failed: $(tail -n 3 "$tmp/ctl.log")"
 python3 "$here/check_positions.py" --min-fresh 20 --since-ns "$((t_start - 20000000))" \
   --answer-log "$tmp/answers.txt" < "$tmp/positions_before.txt" > "$tmp/check_before.txt"
 rc=$?
@@ -154,7 +169,7 @@ read -r boots starts early closed < <(wire_order 2)
 pass "self-reset: boot-up counted and logged, configured again (configurations $n_configurations), started again (nmt_starts $cn_nmt_starts), heartbeats $cn_heartbeats (NMT state $cn_nmt_state)"
 
 # ---- 4. positions after the reset ----------------------------------------------------------------
-positions "$tmp/positions_after.txt" 200 || fail "ds1928ctl position --follow (after the reset)"
+positions_fresh "$tmp/positions_after.txt" || fail "ds1928ctl position --follow (after the reset)"
 python3 "$here/check_positions.py" --min-fresh 20 --since-ns "$t_reset" \
   --answer-log "$tmp/answers.txt" < "$tmp/positions_after.txt" > "$tmp/check_after.txt"
 rc=$?
