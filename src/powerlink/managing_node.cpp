@@ -162,7 +162,9 @@ ManagingNode::ManagingNode(const MnConfig& config)
           {a.slot, a.module.input_mtu, a.module.output_mtu, a.pres_offset, a.preq_offset});
       for (const RegisterWrite& w : startup_writes(a.module))
         cn->boot_ops.push_back({a.slot, RegisterRequest{0, 0, w.reg, w.size, true, w.value}});
-      for (const RegisterWrite& w : info_command_writes(a.module).span())
+      // Named first: a range-for over .span() of a temporary would read it after its end.
+      const InfoCommandWrites info = info_command_writes(a.module);
+      for (const RegisterWrite& w : info.span())
         cn->boot_ops.push_back({a.slot, RegisterRequest{0, 0, w.reg, w.size, true, w.value}});
       // Datasheet §11.6.2.3: Rescan (EnDatAck bit 1) after EnDatMode, so the module reads the
       // identification of the encoder it now talks to (as on CAN-I/O).

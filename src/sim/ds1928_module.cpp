@@ -394,7 +394,9 @@ std::error_code configure_module(Ds1928Module& m, const ModuleSettings& s) {
   for (const RegisterWrite& w : startup_writes(s)) {
     if (auto ec = m.write_register(w.reg, w.size, w.value)) return ec;
   }
-  for (const RegisterWrite& w : info_command_writes(s).span()) {
+  // Named first: a range-for over .span() of a temporary would read it after its end.
+  const InfoCommandWrites info = info_command_writes(s);
+  for (const RegisterWrite& w : info.span()) {
     if (auto ec = m.write_register(w.reg, w.size, w.value)) return ec;
   }
   // Function model 254 boots with EnDat disabled and the identification unread: after enabling
