@@ -18,24 +18,21 @@ struct Mapping {
   std::string path;
 };
 
-std::vector<Mapping> unwritten_mappings() {
+// The mappings one of rt_setup's walks visits.
+std::vector<Mapping> collect(void (*walk)(ds1928::rt::CodeMappingVisitor, void*) noexcept) {
   std::vector<Mapping> out;
-  ds1928::rt::for_each_unwritten_mapping(
+  walk(
       [](uintptr_t lo, uintptr_t hi, const char* path, void* context) {
         static_cast<std::vector<Mapping>*>(context)->push_back({lo, hi, path});
       },
       &out);
   return out;
 }
-
 std::vector<Mapping> code_mappings() {
-  std::vector<Mapping> out;
-  ds1928::rt::for_each_code_mapping(
-      [](uintptr_t lo, uintptr_t hi, const char* path, void* context) {
-        static_cast<std::vector<Mapping>*>(context)->push_back({lo, hi, path});
-      },
-      &out);
-  return out;
+  return collect(&ds1928::rt::for_each_code_mapping);
+}
+std::vector<Mapping> unwritten_mappings() {
+  return collect(&ds1928::rt::for_each_unwritten_mapping);
 }
 
 // VmLck of /proc/self/status: bytes of this process' memory locked in RAM.
