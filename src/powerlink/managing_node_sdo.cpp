@@ -169,9 +169,11 @@ void ManagingNode::object_done(Cn& cn, std::error_code ec, std::span<const uint8
 void ManagingNode::sdo_done(Cn& cn, std::error_code ec, std::span<const uint8_t> data) noexcept {
   cn.op_active = false;
   cn.sdo_wait_answer = false;
+  // kConnectionLost: the node is being reset, and its last error is the reset's reason (set
+  // before the reset ended this transfer), not this consequence of it.
   if (cn.op_internal && cn.op_kind != OpKind::kRegister) {
+    if (ec == SdoError::kConnectionLost) return;
     if (ec) cn.st->last_error = ec;
-    if (ec == SdoError::kConnectionLost) return;  // the node is being reset
     object_done(cn, ec, data);
     if (cn.st->boot == CnBootState::kReset) return;
     start_next_sdo(cn);
@@ -182,7 +184,7 @@ void ManagingNode::sdo_done(Cn& cn, std::error_code ec, std::span<const uint8_t>
     value |= static_cast<uint32_t>(data[i]) << (8 * i);
   if (ec) {
     ++cn.st->sdo_errors;
-    cn.st->last_error = ec;
+    if (ec != SdoError::kConnectionLost) cn.st->last_error = ec;
   } else if (cn.op_internal && cn.current.request.write) {
     ++cn.written;
   }

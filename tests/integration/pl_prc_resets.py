@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Explains each reset of a mixed PollResponse Chaining hold from the wire.
 
-  pl_prc_resets.py FRAMES.tsv THRESHOLD SOC_LOSS_MS SLOT_US [ASYNC_US [STALLS]]
+  pl_prc_resets.py [--pres-timeout-us N] FRAMES.tsv THRESHOLD SOC_LOSS_MS SLOT_US [ASYNC_US [STALLS]]
 
 FRAMES.tsv: both veth ends' POWERLINK frames merged by time (one clock: one machine), columns
 time, MessageType, source, destination, SoA service, ASnd service, NMTCommandId, the NMT state
@@ -12,7 +12,11 @@ by the wire when, before it and since the node's previous reset (checked in this
     (DS 301: +8 per cycle without the node's PRes, -1 per cycle with it) to reach THRESHOLD:
     replayed per cycle from the wire, a PRC node's PRes counting when it came within SLOT_US of
     the cycle's PResMN (the MN's PRC slot: later is outside its slot, lost), a PReq/PRes node's
-    when it came after its PReq and before the next SoC;
+    when it came after its PReq within the MN's PResTimeout (--pres-timeout-us; without it
+    SLOT_US): the MN counts a later PRes lost (EPSG DS 301). The two captures' stamps and the
+    MN's clock differ by microseconds, so with --pres-timeout-us a PRes within TOLERANCE_US
+    before the timeout counts late too (the upper bound: a reset this replay cannot explain, the
+    MN counted wrongly);
   - or a SyncRequest to the node (PollResponse Chaining set-up) got no SyncResponse within
     ASYNC_US (the MN's AsyncSlotTimeout, default 100 µs; the MN resets a PRC node at the second
     miss),
@@ -41,6 +45,7 @@ GAP_WINDOW_S = 2.0
 # period (the stop began before its missed wake-up), the MN's cycle (after it the MN sends at its
 # next cycle start) and a wake-up: 1 + 1 + 0.5 ms at the hold's 1 ms.
 HOST_SLACK_MS = 2.5
+TOLERANCE_US = 20
 OPERATIONAL = 0xFD
 
 
@@ -49,12 +54,19 @@ def num(v):
 
 
 def main():
-    path, threshold, soc_loss_ms = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
-    slot_s = float(sys.argv[4]) / 1e6
-    async_s = float(sys.argv[5] if len(sys.argv) > 5 else 100) / 1e6
+    argv = sys.argv[1:]
+    pres_timeout_s = None  # SLOT_US
+    if argv[:1] == ["--pres-timeout-us"]:
+        pres_timeout_s = (float(argv[1]) - TOLERANCE_US) / 1e6
+        argv = argv[2:]
+    path, threshold, soc_loss_ms = argv[0], int(argv[1]), float(argv[2])
+    slot_s = float(argv[3]) / 1e6
+    if pres_timeout_s is None:
+        pres_timeout_s = slot_s
+    async_s = float(argv[4] if len(argv) > 4 else 100) / 1e6
     stalls = []  # (start, end) of each CPU's stop seen by the probe
-    if len(sys.argv) > 6:
-        for line in open(sys.argv[6]):
+    if len(argv) > 5:
+        for line in open(argv[5]):
             f = line.split()
             if len(f) >= 3:
                 stalls.append((float(f[1]), float(f[2])))
@@ -135,8 +147,11 @@ def main():
             if src not in polled and pres_mn_seen:
                 polled[src] = "prc"  # a PRC node answers the PResMN without a PReq
                 prc_members.add(src)
-            ref = pres_mn_t if polled.get(src) == "prc" else preq_t.get(src, 0.0)
-            if t - ref <= slot_s:
+            if polled.get(src) == "prc":
+                in_time = t - pres_mn_t <= slot_s
+            else:
+                in_time = t - preq_t.get(src, 0.0) <= pres_timeout_s
+            if in_time:
                 answered.add(src)
         elif mtyp == 6 and asnd_svid == 4 and cid == RESET_NODE and dst is not None:
             resets.append((t, dst))

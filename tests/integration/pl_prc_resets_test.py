@@ -37,7 +37,16 @@ class Capture:
     def reset(self, node=1):
         self.row(self.t + 500e-6, 6, 240, node, cid="0x28", asnd="0x04")
 
-    def judge(self, stalls=()):
+    def polled_cycles(self, n, node=3, pres_delay=50e-6):
+        """n cycles polling `node` with PReq/PRes, its PRes `pres_delay` after the PReq."""
+        for _ in range(n):
+            self.t += PERIOD
+            self.row(self.t, 1, 240, 255)
+            self.row(self.t + 10e-6, 3, 240, node)
+            self.row(self.t + 10e-6 + pres_delay, 4, node, 255, OPERATIONAL)
+            self.row(self.t + 600e-6, 5, 240, 255)
+
+    def judge(self, stalls=(), options=()):
         """stalls: (cpu, start, end) as host_stall_probe writes them."""
         with tempfile.NamedTemporaryFile("w", suffix=".tsv", delete=False) as f:
             for r in self.rows:
@@ -46,8 +55,8 @@ class Capture:
             for cpu, a, b in stalls:
                 p.write("%d %.6f %.6f %.3f\n" % (cpu, a, b, (b - a) * 1e3))
         try:
-            out = subprocess.run([sys.executable, os.path.join(HERE, "pl_prc_resets.py"), f.name,
-                                  "168", "5", "220", "100", p.name], check=True,
+            out = subprocess.run([sys.executable, os.path.join(HERE, "pl_prc_resets.py"),
+                                  *options, f.name, "168", "5", "220", "100", p.name], check=True,
                                  capture_output=True, text=True).stdout
         finally:
             os.unlink(f.name)
@@ -97,6 +106,29 @@ class PrcResets(unittest.TestCase):
         c.cycles(3000, gap=12e-3)
         c.reset()
         v = c.judge()
+        self.assertEqual((v["resets"], v["unexplained"]), ("1", "1"))
+
+    def test_a_preq_node_answering_after_its_pres_timeout_is_lost(self):
+        # Node 3's PRes comes 190 µs after its PReq for 25 cycles: inside the cycle and the
+        # 220 µs PRC slot, but past the MN's 200 µs PResTimeout less the stamps' 20 µs tolerance.
+        # The MN counts each lost (+8): 21 of them reach 168 and it resets the node.
+        c = Capture()
+        c.polled_cycles(100)
+        c.polled_cycles(25, pres_delay=190e-6)
+        c.reset(node=3)
+        v = c.judge(options=("--pres-timeout-us", "200"))
+        self.assertEqual((v["resets"], v["pres_missing"], v["unexplained"]), ("1", "1", "0"))
+        # (the last cycle has no SoC after it: not closed, not counted)
+        self.assertEqual(v["cycles_without_pres"], "3:24")
+        # Without the MN's timeout the replay takes SLOT_US: those PRes were in time, and the
+        # reset is the MN's miscount.
+        v = c.judge()
+        self.assertEqual((v["resets"], v["unexplained"]), ("1", "1"))
+        # PRes 150 µs after the PReq were in time: a reset after them is not explained.
+        c = Capture()
+        c.polled_cycles(125, pres_delay=150e-6)
+        c.reset(node=3)
+        v = c.judge(options=("--pres-timeout-us", "200"))
         self.assertEqual((v["resets"], v["unexplained"]), ("1", "1"))
 
     def test_a_reset_out_of_the_blue_is_unexplained(self):

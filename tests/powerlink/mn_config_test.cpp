@@ -193,6 +193,26 @@ TEST_CASE(
   CHECK(rig.st(3).configuration_resets >= 3);
 }
 
+TEST_CASE(
+    "A reset during an open SDO transfer keeps its own reason: the transfer it ends does not "
+    "overwrite the node's last error",
+    "[powerlink][mn][configure]") {
+  Rig rig({7}, 0, {}, [](PowerlinkNodeConfig& n) {
+    n.object_writes = {{0x1006, 0, le(1000, 4), true}};
+    n.pres_size = 8;
+  });
+  TestCn& cn = *rig.cns[0];
+  cn.ignore_sdo = true;  // the configuration download stays open
+  REQUIRE(rig.run_until([&] { return rig.st(7).boot == CnBootState::kConfigure; }));
+  for (int i = 0; i < 5; ++i) rig.step();
+  REQUIRE(rig.st(7).boot == CnBootState::kConfigure);
+  cn.drop_pres = true;  // two PRes lost in a row: the loss-of-PRes threshold (15) fires
+  REQUIRE(rig.run_until([&] { return rig.st(7).resets > 0; }));
+  CHECK(rig.st(7).last_reset_reason == MnError::kLossOfPresThreshold);
+  CHECK(rig.st(7).last_error == MnError::kLossOfPresThreshold);
+  CHECK(rig.st(7).sdo_errors == 0);  // the download was the MN's own, not a client's request
+}
+
 TEST_CASE("A CN with nothing to write is started without NMTResetConfiguration",
           "[powerlink][mn][configure]") {
   Rig rig({3}, 0);

@@ -176,7 +176,7 @@ void TestCn::on_frame(std::span<const uint8_t> bytes, std::deque<std::vector<uin
           break;
       }
     } else if (const auto* sdo = std::get_if<Sdo>(&asnd->body)) {
-      server_.receive(*sdo, 0);
+      if (!ignore_sdo) server_.receive(*sdo, 0);
     }
   }
 }
