@@ -30,6 +30,7 @@
 #include "config/config_loader.hpp"
 #include "config/config_metrics.hpp"
 #include "config/config_powerlink.hpp"
+#include "config/config_powerlink_cdc.hpp"
 #include "config/config_reader.hpp"
 #include "x20ds1928/object_dictionary.hpp"
 
@@ -58,7 +59,9 @@ void group_name(Section& s, std::string_view key, std::string& out) {
   out = group;
 }
 
-void parse_cycle(Section s, CycleConfig& c) {
+// Returns whether the file gives the period (else the MN's concise DCF may).
+bool parse_cycle(Section s, CycleConfig& c) {
+  const bool period_given = s.has("period_us");
   s.integer("period_us", c.period_us, 100, 100000, "µs");
   s.integer("rt_priority", c.rt_priority, 1, 99, "(SCHED_FIFO)");
   s.integer("cpu", c.cpu, -1, 1023, "(-1 = no affinity)");
@@ -68,6 +71,7 @@ void parse_cycle(Section s, CycleConfig& c) {
   s.choice("timebase", c.timebase,
            {{"monotonic", TimebaseKind::Monotonic}, {"tai", TimebaseKind::Tai}});
   s.finish();
+  return period_given;
 }
 
 // axes[].module.<key> accepts what the register behind it accepts under `fm`: the object
@@ -322,10 +326,16 @@ DaemonConfig parse_document(Diagnostics& diag, const YAML::Node& doc, const std:
                {"critical", std::string("critical")},
                {"off", std::string("off")}});
   c.cycle.period_us = bus.default_period_us;
-  parse_cycle(root.section("cycle"), c.cycle);
+  const bool period_given = parse_cycle(root.section("cycle"), c.cycle);
 
   PowerlinkSites pl_sites;
   parse_powerlink(root.section("powerlink"), c.powerlink, pl_sites, base_dir);
+  // The MN's concise DCF sets the cycle when the file does not (NMT_CycleLen).
+  if (c.bus == BusKind::Powerlink && !pl_sites.mn_cdc.empty()) {
+    Section powerlink = root.section("powerlink");
+    apply_mn_cdc_cycle(powerlink, period_given, c.cycle.period_us, pl_sites.mn_cdc,
+                       c.powerlink.sources);
+  }
   parse_canio(root.section("canio"), c.canio);
   const bool have_section = root.has(bus.name);
   if (!bus.needs.empty() && !have_section) {
@@ -557,7 +567,8 @@ std::string dump_config(const DaemonConfig& c) {
   if (!c.source_file.empty()) o << " of " << c.source_file;
   o << "\nlog_level: " << c.log_level << "\n";
   o << "cycle:\n"
-    << "  period_us: " << c.cycle.period_us << "\n"
+    << "  period_us: " << c.cycle.period_us << source_comment(c.powerlink, "cycle.period_us")
+    << "\n"
     << "  rt_priority: " << c.cycle.rt_priority << "\n"
     << "  cpu: " << c.cycle.cpu << "\n"
     << "  spin_us: " << c.cycle.spin_us << "\n"

@@ -10,6 +10,7 @@
 #include <string>
 #include <tuple>
 
+#include "config/config_powerlink_cdc.hpp"
 #include "config/config_sdo_objects.hpp"
 #include "powerlink/concise_dcf.hpp"
 #include "powerlink/cycle_budget.hpp"
@@ -229,66 +230,6 @@ void parse_sdo_write(Section o, std::vector<CnObjectWrite>& out) {
   if (have_index && given.size() == 1 && !w.data.empty()) out.push_back(std::move(w));
 }
 
-// The node's objects and identity from the MN's concise DCF (CFM_ConciseDcfList, the
-// NMT_MN*IdList identity lists, the PReq/PRes payload limit lists, each /node); what the YAML
-// gives wins.
-void apply_mn_cdc(Section& n, PowerlinkNodeConfig& node, std::span<const powerlink::CdcEntry> mn,
-                  bool node_has_own_cdc) {
-  using powerlink::find_cdc_entry;
-  const uint8_t id = node.node_id;
-  if (!node_has_own_cdc) {
-    if (const auto* dcf = find_cdc_entry(mn, powerlink::obj::kConciseDcfList, id)) {
-      auto decoded = powerlink::decode_cdc(dcf->data);
-      if (!decoded.ok()) {
-        n.error("node_id",
-                "powerlink.cdc: object " +
-                    powerlink::object_name(powerlink::obj::kConciseDcfList, id) +
-                    " (this node's concise DCF) is not valid: " + decoded.error->message);
-      } else {
-        for (auto& e : decoded.entries)
-          node.object_writes.push_back({e.index, e.subindex, std::move(e.data), true});
-      }
-    }
-  }
-  auto value = [&](uint16_t index) -> std::optional<uint32_t> {
-    const auto* e = find_cdc_entry(mn, index, id);
-    const auto v = e ? e->as_unsigned() : std::nullopt;
-    if (!v || *v == 0) return std::nullopt;  // 0: "do not check" in the MN's lists
-    return static_cast<uint32_t>(*v);
-  };
-  // NMT_NodeAssignment/node bit 14: PollResponse Chaining (the YAML's prc wins).
-  if (!n.has("prc"))
-    if (const auto* e = find_cdc_entry(mn, powerlink::obj::kNodeAssignment, id);
-        e && e->as_unsigned())
-      node.prc = (*e->as_unsigned() & powerlink::obj::kNodeAssignmentPrc) != 0;
-  // NMT_NodeAssignment/node bit 9: multiplexed; NMT_MultiplCycleAssign/node: its slot (the
-  // YAML's multiplexed / multiplex_slot win).
-  if (!n.has("multiplexed") && !n.has("multiplex_slot")) {
-    if (const auto* e = find_cdc_entry(mn, powerlink::obj::kNodeAssignment, id);
-        e && e->as_unsigned())
-      node.multiplexed = (*e->as_unsigned() & powerlink::obj::kNodeAssignmentMultiplexed) != 0;
-    if (const auto slot = value(powerlink::obj::kMultiplCycleAssign); slot && node.multiplexed)
-      node.multiplex_slot = static_cast<uint8_t>(std::min(*slot, 255u));
-  }
-  if (!node.device_type) node.device_type = value(powerlink::obj::kMnDeviceTypeIdList);
-  if (!node.vendor_id) node.vendor_id = value(powerlink::obj::kMnVendorIdList);
-  if (!node.product_code) node.product_code = value(powerlink::obj::kMnProductCodeList);
-  if (!node.revision_no) node.revision_no = value(powerlink::obj::kMnRevisionNoList);
-  if (!node.serial_no) node.serial_no = value(powerlink::obj::kMnSerialNoList);
-  // CFM_ExpConfDateList/TimeList: checked when either is set (0 = not set), as the CDC's tool
-  // and openPOWERLINK's MN read them; the YAML's pair wins as a whole.
-  if (!node.expected_conf_date && !node.expected_conf_time) {
-    node.expected_conf_date = value(powerlink::obj::kExpConfDateList);
-    node.expected_conf_time = value(powerlink::obj::kExpConfTimeList);
-  }
-  if (!node.preq_size)
-    if (const auto v = value(powerlink::obj::kMnPReqPayloadLimitList))
-      node.preq_size = static_cast<uint16_t>(std::min(*v, 1490u));
-  if (!node.pres_size)
-    if (const auto v = value(powerlink::obj::kPResPayloadLimitList))
-      node.pres_size = static_cast<uint16_t>(std::min(*v, 1490u));
-}
-
 // The bus controller's object scheme (docs/powerlink.md §Process image from the PDO mapping).
 void parse_object_scheme(Section os, PdoObjectScheme& scheme) {
   os.integer("input_index", scheme.input_index, 0x2000, 0xFFEF, "(slot s's inputs: index + s)");
@@ -368,7 +309,8 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
     }
     for (auto& w : n.list("sdo_writes"))
       parse_sdo_write(Section(n.diag(), w.node, w.path, w.at), node.object_writes);
-    if (have_id && !mn_cdc.empty()) apply_mn_cdc(n, node, mn_cdc, own_cdc);
+    if (have_id && !mn_cdc.empty())
+      apply_mn_cdc(n, node, p.nodes.size(), mn_cdc, own_cdc, p.sources);
     if (node.multiplexed)
       sites.multiplexed.emplace_back(
           n.value_at(node.multiplex_slot ? "multiplex_slot" : "multiplexed"), p.nodes.size());
@@ -428,6 +370,8 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
   s.integer("async_slot_timeout_us", p.async_timeout_us, 1, 100000, "µs");
   s.integer("async_timeout_us", p.async_timeout_us, 1, 100000, "µs");
   s.integer("wait_soc_preq_us", p.wait_soc_preq_us, 0, 100000, "µs");
+  if (!mn_cdc.empty()) apply_mn_cdc_network(s, t, nmt, p, mn_cdc);
+  sites.mn_cdc = mn_cdc;
   // PResMN payload: the key, else the MN's CDC (NMT_CycleTiming_REC.PResActPayloadLimit_U16).
   if (!s.has("pres_mn_size") && !mn_cdc.empty())
     if (const auto* e = powerlink::find_cdc_entry(mn_cdc, powerlink::obj::kCycleTiming,
@@ -617,6 +561,11 @@ void check_powerlink(const BusDocument& d) {
   if (!timeout_too_long) check_cycle_budget(diag, c, sites);
 }
 
+std::string source_comment(const PowerlinkBusConfig& p, const std::string& key) {
+  const auto it = p.sources.find(key);
+  return it == p.sources.end() ? std::string() : "  # " + it->second;
+}
+
 void dump_powerlink(std::ostream& o, const PowerlinkBusConfig& p) {
   o << "powerlink:\n"
     << "  interface: " << quote(p.interface) << "\n"
@@ -625,7 +574,11 @@ void dump_powerlink(std::ostream& o, const PowerlinkBusConfig& p) {
     << "  nodes:" << (p.nodes.empty() ? " []" : "") << "\n";
   const auto opt = [](const auto& v) { return v ? hex(*v) : std::string(); };
   const auto opt_dec = [](const auto& v) { return v ? std::to_string(*v) : std::string(); };
-  for (const auto& n : p.nodes) {
+  for (std::size_t i = 0; i < p.nodes.size(); ++i) {
+    const PowerlinkNodeConfig& n = p.nodes[i];
+    const auto src = [&](const char* key) {
+      return source_comment(p, "powerlink.nodes[" + std::to_string(i) + "]." + key);
+    };
     o << "    - node_id: " << +n.node_id << "\n"
       << "      vendor_id: " << opt(n.vendor_id) << "\n"
       << "      product_code: " << opt(n.product_code) << "\n"
@@ -636,12 +589,13 @@ void dump_powerlink(std::ostream& o, const PowerlinkBusConfig& p) {
       << "      expected_conf_time: " << opt(n.expected_conf_time) << "\n"
       << "      cdc: " << quote(n.cdc) << "\n"
       << "      cycle_objects: " << yes(n.cycle_objects) << "\n"
-      << "      pres_timeout_us: " << n.pres_timeout_us << "\n"
-      << "      mandatory: " << yes(n.mandatory) << "\n"
-      << "      loss_of_pres_threshold: " << opt_dec(n.loss_of_pres_threshold) << "\n"
+      << "      pres_timeout_us: " << n.pres_timeout_us << src("pres_timeout_us") << "\n"
+      << "      mandatory: " << yes(n.mandatory) << src("mandatory") << "\n"
+      << "      loss_of_pres_threshold: " << opt_dec(n.loss_of_pres_threshold)
+      << src("loss_of_pres_threshold") << "\n"
       << "      multiplexed: " << yes(n.multiplexed) << "\n"
       << "      multiplex_slot: " << opt_dec(n.multiplex_slot) << "\n"
-      << "      prc: " << yes(n.prc) << "\n"
+      << "      prc: " << yes(n.prc) << src("prc") << "\n"
       << "      preq_size: " << opt_dec(n.preq_size) << "\n"
       << "      pres_size: " << opt_dec(n.pres_size) << "\n"
       << "      layout: "
@@ -671,15 +625,19 @@ void dump_powerlink(std::ostream& o, const PowerlinkBusConfig& p) {
   }
   o << "  thresholds:\n"
     << "    loss_of_pres: " << opt_dec(p.thresholds.loss_of_pres) << "\n"
-    << "    cycle_time_exceeded: " << p.thresholds.cycle_time_exceeded << "\n"
+    << "    cycle_time_exceeded: " << p.thresholds.cycle_time_exceeded
+    << source_comment(p, "powerlink.thresholds.cycle_time_exceeded") << "\n"
     << "    late_pres: " << p.thresholds.late_pres << "\n"
     << "  nmt:\n"
-    << "    pre_op1_timeout_ms: " << p.nmt.pre_op1_timeout_ms << "\n"
+    << "    pre_op1_timeout_ms: " << p.nmt.pre_op1_timeout_ms
+    << source_comment(p, "powerlink.nmt.pre_op1_timeout_ms") << "\n"
     << "    boot_step_timeout_ms: " << p.nmt.boot_step_timeout_ms << "\n"
     << "    reset_wait_ms: " << p.nmt.reset_wait_ms << "\n"
     << "    status_request_every: " << p.nmt.status_request_every << "\n"
-    << "  async_slot_timeout_us: " << p.async_timeout_us << "\n"
-    << "  wait_soc_preq_us: " << p.wait_soc_preq_us << "\n"
+    << "  async_slot_timeout_us: " << p.async_timeout_us
+    << source_comment(p, "powerlink.async_slot_timeout_us") << "\n"
+    << "  wait_soc_preq_us: " << p.wait_soc_preq_us
+    << source_comment(p, "powerlink.wait_soc_preq_us") << "\n"
     << "  multiplex_cycles: " << unsigned{p.multiplex_cycles} << "\n"
     << "  pres_mn_size: " << p.pres_mn_size << "\n"
     << "  rx_wait: "

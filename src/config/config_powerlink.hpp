@@ -13,6 +13,7 @@
 
 #include "config/config_bus_kinds.hpp"
 #include "config/config_reader.hpp"
+#include "powerlink/concise_dcf.hpp"
 
 namespace ds1928::config_detail {
 
@@ -25,6 +26,8 @@ struct PowerlinkSites {
   std::optional<Loc> pres_mn_size_at;  // where pres_mn_size was given, if it was
   // Multiplexed nodes: where multiplex_slot (else multiplexed) was given, index in nodes.
   std::vector<std::pair<Loc, std::size_t>> multiplexed;
+  // The MN's concise DCF (powerlink.cdc), decoded: its NMT_CycleLen sets cycle.period_us.
+  std::vector<powerlink::CdcEntry> mn_cdc;
 };
 
 // `base_dir`: where relative file names (cdc) are resolved.
@@ -36,5 +39,8 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
 void check_powerlink(const BusDocument& d);
 
 void dump_powerlink(std::ostream& o, const PowerlinkBusConfig& p);
+
+// "  # <where the value came from>" for a key the MN's CDC can set (p.sources), else empty.
+[[nodiscard]] std::string source_comment(const PowerlinkBusConfig& p, const std::string& key);
 
 }  // namespace ds1928::config_detail

@@ -82,6 +82,7 @@ CdcDecodeResult decode_cdc(std::span<const uint8_t> bytes) {
                       std::to_string(bytes.size()));
     }
     CdcEntry e;
+    e.offset = pos;
     e.index = static_cast<uint16_t>(bytes[pos] | bytes[pos + 1] << 8);
     e.subindex = bytes[pos + 2];
     const uint32_t size = le32(bytes.data() + pos + 3);

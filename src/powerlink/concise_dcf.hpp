@@ -24,7 +24,12 @@ struct CdcEntry {
   uint16_t index = 0;
   uint8_t subindex = 0;
   std::vector<uint8_t> data;
-  friend bool operator==(const CdcEntry&, const CdcEntry&) = default;
+  // Where the entry's header starts in the file decode_cdc() read (messages name it); not part
+  // of the entry's identity.
+  std::size_t offset = 0;
+  friend bool operator==(const CdcEntry& a, const CdcEntry& b) noexcept {
+    return a.index == b.index && a.subindex == b.subindex && a.data == b.data;
+  }
 
   // The value as an unsigned little-endian number; nullopt when empty or longer than 8 bytes.
   [[nodiscard]] std::optional<uint64_t> as_unsigned() const noexcept;

@@ -141,6 +141,10 @@ struct PowerlinkBusConfig {
   // Register → (index, subindex) overrides; default scheme in docs/powerlink.md.
   std::map<uint16_t, std::pair<uint16_t, uint8_t>> sdo_overrides;
   PdoObjectScheme object_scheme;  // of every CN without its own
+  // With the MN's concise DCF: for each key it can set ("cycle.period_us",
+  // "powerlink.nodes[0].pres_timeout_us", ...) where the effective value came from: "yaml",
+  // "default" or "cdc <object> = <value> (byte <offset>)". --print-config shows it.
+  std::map<std::string, std::string> sources;
 };
 
 }  // namespace ds1928

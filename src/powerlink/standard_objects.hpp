@@ -45,6 +45,7 @@ inline constexpr uint16_t kMnVendorIdList = 0x1F85;
 inline constexpr uint16_t kMnProductCodeList = 0x1F86;
 inline constexpr uint16_t kMnRevisionNoList = 0x1F87;
 inline constexpr uint16_t kMnSerialNoList = 0x1F88;
+inline constexpr uint16_t kMnBootTime = 0x1F89;
 inline constexpr uint16_t kMnCycleTiming = 0x1F8A;
 inline constexpr uint16_t kMnPReqPayloadLimitList = 0x1F8B;
 inline constexpr uint16_t kPResPayloadLimitList = 0x1F8D;
@@ -60,6 +61,12 @@ inline constexpr uint8_t kCycleTimingMultiplCycleCnt = 7;  // kCycleTiming/7
 inline constexpr uint32_t kNodeAssignmentPrc = 0x00004000;
 // NMT_NodeAssignment bit 9: the node is polled in a multiplexed slot.
 inline constexpr uint32_t kNodeAssignmentMultiplexed = 0x00000200;
+// NMT_NodeAssignment bit 3: the MN does not go OPERATIONAL without the node.
+inline constexpr uint32_t kNodeAssignmentMandatory = 0x00000008;
+// NMT_NodeAssignment bit 8: the node is served in the asynchronous phase only, never polled.
+inline constexpr uint32_t kNodeAssignmentAsyncOnly = 0x00000100;
+// NMT_NodeAssignment bit 0: the entry describes a node.
+inline constexpr uint32_t kNodeAssignmentExists = 0x00000001;
 }  // namespace obj
 
 enum class ObjType : uint8_t { kU8, kU16, kU32, kU64, kDomain };
@@ -161,12 +168,13 @@ inline constexpr std::array kStandardObjects = std::to_array<StandardObject>({
   {kConciseDcfList, 1, 254, "CFM_ConciseDcfList_ADOM", kDomain, kRw, kCn, 0, "concise DCF per node (the objects the MN writes to it)"},
   {kExpConfDateList, 1, 254, "CFM_ExpConfDateList_AU32", kU32, kRw, kMn, 0, "configuration date expected per node"},
   {kExpConfTimeList, 1, 254, "CFM_ExpConfTimeList_AU32", kU32, kRw, kMn, 0, "configuration time expected per node"},
-  {kNodeAssignment, 1, 254, "NMT_NodeAssignment_AU32", kU32, kRw, kMn, 0, "node assignment per node (bit 14: PollResponse Chaining)"},
+  {kNodeAssignment, 1, 254, "NMT_NodeAssignment_AU32", kU32, kRw, kMn, 0, "node assignment per node (bit 3: mandatory, 8: async-only, 9: multiplexed, 14: PollResponse Chaining)"},
   {kMnDeviceTypeIdList, 1, 254, "NMT_MNDeviceTypeIdList_AU32", kU32, kRw, kMn, 0, "device type expected per node"},
   {kMnVendorIdList, 1, 254, "NMT_MNVendorIdList_AU32", kU32, kRw, kMn, 0, "vendor id expected per node"},
   {kMnProductCodeList, 1, 254, "NMT_MNProductCodeList_AU32", kU32, kRw, kMn, 0, "product code expected per node"},
   {kMnRevisionNoList, 1, 254, "NMT_MNRevisionNoList_AU32", kU32, kRw, kMn, 0, "revision number expected per node"},
   {kMnSerialNoList, 1, 254, "NMT_MNSerialNoList_AU32", kU32, kRw, kMn, 0, "serial number expected per node"},
+  {kMnBootTime, 2, 2, "NMT_BootTime_REC.MNTimeoutPreOp1_U32", kU32, kRw, kMn, 500'000, "MN in PRE_OPERATIONAL_1 until the mandatory CNs are identified, µs"},
   {kMnCycleTiming, 1, 1, "NMT_MNCycleTiming_REC.WaitSoCPReq_U32", kU32, kRw, kMn, 0, "pause SoC to first PReq, ns"},
   {kMnCycleTiming, 2, 2, "NMT_MNCycleTiming_REC.AsyncSlotTimeout_U32", kU32, kRw, kMn, 0, "wait for the invited ASnd, ns"},
   {kMnPReqPayloadLimitList, 1, 254, "NMT_MNPReqPayloadLimitList_AU16", kU16, kRw, kMn, 0, "PReq payload per node, bytes"},

@@ -201,6 +201,113 @@ TEST_CASE("The MN's mnobd.cdc supplies each node's 0x1F22 objects, identity and 
                              "node's concise DCF) is not valid: entry 0 of 1 is truncated"));
 }
 
+TEST_CASE("The MN's objects in its mnobd.cdc are the configuration; the YAML overrides each",
+          "[config][powerlink][cdc]") {
+  TempDir dir;
+  // openCONFIGURATOR's MN objects (its Demo_3CN project writes these with 50 ms and 40).
+  const std::vector<CdcEntry> mn = {
+      {0x1F81, 3, le(0x00000007, 4)},  // NodeAssignment: exists, CN, start it; not mandatory
+      {0x1F81, 4, le(0x0000000F, 4)},  // ... node 4 mandatory
+      {0x1006, 0, le(500, 4)},         // NMT_CycleLen_U32, µs
+      {0x1C02, 3, le(40, 4)},          // DLL_MNCycTimeExceed_REC.Threshold_U32
+      {0x1C09, 3, le(40, 4)},          // DLL_MNCNLossPResThreshold_AU32/3
+      {0x1F8A, 1, le(2000, 4)},        // WaitSoCPReq_U32, ns
+      {0x1F8A, 2, le(50000, 4)},       // AsyncSlotTimeout_U32, ns
+      {0x1F89, 2, le(300000, 4)},      // MNTimeoutPreOp1_U32, µs
+      {0x1F92, 3, le(120001, 4)},      // NMT_MNCNPResTimeout_AU32/3, ns: 120.001 µs
+      {0x1F92, 4, le(100000, 4)},
+  };
+  dir.write("mnobd.cdc", powerlink::encode_cdc(mn));
+  const std::string cfg = (dir.path / "ds1928d.yaml").string();
+  const std::string nodes = "    - {node_id: 3}\n    - {node_id: 4}\n  cdc: mnobd.cdc\n";
+  const ConfigResult r = from(kHead + nodes, cfg);
+  INFO(r.error_report());
+  REQUIRE(r.ok());
+  const DaemonConfig& c = r.config();
+  const PowerlinkBusConfig& p = c.powerlink;
+  CHECK(c.cycle.period_us == 500);
+  CHECK(p.thresholds.cycle_time_exceeded == 40);
+  CHECK(p.nodes[0].loss_of_pres_threshold == uint32_t{40});
+  CHECK_FALSE(p.nodes[1].loss_of_pres_threshold);  // none for node 4: the network's
+  CHECK(p.wait_soc_preq_us == 2);
+  CHECK(p.async_timeout_us == 50);
+  CHECK(p.nmt.pre_op1_timeout_ms == 300);
+  CHECK(p.nodes[0].pres_timeout_us == 121);  // rounded up: a timeout is never shortened
+  CHECK(p.nodes[1].pres_timeout_us == 100);
+  CHECK_FALSE(p.nodes[0].mandatory);
+  CHECK(p.nodes[1].mandatory);
+  // --print-config says where each came from, and loads back to the same values.
+  const std::string dumped = dump_config(c);
+  CHECK_THAT(dumped, Catch::Contains("period_us: 500  # cdc 0x1006/0 NMT_CycleLen_U32 = 500 µs "
+                                     "(byte 26)"));
+  CHECK_THAT(dumped, Catch::Contains("pres_timeout_us: 121  # cdc 0x1F92/3 "
+                                     "NMT_MNCNPResTimeout_AU32 = 120001 ns"));
+  CHECK_THAT(dumped, Catch::Contains("loss_of_pres_threshold: 40  # cdc 0x1C09/3"));
+  CHECK_THAT(dumped, Catch::Contains("loss_of_pres_threshold:   # default"));
+  CHECK_THAT(dumped, Catch::Contains("mandatory: false  # cdc 0x1F81/3 NMT_NodeAssignment_AU32 "
+                                     "= 0x00000007"));
+  CHECK_THAT(dumped, Catch::Contains("async_slot_timeout_us: 50  # cdc 0x1F8A/2"));
+  CHECK_THAT(dumped, Catch::Contains("pre_op1_timeout_ms: 300  # cdc 0x1F89/2"));
+  const ConfigResult again = from(dumped, cfg);
+  INFO(again.error_report());
+  REQUIRE(again.ok());
+  CHECK(again.config().cycle.period_us == 500);
+  CHECK(again.config().powerlink.nodes[0].pres_timeout_us == 121);
+  CHECK(again.config().powerlink.nodes[0].mandatory == false);
+
+  // The YAML wins where it sets a key, and says so.
+  const ConfigResult y = from(
+      "bus: powerlink\ncycle:\n  period_us: 1000\npowerlink:\n  interface: veth0\n"
+      "  async_slot_timeout_us: 80\n  thresholds: {cycle_time_exceeded: 15}\n  nodes:\n"
+      "    - {node_id: 3, pres_timeout_us: 90, loss_of_pres_threshold: 168, mandatory: true}\n"
+      "    - {node_id: 4}\n  cdc: mnobd.cdc\n",
+      cfg);
+  INFO(y.error_report());
+  REQUIRE(y.ok());
+  CHECK(y.config().cycle.period_us == 1000);
+  CHECK(y.config().powerlink.async_timeout_us == 80);
+  CHECK(y.config().powerlink.thresholds.cycle_time_exceeded == 15);
+  CHECK(y.config().powerlink.nodes[0].pres_timeout_us == 90);
+  CHECK(y.config().powerlink.nodes[0].loss_of_pres_threshold == uint32_t{168});
+  CHECK(y.config().powerlink.nodes[0].mandatory);
+  CHECK(y.config().powerlink.wait_soc_preq_us == 2);  // not set in the YAML: the CDC's
+  const std::string ydump = dump_config(y.config());
+  CHECK_THAT(ydump, Catch::Contains("period_us: 1000  # yaml"));
+  CHECK_THAT(ydump, Catch::Contains("pres_timeout_us: 90  # yaml"));
+  CHECK_THAT(ydump, Catch::Contains("wait_soc_preq_us: 2  # cdc 0x1F8A/1"));
+  // Without a CDC the dump carries no source comments (nothing to tell apart).
+  CHECK_THAT(dump_config(from(kHead + "    - {node_id: 3}\n").config()),
+             !Catch::Contains("# default"));
+}
+
+TEST_CASE("An MN object out of range or an async-only node in the CDC is refused by name",
+          "[config][powerlink][cdc]") {
+  TempDir dir;
+  const std::string cfg = (dir.path / "ds1928d.yaml").string();
+  auto with = [&](std::vector<CdcEntry> mn) {
+    dir.write("mnobd.cdc", powerlink::encode_cdc(mn));
+    return one_error(kHead + "    - {node_id: 3}\n  cdc: mnobd.cdc\n", cfg);
+  };
+  // 4-byte count, then entries of 7 header bytes + data: the second entry starts at byte 15.
+  CHECK_THAT(with({{0x1F81, 3, le(7, 4)}, {0x1006, 0, le(50, 4)}}),
+             Catch::Contains("powerlink.cdc: 0x1006/0 NMT_CycleLen_U32 = 50 µs (byte 15) is "
+                             "outside what ds1928d takes for cycle.period_us (100..100000 µs)"));
+  CHECK_THAT(with({{0x1F8A, 2, le(100, 4)}}),
+             Catch::Contains("powerlink.cdc: 0x1F8A/2 NMT_MNCycleTiming_REC.AsyncSlotTimeout_U32 "
+                             "= 100 ns (byte 4) is below DS 301's minimum of 250 ns"));
+  CHECK_THAT(with({{0x1F92, 3, le(0, 4)}}),
+             Catch::Contains("powerlink.nodes[0].node_id: powerlink.cdc: 0x1F92/3 "
+                             "NMT_MNCNPResTimeout_AU32 = 0 ns (byte 4) is below DS 301's minimum"));
+  CHECK_THAT(with({{0x1F92, 3, le(200'000'000, 4)}}),
+             Catch::Contains("is outside what ds1928d takes for pres_timeout_us (1..100000 µs)"));
+  CHECK_THAT(with({{0x1C09, 3, le(40, 2)}, {0x1F81, 3, le(0x107, 4)}}),
+             Catch::Contains("powerlink.nodes[0].node_id: powerlink.cdc: 0x1F81/3 "
+                             "NMT_NodeAssignment_AU32 marks node 3 async-only (bit 8)"));
+  CHECK_THAT(with({{0x1C09, 3, le(40, 8)}}),
+             Catch::Contains("0x1C09/3 DLL_MNCNLossPResThreshold_AU32 (byte 4) holds 8 bytes; DS "
+                             "301 gives it 4 (UNSIGNED32)"));
+}
+
 }  // namespace
 
 TEST_CASE("Timing keys by the standard's names, receive strategy, defaults",

@@ -84,6 +84,15 @@ pres_timeout_us=${PRES_TIMEOUT_US:-$((period_us >= 10000 ? 1000 : period_us / 2)
 # each SoC advances it modulo n, dllkstatemachine.c reports DLL_ERR_CN_LOSS_PREQ at an SoA with
 # cycleCount 0 and no PReq). Without the reset it kept 0 (every cycle) and left OPERATIONAL with
 # NmtEventNmtCycleError about 10 ms after each start.
+# The demo's CDC is openCONFIGURATOR's for its 50 ms cycle, and ds1928d takes the MN objects in it
+# (docs/configuration.md §The MN's concise DCF): its AsyncSlotTimeout (0x1F8A/2, 500 µs) and
+# thresholds (0x1C02/3, 0x1C09/1: 40, 5 cycles in a row) are that cycle's. The YAML sets ds1928d's
+# defaults for them at this test's period (the loss-of-PRes threshold riding through 20 ms:
+# default_loss_of_pres_threshold()), as a user moving that project to 1 ms would; the rest of the
+# CDC's MN objects stand (node 1 optional: NodeAssignment 0x80000007, bit 3 clear; checked below).
+ride=$(((20000 + period_us - 1) / period_us))
+[ "$ride" -lt 5 ] && ride=5
+loss_threshold=$((8 * (ride + 1)))
 cat >"$tmp/opl.yaml" <<YAML
 bus: powerlink
 cycle:
@@ -93,9 +102,13 @@ powerlink:
   interface: $if_mn
   cdc: mnobd.cdc
   multiplex_cycles: $mux
+  async_slot_timeout_us: 100
+  thresholds:
+    cycle_time_exceeded: 15
   nodes:
     - node_id: 1
       pres_timeout_us: $pres_timeout_us
+      loss_of_pres_threshold: $loss_threshold
       prc: $([ "$prc" = 1 ] && echo true || echo false)
       multiplexed: $([ "$mux" -gt 1 ] && echo true || echo false)
 shm:
@@ -109,6 +122,12 @@ YAML
 # writes them (0x1020): the MN checks the demo CN's IdentResponse against them after its reset.
 "$daemon" --no-host-checks --check-config "$tmp/opl.yaml" --print-config >"$tmp/effective.yaml" 2>&1 ||
   fail "print-config refused it"
+# The CDC's MN objects the YAML leaves alone are taken, and --print-config says from where.
+grep -qE "mandatory: false  # cdc 0x1F81/1 NMT_NodeAssignment_AU32 = 0x[0-9A-F]{8} " \
+    "$tmp/effective.yaml" ||
+  fail "node 1 is not optional as the demo's NodeAssignment says: $(grep -E 'mandatory|async_slot' "$tmp/effective.yaml" | tr '\n' ' ')"
+grep -qE "async_slot_timeout_us: 100  # yaml" "$tmp/effective.yaml" ||
+  fail "--print-config does not say the YAML set async_slot_timeout_us: $(grep async_slot "$tmp/effective.yaml")"
 grep -qE "expected_conf_date: 0x[0-9a-f]+$" "$tmp/effective.yaml" ||
   fail "no expected configuration date from the demo's CDC"
 
@@ -298,16 +317,21 @@ for line in sys.stdin:
     num = lambda v: int(v, 0) if v else 0
     if mtyp == 6 and f[1] == "1" and num(f[4]) == 0x2A:
         reset_conf += 1
+    if mtyp == 6 and f[1] == "1" and num(f[4]) in (0x28, 0x29, 0x2A):
+        socs_since = None  # a reset (explained above) takes the node out of its slot sequence
     if mtyp == 1 and socs_since is not None:
         socs_since += 1
     if mtyp != 3 or f[1] != "1":
         continue
+    # The first PReq with RD=1 ends the boot: its distance to the last PReq before (a boot step
+    # away: node 1 optional, the MN already OPERATIONAL) is not a multiplexed cycle.
+    first = not holding and num(f[3]) == 1
     if num(f[3]) == 1:
         holding = True
     if holding:
         preqs += 1
         no_ms += num(f[2]) != 1
-        bad += socs_since is not None and socs_since != n
+        bad += not first and socs_since is not None and socs_since != n
     socs_since = 0
 print(preqs, bad, no_ms, reset_conf)
 ' "$mux")

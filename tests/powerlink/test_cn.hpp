@@ -43,9 +43,9 @@ class TestCn : public SdoObjectAccess {
   bool pres_not_ready = false;            // PRes with RD = 0 also in OPERATIONAL
   std::optional<uint16_t> poll_out_size;  // PollOutSize reported instead of the layout's
   bool ignore_status_requests = false;
-  bool ignore_sdo = false;  // SDO frames go unanswered (a transfer stays open until its timeout)
-  int fake_request_count = 0;                  // RS reported in the PRes although nothing is queued
-  bool hold_pres = false;                      // answer, but into held_pres (a late PRes)
+  bool ignore_sdo = false;     // SDO frames go unanswered (a transfer stays open until its timeout)
+  int fake_request_count = 0;  // RS reported in the PRes although nothing is queued
+  bool hold_pres = false;      // answer, but into held_pres (a late PRes)
   std::deque<std::vector<uint8_t>> held_pres;  // the test delivers these when it wants
   int pres_size_delta = 0;
   std::vector<ErrorEntry> status_errors;
