@@ -545,6 +545,13 @@ int main(int argc, char** argv) {
     resets += st.resets;
     stale += st.stale_pres_dropped;
   }
+  // Where each node's process image came from, and how many objects its mapping has.
+  for (const pl::CnStatus& st : bus->managing_node().nodes())
+    std::printf("IMAGE node=%u source=%s tpdo=%zu rpdo=%zu refused=\"%s\"\n", st.node,
+                std::string(pl::to_string(st.image_source)).c_str(),
+                bus->managing_node().mapped_objects(st.node, true).size(),
+                bus->managing_node().mapped_objects(st.node, false).size(),
+                st.image_refusal.data());
   const pl::MnCounters& mc = bus->managing_node().counters();
   std::printf(
       "RESULT period_us=%u nodes=%zu cycles=%llu measured_cycles=%llu measured_skipped=%llu "
@@ -557,12 +564,13 @@ int main(int argc, char** argv) {
       "fresh=%llu moving=%llu wrong_positions=%llu bad_stamps=%llu old_stamps=%llu\n",
       config.cycle.period_us, config.powerlink.nodes.size(),
       static_cast<unsigned long long>(cycles), static_cast<unsigned long long>(measured_cycles),
-      static_cast<unsigned long long>(measured_skipped), all_op ? 1 : 0, boots, resets, events, fired, measuring ? events - events_at_start : 0,
-      measuring ? fired - fired_at_start : 0, static_cast<unsigned long long>(overruns),
-      mc.cycle_time_exceeded.events, mc.invalid_frames, mc.short_frames, mc.unexpected_frames,
-      mc.async_timeouts, mc.async_invites_unused, stale, static_cast<unsigned long long>(fresh),
-      static_cast<unsigned long long>(moving), static_cast<unsigned long long>(wrong),
-      static_cast<unsigned long long>(bad_stamp), static_cast<unsigned long long>(old_stamps));
+      static_cast<unsigned long long>(measured_skipped), all_op ? 1 : 0, boots, resets, events,
+      fired, measuring ? events - events_at_start : 0, measuring ? fired - fired_at_start : 0,
+      static_cast<unsigned long long>(overruns), mc.cycle_time_exceeded.events, mc.invalid_frames,
+      mc.short_frames, mc.unexpected_frames, mc.async_timeouts, mc.async_invites_unused, stale,
+      static_cast<unsigned long long>(fresh), static_cast<unsigned long long>(moving),
+      static_cast<unsigned long long>(wrong), static_cast<unsigned long long>(bad_stamp),
+      static_cast<unsigned long long>(old_stamps));
   std::printf(
       "STALLS mn_wake_later_than_pres_timeout=%llu losses_after_stall=%llu "
       "losses_other=%llu late_pres=%llu fired_after_stall=%llu fired_other=%llu\n",
