@@ -168,7 +168,7 @@ void ManagingNode::bind_read_mapping(Cn& cn) noexcept {
   if (cn.map_tpdo_count == 0) {
     if (cn.cfg.layout == ImageLayout::kMapping) {
       refuse(make_error_code(MnError::kPdoRegisterNotMapped),
-             "layout mapping, but the CN maps no TPDO (0x1A00/0 = 0)");
+             "layout mapping, but the CN maps no TPDO (PDO_TxMappParam NumberOfEntries 0)");
       return;
     }
     st.image_source = ImageSource::kPacked;
