@@ -52,9 +52,34 @@ nlohmann::json exception_json(const powerlink::CnStatus& n) {
           {"entries", std::move(entries)}};
 }
 
+// Where the CN's process image comes from and the PDO mapping it was bound from, entry by entry
+// (docs/powerlink.md §Process image from the PDO mapping).
+nlohmann::json image_json(const powerlink::PowerlinkBus& bus, uint8_t node) {
+  // Large (two mappings of up to 254 entries): on the heap, once per status request.
+  auto img = std::make_unique<powerlink::PowerlinkBus::MappedImage>();
+  if (!bus.mapped_image(node, *img)) return nullptr;
+  auto entries = [](std::span<const powerlink::PdoMapEntry> list) {
+    nlohmann::json out = nlohmann::json::array();
+    for (const powerlink::PdoMapEntry& e : list)
+      out.push_back({{"index", e.index},
+                     {"subindex", e.subindex},
+                     {"offset", e.offset_bits / 8},
+                     {"length", e.length_bits / 8},
+                     {"bit_offset", e.offset_bits},
+                     {"bit_length", e.length_bits}});
+    return out;
+  };
+  return {{"source", std::string(powerlink::to_string(img->source))},
+          {"error", img->error ? img->error.message() : std::string()},
+          {"refused", std::string(img->refusal.data())},
+          {"tpdo", entries(std::span(img->tpdo.data(), img->tpdo_count))},
+          {"rpdo", entries(std::span(img->rpdo.data(), img->rpdo_count))}};
+}
+
 // Whether the CN's inputs reach its axes, and why not: its axes are published stale while it is
 // not OPERATIONAL, or while its PRes says RD = 0 (data not ready).
 std::string inputs_state(const powerlink::CnStatus& n) {
+  if (n.image_source == powerlink::ImageSource::kRefused) return "image_refused";
   if (n.boot != powerlink::CnBootState::kOperational) return "node_not_operational";
   if (!n.pres_ready) return "pres_not_ready";
   return "taken";
@@ -154,6 +179,7 @@ void PowerlinkService::status_extra(nlohmann::json& j) const {
                      {"last_error", n.last_error ? n.last_error.message() : std::string()},
                      {"last_reset_reason",
                       n.last_reset_reason ? n.last_reset_reason.message() : std::string()}});
+    nodes.back()["image"] = image_json(bus_, n.node);
     nodes.back()["configuration"] = configuration_json(n);
     nodes.back()["exception"] = exception_json(n);
   }
@@ -228,6 +254,23 @@ void PowerlinkService::watch(std::vector<BusEvent>& events, bool first,
                                       n.node, n.object_failures - seen.object_failures, list),
                           control::LogEvent::ConfigurationFailed, n.node, -1, list});
       }
+      if (n.image_source != seen.image && n.image_source == powerlink::ImageSource::kRefused)
+        events.push_back(
+            {true, fmt::format("powerlink node {}: process image refused, its axes get no inputs: "
+                               "{} ({})",
+                               n.node, n.image_refusal.data(), n.image_error.message())});
+      else if (n.image_source != seen.image &&
+               n.image_source == powerlink::ImageSource::kReadMapping)
+        events.push_back(
+            n.image_refusal[0] == '\0'
+                ? BusEvent{false, fmt::format("powerlink node {}: process image from the node's "
+                                              "own PDO mapping (read by SDO)",
+                                              n.node)}
+                : BusEvent{true,
+                           fmt::format("powerlink node {}: process image from the node's own "
+                                       "PDO mapping (read by SDO); refused, those axes get no "
+                                       "inputs: {}",
+                                       n.node, n.image_refusal.data())});
       if (n.boots > seen.boots)
         events.push_back({false,
                           fmt::format("powerlink node {}: operational (boot {})", n.node, n.boots),
@@ -242,6 +285,7 @@ void PowerlinkService::watch(std::vector<BusEvent>& events, bool first,
                                             n.node, more, n.nmt_requests_refused)});
     }
     seen.resets = n.resets;
+    seen.image = n.image_source;
     seen.boots = n.boots;
     seen.object_failures = n.object_failures;
     seen.error_entries = n.status_error_entries;

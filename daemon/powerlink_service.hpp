@@ -37,7 +37,8 @@ class PowerlinkService final : public BusService {
     uint32_t resets = 0;
     uint32_t boots = 0;
     uint32_t object_failures = 0;
-    uint32_t error_entries = 0;        // CnStatus::status_error_entries said
+    uint32_t error_entries = 0;  // CnStatus::status_error_entries said
+    powerlink::ImageSource image = powerlink::ImageSource::kPacked;  // said
     bool errsig_gave_up_said = false;  // "no error signalling" is said once per node
     bool prc_fallback_said = false;    // "polled with PReq/PRes instead of PRC", once per node
     SaidCounter late_pres;

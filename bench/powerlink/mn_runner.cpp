@@ -545,6 +545,13 @@ int main(int argc, char** argv) {
     resets += st.resets;
     stale += st.stale_pres_dropped;
   }
+  // Where each node's process image came from, and how many objects its mapping has.
+  for (const pl::CnStatus& st : bus->managing_node().nodes())
+    std::printf("IMAGE node=%u source=%s tpdo=%zu rpdo=%zu refused=\"%s\"\n", st.node,
+                std::string(pl::to_string(st.image_source)).c_str(),
+                bus->managing_node().mapped_objects(st.node, true).size(),
+                bus->managing_node().mapped_objects(st.node, false).size(),
+                st.image_refusal.data());
   const pl::MnCounters& mc = bus->managing_node().counters();
   std::printf(
       "RESULT period_us=%u nodes=%zu cycles=%llu measured_cycles=%llu measured_skipped=%llu "

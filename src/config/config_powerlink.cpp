@@ -328,14 +328,14 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
         *size = from;
       }
     }
-    if (node.layout == ImageLayout::kMapping) {
+    if (node.layout == ImageLayout::kMapping && node.prc) {
       const auto* count = powerlink::find_cdc_entry(written, powerlink::obj::kTxPdoMapping, 0);
       const auto v = count ? count->as_unsigned() : std::nullopt;
       if (!v || *v == 0)
         n.error("layout",
-                "layout mapping needs the node's TPDO mapping (PDO_TxMappParam) among the objects "
-                "written "
-                "to it (its cdc or sdo_writes)");
+                "layout mapping on a PollResponse Chaining node (prc) needs the node's TPDO "
+                "mapping (PDO_TxMappParam) among the objects written to it (its cdc or "
+                "sdo_writes): a chained node's image cannot change at boot");
     }
     if (node.prc && node.multiplexed) {
       n.error(node.multiplex_slot ? "multiplex_slot" : "multiplexed",

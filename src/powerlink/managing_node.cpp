@@ -91,41 +91,6 @@ const ManagingNode::Handler ManagingNode::kHandlers[] = {
      true},
 };
 
-// The process image of a CN (docs/powerlink.md §Process image): from the PDO mapping its objects
-// write (0x1A00/0x1600, its concise DCF or sdo_writes) through the object scheme, or packed.
-// Throws what names the node and the entry, slot or register at fault.
-NodeImageLayout ManagingNode::image_layout(const PowerlinkNodeConfig& nc,
-                                           std::span<const CdcEntry> written,
-                                           std::span<const ModuleSpec> specs) const {
-  const std::string node = "process image of node " + std::to_string(nc.node_id);
-  const auto tpdo = mapping_from_objects(written, obj::kTxPdoMapping);
-  const auto rpdo = mapping_from_objects(written, obj::kRxPdoMapping);
-  const bool has_mapping = tpdo && !tpdo->empty();
-  if (nc.layout == ImageLayout::kMapping || (nc.layout == ImageLayout::kAuto && has_mapping)) {
-    if (!has_mapping)
-      throw std::system_error(
-          make_error_code(MnError::kPdoRegisterNotMapped),
-          node + ": layout mapping, but its objects map no TPDO (PDO_TxMappParam)");
-    PdoMappingLists lists;
-    lists.tpdo = *tpdo;
-    if (rpdo) lists.rpdo = *rpdo;
-    PdoBindIssue issue;
-    auto layout =
-        bind_pdo_mapping(lists, nc.object_scheme.value_or(config_.bus.object_scheme), specs, issue);
-    if (!layout) throw std::system_error(issue.error, node + ", " + issue.what);
-    return *layout;
-  }
-  LayoutIssue issue;
-  auto layout = make_layout(specs, &issue);
-  if (!layout) {
-    std::string what =
-        node + ", " + (issue.in_preq ? "PReq" : "PRes") + ": slot " + std::to_string(issue.slot);
-    if (issue.other_slot != 0) what += " and slot " + std::to_string(issue.other_slot);
-    throw std::system_error(layout.error(), what);
-  }
-  return *layout;
-}
-
 ManagingNode::ManagingNode(const MnConfig& config)
     : config_(config), mapping_(config.bus.sdo_overrides) {
   status_view_.reserve(config_.bus.nodes.size());
@@ -171,7 +136,7 @@ ManagingNode::ManagingNode(const MnConfig& config)
       if (a.module.endat_enable)
         cn->boot_ops.push_back({a.slot, RegisterRequest{0, 0, reg::kEnDatAck, 1, true, 0x02}});
     }
-    cn->layout = image_layout(nc, written, specs);
+    init_image(*cn, written, specs);
     // A configured payload size is what goes on the wire: every block must fit inside it.
     for (const ModuleMapping& m : cn->layout.mappings()) {
       const bool pres_out = nc.pres_size && pres_end(m) > *nc.pres_size;
@@ -289,7 +254,6 @@ const NodeImageLayout* ManagingNode::layout(uint8_t id) const noexcept {
   const Cn* cn = find(id);
   return cn ? &cn->layout : nullptr;
 }
-
 bool ManagingNode::all_operational() const noexcept {
   for (const auto& cn : cns_)
     if (cn->cfg.mandatory && cn->st->boot != CnBootState::kOperational) return false;
@@ -424,6 +388,9 @@ void ManagingNode::on_state_operational(Cn& cn, NmtState s) noexcept {
 void ManagingNode::on_enter_reset(Cn& cn) noexcept {
   // NMTResetNode: the CN restores its stored communication objects; they are written again.
   cn.config_applied = false;
+  // The CN may be another one when it comes back: its own mapping is read again.
+  if (cn.read_mapping) cn.map_read = MapRead::kTpdo;
+  cn.map_sub = cn.map_count = 0;
   cn.st->in_isochronous = false;
   cn.st->identified = false;
   cn.st->prc = false;

@@ -77,6 +77,16 @@ struct IdentityMismatch {
 [[nodiscard]] std::string describe(const ObjectAccessFailure& f);
 [[nodiscard]] std::string describe(const IdentityMismatch& m);
 
+// Where a CN's process image comes from (docs/powerlink.md §Process image from the PDO mapping).
+enum class ImageSource : uint8_t {
+  kPacked,          // packed blocks (layout packed, or auto and the CN maps no TPDO)
+  kWrittenMapping,  // the mapping the MN writes (its concise DCF or sdo_writes)
+  kReadMapping,     // the CN's own mapping, read by SDO at boot
+  kRefused,         // the CN's own mapping lacks a register or has a bad entry: no axis is fed
+};
+[[nodiscard]] std::string_view to_string(ImageSource s) noexcept;
+inline constexpr std::size_t kMaxPdoMapEntries = 254;  // per mapping (DS 301: sub 1..254)
+
 struct CnStatus {
   uint8_t node = 0;
   CnBootState boot = CnBootState::kIdentify;
@@ -136,6 +146,11 @@ struct CnStatus {
   uint32_t sync_responses = 0;
   uint32_t nmt_requests = 0;          // NMTRequests received from the CN
   uint32_t nmt_requests_refused = 0;  // ... of them not served
+  ImageSource image_source = ImageSource::kPacked;
+  // kRefused: the binding's error and what it names ("slot 1: PosCycle (0x2001/4) is not
+  // mapped"; fixed storage, the status is copied on the cycle thread).
+  std::error_code image_error;
+  std::array<char, 120> image_refusal{};
   std::error_code last_error;
   // Why the MN last reset the CN (kept when it boots again, unlike last_error).
   std::error_code last_reset_reason;
@@ -239,6 +254,12 @@ class ManagingNode {
   // The PRes of `node` arrived in this cycle (whatever its size and RD).
   [[nodiscard]] bool pres_seen(uint8_t node) const noexcept;
   [[nodiscard]] const NodeImageLayout* layout(uint8_t node) const noexcept;
+  // Counts the changes of any node's layout (a CN's own mapping read and bound at boot): the
+  // driver takes the layouts again when it moves.
+  [[nodiscard]] uint32_t layouts_version() const noexcept { return layouts_version_; }
+  // The PDO mapping the node's image was bound from (TPDO, RPDO): the mapping written to it or
+  // read from it; empty when packed.
+  [[nodiscard]] std::span<const PdoMapEntry> mapped_objects(uint8_t node, bool tpdo) const noexcept;
   // NetTime of this cycle's SoC (RelativeTime µs + offset), µs.
   [[nodiscard]] uint64_t net_time_us() const noexcept;
   [[nodiscard]] uint64_t relative_time_us() const noexcept { return relative_time_us_; }
@@ -272,6 +293,8 @@ class ManagingNode {
   [[nodiscard]] NodeImageLayout image_layout(const PowerlinkNodeConfig& nc,
                                              std::span<const CdcEntry> written,
                                              std::span<const ModuleSpec> specs) const;
+  // The CN's layout at start (packed or its written mapping) and whether its own is read at boot.
+  void init_image(Cn& cn, std::span<const CdcEntry> written, std::span<const ModuleSpec> specs);
   Cn* find(uint8_t node) noexcept;
   const Cn* find(uint8_t node) const noexcept;
   void enter(Cn& cn, CnBootState state) noexcept;
@@ -289,6 +312,9 @@ class ManagingNode {
   void sdo_done(Cn& cn, std::error_code ec, std::span<const uint8_t> data) noexcept;
   void start_object_op(Cn& cn) noexcept;  // the op at cn.object_next
   void object_done(Cn& cn, std::error_code ec, std::span<const uint8_t> data) noexcept;
+  void start_mapping_read(Cn& cn) noexcept;
+  void mapping_read_done(Cn& cn, std::error_code ec, std::span<const uint8_t> data) noexcept;
+  void bind_read_mapping(Cn& cn) noexcept;
   void update_mn_state() noexcept;
   // PollResponse Chaining set-up (managing_node_prc.cpp).
   [[nodiscard]] bool uses_prc(const Cn& cn) const noexcept;
@@ -343,6 +369,7 @@ class ManagingNode {
   int64_t start_ns_ = -1;
   int64_t mn_state_since_ns_ = 0;
   uint64_t relative_time_us_ = 0;
+  uint32_t layouts_version_ = 0;
   uint64_t mux_cycle_len_ = 1;  // cycles of one multiplexed cycle (MultiplCycleCnt), 1: none
   bool mc_flag_ = false;        // SoC MC, toggled at the start of each multiplexed cycle
   int64_t soc_time_ns_ = 0;

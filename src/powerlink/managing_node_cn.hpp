@@ -21,7 +21,12 @@ enum class OpKind : uint8_t {
   kRegister,      // a module register (boot configuration or a client's request)
   kIdentityRead,  // 0x1000 / 0x1018 read back and compared
   kObjectWrite,   // an object of the CN's configuration (concise DCF, sdo_writes, cycle objects)
+  kMappingRead,   // the CN's own PDO mapping (0x1A00, 0x1600), read when none is written
 };
+// Entries of one PDO mapping the MN reads (DS 301: sub 1..254).
+inline constexpr std::size_t kMaxReadMapEntries = kMaxPdoMapEntries;
+// Reading the CN's own PDO mapping (boot step "configure"): TPDO, then RPDO, sub 0 then 1..n.
+enum class MapRead : uint8_t { kTpdo, kRpdo, kDone };
 // Where an object write's value comes from: fixed bytes, or what is known only at boot.
 enum class ValueSource : uint8_t { kData, kCycleUs, kPreqSize, kPresSize };
 struct ObjectOp {
@@ -56,6 +61,18 @@ struct ManagingNode::Cn {
   PowerlinkNodeConfig cfg;
   CnStatus* st = nullptr;
   NodeImageLayout layout;
+  // Layout auto/mapping without a mapping written to the CN: its own is read by SDO at boot
+  // (docs/powerlink.md §Process image from the PDO mapping) and bound through the scheme.
+  bool read_mapping = false;
+  NodeImageLayout packed_layout;      // until the CN's mapping is read (auto: if it maps no TPDO)
+  std::vector<ModuleSpec> specs;      // the node's modules, for binding
+  MapRead map_read = MapRead::kDone;  // kDone: read in this boot (or not to be read)
+  uint8_t map_sub = 0;                // next sub-index to read
+  uint8_t map_count = 0;              // sub 0 of the mapping being read
+  std::array<PdoMapEntry, kMaxReadMapEntries> map_tpdo{};
+  std::array<PdoMapEntry, kMaxReadMapEntries> map_rpdo{};
+  uint8_t map_tpdo_count = 0;
+  uint8_t map_rpdo_count = 0;
   std::array<uint8_t, kMaxIsoPayload> preq{};
   std::array<uint8_t, kMaxIsoPayload> pres{};
   uint8_t mux_slot = 0;          // slot of the multiplexed cycle, 0: polled every cycle

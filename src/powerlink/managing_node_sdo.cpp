@@ -2,8 +2,10 @@
 #include <algorithm>
 #include <cstring>
 
+#include "core/sdo_abort.hpp"
 #include "powerlink/managing_node.hpp"
 #include "powerlink/managing_node_cn.hpp"
+#include "powerlink/pdo_image.hpp"
 
 namespace ds1928::powerlink {
 
@@ -56,6 +58,10 @@ void ManagingNode::start_next_sdo(Cn& cn) noexcept {
         continue;
       }
       start_object_op(cn);
+      continue;
+    }
+    if (cn.configuring && cn.map_read != MapRead::kDone) {
+      start_mapping_read(cn);
       continue;
     }
     if (cn.configuring && cn.boot_next < cn.boot_ops.size()) {
@@ -174,7 +180,10 @@ void ManagingNode::sdo_done(Cn& cn, std::error_code ec, std::span<const uint8_t>
   if (cn.op_internal && cn.op_kind != OpKind::kRegister) {
     if (ec == SdoError::kConnectionLost) return;
     if (ec) cn.st->last_error = ec;
-    object_done(cn, ec, data);
+    if (cn.op_kind == OpKind::kMappingRead)
+      mapping_read_done(cn, ec, data);
+    else
+      object_done(cn, ec, data);
     if (cn.st->boot == CnBootState::kReset) return;
     start_next_sdo(cn);
     return;

@@ -47,10 +47,12 @@ bool place(std::span<const PdoMapEntry> entries, uint16_t mapping_index, bool pr
            const ObjectScheme& scheme, NodeImageLayout& layout, PdoBindIssue& issue) {
   for (std::size_t k = 0; k < entries.size(); ++k) {
     const PdoMapEntry& e = entries[k];
-    const std::string where = hex_object(mapping_index, static_cast<uint8_t>(k + 1)) + " (" +
-                              hex_object(e.index, e.subindex) + ")";
+    // The message is built only on refusal: the MN binds a mapping it read on the cycle thread.
     auto refuse = [&](const std::string& why) {
-      issue = {make_error_code(MnError::kPdoMappingEntryInvalid), where + ": " + why};
+      issue = {make_error_code(MnError::kPdoMappingEntryInvalid),
+               hex_object(mapping_index, static_cast<uint8_t>(k + 1)) + " (" +
+                   hex_object(e.index, e.subindex) + "): " + why,
+               0};
       return false;
     };
     if (e.length_bits == 0 || e.length_bits % 8 != 0)
@@ -99,7 +101,7 @@ std::optional<NodeImageLayout> bind_pdo_mapping(const PdoMappingLists& lists,
   for (const ModuleSpec& s : modules) {
     if (layout.count == kMaxModulesPerNode || s.input_mtu > kMaxFlatstreamMtu ||
         s.output_mtu > kMaxFlatstreamMtu) {
-      issue = {make_error_code(MnError::kInvalidLayout), "slot " + std::to_string(s.slot)};
+      issue = {make_error_code(MnError::kInvalidLayout), "slot " + std::to_string(s.slot), s.slot};
       return std::nullopt;
     }
     ModuleMapping& m = layout.modules[layout.count++];
@@ -116,7 +118,8 @@ std::optional<NodeImageLayout> bind_pdo_mapping(const PdoMappingLists& lists,
     auto missing = [&](std::string_view reg, uint16_t index, uint8_t sub) {
       issue = {make_error_code(MnError::kPdoRegisterNotMapped),
                "slot " + std::to_string(m.slot) + ": " + std::string(reg) + " (" +
-                   hex_object(index, sub) + ") is not mapped"};
+                   hex_object(index, sub) + ") is not mapped",
+               m.slot};
       return std::nullopt;
     };
     const uint16_t in_obj = static_cast<uint16_t>(scheme.input_index + m.slot);

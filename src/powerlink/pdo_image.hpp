@@ -58,6 +58,7 @@ using ObjectScheme = PdoObjectScheme;
 struct PdoBindIssue {
   std::error_code error;
   std::string what;
+  uint8_t slot = 0;  // kPdoRegisterNotMapped: the module missing it
 };
 
 struct PdoMappingLists {

@@ -24,12 +24,6 @@ PowerlinkBus::PowerlinkBus(const MnConfig& config, Link& link)
     : config_(config), link_(link), mn_(config), clock_(&rt::now_ns) {
   axis_map_.resize(config_.axes.size());
   rx_time_.resize(config_.axes.size());
-  for (std::size_t i = 0; i < config_.axes.size(); ++i) {
-    const AxisConfig& a = config_.axes[i];
-    const NodeImageLayout* layout = mn_.layout(a.node);
-    if (!layout) continue;  // axis on an unconfigured node: never fresh
-    if (const ModuleMapping* m = layout->find(a.slot)) axis_map_[i] = {a.node, *m, true};
-  }
   raw_.resize(config_.bus.nodes.size());
   pres_latency_ = std::make_unique<PresLatencyHistogram[]>(raw_.size());
   Snapshot initial;
@@ -37,9 +31,48 @@ PowerlinkBus::PowerlinkBus(const MnConfig& config, Link& link)
   for (std::size_t i = 0; i < raw_.size(); ++i) {
     const uint8_t node = config_.bus.nodes[i].node_id;
     raw_[i].node = initial.pres[i].node = node;
-    if (const NodeImageLayout* layout = mn_.layout(node)) raw_[i].layout = *layout;
   }
   snapshot_.for_each([&](Snapshot& s) { s = initial; });
+  mapped_.for_each([&](std::vector<MappedImage>& v) { v.resize(raw_.size()); });
+  sync_layouts();
+}
+
+void PowerlinkBus::sync_layouts() noexcept {
+  layouts_version_ = mn_.layouts_version();
+  for (std::size_t i = 0; i < axis_map_.size(); ++i) {
+    const AxisConfig& a = config_.axes[i];
+    axis_map_[i] = {a.node, {}, false};
+    const NodeImageLayout* layout = mn_.layout(a.node);
+    if (!layout) continue;  // axis on an unconfigured node: never fresh
+    if (const ModuleMapping* m = layout->find(a.slot)) axis_map_[i] = {a.node, *m, true};
+  }
+  std::vector<MappedImage>& images = mapped_.back();
+  for (std::size_t i = 0; i < raw_.size() && i < images.size(); ++i) {
+    MappedImage& img = images[i];
+    img.node = raw_[i].node;
+    if (const CnStatus* st = mn_.node(img.node)) {
+      img.source = st->image_source;
+      img.error = st->image_error;
+      img.refusal = st->image_refusal;
+    }
+    if (const NodeImageLayout* layout = mn_.layout(img.node)) img.layout = *layout;
+    const auto tpdo = mn_.mapped_objects(img.node, true);
+    const auto rpdo = mn_.mapped_objects(img.node, false);
+    img.tpdo_count = static_cast<uint16_t>(std::min(tpdo.size(), img.tpdo.size()));
+    img.rpdo_count = static_cast<uint16_t>(std::min(rpdo.size(), img.rpdo.size()));
+    std::copy_n(tpdo.begin(), img.tpdo_count, img.tpdo.begin());
+    std::copy_n(rpdo.begin(), img.rpdo_count, img.rpdo.begin());
+  }
+  mapped_.publish();
+}
+
+bool PowerlinkBus::mapped_image(uint8_t node, MappedImage& out) const {
+  for (const MappedImage& img : mapped_.read()) {
+    if (img.node != node) continue;
+    out = img;
+    return true;
+  }
+  return false;
 }
 
 PowerlinkBus::NodeRaw* PowerlinkBus::raw(uint8_t node) noexcept {
@@ -80,7 +113,10 @@ PreqWriteCheck PowerlinkBus::set_preq(uint8_t node, uint16_t offset,
     check.error = make_error_code(MnError::kPreqOutOfRange);
     return check;
   }
-  for (const ModuleMapping& m : r->layout.mappings()) {
+  // The modules' regions as the cycle thread last bound them (a CN's own mapping read at boot
+  // moves them).
+  const NodeImageLayout& layout = mapped_.read()[static_cast<std::size_t>(r - raw_.data())].layout;
+  for (const ModuleMapping& m : layout.mappings()) {
     if (preq_overlaps(m, offset, end)) {
       check.error = make_error_code(MnError::kPreqRegionOwnedByModule);
       check.module = m;
@@ -160,6 +196,8 @@ ExchangeResult PowerlinkBus::exchange(std::span<AxisIo> axes, int64_t cycle_star
   // for this cycle's answer (frames carry no cycle number). The MN drops such PRes (counted as
   // stale); late ASnds are still served, they identify themselves (SDO sequence numbers).
   drain(0);
+  // A CN's own mapping was read and bound at boot: its axes move to where it puts them.
+  if (mn_.layouts_version() != layouts_version_) sync_layouts();
   const std::size_t n_axes = std::min(axes.size(), axis_map_.size());
   for (NodeRaw& r : raw_) r.outputs_ok = true;
   for (std::size_t i = 0; i < n_axes; ++i) {
@@ -231,6 +269,7 @@ ExchangeResult PowerlinkBus::exchange(std::span<AxisIo> axes, int64_t cycle_star
   drain(0);  // late and foreign frames
   const int64_t period_ns = static_cast<int64_t>(config_.cycle_us) * 1000;
   mn_.end_cycle(clock_() - cycle_start_ns > period_ns);
+  if (mn_.layouts_version() != layouts_version_) sync_layouts();
 
   for (std::size_t i = 0; i < n_axes; ++i) {
     const AxisMap& am = axis_map_[i];

@@ -88,6 +88,22 @@ class PowerlinkBus final : public BusDriver, private RegisterTarget {
   // (0 until the CN is identified) and against the module regions, which belong to the axes.
   [[nodiscard]] PreqWriteCheck set_preq(uint8_t node, uint16_t offset,
                                         std::span<const uint8_t> bytes);
+  // Normal thread: a configured CN's process image as the cycle thread last bound it (at start,
+  // and when its own PDO mapping was read at boot): where it comes from, the module layout, and
+  // the mapped objects (index, sub-index, bit offset, bit length) it was bound from. False when
+  // `node` is not configured.
+  struct MappedImage {
+    uint8_t node = 0;
+    ImageSource source = ImageSource::kPacked;
+    std::error_code error;
+    std::array<char, 120> refusal{};
+    NodeImageLayout layout{};
+    std::array<PdoMapEntry, kMaxPdoMapEntries> tpdo{};
+    std::array<PdoMapEntry, kMaxPdoMapEntries> rpdo{};
+    uint16_t tpdo_count = 0;
+    uint16_t rpdo_count = 0;
+  };
+  [[nodiscard]] bool mapped_image(uint8_t node, MappedImage& out) const;
   // Any thread: the PRes latency of a configured CN; nullptr when `node` is not configured.
   [[nodiscard]] const PresLatencyHistogram* pres_latency(uint8_t node) const noexcept;
   // Cycle thread (or tests driving exchange() themselves).
@@ -104,11 +120,10 @@ class PowerlinkBus final : public BusDriver, private RegisterTarget {
     ModuleMapping mapping{};
     bool valid = false;
   };
-  // Per configured CN. `node` and `layout` are fixed at construction (read by both threads); the
-  // rest is the cycle thread's.
+  // Per configured CN. `node` is fixed at construction (read by both threads); the rest is the
+  // cycle thread's.
   struct NodeRaw {
     uint8_t node = 0;
-    NodeImageLayout layout{};
     std::array<uint8_t, kMaxIsoPayload> preq_set{};  // raw PReq bytes set through set_preq()
     std::bitset<kMaxIsoPayload> preq_mask;           // which of them were set
     uint16_t set_lo = 0, set_hi = 0;                 // [lo, hi) spans every set byte
@@ -136,12 +151,14 @@ class PowerlinkBus final : public BusDriver, private RegisterTarget {
   void prc_slot(ExchangeResult& result, std::size_t n_axes) noexcept;
   void note_pres(uint8_t node, int64_t t, int64_t sent_ns, std::size_t n_axes) noexcept;
   void publish_status() noexcept;
+  void sync_layouts() noexcept;  // axis_map_ from the MN's layouts
 
   MnConfig config_;
   std::unique_ptr<Link> owned_link_;
   Link& link_;
   ManagingNode mn_;
   std::vector<AxisMap> axis_map_;
+  uint32_t layouts_version_ = 0;  // of the MN's layouts axis_map_ was taken from
   std::vector<int64_t> rx_time_;  // per axis: reception time of its PRes this cycle
   std::array<uint8_t, kMaxFrameSize> tx_{};
   std::array<uint8_t, kMaxFrameSize> rx_{};
@@ -155,6 +172,8 @@ class PowerlinkBus final : public BusDriver, private RegisterTarget {
     std::vector<PresSnapshot> pres;
   };
   mutable TripleBuffer<Snapshot> snapshot_;
+  // Published when a layout changes (sync_layouts()); per configured CN, in raw_ order.
+  mutable TripleBuffer<std::vector<MappedImage>> mapped_;
   Clock clock_;
 };
 

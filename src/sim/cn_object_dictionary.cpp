@@ -69,7 +69,18 @@ CnObjectDictionary::CnObjectDictionary() noexcept {
     for (std::size_t k = 0; k < entries(kStandardObjects[i]); ++k)
       v_.slot[kFirstSlot[i] + k] = kStandardObjects[i].default_value;
   }
+  factory_ = v_;
   stored_ = v_;
+}
+
+bool CnObjectDictionary::set_own_mapping(uint16_t mapping_index,
+                                         std::span<const powerlink::PdoMapEntry> entries) noexcept {
+  if (entries.size() > kMaxMapped) return false;
+  set(mapping_index, 0, entries.size());
+  for (std::size_t i = 0; i < entries.size(); ++i)
+    set(mapping_index, static_cast<uint8_t>(i + 1), entries[i].to_u64());
+  factory_ = v_;
+  return true;
 }
 
 bool CnObjectDictionary::handles(uint16_t index) noexcept {
@@ -178,11 +189,7 @@ void CnObjectDictionary::set_error_register(uint8_t bits) noexcept {
 
 void CnObjectDictionary::reset_communication() noexcept {
   // The written values return to the stored (or default) ones; the device's own stay.
-  const Values defaults = [] {
-    CnObjectDictionary fresh;
-    return fresh.v_;
-  }();
-  const Values& from = has_stored_ ? stored_ : defaults;
+  const Values& from = has_stored_ ? stored_ : factory_;
   for (std::size_t i = 0; i < kStandardObjects.size(); ++i) {
     const StandardObject& o = kStandardObjects[i];
     if (!stored(o) || o.access != ObjAccess::kRw) continue;

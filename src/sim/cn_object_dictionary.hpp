@@ -38,6 +38,10 @@ class CnObjectDictionary {
   void set_identity(uint32_t device_type, uint32_t vendor_id, uint32_t product_code,
                     uint32_t revision_no, uint32_t serial_no) noexcept;
   void set_error_register(uint8_t bits) noexcept;
+  // The device's own PDO mapping (0x1A00 TPDO, 0x1600 RPDO): in use from now on and what a reset
+  // restores when nothing was stored. False (nothing set) with more than kMaxMapped entries.
+  [[nodiscard]] bool set_own_mapping(uint16_t mapping_index,
+                                     std::span<const powerlink::PdoMapEntry> entries) noexcept;
 
   // The payload sizes the objects define: cycle timing /5 (/4) when written, else the end of the
   // mapped objects of the TPDO (RPDO) mapping when mapped, else `fallback` (the modules' layout).
@@ -89,6 +93,7 @@ class CnObjectDictionary {
   void set(uint16_t index, uint8_t subindex, uint64_t v) noexcept;
 
   Values v_;
+  Values factory_;  // the defaults a reset restores without stored values
   Values stored_;
   bool has_stored_ = false;
 };

@@ -7,6 +7,8 @@
 #include <climits>
 #include <cmath>
 #include <cstring>
+#include <stdexcept>
+#include <string>
 
 #include "core/sdo_abort.hpp"
 #include "powerlink/pdo_image.hpp"
@@ -121,6 +123,53 @@ const PowerlinkCn::StateHandler& PowerlinkCn::handler() const noexcept {
   return kSilent;
 }
 
+OwnPdoMapping own_pdo_mapping(OwnMapping style, const pl::NodeImageLayout& layout,
+                              const PdoObjectScheme& scheme) {
+  OwnPdoMapping out;
+  if (style == OwnMapping::kNone) return out;
+  if (style == OwnMapping::kPacked) {
+    out.tpdo = pl::tpdo_mapping_of(layout, scheme);
+    out.rpdo = pl::rpdo_mapping_of(layout, scheme);
+    return out;
+  }
+  auto entry = [](uint16_t index, uint8_t sub, std::size_t at, std::size_t bytes) {
+    return pl::PdoMapEntry{index, sub, static_cast<uint16_t>(at * 8),
+                           static_cast<uint16_t>(bytes * 8)};
+  };
+  const bool gap = style == OwnMapping::kGap;
+  std::size_t in_at = gap ? 2 : 0, out_at = gap ? 1 : 0;  // gap: the payload starts with a hole
+  for (const pl::ModuleMapping& m : layout.mappings()) {
+    const auto in = static_cast<uint16_t>(scheme.input_index + m.slot);
+    const auto outs = static_cast<uint16_t>(scheme.output_index + m.slot);
+    if (!gap) {
+      in_at = m.pres_offset;
+      out_at = m.preq_offset;
+    }
+    // PosCycle first: PositionHW, PosCycle, PositionLW, PosTime, SDCLifeCount, ErrorInfo, ...
+    std::vector<pl::SchemeRegister> order(pl::kSchemeInputs.begin(), pl::kSchemeInputs.end());
+    if (!gap) std::rotate(order.begin() + 1, order.begin() + 3, order.begin() + 4);
+    for (const pl::SchemeRegister& r : order) {
+      out.tpdo.push_back(entry(in, r.subindex, in_at, r.bytes));
+      in_at += r.bytes + (gap ? 1 : 0);
+    }
+    for (uint8_t b = 0; b < m.input_mtu; ++b) {
+      out.tpdo.push_back(entry(in, static_cast<uint8_t>(pl::kSchemeRxByteFirstSub + b), in_at, 1));
+      in_at += gap ? 2 : 1;
+    }
+    if (gap) {
+      // AckErrorInfo, a hole, OutputSequence, TxByte1..MTU.
+      out.rpdo.push_back(entry(outs, pl::kSchemeOutputs[1].subindex, out_at, 1));
+      out_at += 2;
+      out.rpdo.push_back(entry(outs, pl::kSchemeOutputs[0].subindex, out_at++, 1));
+      for (uint8_t b = 0; b < m.output_mtu; ++b)
+        out.rpdo.push_back(
+            entry(outs, static_cast<uint8_t>(pl::kSchemeTxByteFirstSub + b), out_at++, 1));
+    }
+  }
+  if (!gap) out.rpdo = pl::rpdo_mapping_of(layout, scheme);
+  return out;
+}
+
 PowerlinkCn::PowerlinkCn(const PowerlinkCnConfig& config, FrameSink send)
     : config_(config),
       send_(std::move(send)),
@@ -147,6 +196,13 @@ PowerlinkCn::PowerlinkCn(const PowerlinkCnConfig& config, FrameSink send)
     layout_ = pl::NodeImageLayout{};
   }
   for (HostedModule& m : modules_) m.mapping = layout_.find(m.slot);
+  // Its own mapping: in the objects from power-up, taken at the first reset below (boot()).
+  const OwnPdoMapping own = own_pdo_mapping(config_.own_mapping, layout_, config_.object_scheme);
+  if (!comm_.set_own_mapping(pl::obj::kTxPdoMapping, own.tpdo) ||
+      !comm_.set_own_mapping(pl::obj::kRxPdoMapping, own.rpdo))
+    throw std::invalid_argument("own PDO mapping: more than " +
+                                std::to_string(CnObjectDictionary::kMaxMapped) +
+                                " entries per direction (fewer modules or smaller MTUs)");
 
   objects_ = std::make_unique<Objects>(*this);
   pl::SdoServerConfig sdo_config;

@@ -65,6 +65,20 @@ struct PowerlinkCnFaults {
   uint64_t seed = 1;
 };
 
+// The PDO mapping the bus controller has of its own (0x1A00/0x1600, readable by SDO and taken at
+// every reset unless an MN writes another): none (mapping disabled, the packed image), the packed
+// image as a mapping, or rearranged: PosCycle before PositionLW in each module's block, or every
+// register followed by a byte no object is mapped to (and the outputs AckErrorInfo first).
+enum class OwnMapping : uint8_t { kNone, kPacked, kPosCycleFirst, kGap };
+struct OwnPdoMapping {
+  std::vector<powerlink::PdoMapEntry> tpdo;
+  std::vector<powerlink::PdoMapEntry> rpdo;
+};
+// The entries of `style` for the modules of `layout` (packed) through `scheme`.
+[[nodiscard]] OwnPdoMapping own_pdo_mapping(OwnMapping style,
+                                            const powerlink::NodeImageLayout& layout,
+                                            const PdoObjectScheme& scheme);
+
 // A CN whose PRes comes from software (a user-space stack on a PC): each PRes leaves after a
 // log-normal delay — median `pres_latency_median_ns`, shape `pres_latency_sigma` (0.6 gives
 // p99 ≈ 4 × median, p99.99 ≈ 9 × median: a long tail), capped at `pres_latency_max_ns` — and
@@ -104,6 +118,7 @@ struct PowerlinkCnConfig {
   // the modules' registers by it; after NMTResetConfiguration the node sends and takes each
   // register where that mapping puts it (powerlink/pdo_image.hpp). Without a mapping: packed.
   PdoObjectScheme object_scheme;
+  OwnMapping own_mapping = OwnMapping::kNone;
 };
 
 struct PowerlinkCnStats {

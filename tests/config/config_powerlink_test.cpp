@@ -507,9 +507,11 @@ TEST_CASE("The process image layout and the object scheme per node", "[config][p
   REQUIRE(again.ok());
   CHECK(dump_config(again.config()) == dumped);
 
-  CHECK_THAT(one_error(kHead + "    - {node_id: 1, layout: mapping}\n"),
-             Catch::Contains("powerlink.nodes[0].layout: layout mapping needs the node's TPDO "
-                             "mapping (PDO_TxMappParam)"));
+  // Without a written mapping, `mapping` reads the CN's own at boot; a chained node cannot.
+  CHECK(from(kHead + "    - {node_id: 1, layout: mapping}\n").ok());
+  CHECK_THAT(one_error(kHead + "    - {node_id: 1, layout: mapping, prc: true}\n"),
+             Catch::Contains("powerlink.nodes[0].layout: layout mapping on a PollResponse "
+                             "Chaining node (prc) needs the node's TPDO mapping"));
   CHECK_THAT(one_error(kHead + "    - {node_id: 1, layout: fixed}\n"),
              Catch::Contains("powerlink.nodes[0].layout"));
   CHECK_THAT(one_error(kHead + "    - {node_id: 1}\n  object_scheme: {input_index: 0x1000}\n"),

@@ -69,22 +69,27 @@ struct Setup {
   uint64_t cycle = 0;
 
   explicit Setup(const sim::PowerlinkCnFaults& faults = {}, uint32_t loss_threshold = 15,
-                 const std::function<void(ds1928::PowerlinkNodeConfig&)>& node_config = {}) {
+                 const std::function<void(ds1928::PowerlinkNodeConfig&)>& node_config = {},
+                 const std::function<void(sim::PowerlinkCnConfig&)>& cn_setup = {},
+                 std::vector<uint8_t> slots = {1}) {
     bus.thresholds.loss_of_pres = loss_threshold;
     ds1928::PowerlinkNodeConfig node;
     node.node_id = 1;
     node.pres_timeout_us = 100;
     if (node_config) node_config(node);
     bus.nodes.push_back(node);
-    ds1928::AxisConfig axis;
-    axis.node = 1;
-    axis.slot = 1;
-    axes.push_back(axis);
+    for (uint8_t slot : slots) {
+      ds1928::AxisConfig axis;
+      axis.node = 1;
+      axis.slot = slot;
+      axes.push_back(axis);
+    }
 
     sim::PowerlinkCnConfig cn_config;
     cn_config.node_id = 1;
     cn_config.faults = faults;
     cn_config.power_off_ns = 50'000'000;
+    if (cn_setup) cn_setup(cn_config);
     cn = std::make_unique<sim::PowerlinkCn>(cn_config, [this](std::span<const uint8_t> f) {
       wire.to_mn.emplace_back(f.begin(), f.end());
     });
@@ -370,4 +375,116 @@ TEST_CASE("A CN mapped with PosCycle before PositionLW and gaps is decoded exact
   const double dt = static_cast<double>(last_t - first_t) / 1e9;
   CHECK(dt > 0.15);
   CHECK(std::fabs((last - first) - 100.0 * dt) < 0.02);
+}
+
+TEST_CASE("The MN reads a CN's own rearranged mapping by SDO and decodes it exactly") {
+  // No mapping written (layout auto): the CN's own 0x1A00/0x1600 are read in "configure".
+  const auto style = GENERATE(sim::OwnMapping::kPosCycleFirst, sim::OwnMapping::kGap);
+  CAPTURE(static_cast<int>(style));
+  Setup s({}, 15, {}, [&](sim::PowerlinkCnConfig& c) { c.own_mapping = style; });
+  const pl::CnStatus* st = s.mn->managing_node().node(1);
+  CHECK(st->image_source == pl::ImageSource::kPacked);  // until read
+  REQUIRE(s.run_until_operational(5000));
+  REQUIRE(s.cn->image_by_mapping());
+  CHECK(st->image_source == pl::ImageSource::kReadMapping);
+  const pl::NodeImageLayout* layout = s.mn->managing_node().layout(1);
+  REQUIRE(layout->modules[0].by_fields);
+
+  // What the CN serves, entry for entry, is what the MN bound from.
+  const pl::NodeImageLayout packed =
+      *pl::make_layout(std::vector<pl::ModuleSpec>{{1, 7, 7, {}, {}}});
+  const sim::OwnPdoMapping own = sim::own_pdo_mapping(style, packed, pl::ObjectScheme{});
+  const auto tpdo = s.mn->managing_node().mapped_objects(1, true);
+  const auto rpdo = s.mn->managing_node().mapped_objects(1, false);
+  REQUIRE(tpdo.size() == own.tpdo.size());
+  REQUIRE(rpdo.size() == own.rpdo.size());
+  for (std::size_t i = 0; i < tpdo.size(); ++i) CHECK(tpdo[i].to_u64() == own.tpdo[i].to_u64());
+  for (std::size_t i = 0; i < rpdo.size(); ++i) CHECK(rpdo[i].to_u64() == own.rpdo[i].to_u64());
+  auto offset_of = [&](uint8_t sub) {
+    for (const pl::PdoMapEntry& e : own.tpdo)
+      if (e.subindex == sub) return std::size_t{e.offset_bits} / 8;
+    return std::size_t{0};
+  };
+  auto out_offset_of = [&](uint8_t sub) {
+    for (const pl::PdoMapEntry& e : own.rpdo)
+      if (e.subindex == sub) return std::size_t{e.offset_bits} / 8;
+    return std::size_t{0};
+  };
+  if (style == sim::OwnMapping::kPosCycleFirst) CHECK(offset_of(4) < offset_of(2));
+  if (style == sim::OwnMapping::kGap) CHECK(offset_of(2) == offset_of(1) + 5);
+
+  ds1928::AxisDecodeState state;
+  const ds1928::AxisDecodeParams params;
+  double first = 0, last = 0;
+  int64_t first_t = 0, last_t = 0;
+  for (int i = 0; i < 200; ++i) {
+    s.io[0].outputs.output_sequence = static_cast<uint8_t>(i);
+    const auto r = s.step();
+    REQUIRE(r.bus_up);
+    REQUIRE(s.io[0].inputs_fresh);
+    const auto pres = s.mn->managing_node().pres_payload(1);
+    CHECK(s.io[0].inputs.position_hw == pl::load_le32(pres.data() + offset_of(1)));
+    CHECK(s.io[0].inputs.position_lw == pl::load_le32(pres.data() + offset_of(2)));
+    CHECK(s.io[0].inputs.pos_time_us == pl::load_le32(pres.data() + offset_of(3)));
+    CHECK(s.io[0].inputs.pos_cycle == static_cast<int8_t>(pres[offset_of(4)]));
+    CHECK(s.wire.last_preq[out_offset_of(1)] == static_cast<uint8_t>(i));
+    auto sample = ds1928::decode_axis(s.io[0], params, r.net_time, state);
+    REQUIRE(sample.fresh);
+    REQUIRE(sample.error_info == 0);
+    const double pos = static_cast<double>(sample.periods) + sample.fraction / 65536.0;
+    if (i == 0) {
+      first = pos;
+      first_t = sample.pos_time_ns;
+    }
+    last = pos;
+    last_t = sample.pos_time_ns;
+  }
+  // The simulator's motion, 100 periods/s: exact only when every register came from its bytes.
+  const double dt = static_cast<double>(last_t - first_t) / 1e9;
+  CHECK(dt > 0.15);
+  CHECK(std::fabs((last - first) - 100.0 * dt) < 0.02);
+}
+
+TEST_CASE(
+    "A CN that maps no TPDO keeps the packed image, or with layout mapping is refused by name") {
+  SECTION("auto: packed") {
+    Setup s;
+    REQUIRE(s.run_until_operational(5000));
+    const pl::CnStatus* st = s.mn->managing_node().node(1);
+    CHECK(st->image_source == pl::ImageSource::kPacked);
+    CHECK_FALSE(s.mn->managing_node().layout(1)->modules[0].by_fields);
+    s.step();
+    CHECK(s.io[0].inputs_fresh);
+  }
+  SECTION("mapping: refused, the node runs without feeding its axis") {
+    Setup s({}, 15,
+            [](ds1928::PowerlinkNodeConfig& n) { n.layout = ds1928::ImageLayout::kMapping; });
+    REQUIRE(s.run_until_operational(5000));
+    const pl::CnStatus* st = s.mn->managing_node().node(1);
+    CHECK(st->image_source == pl::ImageSource::kRefused);
+    CHECK(st->image_error == pl::MnError::kPdoRegisterNotMapped);
+    CHECK_THAT(std::string(st->image_refusal.data()), Catch::Contains("maps no TPDO"));
+    for (int i = 0; i < 20; ++i) {
+      s.step();
+      CHECK_FALSE(s.io[0].inputs_fresh);
+    }
+  }
+}
+
+TEST_CASE("A CN's own mapping that lacks a configured axis' register refuses that axis only") {
+  // The CN hosts one module (slot 1); the configuration has an axis in slot 2 as well.
+  Setup s({}, 15, {}, [](sim::PowerlinkCnConfig& c) { c.own_mapping = sim::OwnMapping::kGap; },
+          {1, 2});
+  REQUIRE(s.run_until_operational(5000));
+  const pl::CnStatus* st = s.mn->managing_node().node(1);
+  CHECK(st->image_source == pl::ImageSource::kReadMapping);
+  CHECK(st->image_error == pl::MnError::kPdoRegisterNotMapped);
+  CHECK(std::string(st->image_refusal.data()) == "slot 2: PositionHW (0x2002/1) is not mapped");
+  REQUIRE(s.mn->managing_node().layout(1)->count == 1);
+  CHECK(s.mn->managing_node().layout(1)->modules[0].slot == 1);
+  for (int i = 0; i < 20; ++i) {
+    s.step();
+    CHECK(s.io[0].inputs_fresh);  // slot 1 runs from the mapping
+    CHECK_FALSE(s.io[1].inputs_fresh);
+  }
 }

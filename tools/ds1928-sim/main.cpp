@@ -84,6 +84,7 @@ struct PowerlinkOptions {
   double duration_s = 0.0;
   bool quiet = false;
   bool no_prc = false;
+  std::string pdo_mapping = "none";
   // Software response path (--profile software-cn and the --pres-latency-* options).
   std::string profile = "hardware";
   double pres_latency_us = -1;  // -1: from the profile
@@ -235,18 +236,28 @@ int run_powerlink(const PowerlinkOptions& o) {
     cn.response.pres_latency_max_ns = static_cast<int64_t>(o.pres_latency_max_us * 1000);
     cn.response.ready_after_soc_ns = static_cast<int64_t>(o.ready_after_soc_us * 1000);
     cn.prc_capable = !o.no_prc;
+    cn.own_mapping = o.pdo_mapping == "packed"           ? sim::OwnMapping::kPacked
+                     : o.pdo_mapping == "poscycle-first" ? sim::OwnMapping::kPosCycleFirst
+                     : o.pdo_mapping == "gap"            ? sim::OwnMapping::kGap
+                                                         : sim::OwnMapping::kNone;
     // The wire shows every node's frames to the others; a socket does not return its own, so a
     // SyncResponse (which the other nodes time for PollResponse Chaining) is handed to the other
     // nodes of this process here.
-    auto node = std::make_unique<sim::PowerlinkCn>(
-        cn, [&link, &node_ptrs, node_id](std::span<const uint8_t> frame) {
-          (void)link.send(frame);
-          if (frame.size() > 17 && frame[14] == 0x06 && frame[17] == 0x06) {
-            const int64_t now = ds1928::rt::now_ns();
-            for (sim::PowerlinkCn* other : node_ptrs)
-              if (other->node_id() != node_id) other->receive(frame, now);
-          }
-        });
+    std::unique_ptr<sim::PowerlinkCn> node;
+    try {
+      node = std::make_unique<sim::PowerlinkCn>(
+          cn, [&link, &node_ptrs, node_id](std::span<const uint8_t> frame) {
+            (void)link.send(frame);
+            if (frame.size() > 17 && frame[14] == 0x06 && frame[17] == 0x06) {
+              const int64_t now = ds1928::rt::now_ns();
+              for (sim::PowerlinkCn* other : node_ptrs)
+                if (other->node_id() != node_id) other->receive(frame, now);
+            }
+          });
+    } catch (const std::invalid_argument& e) {
+      std::fprintf(stderr, "ds1928-sim: node %u: %s\n", node_id, e.what());
+      return 1;
+    }
     if (!o.quiet) {
       node->set_state_listener([node_id, start](pl::NmtState from, pl::NmtState to, int64_t t) {
         std::printf("%10.6f node %u: %s -> %s\n",
@@ -411,6 +422,11 @@ int main(int argc, char** argv) {
   plk->add_flag("--no-prc", o.no_prc,
                 "no PollResponse Chaining: the PRC feature flag is not advertised and an MN's "
                 "SyncRequests do not switch the node to PRC");
+  plk->add_option("--pdo-mapping", o.pdo_mapping,
+                  "the node's own PDO mapping (0x1A00/0x1600, readable by SDO): none (disabled, "
+                  "packed image) | packed | poscycle-first (PosCycle before PositionLW) | gap "
+                  "(a byte no object is mapped to after every register)")
+      ->check(CLI::IsMember({"none", "packed", "poscycle-first", "gap"}));
   plk->add_option("--profile", o.profile,
                   "hardware (PRes at once, polling) | software-cn (blocking responder at FIFO 50, "
                   "PRes latency with a long tail, readiness delay after SoC)")
