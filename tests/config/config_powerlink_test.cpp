@@ -201,7 +201,7 @@ TEST_CASE("The MN's mnobd.cdc supplies each node's 0x1F22 objects, identity and 
                              "node's concise DCF) is not valid: entry 0 of 1 is truncated"));
 }
 
-TEST_CASE("The MN's objects in its mnobd.cdc are the configuration; the YAML overrides each",
+TEST_CASE("The MN's objects in its mnobd.cdc are the configuration, the YAML overrides each",
           "[config][powerlink][cdc]") {
   TempDir dir;
   // openCONFIGURATOR's MN objects (its Demo_3CN project writes these with 50 ms and 40).
