@@ -1,13 +1,13 @@
 // The additional-information channels' register layout (§11.8.3.1) and the named information.
 #include "x20ds1928/info_channels.hpp"
 
-#include "x20ds1928/object_dictionary.hpp"
-
 #include <catch2/catch.hpp>
 #include <random>
-#include <utility>
 #include <set>
 #include <string>
+#include <utility>
+
+#include "x20ds1928/object_dictionary.hpp"
 
 using namespace ds1928;
 
@@ -58,7 +58,9 @@ TEST_CASE("Named additional information: EnDat 2.2's MRS codes, unique names", "
 
 namespace {
 template <typename T>
-concept SpanOf = requires(T&& w) { std::forward<T>(w).span(); };
+concept SpanOf = requires(T&& w) {
+  std::forward<T>(w).span();
+};
 }  // namespace
 
 TEST_CASE("InfoCommandWrites: the span of a temporary does not compile", "[info]") {
