@@ -106,8 +106,9 @@ void CycleWork::run_cycle(const CycleContext& ctx) noexcept {
     any_fresh |= sample.fresh;
 
     shm::AxisStatus& st = status_[i];
-    // The bus image carries the channels: each fresh input is one read of all four.
-    if (sample.fresh && st.info.configured != 0) {
+    // Each fresh input is one read of all four channels, unless the bus reads them apart.
+    const bool info_read = io_[i].info_acyclic ? io_[i].info_fresh : sample.fresh;
+    if (info_read && st.info.configured != 0) {
       update_axis_info(st.info, io_[i].inputs.info_ok, io_[i].inputs.info, ctx.start_ns);
       for (std::size_t n = 0; n < kInfoChannels; ++n) {
         c.info_value[n].store(st.info.value[n], std::memory_order_relaxed);
