@@ -47,6 +47,12 @@ CycleWork::CycleWork(const DaemonConfig& config, BusDriver& bus, shm::Publisher&
         static_cast<uint8_t>(expected ? IdentityState::Pending : IdentityState::Unchecked),
         std::memory_order_relaxed);
     identity_gate_.push_back(expected && config.topology.refuse ? 1 : 0);
+    AxisInfo& info = status_[i].info;
+    for (std::size_t n = 0; n < config.axes[i].info.size() && n < kInfoChannels; ++n) {
+      info.configured = static_cast<uint8_t>(info.configured | 1u << n);
+      if (config.axes[i].info[n].is_signed)
+        info.is_signed = static_cast<uint8_t>(info.is_signed | 1u << n);
+    }
   }
 }
 
@@ -100,6 +106,16 @@ void CycleWork::run_cycle(const CycleContext& ctx) noexcept {
     any_fresh |= sample.fresh;
 
     shm::AxisStatus& st = status_[i];
+    // Each fresh input is one read of all four channels, unless the bus reads them apart.
+    const bool info_read = io_[i].info_acyclic ? io_[i].info_fresh : sample.fresh;
+    if (info_read && st.info.configured != 0) {
+      update_axis_info(st.info, io_[i].inputs.info_ok, io_[i].inputs.info, ctx.start_ns);
+      for (std::size_t n = 0; n < kInfoChannels; ++n) {
+        c.info_value[n].store(st.info.value[n], std::memory_order_relaxed);
+        c.info_read_ns[n].store(st.info.read_ns[n], std::memory_order_relaxed);
+      }
+      c.info_valid.store(st.info.valid, std::memory_order_relaxed);
+    }
     st.sample = sample;
     st.endat_error = words.endat_error;
     st.endat_warning = words.endat_warning;

@@ -104,6 +104,11 @@ struct AxisCounters {
   std::atomic<uint8_t> identity{0};        // IdentityState, written by the normal thread
   // Cycles published per shm::AxisValidity (the metrics endpoint's publications by validity).
   std::array<std::atomic<uint64_t>, 4> published{};
+  // The additional-information channels as last published (status and metrics; each field
+  // alone is consistent, applications read the seqlock record).
+  std::array<std::atomic<int32_t>, kInfoChannels> info_value{};
+  std::array<std::atomic<int64_t>, kInfoChannels> info_read_ns{};  // 0: never valid
+  std::atomic<uint8_t> info_valid{0};
 };
 
 class CycleWork final : public CycleTask {

@@ -80,8 +80,12 @@ std::error_code Daemon::start() {
       std::make_unique<IncidentService>(config_, bus_->capture_taps(), std::string(bus().name()));
   incidents_->open();
   bus().set_incident_sink(&incidents_->sink());
+  std::vector<shm::InfoNames> info_names(config_.axes.size());
+  for (std::size_t a = 0; a < config_.axes.size(); ++a)
+    for (std::size_t n = 0; n < config_.axes[a].info.size() && n < kInfoChannels; ++n)
+      info_names[a][n] = config_.axes[a].info[n].name;
   if (auto ec = publisher_.open(config_.shm, static_cast<uint32_t>(config_.axes.size()),
-                                uint64_t{config_.cycle.period_us} * 1000)) {
+                                uint64_t{config_.cycle.period_us} * 1000, info_names)) {
     spdlog::error("shared memory {}: {}", config_.shm.name,
                   ec == shm::ShmError::kUnknownGroup
                       ? "shm.group: " + group_missing(config_.shm.group)

@@ -5,8 +5,12 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <array>
+#include <string>
+#include <vector>
 
+#include "core/clock.hpp"
 #include "daemon.hpp"
 
 namespace ds1928 {
@@ -47,6 +51,50 @@ std::string_view validity_label(std::size_t v) noexcept {
   static constexpr std::array<std::string_view, 4> kNames{"valid", "stale", "bus_down",
                                                           "module_error"};
   return v < kNames.size() ? kNames[v] : "unknown";
+}
+
+// The additional-information channels (axes[].info) as last published: one series per
+// configured channel, labelled with its number and name. The age is left out until the
+// channel's first valid read.
+void append_info_metrics(Exposition& out, const DaemonConfig& config, CycleWork& work,
+                         const std::vector<std::string>& index) {
+  struct Row {
+    std::size_t axis, channel;
+  };
+  std::vector<Row> rows;
+  for (std::size_t i = 0; i < config.axes.size() && i < work.axis_count(); ++i)
+    for (std::size_t n = 0; n < config.axes[i].info.size() && n < kInfoChannels; ++n)
+      rows.push_back({i, n});
+  if (rows.empty()) return;
+  const auto each = [&](auto value) {
+    for (const Row& r : rows) {
+      const std::string channel = std::to_string(r.channel + 1);
+      const AxisCounters& c = work.counters(r.axis);
+      value({{"axis", index[r.axis]},
+             {"name", config.axes[r.axis].name},
+             {"channel", channel},
+             {"info", config.axes[r.axis].info[r.channel].name}},
+            c, r.channel);
+    }
+  };
+  out.family("ds1928_axis_info_value", Type::Gauge,
+             "Last value of the additional-information channel (EnDatInfo0N) read with its "
+             "EnDatInfoOK bit set.");
+  each([&](metrics::Labels l, const AxisCounters& c, std::size_t n) {
+    out.sample(l, static_cast<double>(c.info_value[n].load(std::memory_order_relaxed)));
+  });
+  out.family("ds1928_axis_info_valid", Type::Gauge,
+             "1 while the channel's last read had its EnDatInfoOK bit set.");
+  each([&](metrics::Labels l, const AxisCounters& c, std::size_t n) {
+    out.sample(l, uint64_t{(c.info_valid.load(std::memory_order_relaxed) >> n) & 1u});
+  });
+  out.family("ds1928_axis_info_age_seconds", Type::Gauge,
+             "Time since the channel's value was read valid.", "seconds");
+  const int64_t now = rt::now_ns();
+  each([&](metrics::Labels l, const AxisCounters& c, std::size_t n) {
+    const int64_t at = c.info_read_ns[n].load(std::memory_order_relaxed);
+    if (at != 0) out.sample(l, static_cast<double>(std::max<int64_t>(0, now - at)) / 1e9);
+  });
 }
 
 }  // namespace
@@ -183,6 +231,7 @@ std::string Daemon::metrics_text(metrics::Format format) const {
     out.sample({{"axis", index[i]}, {"name", config_.axes[i].name}},
                work_->counters(i).stalled.load(std::memory_order_relaxed));
   append_module_error_metrics(out, config_, *work_);
+  append_info_metrics(out, config_, *work_, index);
   if (endat_) {
     std::vector<EnDatService::Counters> ec(axes);
     for (std::size_t i = 0; i < axes; ++i) ec[i] = endat_->counters(i);

@@ -113,6 +113,11 @@ struct axis_pins {
   hal_bit_t* fault;   /* a fault-class error bit is set (docs/registers.md, error bits) */
   hal_bit_t* warning; /* a warning-class error bit is set; the position stays valid */
   hal_float_t* age_us;
+  /* The additional-information channels the daemon named at load (DS1928_SHM_FEATURE_INFO):
+   * <axis>.info-<name> (value), -valid, -age-us; NULL pins where the channel is off. */
+  hal_s32_t* info_value[DS1928_INFO_CHANNELS];
+  hal_bit_t* info_valid[DS1928_INFO_CHANNELS];
+  hal_float_t* info_age_us[DS1928_INFO_CHANNELS];
   hal_float_t scale;  /* parameter: counts (LSBs of the 64-bit position) per user unit */
   hal_float_t offset; /* parameter: added after scaling */
 };
@@ -193,12 +198,38 @@ static int read_record(const struct ds1928_shm_axis* rec, struct ds1928_axis_dat
   return 0;
 }
 
+/* The channels' words of the same seqlock pass as read_record's copy: read once more with the
+ * payload (the check word covers the payload only; the equal sequence covers both). */
+static int read_record_info(const struct ds1928_shm_axis* rec, struct ds1928_axis_data* out,
+                            struct ds1928_axis_info* info, uint32_t* retries) {
+  uint64_t* dst = (uint64_t*)(void*)out;
+  uint64_t* idst = (uint64_t*)(void*)info;
+  for (unsigned attempt = 0; attempt < READ_ATTEMPTS; ++attempt) {
+    if (attempt != 0) {
+      ++*retries;
+      ds1928_shm_cpu_relax();
+    }
+    const uint64_t s1 = __atomic_load_n(&rec->seq, __ATOMIC_ACQUIRE);
+    if (s1 & 1u) continue;
+    for (unsigned i = 0; i < DS1928_AXIS_DATA_WORDS; ++i)
+      dst[i] = __atomic_load_n(&rec->u.words[i], __ATOMIC_RELAXED);
+    for (unsigned i = 0; i < DS1928_AXIS_INFO_WORDS; ++i)
+      idst[i] = __atomic_load_n(&rec->x.words[i], __ATOMIC_RELAXED);
+    __atomic_thread_fence(__ATOMIC_ACQUIRE);
+    if (__atomic_load_n(&rec->seq, __ATOMIC_RELAXED) == s1 && ds1928_shm_check(out) == out->check)
+      return 1;
+  }
+  return 0;
+}
+
 static void invalidate(struct instance_pins* p, unsigned from, unsigned to) {
   for (unsigned a = from; a < to; ++a) {
     *p->axis[a].valid = 0;
     *p->axis[a].fresh = 0;
     *p->axis[a].new_position = 0;
     *p->axis[a].stale = 1;
+    for (unsigned n = 0; n < DS1928_INFO_CHANNELS; ++n)
+      if (p->axis[a].info_valid[n]) *p->axis[a].info_valid[n] = 0;
   }
 }
 
@@ -223,10 +254,15 @@ static void read_instance(struct instance* in, int64_t now) {
       *p->phase_us = (double)phase / 1000.0;
     }
     const unsigned present = h->axis_count < in->axis_count ? h->axis_count : in->axis_count;
+    const int has_info = ds1928_shm_has_info(h);
     for (unsigned a = 0; a < present; ++a) {
       struct axis_pins* ap = &p->axis[a];
       struct ds1928_axis_data d;
-      if (!read_record(ds1928_shm_axis_record(h, a), &d, &in->retries)) {
+      struct ds1928_axis_info info;
+      memset(&info, 0, sizeof info);
+      const struct ds1928_shm_axis* rec = ds1928_shm_axis_record(h, a);
+      if (!(has_info ? read_record_info(rec, &d, &info, &in->retries)
+                     : read_record(rec, &d, &in->retries))) {
         ++in->failures; /* keep the last values, but not as valid */
         *ap->valid = 0;
         continue;
@@ -249,6 +285,15 @@ static void read_instance(struct instance* in, int64_t now) {
       *ap->warning = (d.flags & DS1928_AXIS_WARNING) != 0;
       const int64_t t = d.pos_time_ns != 0 ? d.pos_time_ns : d.publish_ns;
       *ap->age_us = (double)(now - t) / 1000.0;
+      for (unsigned n = 0; n < DS1928_INFO_CHANNELS; ++n) {
+        if (!ap->info_value[n]) continue;
+        *ap->info_value[n] = info.value[n];
+        *ap->info_valid[n] = alive && (info.valid & (1u << n)) != 0;
+        /* -1: never read valid (or a daemon without the channels) */
+        *ap->info_age_us[n] = info.age_us[n] == DS1928_INFO_AGE_NEVER
+                                  ? -1.0
+                                  : (double)info.age_us[n] + (double)(now - d.publish_ns) / 1000.0;
+      }
       if (a == 0) *p->bus_cycle = (uint32_t)d.cycle;
     }
     if (present == 0) *p->bus_cycle = (uint32_t)ds1928_shm_last_cycle(h);
@@ -456,8 +501,22 @@ static void* helper_main(void* arg) {
 
 /* ---- loading ---- */
 
-static int export_axis(const char* prefix, const char* axis, struct axis_pins* p) {
+/* The channels' names of each axis, taken from the daemon at load (loading is single-threaded). */
+static char info_names[MAX_AXES][DS1928_INFO_CHANNELS][DS1928_INFO_NAME_LEN];
+
+static int export_axis(const char* prefix, const char* axis, unsigned index, struct axis_pins* p) {
   int r = 0;
+  for (unsigned n = 0; n < DS1928_INFO_CHANNELS; ++n) {
+    const char* name = info_names[index][n];
+    if (!name[0]) continue;
+    r |= hal_pin_s32_newf(HAL_OUT, &p->info_value[n], comp_id, "%s.%s.info-%s", prefix, axis, name);
+    r |= hal_pin_bit_newf(HAL_OUT, &p->info_valid[n], comp_id, "%s.%s.info-%s-valid", prefix, axis,
+                          name);
+    r |= hal_pin_float_newf(HAL_OUT, &p->info_age_us[n], comp_id, "%s.%s.info-%s-age-us", prefix,
+                            axis, name);
+    if (r != 0) return -1;
+    *p->info_age_us[n] = -1.0;
+  }
   r |= hal_pin_float_newf(HAL_OUT, &p->position, comp_id, "%s.%s.position", prefix, axis);
   r |= hal_pin_u32_newf(HAL_OUT, &p->raw_hi, comp_id, "%s.%s.raw-hi", prefix, axis);
   r |= hal_pin_u32_newf(HAL_OUT, &p->raw_lo, comp_id, "%s.%s.raw-lo", prefix, axis);
@@ -572,6 +631,19 @@ static int setup_instance(unsigned i, struct instance* in) {
       ds1928_shm_reader_close(&r);
     }
   }
+  /* The additional-information channels' names, when the daemon runs at load. */
+  memset(info_names, 0, sizeof info_names);
+  {
+    struct ds1928_shm_reader r;
+    if (ds1928_shm_reader_open(&r, in->shm_name) == 0) {
+      for (unsigned a = 0; a < n && a < r.header->axis_count; ++a)
+        for (unsigned c = 0; c < DS1928_INFO_CHANNELS; ++c) {
+          const char* name = ds1928_shm_info_name(r.header, r.size, a, c);
+          if (name) snprintf(info_names[a][c], DS1928_INFO_NAME_LEN, "%s", name);
+        }
+      ds1928_shm_reader_close(&r);
+    }
+  }
   if (sync[i] && sync_check(in, bus_period, has_timebase) != 0) return -1;
   in->sync.enabled = sync[i] != 0;
   in->axis_count = n;
@@ -603,7 +675,7 @@ static int setup_instance(unsigned i, struct instance* in) {
     sp->offset_us = -1.0;
   }
   for (unsigned a = 0; a < n; ++a)
-    if (export_axis(pre, axis_names[a], &p->axis[a]) != 0) return -1;
+    if (export_axis(pre, axis_names[a], a, &p->axis[a]) != 0) return -1;
   return 0;
 }
 

@@ -117,6 +117,16 @@ enum ds1928_time_source {
 /* ds1928_shm_header.features: what this daemon publishes beyond the ABI version 1 base (a bit
  * set; 0 in daemons that predate it). Bits not named here are reserved. */
 #define DS1928_SHM_FEATURE_TIMEBASE 0x01u /* the time base fields (docs/shared-memory.md) */
+/* The additional-information channels (struct ds1928_axis_info in each record, their names in
+ * the table at info_names_offset; docs/shared-memory.md). */
+#define DS1928_SHM_FEATURE_INFO 0x02u
+
+/* Additional-information channels per axis (EnDatInfo01..04, datasheet 11.8.3) and the room for
+ * one channel's name (NUL-terminated) in the names table. */
+#define DS1928_INFO_CHANNELS 4u
+#define DS1928_INFO_NAME_LEN 32u
+/* ds1928_axis_info.age_us of a channel that never had a valid value. */
+#define DS1928_INFO_AGE_NEVER UINT32_MAX
 
 /* ds1928_shm_header.timebase_kind: the clock the cycle starts are aligned to. */
 enum ds1928_timebase_kind {
@@ -158,6 +168,20 @@ struct ds1928_axis_data {
 
 #define DS1928_AXIS_DATA_WORDS 9u
 
+/* The additional-information channels of one axis (DS1928_SHM_FEATURE_INFO): 5 words of 64 bits,
+ * written under the record's seqlock with the payload (ds1928_shm_read_axis_info). Channel n
+ * (0-based) is EnDatInfo0(n+1); its name is ds1928_shm_info_name(). */
+struct ds1928_axis_info {
+  int32_t value[DS1928_INFO_CHANNELS]; /* EnDatInfo0N as last read valid (INT channels signed) */
+  uint32_t
+      age_us[DS1928_INFO_CHANNELS]; /* since that read (saturating), or DS1928_INFO_AGE_NEVER */
+  uint8_t valid;      /* bit n: EnDatInfoOK bit n in the last read, the channel configured */
+  uint8_t configured; /* bit n: channel n is configured (axes[].info) */
+  uint8_t reserved[6];
+};
+
+#define DS1928_AXIS_INFO_WORDS 5u
+
 /* One axis record: a seqlock around the payload, two cache lines. */
 struct ds1928_shm_axis {
   uint64_t seq; /* atomic; odd while the daemon writes */
@@ -170,7 +194,12 @@ struct ds1928_shm_axis {
    * the largest of the last measurement window: the axis' T_IO_Input equivalent. */
   uint32_t acq_to_publish_ns;
   uint32_t acq_to_publish_max_ns;
-  uint64_t reserved[5];
+  /* Additional information (DS1928_SHM_FEATURE_INFO; zero in daemons without it), inside the
+   * seqlock: written word by word, atomically, between the two stores of `seq`. */
+  union {
+    struct ds1928_axis_info info;
+    uint64_t words[DS1928_AXIS_INFO_WORDS];
+  } x;
 };
 
 /* The object starts with this header; the records follow at offset header_size. */
@@ -201,7 +230,11 @@ struct ds1928_shm_header {
   uint32_t publish_offset_max_ns;
   uint32_t timebase_kind;        /* enum ds1928_timebase_kind */
   int64_t timebase_last_step_ns; /* how far the last re-anchor moved the cycle starts */
-  uint64_t reserved3;
+  /* DS1928_SHM_FEATURE_INFO, constant after creation: offset from the object's start of the
+   * channel names, axis_count * DS1928_INFO_CHANNELS entries of DS1928_INFO_NAME_LEN bytes
+   * (axis-major; an empty name: the channel is off). 0 in daemons without the feature. */
+  uint32_t info_names_offset;
+  uint32_t reserved3;
 };
 
 /* <name>.wait: written by readers (registration) and by the daemon (futex word). */
@@ -220,17 +253,20 @@ struct ds1928_shm_wait_area {
 
 #if defined(__cplusplus)
 static_assert(sizeof(struct ds1928_axis_data) == 8 * DS1928_AXIS_DATA_WORDS, "axis data layout");
+static_assert(sizeof(struct ds1928_axis_info) == 8 * DS1928_AXIS_INFO_WORDS, "axis info layout");
 static_assert(sizeof(struct ds1928_shm_axis) == 128, "axis record layout");
 static_assert(sizeof(struct ds1928_shm_header) == 128, "header layout");
 static_assert(sizeof(struct ds1928_shm_wait_area) == 256, "wait area layout");
 #elif defined(__STDC_VERSION__) && __STDC_VERSION__ >= 201112L
 _Static_assert(sizeof(struct ds1928_axis_data) == 8 * DS1928_AXIS_DATA_WORDS, "axis data layout");
+_Static_assert(sizeof(struct ds1928_axis_info) == 8 * DS1928_AXIS_INFO_WORDS, "axis info layout");
 _Static_assert(sizeof(struct ds1928_shm_axis) == 128, "axis record layout");
 _Static_assert(sizeof(struct ds1928_shm_header) == 128, "header layout");
 _Static_assert(sizeof(struct ds1928_shm_wait_area) == 256, "wait area layout");
 #else /* C99: a negative array size stops the compilation instead */
 typedef char
     ds1928_shm_layout_check[(sizeof(struct ds1928_axis_data) == 8 * DS1928_AXIS_DATA_WORDS) &&
+                                    sizeof(struct ds1928_axis_info) == 8 * DS1928_AXIS_INFO_WORDS &&
                                     sizeof(struct ds1928_shm_axis) == 128 &&
                                     sizeof(struct ds1928_shm_header) == 128 &&
                                     sizeof(struct ds1928_shm_wait_area) == 256
@@ -293,6 +329,52 @@ static inline int ds1928_shm_read_axis(const struct ds1928_shm_header* h, uint32
     if (__atomic_load_n(&rec->seq, __ATOMIC_RELAXED) == s1) return 0;
   }
   return -EBUSY;
+}
+
+/* The daemon publishes the additional-information channels (DS1928_SHM_FEATURE_INFO). */
+static inline int ds1928_shm_has_info(const struct ds1928_shm_header* h) {
+  return (__atomic_load_n(&h->features, __ATOMIC_ACQUIRE) & DS1928_SHM_FEATURE_INFO) != 0;
+}
+
+/* Consistent copy of one record with its additional-information channels (one seqlock pass).
+ * Returns as ds1928_shm_read_axis, and -ENOTSUP when the daemon publishes no channels. */
+static inline int ds1928_shm_read_axis_info(const struct ds1928_shm_header* h, uint32_t axis,
+                                            struct ds1928_axis_data* out,
+                                            struct ds1928_axis_info* info) {
+  if (axis >= h->axis_count) return -EINVAL;
+  if (!ds1928_shm_has_info(h)) return -ENOTSUP;
+  const struct ds1928_shm_axis* rec = ds1928_shm_axis_record(h, axis);
+  uint64_t* dst = (uint64_t*)(void*)out;
+  uint64_t* idst = (uint64_t*)(void*)info;
+  for (unsigned attempt = 0; attempt < 100000u; ++attempt) {
+    const uint64_t s1 = __atomic_load_n(&rec->seq, __ATOMIC_ACQUIRE);
+    if (s1 & 1u) {
+      ds1928_shm_cpu_relax();
+      continue;
+    }
+    for (unsigned i = 0; i < DS1928_AXIS_DATA_WORDS; ++i)
+      dst[i] = __atomic_load_n(&rec->u.words[i], __ATOMIC_RELAXED);
+    for (unsigned i = 0; i < DS1928_AXIS_INFO_WORDS; ++i)
+      idst[i] = __atomic_load_n(&rec->x.words[i], __ATOMIC_RELAXED);
+    __atomic_thread_fence(__ATOMIC_ACQUIRE);
+    if (__atomic_load_n(&rec->seq, __ATOMIC_RELAXED) == s1) return 0;
+  }
+  return -EBUSY;
+}
+
+/* The name of channel `channel` (0-based) of `axis` as axes[].info gives it, or NULL when the
+ * daemon publishes no channels, the arguments are out of range or the channel is off. `size` is
+ * the mapping's size (ds1928_shm_reader.size). */
+static inline const char* ds1928_shm_info_name(const struct ds1928_shm_header* h, size_t size,
+                                               uint32_t axis, uint32_t channel) {
+  if (!ds1928_shm_has_info(h) || axis >= h->axis_count || channel >= DS1928_INFO_CHANNELS)
+    return NULL;
+  const uint64_t at = (uint64_t)h->info_names_offset +
+                      ((uint64_t)axis * DS1928_INFO_CHANNELS + channel) * DS1928_INFO_NAME_LEN;
+  if (h->info_names_offset == 0 || at + DS1928_INFO_NAME_LEN > size) return NULL;
+  const char* name = (const char*)h + at;
+  if (name[0] == '\0' || memchr(name, '\0', DS1928_INFO_NAME_LEN) == NULL) return NULL;
+  return name;
 }
 
 static inline uint32_t ds1928_shm_daemon_state(const struct ds1928_shm_header* h) {

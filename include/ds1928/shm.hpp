@@ -70,6 +70,19 @@ class ShmReader {
     return {};
   }
 
+  // The additional-information channels (DS1928_SHM_FEATURE_INFO): a record with its channels
+  // (errc::not_supported from a daemon without them) and a channel's name (nullptr: off).
+  [[nodiscard]] bool has_info() const noexcept { return ds1928_shm_has_info(reader_.header) != 0; }
+  [[nodiscard]] std::error_code read(uint32_t axis, ds1928_axis_data& out,
+                                     ds1928_axis_info& info) const noexcept {
+    if (const int rc = ds1928_shm_read_axis_info(reader_.header, axis, &out, &info); rc != 0)
+      return {-rc, std::generic_category()};
+    return {};
+  }
+  [[nodiscard]] const char* info_name(uint32_t axis, uint32_t channel) const noexcept {
+    return ds1928_shm_info_name(reader_.header, reader_.size, axis, channel);
+  }
+
   // ds1928_shm_wait: the next publication whose cycle index is a multiple of `every`.
   [[nodiscard]] ShmWait wait(uint64_t& seen_cycle, uint32_t every, int64_t deadline_ns,
                              std::error_code& error) const noexcept {

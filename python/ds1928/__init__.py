@@ -10,10 +10,10 @@ Pure Python (mmap + struct on the ABI of include/ds1928/shm.h, docs/shared-memor
     ...     use(s.axes)                               # publication + 50 µs, every 2nd cycle
     >>> ds1928.Control().status()
 """
-from .shm import (ABI_VERSION, AbiMismatch, AxisData, DaemonStopped, NotReady, Reader, Sample,
-                  Timebase, TornRead, check_value)
+from .shm import (ABI_VERSION, AbiMismatch, AxisData, DaemonStopped, InfoChannel, NotReady,
+                  Reader, Sample, Timebase, TornRead, check_value)
 from .control import Control, ControlError, DaemonUnreachable
 
 __all__ = ["ABI_VERSION", "AbiMismatch", "AxisData", "Control", "ControlError", "DaemonStopped",
-           "DaemonUnreachable", "NotReady", "Reader", "Sample", "Timebase", "TornRead", "check_value"]
+           "DaemonUnreachable", "InfoChannel", "NotReady", "Reader", "Sample", "Timebase", "TornRead", "check_value"]
 __version__ = "0.1.0"

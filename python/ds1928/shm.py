@@ -16,6 +16,7 @@ import os
 import struct
 import time
 from dataclasses import dataclass
+from typing import Optional
 
 SHM_MAGIC = 0x4D48533832393144  # "D1928SHM"
 WAIT_MAGIC = 0x5449415738323944  # "D928WAIT"
@@ -38,6 +39,12 @@ TIME_SOURCE = {0: "none", 1: "nettime", 2: "rx_timestamp"}
 STATE = {0: "starting", 1: "running", 2: "stopping", 3: "stopped"}
 FLAG_NEW_POSITION, FLAG_FRACTION_VALID, FLAG_FRESH = 0x01, 0x02, 0x04
 FEATURE_TIMEBASE = 0x01  # header.features: the time base fields are published
+FEATURE_INFO = 0x02  # header.features: the additional-information channels are published
+INFO_CHANNELS = 4
+INFO_NAME_LEN = 32
+INFO_AGE_NEVER = 0xFFFFFFFF
+INFO_WORDS = 5  # struct ds1928_axis_info, at record offset 88 (word 11), under the seqlock
+_INFO = struct.Struct("<4i4IBB6x")
 TIMEBASE_KIND = {0: "monotonic", 1: "tai"}
 # The module's error bits (docs/registers.md, error bits): a fault- / warning-class bit is set;
 # an analogue error holds the last good position (validity stale).
@@ -118,6 +125,20 @@ class AxisData:
     def position(self):
         """Whole and fractional sine periods as a float."""
         return self.periods + self.fraction / 65536.0
+
+    info: tuple = ()  # InfoChannel per configured channel (a daemon with FEATURE_INFO)
+
+
+@dataclass(frozen=True)
+class InfoChannel:
+    """One configured additional-information channel (EnDatInfo0N), as ds1928ctl --json
+    position prints it: the last value read with EnDatInfoOK set, whether the last read had it,
+    and that value's age (None: never read valid)."""
+    channel: int  # 1..4
+    name: str
+    value: int
+    valid: bool
+    age_us: Optional[int]
 
 
 def _shm_path(name):
@@ -291,6 +312,24 @@ class Reader:
     def has_timebase(self):
         return bool(self.features & FEATURE_TIMEBASE)
 
+    @property
+    def has_info(self):
+        return bool(self.features & FEATURE_INFO)
+
+    def info_name(self, axis, channel):
+        """The name of channel `channel` (0-based) of `axis` (axes[].info), or None."""
+        if not self.has_info or not 0 <= axis < self.axis_count or \
+                not 0 <= channel < INFO_CHANNELS:
+            return None
+        offset = self._u32[120 // 4]
+        at = offset + (axis * INFO_CHANNELS + channel) * INFO_NAME_LEN
+        if offset == 0 or at + INFO_NAME_LEN > len(self._map):
+            return None
+        raw = bytes(self._map[at:at + INFO_NAME_LEN])
+        if raw[0] == 0 or b"\0" not in raw:
+            return None
+        return raw.split(b"\0", 1)[0].decode("utf-8", "replace")
+
     def timebase(self):
         """The time base, or None when the daemon publishes none (an older daemon)."""
         if not self.has_timebase:
@@ -380,24 +419,38 @@ class Reader:
         return time.clock_gettime_ns(time.CLOCK_MONOTONIC) - last <= tolerance
 
     # -- records ---------------------------------------------------------------------------
-    def words(self, axis, attempts=100_000):
-        """The nine payload words of one consistent copy (seqlock + check word)."""
+    def words(self, axis, attempts=100_000, info=False):
+        """The nine payload words of one consistent copy (seqlock + check word); with
+        info=True a pair (payload words, the channels' five words) from the same copy."""
         if not 0 <= axis < self.axis_count:
             raise IndexError(f"axis {axis}: the daemon has {self.axis_count} axes")
         u64 = self._u64
         seq_index = (self.header_size + axis * self.record_size) // 8
         first, stop = seq_index + 1, seq_index + 1 + DATA_WORDS
+        info_first = seq_index + 11
         for _ in range(attempts):
             s1 = u64[seq_index]
             if s1 & 1:
                 continue
             words = u64[first:stop].tolist()
+            extra = u64[info_first:info_first + INFO_WORDS].tolist() if info else None
             if u64[seq_index] == s1 and check_value(words) == words[8]:
-                return words
+                return (words, extra) if info else words
         raise TornRead(f"{self.name}: axis {axis} stayed locked for {attempts} attempts")
 
     def axis(self, axis=0):
-        w = self.words(axis)
+        channels = ()
+        if self.has_info:
+            w, extra = self.words(axis, info=True)
+            values = _INFO.unpack(struct.pack(f"<{INFO_WORDS}Q", *extra))
+            valid, configured = values[8], values[9]
+            channels = tuple(
+                InfoChannel(channel=n + 1, name=self.info_name(axis, n) or f"info{n + 1}",
+                            value=values[n], valid=bool(valid & (1 << n)),
+                            age_us=None if values[4 + n] == INFO_AGE_NEVER else values[4 + n])
+                for n in range(INFO_CHANNELS) if configured & (1 << n))
+        else:
+            w = self.words(axis)
         (raw, periods, pos_time, publish, cycle, sdc, pos_time_raw, endat_error, endat_warning,
          fraction, time_source, pos_cycle, error_info, validity, flags, _reserved,
          _check) = _PAYLOAD.unpack(struct.pack("<9Q", *w))
@@ -407,7 +460,7 @@ class Reader:
                         endat_warning=endat_warning,
                         time_source=TIME_SOURCE.get(time_source, "none"), pos_cycle=pos_cycle,
                         error_info=error_info, state=VALIDITY.get(validity, "unknown"),
-                        flags=flags)
+                        flags=flags, info=channels)
 
     def axes(self):
         return [self.axis(a) for a in range(self.axis_count)]

@@ -511,6 +511,18 @@ ExchangeResult CanioBus::exchange(std::span<AxisIo> axes, int64_t, uint64_t) noe
   // SYNC).
   step_nmt(now);
   step_sdo(now);
+  // The additional-information channels are read by SDO (step_sdo): a completed read is handed
+  // over once.
+  for (std::size_t i = 0; i < n; ++i) {
+    axes[i].info_acyclic = true;
+    axes[i].info_fresh = false;
+    AxisSdo& a = axis_sdo_[i];
+    if (!a.info_ready) continue;
+    a.info_ready = false;
+    axes[i].inputs.info_ok = a.info_ok;
+    axes[i].inputs.info = a.info;
+    axes[i].info_fresh = true;
+  }
   // The bus cycles; which axis is usable is per axis (AxisIo::axis_up).
   state_.store(BusState::Operational, std::memory_order_relaxed);
   result.bus_up = true;

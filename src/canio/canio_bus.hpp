@@ -46,6 +46,7 @@
 #include "canio/sync_pairing.hpp"
 #include "core/bus.hpp"
 #include "core/spsc_queue.hpp"
+#include "x20ds1928/info_channels.hpp"
 #include "x20ds1928/object_dictionary.hpp"
 #include "x20ds1928/sdo_mapping.hpp"
 
@@ -360,7 +361,7 @@ class CanioBus final : public BusDriver, private RegisterTarget {
 
   // ---- Register access over SDO (canio_sdo.cpp): one job at a time — a module's configuration,
   // its check after a silence, or one of the daemon's requests — made of expedited transfers.
-  enum class SdoJobKind : uint8_t { None, Configure, Check, Request, Identity };
+  enum class SdoJobKind : uint8_t { None, Configure, Check, Request, Identity, Info };
   enum class SdoStage : uint8_t { Write, ReadBack, Heartbeat, Rescan, Read };
   struct SdoJob {
     SdoJobKind kind = SdoJobKind::None;
@@ -369,7 +370,12 @@ class CanioBus final : public BusDriver, private RegisterTarget {
     uint8_t step = 0;     // Configure: start-up write; Check: register read
     bool verify = false;  // Request writes: read back
     RegisterRequest request{};
-    std::array<RegisterWrite, kStartupWriteCount> writes{};  // Configure, in start-up order
+    // Configure, in start-up order, then the additional-information channels' EnDatInfoCmd0N.
+    std::array<RegisterWrite, kStartupWriteCount + kInfoChannels> writes{};
+    uint8_t write_count = 0;
+    // Info: EnDatInfoOK (step 0), then each configured channel's EnDatInfo0N.
+    uint8_t info_ok = 0;
+    std::array<uint16_t, kInfoChannels> info{};
     // Configure: the first read-back that differed (it does not stop the configuration).
     std::error_code mismatch;
     uint16_t mismatch_reg = 0;
@@ -392,7 +398,11 @@ class CanioBus final : public BusDriver, private RegisterTarget {
   };
   struct AxisSdo {             // cycle thread
     bool reconfigure = false;  // configure the module (or check it after a silence)
-    bool fresh = false;        // configure anew, no check (the node announced a reset)
+    int64_t info_due_ns = 0;   // the next read of the additional-information channels
+    bool info_ready = false;   // a completed read for the next exchange to hand over
+    uint8_t info_ok = 0;
+    std::array<uint16_t, kInfoChannels> info{};
+    bool fresh = false;  // configure anew, no check (the node announced a reset)
     int64_t retry_at_ns = 0;
     int64_t backoff_ns = 0;   // unconfigurable: next retry after this (doubling, bounded)
     unsigned definitive = 0;  // configurations in a row that got a definitive wrong answer
@@ -439,6 +449,10 @@ class CanioBus final : public BusDriver, private RegisterTarget {
   void configure_step_done(int64_t now, std::error_code ec, uint32_t value) noexcept;
   void check_step_done(int64_t now, std::error_code ec, uint32_t value, uint8_t size) noexcept;
   void request_step_done(std::error_code ec, uint32_t value) noexcept;
+  // The additional-information channels (canio_sdo.cpp): the register the Info job's step reads,
+  // and the step's answer.
+  [[nodiscard]] static uint16_t info_step_reg(uint8_t step) noexcept;
+  void info_step_done(std::error_code ec, uint32_t value) noexcept;
   void after_writes(int64_t now) noexcept;
   void unconfigurable(int64_t now, uint16_t reg, uint32_t value, std::error_code ec) noexcept;
   void finish_configure(int64_t now, std::error_code ec, bool completed) noexcept;

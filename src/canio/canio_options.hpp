@@ -95,6 +95,9 @@ struct CanioBusConfig {
   // The bus loop starts at most one SDO transfer this often (and at most one a cycle): the acyclic
   // share of the bus-load budget.
   uint32_t sdo_interval_us = 5000;
+  // The additional-information channels (axes[].info) are read by SDO (EnDatInfoOK, then each
+  // configured EnDatInfo0N) once per this interval per axis, off the cycle's objects.
+  uint32_t info_interval_ms = 1000;
   // Register → (index, subindex) overrides of the default SDO scheme (same as POWERLINK's,
   // docs/powerlink.md §SDO mapping): the configured index addresses slot 1.
   std::map<uint16_t, std::pair<uint16_t, uint8_t>> sdo_overrides;

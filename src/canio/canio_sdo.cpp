@@ -31,6 +31,18 @@ constexpr int64_t kDeferLimitNs = 2000 * kMs;
 // bounds the cycle's time in step_sdo().
 constexpr int kMaxDecisionsPerStep = 8;
 
+// The Info job's steps: 0 reads EnDatInfoOK, n + 1 channel n's EnDatInfo0N; the next step at or
+// after `from` that has a configured channel, kInfoChannels + 1 when none is left.
+uint8_t next_info_step(const ModuleSettings& m, uint8_t from) noexcept {
+  if (from == 0) return 0;
+  for (uint8_t s = from; s <= kInfoChannels; ++s)
+    if (m.info_cmd[s - 1] != 0) return s;
+  return static_cast<uint8_t>(kInfoChannels + 1);
+}
+bool has_info(const ModuleSettings& m) noexcept {
+  return next_info_step(m, 1) <= kInfoChannels;
+}
+
 // CiA 301 aborts that say "this object cannot be read" — the write stands, it just cannot be
 // verified: 0x06010000 unsupported access, 0x06010001 attempt to read a write-only object.
 [[nodiscard]] bool cannot_be_read(std::error_code ec) noexcept {
@@ -207,6 +219,17 @@ bool CanioBus::next_job(int64_t now) noexcept {
     start_request(r);
     return true;
   }
+  // The additional-information channels of a configured axis, when due (one axis a job).
+  for (std::size_t i = 0; i < n; ++i) {
+    AxisSdo& a = axis_sdo_[i];
+    if (a.reconfigure || now < a.info_due_ns || !has_info(options_.axes[i].module)) continue;
+    a.info_due_ns = now + int64_t{options_.bus.info_interval_ms} * kMs;
+    job_ = SdoJob{};
+    job_.kind = SdoJobKind::Info;
+    job_.stage = SdoStage::Read;
+    job_.axis = static_cast<uint16_t>(i);
+    return true;
+  }
   // The daemon's next request. One for an axis being configured waits (its identification needs
   // the Rescan first); while the waiting room is full it stays queued.
   offer_now_ = now;
@@ -232,7 +255,43 @@ void CanioBus::start_configure(std::size_t axis) noexcept {
   job_.kind = SdoJobKind::Configure;
   job_.stage = SdoStage::Write;
   job_.axis = static_cast<uint16_t>(axis);
-  job_.writes = startup_writes(options_.axes[axis].module);
+  const ModuleSettings& module = options_.axes[axis].module;
+  const auto startup = startup_writes(module);
+  std::copy(startup.begin(), startup.end(), job_.writes.begin());
+  job_.write_count = static_cast<uint8_t>(startup.size());
+  // The additional-information channels after the start-up configuration (as the POWERLINK MN
+  // writes them): a refusal is reported like any register's but EnDatMode's.
+  const InfoCommandWrites info = info_command_writes(module);
+  for (const RegisterWrite& w : info.span()) job_.writes[job_.write_count++] = w;
+}
+
+uint16_t CanioBus::info_step_reg(uint8_t step) noexcept {
+  if (step == 0) return reg::kEnDatInfoOk;
+  constexpr const RegisterInfo& r = od_entry("EnDatInfo01..04");
+  return static_cast<uint16_t>(r.number + (step - 1) * r.stride);
+}
+
+void CanioBus::info_step_done(std::error_code ec, uint32_t value) noexcept {
+  const std::size_t axis = job_.axis;
+  if (ec) {
+    // This round is lost: the last values stay (their age grows); the next round is due as
+    // planned.
+    single_writer_add(axis_counters_[axis].sdo_errors);
+    job_.kind = SdoJobKind::None;
+    return;
+  }
+  if (job_.step == 0) {
+    job_.info_ok = static_cast<uint8_t>(value);
+  } else {
+    job_.info[job_.step - 1] = static_cast<uint16_t>(value);
+  }
+  job_.step = next_info_step(options_.axes[axis].module, static_cast<uint8_t>(job_.step + 1));
+  if (job_.step <= kInfoChannels) return;
+  AxisSdo& a = axis_sdo_[axis];
+  a.info_ok = job_.info_ok;
+  a.info = job_.info;
+  a.info_ready = true;
+  job_.kind = SdoJobKind::None;
 }
 
 void CanioBus::start_request(const RegisterRequest& request) noexcept {
@@ -260,6 +319,8 @@ CanioBus::SdoOp CanioBus::current_op() const noexcept {
       const RegisterWrite& w = job_.writes[job_.step];
       return {w.reg, w.size, job_.stage == SdoStage::Write, w.value};
     }
+    case SdoJobKind::Info:
+      return {info_step_reg(job_.step), static_cast<uint8_t>(job_.step == 0 ? 1 : 2), false, 0};
     case SdoJobKind::Check: {
       const RegisterWrite c = configuration_checks(options_.axes[job_.axis].module)[job_.step];
       return {c.reg, c.size, false, 0};
@@ -325,6 +386,9 @@ void CanioBus::transfer_done(int64_t now, std::error_code ec, uint32_t value,
       return;
     case SdoJobKind::Identity:
       identity_step_done(now, ec, value);
+      return;
+    case SdoJobKind::Info:
+      info_step_done(ec, value);
       return;
     case SdoJobKind::None:
       return;
@@ -431,7 +495,7 @@ void CanioBus::configure_step_done(int64_t now, std::error_code ec, uint32_t val
     }
   }
   job_.stage = SdoStage::Write;
-  if (++job_.step < job_.writes.size()) return;
+  if (++job_.step < job_.write_count) return;
   after_writes(now);
 }
 

@@ -92,6 +92,7 @@ void parse_canio(Section s, CanioBusConfig& c) {
         {{"canopen_sdo", CanAcyclicTransport::CanopenSdo}, {"none", CanAcyclicTransport::None}});
     acyclic.integer("sdo_timeout_ms", c.sdo_timeout_ms, 1, 10000, "ms");
     acyclic.integer("sdo_interval_us", c.sdo_interval_us, 0, 10'000'000, "µs");
+    acyclic.integer("info_interval_ms", c.info_interval_ms, 10, 3'600'000, "ms");
     parse_sdo_objects(acyclic, "sdo_objects", c.sdo_overrides);
     acyclic.finish();
   }
@@ -329,7 +330,8 @@ void dump_canio(std::ostream& o, const CanioBusConfig& c) {
     << "    transport: " << (c.acyclic == CanAcyclicTransport::None ? "none" : "canopen_sdo")
     << "\n"
     << "    sdo_timeout_ms: " << c.sdo_timeout_ms << "\n"
-    << "    sdo_interval_us: " << c.sdo_interval_us << "\n";
+    << "    sdo_interval_us: " << c.sdo_interval_us << "\n"
+    << "    info_interval_ms: " << c.info_interval_ms << "\n";
   if (!c.sdo_overrides.empty()) {
     o << "    sdo_objects:\n";
     for (const auto& [reg, obj] : c.sdo_overrides)

@@ -29,6 +29,12 @@ struct AxisIo {
   // The axis' own part of the bus is up (its node answers and is configured). False makes only
   // this axis BusDown while the others keep cycling (CAN-I/O: one node being configured).
   bool axis_up = true;
+  // The additional-information channels (ModuleInputs::info_ok/info). A bus whose image carries
+  // them (simulated, a POWERLINK mapping) leaves info_acyclic false: every fresh input is a read.
+  // One that reads them acyclically (CAN-I/O by SDO) sets info_acyclic, and info_fresh in the
+  // cycle that brings a completed read (inputs.info_ok/info then hold it, whatever inputs_fresh).
+  bool info_acyclic = false;
+  bool info_fresh = false;
 };
 
 // The bus' NetTime at a reference instant. A module's 32-bit PosTime is unwrapped against it:

@@ -36,6 +36,9 @@ std::optional<SchemeHit> lookup(const ObjectScheme& scheme, uint16_t index, uint
   const uint8_t first_byte = h.input ? kSchemeRxByteFirstSub : kSchemeTxByteFirstSub;
   for (const SchemeRegister& r : table)
     if (r.subindex == sub) h.fixed = &r;
+  if (h.input)
+    for (const SchemeRegister& r : kSchemeInfoInputs)
+      if (r.subindex == sub) h.fixed = &r;
   if (!h.fixed && sub >= first_byte && sub < first_byte + kMaxFlatstreamMtu)
     h.byte_no = static_cast<uint8_t>(sub - first_byte + 1);
   if (!h.fixed && h.byte_no == 0) return std::nullopt;

@@ -44,6 +44,16 @@ inline constexpr std::array<SchemeRegister, 7> kSchemeInputs{{
     {ImageField::kInputSequence, 7, 1, "InputSequence"},
 }};
 inline constexpr uint8_t kSchemeRxByteFirstSub = 8;
+// Optional inputs, taken when the mapping carries them (never required, not in the packed
+// block): EnDatInfoOK and EnDatInfo01..04, after the last RxByte's sub-index (8 + 27 = 35).
+inline constexpr std::array<SchemeRegister, 5> kSchemeInfoInputs{{
+    {ImageField::kInfoOk, 0x30, 1, "EnDatInfoOK"},
+    {ImageField::kInfo1, 0x31, 2, "EnDatInfo01"},
+    {ImageField::kInfo2, 0x32, 2, "EnDatInfo02"},
+    {ImageField::kInfo3, 0x33, 2, "EnDatInfo03"},
+    {ImageField::kInfo4, 0x34, 2, "EnDatInfo04"},
+}};
+static_assert(kSchemeInfoInputs[0].subindex >= kSchemeRxByteFirstSub + kMaxFlatstreamMtu);
 inline constexpr std::array<SchemeRegister, 2> kSchemeOutputs{{
     {ImageField::kOutputSequence, 1, 1, "OutputSequence"},
     {ImageField::kAckErrorInfo, 2, 1, "AckErrorInfo"},

@@ -83,6 +83,16 @@ uint32_t get32(const uint8_t* p, uint16_t at) noexcept {
 uint8_t get8(const uint8_t* p, uint16_t at) noexcept {
   return at == kNotMapped ? 0 : p[at];
 }
+uint16_t get16(const uint8_t* p, uint16_t at) noexcept {
+  return at == kNotMapped ? 0 : static_cast<uint16_t>(p[at] | p[at + 1] << 8);
+}
+void put16(uint8_t* p, uint16_t at, uint16_t v) noexcept {
+  if (at == kNotMapped) return;
+  p[at] = static_cast<uint8_t>(v);
+  p[at + 1] = static_cast<uint8_t>(v >> 8);
+}
+constexpr std::array<ImageField, 4> kInfoFields{ImageField::kInfo1, ImageField::kInfo2,
+                                                ImageField::kInfo3, ImageField::kInfo4};
 constexpr std::size_t f(ImageField x) noexcept {
   return static_cast<std::size_t>(x);
 }
@@ -103,6 +113,9 @@ bool write_inputs(std::span<uint8_t> payload, const ModuleMapping& m,
     put(p, o.fixed[f(ImageField::kErrorInfo)], in.error_info);
     put(p, o.fixed[f(ImageField::kInputSequence)], in.input_sequence);
     for (std::size_t b = 0; b < m.input_mtu; ++b) put(p, o.rx[b], in.rx_bytes[b]);
+    put(p, o.fixed[f(ImageField::kInfoOk)], in.info_ok);
+    for (std::size_t n = 0; n < kInfoFields.size(); ++n)
+      put16(p, o.fixed[f(kInfoFields[n])], in.info[n]);
     return true;
   }
   if (m.pres_offset + pres_module_size(m.input_mtu) > payload.size()) return false;
@@ -133,6 +146,9 @@ bool read_inputs(std::span<const uint8_t> payload, const ModuleMapping& m,
     in.input_sequence = get8(p, o.fixed[f(ImageField::kInputSequence)]);
     in.rx_bytes.fill(0);
     for (std::size_t b = 0; b < m.input_mtu; ++b) in.rx_bytes[b] = get8(p, o.rx[b]);
+    in.info_ok = get8(p, o.fixed[f(ImageField::kInfoOk)]);
+    for (std::size_t n = 0; n < kInfoFields.size(); ++n)
+      in.info[n] = get16(p, o.fixed[f(kInfoFields[n])]);
     return true;
   }
   if (m.pres_offset + pres_module_size(m.input_mtu) > payload.size()) return false;

@@ -68,8 +68,14 @@ enum class ImageField : uint8_t {
   kInputSequence,
   kOutputSequence,
   kAckErrorInfo,
+  // The additional-information channels (§11.8.3): only from a PDO mapping that maps them.
+  kInfoOk,
+  kInfo1,
+  kInfo2,
+  kInfo3,
+  kInfo4,
 };
-inline constexpr std::size_t kImageFieldCount = 9;
+inline constexpr std::size_t kImageFieldCount = 14;
 inline constexpr uint16_t kNotMapped = 0xFFFF;
 struct FieldOffsets {
   FieldOffsets() noexcept {

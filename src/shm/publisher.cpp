@@ -140,16 +140,33 @@ ds1928_axis_data to_data(const AxisStatus& status, uint64_t cycle, int64_t now_n
   return d;
 }
 
-// Seqlock write: odd sequence, release fence, the words, even sequence (release).
-void write_record(ds1928_shm_axis& record, const ds1928_axis_data& data) noexcept {
+ds1928_axis_info to_info(const AxisInfo& info, int64_t now_ns) noexcept {
+  ds1928_axis_info out{};
+  for (std::size_t n = 0; n < kInfoChannels; ++n) {
+    out.value[n] = info.value[n];
+    out.age_us[n] = info_age_us(info, n, now_ns);
+  }
+  out.valid = info.valid;
+  out.configured = info.configured;
+  return out;
+}
+
+// Seqlock write: odd sequence, release fence, the words (payload and channels), even sequence
+// (release).
+void write_record(ds1928_shm_axis& record, const ds1928_axis_data& data,
+                  const ds1928_axis_info& info) noexcept {
   uint64_t words[DS1928_AXIS_DATA_WORDS];
   std::memcpy(words, &data, sizeof(words));
+  uint64_t info_words[DS1928_AXIS_INFO_WORDS];
+  std::memcpy(info_words, &info, sizeof(info_words));
   auto seq = atomic(record.seq);
   const uint64_t s = seq.load(std::memory_order_relaxed);
   seq.store(s + 1, std::memory_order_relaxed);
   std::atomic_thread_fence(std::memory_order_release);
   for (unsigned i = 0; i < DS1928_AXIS_DATA_WORDS; ++i)
     atomic(record.u.words[i]).store(words[i], std::memory_order_relaxed);
+  for (unsigned i = 0; i < DS1928_AXIS_INFO_WORDS; ++i)
+    atomic(record.x.words[i]).store(info_words[i], std::memory_order_relaxed);
   seq.store(s + 2, std::memory_order_release);
 }
 
@@ -178,7 +195,7 @@ void futex_wake_all(std::atomic<uint32_t>& word) {
 }  // namespace
 
 std::error_code Publisher::open(const ShmConfig& config, uint32_t axis_count,
-                                uint64_t cycle_period_ns) {
+                                uint64_t cycle_period_ns, std::span<const InfoNames> info_names) {
   close();
   if (!valid_name(config.name)) return ShmError::kInvalidName;
   // No axes is valid (a POWERLINK MN with generic CNs only): the header alone still tells
@@ -199,8 +216,11 @@ std::error_code Publisher::open(const ShmConfig& config, uint32_t axis_count,
   if (name_held_by_live_daemon(config.name)) return ShmError::kNameInUse;
 
   const std::string wait_name = config.name + DS1928_SHM_WAIT_SUFFIX;
-  const std::size_t size =
+  // The records, then the channels' names table (a reader of the version 1 base ignores it).
+  const std::size_t names_offset =
       sizeof(ds1928_shm_header) + std::size_t{axis_count} * sizeof(ds1928_shm_axis);
+  const std::size_t size =
+      names_offset + std::size_t{axis_count} * DS1928_INFO_CHANNELS * DS1928_INFO_NAME_LEN;
   // Readers register in the wait area, so it is writable wherever the data is readable.
   const uint32_t wait_mode = config.mode | ((config.mode & 0444) >> 1);
   const uint64_t generation = static_cast<uint64_t>(rt::realtime_ns());
@@ -235,12 +255,22 @@ std::error_code Publisher::open(const ShmConfig& config, uint32_t axis_count,
   header_->cycle_period_ns = cycle_period_ns;
   header_->daemon_pid = static_cast<int32_t>(getpid());
   // The time base fields are atomic; t0 stays 0 until the first cycle with a context.
-  header_->features = DS1928_SHM_FEATURE_TIMEBASE;
+  header_->features = DS1928_SHM_FEATURE_TIMEBASE | DS1928_SHM_FEATURE_INFO;
+  header_->info_names_offset = static_cast<uint32_t>(names_offset);
+  char* names = static_cast<char*>(map) + names_offset;
+  for (std::size_t a = 0; a < std::min<std::size_t>(axis_count, info_names.size()); ++a)
+    for (std::size_t n = 0; n < kInfoChannels; ++n) {
+      const std::string& name = info_names[a][n];
+      std::memcpy(names + (a * DS1928_INFO_CHANNELS + n) * DS1928_INFO_NAME_LEN, name.data(),
+                  std::min<std::size_t>(name.size(), DS1928_INFO_NAME_LEN - 1));
+    }
   for (uint32_t i = 0; i < axis_count; ++i) {
     ds1928_axis_data empty{};
     empty.validity = DS1928_AXIS_BUS_DOWN;
     empty.check = ds1928_shm_check(&empty);
-    write_record(records_[i], empty);
+    ds1928_axis_info none{};
+    for (uint32_t& age : none.age_us) age = DS1928_INFO_AGE_NEVER;
+    write_record(records_[i], empty, none);
   }
   atomic(header_->daemon_state).store(DS1928_DAEMON_STARTING, std::memory_order_relaxed);
   atomic(header_->magic).store(DS1928_SHM_MAGIC, std::memory_order_release);
@@ -462,7 +492,8 @@ void Publisher::publish(const CycleContext& ctx, std::span<const AxisStatus> axe
 void Publisher::publish_records(uint64_t cycle, std::span<const AxisStatus> axes,
                                 int64_t now) noexcept {
   const std::size_t n = axes.size() < axis_count_ ? axes.size() : axis_count_;
-  for (std::size_t i = 0; i < n; ++i) write_record(records_[i], to_data(axes[i], cycle, now));
+  for (std::size_t i = 0; i < n; ++i)
+    write_record(records_[i], to_data(axes[i], cycle, now), to_info(axes[i].info, now));
 }
 
 namespace {

@@ -4,6 +4,7 @@
 
 #include <pthread.h>
 
+#include <array>
 #include <atomic>
 #include <cstdint>
 #include <span>
@@ -11,6 +12,7 @@
 #include <system_error>
 #include <vector>
 
+#include "core/axis_info.hpp"
 #include "core/axis_sample.hpp"
 #include "core/cycle_engine.hpp"
 #include "ds1928/shm.h"
@@ -50,7 +52,11 @@ struct AxisStatus {
   uint32_t endat_warning = 0;  // last EnDat warning word
   AxisValidity validity = AxisValidity::Stale;
   ErrorAssessment errors;  // the flags' fault / warning bits
+  AxisInfo info;           // the additional-information channels (DS1928_SHM_FEATURE_INFO)
 };
+
+// The names of one axis' additional-information channels (axes[].info; empty: off).
+using InfoNames = std::array<std::string, kInfoChannels>;
 
 // Largest axis count the daemon will map (a record is 128 bytes).
 inline constexpr uint32_t kMaxAxes = 1024;
@@ -66,8 +72,11 @@ class Publisher {
   // under the same name (a live one is refused with ShmError::kNameInUse), creates
   // <name> with config.mode and <name>.wait with the same mode plus write where it grants read,
   // applies config.group, maps and pre-faults both. State afterwards: Starting.
+  // `info_names`: per axis the channels' names for the names table (DS1928_SHM_FEATURE_INFO);
+  // missing axes have none (longer names than DS1928_INFO_NAME_LEN - 1 are cut).
   [[nodiscard]] std::error_code open(const ShmConfig& config, uint32_t axis_count,
-                                     uint64_t cycle_period_ns);
+                                     uint64_t cycle_period_ns,
+                                     std::span<const InfoNames> info_names = {});
 
   // Normal thread, after the cycle stopped: marks the object Stopped, wakes every waiter,
   // unmaps and unlinks both names (only if they still are ours). Idempotent.

@@ -333,9 +333,12 @@ inline constexpr std::size_t kStartupWriteCount = startup_write_count();
 struct InfoCommandWrites {
   std::array<RegisterWrite, 4> writes{};
   std::size_t count = 0;
-  [[nodiscard]] std::span<const RegisterWrite> span() const noexcept {
+  // Lvalues only: a span of a temporary (`for (w : info_command_writes(s).span())`) would dangle
+  // before the loop's first iteration.
+  [[nodiscard]] std::span<const RegisterWrite> span() const& noexcept {
     return {writes.data(), count};
   }
+  std::span<const RegisterWrite> span() const&& = delete;
 };
 [[nodiscard]] constexpr InfoCommandWrites info_command_writes(const ModuleSettings& s) noexcept {
   constexpr const RegisterInfo& r = od_entry("EnDatInfoCmd01..04");

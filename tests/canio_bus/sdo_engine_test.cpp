@@ -8,7 +8,10 @@
 #include <vector>
 
 #include "canio/sdo_expedited.hpp"
+#include "core/axis_info.hpp"
+#include "endat/names.hpp"
 #include "rig.hpp"
+#include "x20ds1928/info_channels.hpp"
 
 using namespace ds1928;
 using namespace ds1928::test;
@@ -244,4 +247,59 @@ TEST_CASE("CAN-I/O SDO: a request for an axis being configured waits for it, at 
   CHECK(r.rig.canio->axis_counters(1).state.load() == canio::CanioAxisState::Configuring);
   CHECK_THAT(r.rig.canio->axis_last_error(1),
              Catch::Contains("configuring the module") && Catch::Contains("no SDO response"));
+}
+
+TEST_CASE(
+    "CAN-I/O SDO: the additional-information channels are written at configuration and "
+    "read every info_interval_ms",
+    "[canio][sdo][engine][info]") {
+  DaemonConfig c = canio_config(1);
+  for (const char* name : {"temperature1", "temperature2"}) {
+    const NamedInfo* n = find_named_info(name);
+    REQUIRE(n != nullptr);
+    c.axes[0].module.info_cmd[c.axes[0].info.size()] = encode_info_command(named_info_request(*n));
+    c.axes[0].info.push_back({name, named_info_request(*n), n->is_signed});
+  }
+  c.canio.info_interval_ms = 100;
+  Rig rig(c, true, false);
+  REQUIRE_FALSE(rig.canio->start());
+  Steps steps{rig};
+  rig.nodes[0]->module(0).endat().encoder().set_temperature_c(55.3);
+  AxisInfo info;
+  info.configured = 0b0011;
+  std::vector<int64_t> reads;  // fake time of each completed read
+  REQUIRE(steps.until([&] {
+    const AxisIo& io = rig.io[0];
+    REQUIRE(io.info_acyclic);
+    if (io.info_fresh) {
+      update_axis_info(info, io.inputs.info_ok, io.inputs.info, fake_now());
+      reads.push_back(fake_now());
+    }
+    return reads.size() >= 4 && info.valid == 0b0011;
+  }));
+  // EnDatInfoCmd01/02 as configured, written by the configuration job.
+  uint32_t cmd = 0;
+  REQUIRE_FALSE(rig.nodes[0]->module(0).read_register(reg::kEnDatInfoCmd01, 4, cmd));
+  CHECK(cmd == encode_info_command(named_info_request(*find_named_info("temperature1"))));
+  CHECK(info.value[0] == 3285);  // 55.3 °C in 0.1 K
+  CHECK(info.value[1] == endat::temperature_raw(38.0));
+  // One read per interval: the reads start 100 ms apart and each takes its three transfers,
+  // paced one per sdo_interval_us, so completions lie within that much of the interval.
+  const int64_t pacing = 3 * int64_t{c.canio.sdo_interval_us} * 1000;
+  for (std::size_t i = 1; i < reads.size(); ++i) {
+    CHECK(reads[i] - reads[i - 1] >= 100 * kMs - pacing);
+    CHECK(reads[i] - reads[i - 1] <= 100 * kMs + pacing);
+  }
+  // The encoder warms up: the next read brings it.
+  rig.nodes[0]->module(0).endat().encoder().set_temperature_c(80.0);
+  const std::size_t before = reads.size();
+  REQUIRE(steps.until([&] {
+    const AxisIo& io = rig.io[0];
+    if (io.info_fresh) {
+      update_axis_info(info, io.inputs.info_ok, io.inputs.info, fake_now());
+      reads.push_back(fake_now());
+    }
+    return reads.size() > before;
+  }));
+  CHECK(info.value[0] == endat::temperature_raw(80.0));
 }

@@ -108,6 +108,8 @@ struct NodeSpec {
   bool multiplexed = false;         // polled in one slot of the multiplexed cycle
   uint8_t multiplex_slot = 0;       // ... this one (0: the MN assigns it)
   uint8_t cn_multiplex_cycles = 0;  // written to the CN as 0x1F98/7 whatever the MN polls
+  std::vector<ds1928::CnObjectWrite> writes{};    // further objects written at boot (a PDO mapping)
+  std::vector<ds1928::InfoChannelConfig> info{};  // the axis' additional-information channels
 };
 
 struct Setup {
@@ -133,10 +135,14 @@ struct Setup {
       if (s.cn_multiplex_cycles != 0)
         node.object_writes.push_back(
             {pl::obj::kCycleTiming, pl::obj::kCycleTimingMultiplCycleCnt, {s.cn_multiplex_cycles}});
+      node.object_writes.insert(node.object_writes.end(), s.writes.begin(), s.writes.end());
       config.bus.nodes.push_back(node);
       ds1928::AxisConfig axis;
       axis.node = s.id;
       axis.slot = 1;
+      axis.info = s.info;
+      for (std::size_t n = 0; n < s.info.size(); ++n)
+        axis.module.info_cmd[n] = ds1928::encode_info_command(s.info[n].request);
       config.axes.push_back(axis);
       sim::PowerlinkCnConfig c;
       c.node_id = s.id;

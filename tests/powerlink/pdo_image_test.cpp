@@ -223,3 +223,46 @@ TEST_CASE("The MN refuses a node whose written mapping lacks an axis' register, 
   ManagingNode packed(config);
   CHECK_FALSE(packed.layout(4)->modules[0].by_fields);
 }
+
+TEST_CASE("EnDatInfoOK and EnDatInfo01..04 are read where the mapping puts them, and only there",
+          "[powerlink][pdo][info]") {
+  auto t = rearranged_tpdo(7);
+  t.push_back(entry(0x2001, 0x33, 27, 2));  // EnDatInfo03
+  t.push_back(entry(0x2001, 0x30, 29, 1));  // EnDatInfoOK
+  t.push_back(entry(0x2001, 0x31, 30, 2));  // EnDatInfo01
+  PdoBindIssue issue;
+  auto layout = bind_slot1(t, rearranged_rpdo(7), issue);
+  INFO(issue.what);
+  REQUIRE(layout);
+  CHECK(layout->pres_size == 32);
+  std::vector<uint8_t> pres(32, 0xEE);
+  pres[27] = 0x34;  // EnDatInfo03, little-endian
+  pres[28] = 0x12;
+  pres[29] = 0x05;  // OK bits of channels 1 and 3
+  pres[30] = 0xD5;  // EnDatInfo01 = 3285
+  pres[31] = 0x0C;
+  ModuleInputs in;
+  in.info = {1, 2, 3, 4};
+  REQUIRE(read_inputs(pres, layout->modules[0], in));
+  CHECK(in.info_ok == 0x05);
+  CHECK(in.info[0] == 3285);
+  CHECK(in.info[1] == 0);  // not mapped
+  CHECK(in.info[2] == 0x1234);
+  CHECK(in.info[3] == 0);
+  // The simulated CN writes them at the same offsets.
+  std::vector<uint8_t> back(32, 0xEE);
+  REQUIRE(write_inputs(back, layout->modules[0], in));
+  CHECK(std::vector<uint8_t>(back.begin() + 27, back.end()) ==
+        std::vector<uint8_t>(pres.begin() + 27, pres.end()));
+
+  // Optional: a mapping without them binds (the packed layout's mapping carries none).
+  auto packed = make_layout(std::vector<ModuleSpec>{{1, 7, 7}});
+  REQUIRE(packed);
+  for (const PdoMapEntry& e : tpdo_mapping_of(*packed, ObjectScheme{}))
+    CHECK((e.subindex < 0x30 || e.subindex > 0x34));
+  // A word mapped with one byte is refused, naming the entry.
+  auto bad = rearranged_tpdo(7);
+  bad.push_back(entry(0x2001, 0x32, 27, 1));
+  CHECK_FALSE(bind_slot1(bad, rearranged_rpdo(7), issue));
+  CHECK(issue.what == "0x1A00/14 (0x2001/50): length 1 bytes, the register has 2");
+}

@@ -152,12 +152,19 @@ TEST_CASE("publishing the time base allocates nothing and takes no mutex") {
 TEST_CASE("a reader built against the header before the time base reads the new daemon") {
   const auto name = unique_name("oldreader");
   Publisher pub;
-  REQUIRE_FALSE(pub.open(config_for(name), 3, kPeriod));
+  // With the additional-information channels too: their names table and record words are
+  // beyond what the old header knows.
+  std::vector<InfoNames> names(3, InfoNames{"temperature1", "", "", "position2_word1"});
+  REQUIRE_FALSE(pub.open(config_for(name), 3, kPeriod, names));
   std::vector<AxisStatus> st(3);
   TimebaseStatus tb;
   int64_t t0 = 0;
   for (uint64_t c = 1; c <= 100; ++c) {
-    for (uint32_t a = 0; a < 3; ++a) st[a] = status_for(c, a);
+    for (uint32_t a = 0; a < 3; ++a) {
+      st[a] = status_for(c, a);
+      st[a].info.configured = 0b1001;
+      update_axis_info(st[a].info, 0b1001, {0xFFFF, 0, 0, 0x1234}, rt::now_ns());
+    }
     pub.publish(context_for(c, 20'000, t0, &tb), st);
   }
   for (uint32_t a = 0; a < 3; ++a) {

@@ -5,6 +5,9 @@
 #include <random>
 #include <set>
 #include <string>
+#include <utility>
+
+#include "x20ds1928/object_dictionary.hpp"
 
 using namespace ds1928;
 
@@ -51,4 +54,23 @@ TEST_CASE("Named additional information: EnDat 2.2's MRS codes, unique names", "
   CHECK(find_named_info("commutation")->mrs == 0x51);
   CHECK(find_named_info("timestamp")->mrs == 0x5B);
   CHECK(find_named_info("nothing") == nullptr);
+}
+
+namespace {
+template <typename T>
+concept SpanOf = requires(T&& w) {
+  std::forward<T>(w).span();
+};
+}  // namespace
+
+TEST_CASE("InfoCommandWrites: the span of a temporary does not compile", "[info]") {
+  // A range-for over info_command_writes(s).span() would read the array after its end.
+  STATIC_REQUIRE(SpanOf<const InfoCommandWrites&>);
+  STATIC_REQUIRE_FALSE(SpanOf<InfoCommandWrites&&>);
+  ModuleSettings s;
+  s.info_cmd[1] = encode_info_command({0x08, 0x4C, 0, std::nullopt});
+  const InfoCommandWrites w = info_command_writes(s);
+  REQUIRE(w.span().size() == 1);
+  CHECK(w.span()[0].value == 0x0000'4C08u);
+  CHECK(w.span()[0].reg == reg::kEnDatInfoCmd01 + 8);
 }

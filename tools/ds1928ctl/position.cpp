@@ -60,7 +60,39 @@ ErrorWords words_of(const ds1928_axis_data& d) {
           static_cast<uint16_t>(d.endat_warning)};
 }
 
-json axis_json(uint32_t axis, const ds1928_axis_data& d) {
+// One configured additional-information channel as the record carries it.
+struct InfoChannel {
+  uint32_t channel = 0;  // 1..4: EnDatInfo0N
+  std::string name;
+  int32_t value = 0;
+  bool valid = false;
+  uint32_t age_us = DS1928_INFO_AGE_NEVER;
+};
+
+std::vector<InfoChannel> info_channels(const ShmReader& reader, uint32_t axis,
+                                       const ds1928_axis_info& info) {
+  std::vector<InfoChannel> out;
+  for (uint32_t n = 0; n < DS1928_INFO_CHANNELS; ++n) {
+    if ((info.configured & (1u << n)) == 0) continue;
+    const char* name = reader.info_name(axis, n);
+    out.push_back({n + 1, name != nullptr ? name : "info" + std::to_string(n + 1), info.value[n],
+                   (info.valid & (1u << n)) != 0, info.age_us[n]});
+  }
+  return out;
+}
+
+json info_json(const std::vector<InfoChannel>& channels) {
+  json out = json::array();
+  for (const InfoChannel& c : channels)
+    out.push_back({{"channel", c.channel},
+                   {"name", c.name},
+                   {"value", c.value},
+                   {"valid", c.valid},
+                   {"age_us", c.age_us == DS1928_INFO_AGE_NEVER ? json(nullptr) : json(c.age_us)}});
+  return out;
+}
+
+json axis_json(uint32_t axis, const ds1928_axis_data& d, const std::vector<InfoChannel>& info) {
   return {{"axis", axis},
           {"cycle", d.cycle},
           {"state", validity_name(d.validity)},
@@ -81,12 +113,14 @@ json axis_json(uint32_t axis, const ds1928_axis_data& d) {
           {"warning", (d.flags & DS1928_AXIS_WARNING) != 0},
           {"held", (d.flags & DS1928_AXIS_HELD) != 0},
           {"errors", error_bits_json(words_of(d))},
+          {"info", info_json(info)},
           {"publish_ns", d.publish_ns}};
 }
 
-void print_axis(const Context& ctx, uint32_t axis, const ds1928_axis_data& d) {
+void print_axis(const Context& ctx, uint32_t axis, const ds1928_axis_data& d,
+                const std::vector<InfoChannel>& info) {
   if (ctx.json) {
-    std::cout << axis_json(axis, d).dump() << "\n";
+    std::cout << axis_json(axis, d, info).dump() << "\n";
     return;
   }
   const double position = static_cast<double>(d.periods) + d.fraction / 65536.0;
@@ -95,6 +129,21 @@ void print_axis(const Context& ctx, uint32_t axis, const ds1928_axis_data& d) {
               d.cycle, axis, validity_name(d.validity), position, d.position_raw, d.position_sdc,
               d.pos_cycle, (d.flags & DS1928_AXIS_NEW_POSITION) ? " new" : "    ", d.error_info,
               (d.flags & DS1928_AXIS_HELD) ? "  held" : "");
+  // The additional-information channels, one line: value, and its age when not read this cycle.
+  if (!info.empty()) {
+    std::string line = "        info";
+    for (const InfoChannel& c : info) {
+      line += " " + c.name + "=";
+      if (c.age_us == DS1928_INFO_AGE_NEVER) {
+        line += "none";
+        continue;
+      }
+      line += std::to_string(c.value);
+      if (!c.valid) line += " (not ok)";
+      if (c.age_us >= 1000) line += " (" + std::to_string(c.age_us / 1000) + " ms old)";
+    }
+    std::printf("%s\n", line.c_str());
+  }
   // Every set bit by name and remedy, printed again only when the bits change (--follow).
   static std::vector<std::pair<uint32_t, ErrorWords>> shown;
   const ErrorWords w = words_of(d);
@@ -151,11 +200,13 @@ bool print_selected(const Context& ctx, const ShmReader& reader, const PositionO
   const uint32_t last = opt.axis ? *opt.axis + 1 : reader.axis_count();
   for (uint32_t a = first; a < last; ++a) {
     ds1928_axis_data d{};
-    if (auto ec = reader.read(a, d)) {
+    ds1928_axis_info info{};
+    // A daemon without the channels: the record alone.
+    if (auto ec = reader.has_info() ? reader.read(a, d, info) : reader.read(a, d)) {
       std::cerr << "ds1928ctl: axis " << a << ": " << ec.message() << "\n";
       return false;
     }
-    print_axis(ctx, a, d);
+    print_axis(ctx, a, d, info_channels(reader, a, info));
     if (not_valid != nullptr && d.validity != DS1928_AXIS_VALID) {
       ++*not_valid;
       std::cerr << "ds1928ctl: not valid: axis " << a << ": " << validity_name(d.validity) << "\n";
