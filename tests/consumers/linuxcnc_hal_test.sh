@@ -38,23 +38,7 @@ done
 . "$src/tests/lib/linuxcnc.sh"
 linuxcnc_enter_namespaces "$0" "$@"
 
-tag=$(printf '%x%x' $$ $((RANDOM % 256)))$(date +%N | cut -c1-4)
-work=$(mktemp -d /tmp/ds1928-hal-XXXXXX)
-chmod 0755 "$work"
-shm=/ds1928-hal-$tag
-ctl=$build/tools/ds1928ctl/ds1928ctl
-dpid=""
-fail=0
-cleanup() {
-  linuxcnc_stop
-  ds1928_daemon_stop TERM
-  rm -f /dev/shm"$shm" /dev/shm"$shm".wait
-  linuxcnc_teardown "$work" && rm -rf "$work"
-}
-trap cleanup EXIT
-check() {  # check DESCRIPTION COMMAND...
-  if "${@:2}"; then echo "ok:   $1"; else echo "FAIL: $1"; fail=1; fi
-}
+linuxcnc_test_begin hal
 
 linuxcnc_setup "$work" "$module" || { echo "FAIL: cannot overlay LinuxCNC's modules"; exit 1; }
 configure() { ds1928_daemon_configure "$work" "$shm" "$1" || exit 1; }

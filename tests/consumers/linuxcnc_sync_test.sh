@@ -34,22 +34,7 @@ grep -q RTAPI_TASK_PLL_SUPPORT /usr/include/linuxcnc/rtapi.h ||
 . "$src/tests/lib/linuxcnc.sh"
 linuxcnc_enter_namespaces "$0" "$@"
 
-tag=$(printf '%x%x' $$ $((RANDOM % 256)))$(date +%N | cut -c1-4)
-work=$(mktemp -d /tmp/ds1928-sync-XXXXXX)
-chmod 0755 "$work"
-shm=/ds1928-sync-$tag
-dpid=""
-fail=0
-cleanup() {
-  linuxcnc_stop
-  ds1928_daemon_stop TERM
-  rm -f /dev/shm"$shm" /dev/shm"$shm".wait
-  linuxcnc_teardown "$work" && rm -rf "$work"
-}
-trap cleanup EXIT
-check() {  # check DESCRIPTION COMMAND...
-  if "${@:2}"; then echo "ok:   $1"; else echo "FAIL: $1"; fail=1; fi
-}
+linuxcnc_test_begin sync
 refused() {  # refused DESCRIPTION PATTERN loadrt-args...: loadrt fails and says PATTERN
   local out
   out=$(halcmd loadrt "${@:3}" 2>&1; cat "$work/rt.log")

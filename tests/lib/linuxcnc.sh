@@ -77,3 +77,26 @@ linuxcnc_teardown() {  # WORK
   mountpoint -q "$work/orig" && umount "$work/orig"
   ! mountpoint -q "$work/orig"
 }
+
+# The common start of a consumer test, once in its namespaces: a tag, a private work directory,
+# the shared-memory name /ds1928-KIND-TAG, ds1928ctl, `check`, and at exit the cleanup that stops
+# LinuxCNC and the daemon and removes what the run made. Needs $build (and $module for setup).
+linuxcnc_test_begin() {  # KIND
+  tag=$(printf '%x%x' $$ $((RANDOM % 256)))$(date +%N | cut -c1-4)
+  work=$(mktemp -d "/tmp/ds1928-$1-XXXXXX")
+  chmod 0755 "$work"
+  shm=/ds1928-$1-$tag
+  ctl=$build/tools/ds1928ctl/ds1928ctl
+  dpid=""
+  fail=0
+  trap linuxcnc_test_cleanup EXIT
+}
+linuxcnc_test_cleanup() {
+  linuxcnc_stop
+  ds1928_daemon_stop TERM
+  rm -f /dev/shm"$shm" /dev/shm"$shm".wait
+  linuxcnc_teardown "$work" && rm -rf "$work"
+}
+check() {  # check DESCRIPTION COMMAND...
+  if "${@:2}"; then echo "ok:   $1"; else echo "FAIL: $1"; fail=1; fi
+}
