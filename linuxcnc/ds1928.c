@@ -178,30 +178,11 @@ static int daemon_publishing(const struct instance* in, const struct ds1928_shm_
   return last != 0 && now - last <= silence_limit_ns(in, h);
 }
 
-/* One consistent copy in at most READ_ATTEMPTS tries: seqlock plus check word. */
+/* One consistent copy in at most READ_ATTEMPTS tries: seqlock plus check word. With `info`
+ * (not NULL) the channels' words are copied in the same pass (the check word covers the payload
+ * only; the equal sequence covers both). */
 static int read_record(const struct ds1928_shm_axis* rec, struct ds1928_axis_data* out,
-                       uint32_t* retries) {
-  uint64_t* dst = (uint64_t*)(void*)out;
-  for (unsigned attempt = 0; attempt < READ_ATTEMPTS; ++attempt) {
-    if (attempt != 0) {
-      ++*retries;
-      ds1928_shm_cpu_relax();
-    }
-    const uint64_t s1 = __atomic_load_n(&rec->seq, __ATOMIC_ACQUIRE);
-    if (s1 & 1u) continue;
-    for (unsigned i = 0; i < DS1928_AXIS_DATA_WORDS; ++i)
-      dst[i] = __atomic_load_n(&rec->u.words[i], __ATOMIC_RELAXED);
-    __atomic_thread_fence(__ATOMIC_ACQUIRE);
-    if (__atomic_load_n(&rec->seq, __ATOMIC_RELAXED) == s1 && ds1928_shm_check(out) == out->check)
-      return 1;
-  }
-  return 0;
-}
-
-/* The channels' words of the same seqlock pass as read_record's copy: read once more with the
- * payload (the check word covers the payload only; the equal sequence covers both). */
-static int read_record_info(const struct ds1928_shm_axis* rec, struct ds1928_axis_data* out,
-                            struct ds1928_axis_info* info, uint32_t* retries) {
+                       struct ds1928_axis_info* info, uint32_t* retries) {
   uint64_t* dst = (uint64_t*)(void*)out;
   uint64_t* idst = (uint64_t*)(void*)info;
   for (unsigned attempt = 0; attempt < READ_ATTEMPTS; ++attempt) {
@@ -213,8 +194,9 @@ static int read_record_info(const struct ds1928_shm_axis* rec, struct ds1928_axi
     if (s1 & 1u) continue;
     for (unsigned i = 0; i < DS1928_AXIS_DATA_WORDS; ++i)
       dst[i] = __atomic_load_n(&rec->u.words[i], __ATOMIC_RELAXED);
-    for (unsigned i = 0; i < DS1928_AXIS_INFO_WORDS; ++i)
-      idst[i] = __atomic_load_n(&rec->x.words[i], __ATOMIC_RELAXED);
+    if (idst)
+      for (unsigned i = 0; i < DS1928_AXIS_INFO_WORDS; ++i)
+        idst[i] = __atomic_load_n(&rec->x.words[i], __ATOMIC_RELAXED);
     __atomic_thread_fence(__ATOMIC_ACQUIRE);
     if (__atomic_load_n(&rec->seq, __ATOMIC_RELAXED) == s1 && ds1928_shm_check(out) == out->check)
       return 1;
@@ -261,8 +243,7 @@ static void read_instance(struct instance* in, int64_t now) {
       struct ds1928_axis_info info;
       memset(&info, 0, sizeof info);
       const struct ds1928_shm_axis* rec = ds1928_shm_axis_record(h, a);
-      if (!(has_info ? read_record_info(rec, &d, &info, &in->retries)
-                     : read_record(rec, &d, &in->retries))) {
+      if (!read_record(rec, &d, has_info ? &info : NULL, &in->retries)) {
         ++in->failures; /* keep the last values, but not as valid */
         *ap->valid = 0;
         continue;
