@@ -309,14 +309,13 @@ static inline const struct ds1928_shm_axis* ds1928_shm_axis_record(
                                                       (size_t)axis * h->record_size);
 }
 
-/* Consistent copy of one record. Returns 0, -EINVAL for a bad axis, or -EBUSY when the record
- * stayed locked for ~1 ms of retries (only possible if the daemon died in the middle of a
- * write). */
-static inline int ds1928_shm_read_axis(const struct ds1928_shm_header* h, uint32_t axis,
-                                       struct ds1928_axis_data* out) {
-  if (axis >= h->axis_count) return -EINVAL;
-  const struct ds1928_shm_axis* rec = ds1928_shm_axis_record(h, axis);
+/* The seqlock pass of both readers below: the payload and, with `info` (not NULL), the
+ * channels' words in the same pass. 0 or -EBUSY. */
+static inline int ds1928_shm_copy_record_(const struct ds1928_shm_axis* rec,
+                                          struct ds1928_axis_data* out,
+                                          struct ds1928_axis_info* info) {
   uint64_t* dst = (uint64_t*)(void*)out;
+  uint64_t* idst = (uint64_t*)(void*)info;
   for (unsigned attempt = 0; attempt < 100000u; ++attempt) {
     const uint64_t s1 = __atomic_load_n(&rec->seq, __ATOMIC_ACQUIRE);
     if (s1 & 1u) {
@@ -325,10 +324,22 @@ static inline int ds1928_shm_read_axis(const struct ds1928_shm_header* h, uint32
     }
     for (unsigned i = 0; i < DS1928_AXIS_DATA_WORDS; ++i)
       dst[i] = __atomic_load_n(&rec->u.words[i], __ATOMIC_RELAXED);
+    if (idst)
+      for (unsigned i = 0; i < DS1928_AXIS_INFO_WORDS; ++i)
+        idst[i] = __atomic_load_n(&rec->x.words[i], __ATOMIC_RELAXED);
     __atomic_thread_fence(__ATOMIC_ACQUIRE);
     if (__atomic_load_n(&rec->seq, __ATOMIC_RELAXED) == s1) return 0;
   }
   return -EBUSY;
+}
+
+/* Consistent copy of one record. Returns 0, -EINVAL for a bad axis, or -EBUSY when the record
+ * stayed locked for ~1 ms of retries (only possible if the daemon died in the middle of a
+ * write). */
+static inline int ds1928_shm_read_axis(const struct ds1928_shm_header* h, uint32_t axis,
+                                       struct ds1928_axis_data* out) {
+  if (axis >= h->axis_count) return -EINVAL;
+  return ds1928_shm_copy_record_(ds1928_shm_axis_record(h, axis), out, NULL);
 }
 
 /* The daemon publishes the additional-information channels (DS1928_SHM_FEATURE_INFO). */
@@ -343,23 +354,7 @@ static inline int ds1928_shm_read_axis_info(const struct ds1928_shm_header* h, u
                                             struct ds1928_axis_info* info) {
   if (axis >= h->axis_count) return -EINVAL;
   if (!ds1928_shm_has_info(h)) return -ENOTSUP;
-  const struct ds1928_shm_axis* rec = ds1928_shm_axis_record(h, axis);
-  uint64_t* dst = (uint64_t*)(void*)out;
-  uint64_t* idst = (uint64_t*)(void*)info;
-  for (unsigned attempt = 0; attempt < 100000u; ++attempt) {
-    const uint64_t s1 = __atomic_load_n(&rec->seq, __ATOMIC_ACQUIRE);
-    if (s1 & 1u) {
-      ds1928_shm_cpu_relax();
-      continue;
-    }
-    for (unsigned i = 0; i < DS1928_AXIS_DATA_WORDS; ++i)
-      dst[i] = __atomic_load_n(&rec->u.words[i], __ATOMIC_RELAXED);
-    for (unsigned i = 0; i < DS1928_AXIS_INFO_WORDS; ++i)
-      idst[i] = __atomic_load_n(&rec->x.words[i], __ATOMIC_RELAXED);
-    __atomic_thread_fence(__ATOMIC_ACQUIRE);
-    if (__atomic_load_n(&rec->seq, __ATOMIC_RELAXED) == s1) return 0;
-  }
-  return -EBUSY;
+  return ds1928_shm_copy_record_(ds1928_shm_axis_record(h, axis), out, info);
 }
 
 /* The name of channel `channel` (0-based) of `axis` as axes[].info gives it, or NULL when the
