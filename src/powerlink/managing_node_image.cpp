@@ -44,7 +44,7 @@ NodeImageLayout ManagingNode::image_layout(const PowerlinkNodeConfig& nc,
     PdoBindIssue issue;
     auto layout =
         bind_pdo_mapping(lists, nc.object_scheme.value_or(config_.bus.object_scheme), specs, issue);
-    if (!layout) throw std::system_error(issue.error, node + ", " + issue.what);
+    if (!layout) throw std::system_error(issue.error, node + ", " + std::string(issue.what.view()));
     return *layout;
   }
   LayoutIssue issue;
@@ -188,38 +188,33 @@ void ManagingNode::bind_read_mapping(Cn& cn) noexcept {
   st.image_refusal.fill('\0');
   st.image_error = {};
   std::size_t said = 0;
-  try {
-    for (;;) {
-      PdoBindIssue issue;
-      // Allocates only to name what it refuses.
-      if (auto layout = bind_pdo_mapping(lists, scheme, std::span(specs.data(), count), issue)) {
-        cn.layout = *layout;
-        st.image_source = ImageSource::kReadMapping;
-        return;
-      }
-      const auto refused = std::find_if(specs.begin(), specs.begin() + count,
-                                        [&](const ModuleSpec& m) { return m.slot == issue.slot; });
-      if (issue.error != MnError::kPdoRegisterNotMapped || refused == specs.begin() + count) {
-        refuse(issue.error, issue.what);
-        return;
-      }
-      // "slot 2: PositionHW (0x2002/1) is not mapped; slot 3: ..." as far as it fits.
-      st.image_error = issue.error;
-      st.last_error = issue.error;
-      const std::string_view what = issue.what;
-      const std::string_view sep = said > 0 ? "; " : "";
-      for (std::string_view part : {sep, what})
-        for (char c : part)
-          if (said + 1 < st.image_refusal.size()) st.image_refusal[said++] = c;
-      std::copy(refused + 1, specs.begin() + count, refused);
-      if (--count == 0) {
-        st.image_source = ImageSource::kRefused;
-        cn.layout = NodeImageLayout{};
-        return;
-      }
+  for (;;) {
+    PdoBindIssue issue;
+    if (auto layout = bind_pdo_mapping(lists, scheme, std::span(specs.data(), count), issue)) {
+      cn.layout = *layout;
+      st.image_source = ImageSource::kReadMapping;
+      return;
     }
-  } catch (const std::bad_alloc&) {
-    refuse(make_error_code(MnError::kPdoMappingEntryInvalid), "");
+    const auto refused = std::find_if(specs.begin(), specs.begin() + count,
+                                      [&](const ModuleSpec& m) { return m.slot == issue.slot; });
+    if (issue.error != MnError::kPdoRegisterNotMapped || refused == specs.begin() + count) {
+      refuse(issue.error, issue.what);
+      return;
+    }
+    // "slot 2: PositionHW (0x2002/1) is not mapped; slot 3: ..." as far as it fits.
+    st.image_error = issue.error;
+    st.last_error = issue.error;
+    const std::string_view what = issue.what.view();
+    const std::string_view sep = said > 0 ? "; " : "";
+    for (std::string_view part : {sep, what})
+      for (char c : part)
+        if (said + 1 < st.image_refusal.size()) st.image_refusal[said++] = c;
+    std::copy(refused + 1, specs.begin() + count, refused);
+    if (--count == 0) {
+      st.image_source = ImageSource::kRefused;
+      cn.layout = NodeImageLayout{};
+      return;
+    }
   }
 }
 

@@ -8,12 +8,6 @@
 namespace ds1928::powerlink {
 namespace {
 
-std::string hex_object(uint16_t index, uint8_t sub) {
-  std::array<char, 24> buf{};
-  std::snprintf(buf.data(), buf.size(), "0x%04X/%u", index, sub);
-  return buf.data();
-}
-
 // What the scheme says an object is: the slot, whether an input, and the register (a fixed one,
 // or an Rx/Tx byte with its number).
 struct SchemeHit {
@@ -47,39 +41,40 @@ std::optional<SchemeHit> lookup(const ObjectScheme& scheme, uint16_t index, uint
 
 // One direction's entries into the modules' offsets; false with `issue` set on a bad entry.
 bool place(std::span<const PdoMapEntry> entries, uint16_t mapping_index, bool pres,
-           const ObjectScheme& scheme, NodeImageLayout& layout, PdoBindIssue& issue) {
+           const ObjectScheme& scheme, NodeImageLayout& layout, PdoBindIssue& issue) noexcept {
   for (std::size_t k = 0; k < entries.size(); ++k) {
     const PdoMapEntry& e = entries[k];
-    // The message is built only on refusal: the MN binds a mapping it read on the cycle thread.
-    auto refuse = [&](const std::string& why) {
-      issue = {make_error_code(MnError::kPdoMappingEntryInvalid),
-               hex_object(mapping_index, static_cast<uint8_t>(k + 1)) + " (" +
-                   hex_object(e.index, e.subindex) + "): " + why,
-               0};
+    // Named without allocating: the MN binds a mapping it read on the cycle thread.
+    auto refuse = [&](auto&&... why) {
+      issue.error = make_error_code(MnError::kPdoMappingEntryInvalid);
+      issue.slot = 0;
+      issue.what.clear();
+      issue.what.object(mapping_index, static_cast<unsigned>(k + 1)) << " (";
+      issue.what.object(e.index, e.subindex) << "): ";
+      (issue.what << ... << why);
       return false;
     };
     if (e.length_bits == 0 || e.length_bits % 8 != 0)
-      return refuse("length " + std::to_string(e.length_bits) +
-                    " bits is no whole number of bytes");
+      return refuse("length ", unsigned{e.length_bits}, " bits is no whole number of bytes");
     if (e.offset_bits % 8 != 0)
-      return refuse("offset " + std::to_string(e.offset_bits) + " bits is no whole byte");
+      return refuse("offset ", unsigned{e.offset_bits}, " bits is no whole byte");
     const std::size_t offset = e.offset_bits / 8, bytes = e.length_bits / 8;
     if (offset + bytes > kMaxIsoPayload)
-      return refuse("ends at byte " + std::to_string(offset + bytes) + ", past the " +
-                    std::to_string(kMaxIsoPayload) + "-byte payload");
+      return refuse("ends at byte ", static_cast<unsigned>(offset + bytes), ", past the ",
+                    static_cast<unsigned>(kMaxIsoPayload), "-byte payload");
     const auto hit = lookup(scheme, e.index, e.subindex);
     if (!hit) continue;  // not a register of a module of this scheme
     if (hit->input != pres)
-      return refuse(std::string("an ") + (hit->input ? "input" : "output") +
-                    " object mapped into the " + (pres ? "PRes" : "PReq"));
+      return refuse(hit->input ? "an input" : "an output", " object mapped into the ",
+                    pres ? "PRes" : "PReq");
     ModuleMapping* m = nullptr;
     for (std::size_t i = 0; i < layout.count; ++i)
       if (layout.modules[i].slot == hit->slot) m = &layout.modules[i];
     if (m == nullptr) continue;  // a slot without a configured axis
     const std::size_t want = hit->fixed ? hit->fixed->bytes : 1;
     if (bytes != want)
-      return refuse("length " + std::to_string(bytes) + " bytes, the register has " +
-                    std::to_string(want));
+      return refuse("length ", static_cast<unsigned>(bytes), " bytes, the register has ",
+                    static_cast<unsigned>(want));
     const auto off = static_cast<uint16_t>(offset);
     if (hit->fixed) {
       m->fields.fixed[static_cast<std::size_t>(hit->fixed->field)] = off;
@@ -99,12 +94,15 @@ bool place(std::span<const PdoMapEntry> entries, uint16_t mapping_index, bool pr
 std::optional<NodeImageLayout> bind_pdo_mapping(const PdoMappingLists& lists,
                                                 const ObjectScheme& scheme,
                                                 std::span<const ModuleSpec> modules,
-                                                PdoBindIssue& issue) {
+                                                PdoBindIssue& issue) noexcept {
   NodeImageLayout layout;
   for (const ModuleSpec& s : modules) {
     if (layout.count == kMaxModulesPerNode || s.input_mtu > kMaxFlatstreamMtu ||
         s.output_mtu > kMaxFlatstreamMtu) {
-      issue = {make_error_code(MnError::kInvalidLayout), "slot " + std::to_string(s.slot), s.slot};
+      issue.error = make_error_code(MnError::kInvalidLayout);
+      issue.slot = s.slot;
+      issue.what.clear();
+      issue.what << "slot " << unsigned{s.slot};
       return std::nullopt;
     }
     ModuleMapping& m = layout.modules[layout.count++];
@@ -118,11 +116,15 @@ std::optional<NodeImageLayout> bind_pdo_mapping(const PdoMappingLists& lists,
   if (!place(lists.rpdo, lists.rpdo_index, false, scheme, layout, issue)) return std::nullopt;
   for (std::size_t i = 0; i < layout.count; ++i) {
     ModuleMapping& m = layout.modules[i];
-    auto missing = [&](std::string_view reg, uint16_t index, uint8_t sub) {
-      issue = {make_error_code(MnError::kPdoRegisterNotMapped),
-               "slot " + std::to_string(m.slot) + ": " + std::string(reg) + " (" +
-                   hex_object(index, sub) + ") is not mapped",
-               m.slot};
+    // `byte_no` > 0 names an Rx/Tx byte register: `reg` then is its prefix.
+    auto missing = [&](std::string_view reg, uint16_t index, uint8_t sub, unsigned byte_no = 0) {
+      issue.error = make_error_code(MnError::kPdoRegisterNotMapped);
+      issue.slot = m.slot;
+      issue.what.clear();
+      issue.what << "slot " << unsigned{m.slot} << ": " << reg;
+      if (byte_no > 0) issue.what << byte_no;
+      issue.what << " (";
+      issue.what.object(index, sub) << ") is not mapped";
       return std::nullopt;
     };
     const uint16_t in_obj = static_cast<uint16_t>(scheme.input_index + m.slot);
@@ -136,16 +138,15 @@ std::optional<NodeImageLayout> bind_pdo_mapping(const PdoMappingLists& lists,
     }
     for (uint8_t b = 0; b < m.input_mtu && !lists.outputs_only; ++b)
       if (m.fields.rx[b] == kNotMapped)
-        return missing("RxByte" + std::to_string(b + 1), in_obj,
-                       static_cast<uint8_t>(kSchemeRxByteFirstSub + b));
+        return missing("RxByte", in_obj, static_cast<uint8_t>(kSchemeRxByteFirstSub + b), b + 1u);
     if (m.output_mtu > 0) {
       for (const SchemeRegister& r : kSchemeOutputs)
         if (m.fields.fixed[static_cast<std::size_t>(r.field)] == kNotMapped)
           return missing(r.name, out_obj, r.subindex);
       for (uint8_t b = 0; b < m.output_mtu; ++b)
         if (m.fields.tx[b] == kNotMapped)
-          return missing("TxByte" + std::to_string(b + 1), out_obj,
-                         static_cast<uint8_t>(kSchemeTxByteFirstSub + b));
+          return missing("TxByte", out_obj, static_cast<uint8_t>(kSchemeTxByteFirstSub + b),
+                         b + 1u);
     }
     // The first byte of each direction (messages name the module's bytes from there).
     uint16_t first_in = m.fields.pres_end, first_out = m.fields.preq_end;

@@ -16,6 +16,7 @@
 #include <string_view>
 #include <vector>
 
+#include "core/fixed_text.hpp"
 #include "powerlink/concise_dcf.hpp"
 #include "powerlink/cycle_budget.hpp"
 #include "powerlink/powerlink_options.hpp"
@@ -67,8 +68,8 @@ using ObjectScheme = PdoObjectScheme;
 // Why bind_pdo_mapping() refused. `what` names the node's entry or the axis and register.
 struct PdoBindIssue {
   std::error_code error;
-  std::string what;
-  uint8_t slot = 0;  // kPdoRegisterNotMapped: the module missing it
+  FixedText<128> what;  // fixed: the MN binds a mapping it read on the cycle thread
+  uint8_t slot = 0;     // kPdoRegisterNotMapped: the module missing it
 };
 
 struct PdoMappingLists {
@@ -87,10 +88,11 @@ struct PdoMappingLists {
 // past kMaxIsoPayload (MnError::kPdoMappingEntryInvalid, naming 0x1A00/k and the object); a
 // module missing a register (MnError::kPdoRegisterNotMapped, naming the slot and register).
 // Entries of objects outside the scheme (other modules of the bus controller) are left alone.
+// Allocates nothing, refusal included (the MN binds on the cycle thread).
 [[nodiscard]] std::optional<NodeImageLayout> bind_pdo_mapping(const PdoMappingLists& lists,
                                                               const ObjectScheme& scheme,
                                                               std::span<const ModuleSpec> modules,
-                                                              PdoBindIssue& issue);
+                                                              PdoBindIssue& issue) noexcept;
 
 // The mapping entries of `mapping_index` (sub 0 = count) in an object list; nullopt when the
 // list does not write sub 0.

@@ -237,13 +237,9 @@ bool PowerlinkCn::bind_mapping(const pl::PdoMappingLists& lists,
                                pl::NodeImageLayout& out) noexcept {
   pl::PdoBindIssue issue;
   bool bound = false;
-  try {
-    if (auto layout = pl::bind_pdo_mapping(lists, config_.object_scheme, specs_, issue)) {
-      out = *layout;
-      bound = true;
-    }
-  } catch (const std::bad_alloc&) {
-    // the message could not be built: refused like any other unusable mapping
+  if (auto layout = pl::bind_pdo_mapping(lists, config_.object_scheme, specs_, issue)) {
+    out = *layout;
+    bound = true;
   }
   ++(bound ? stats_.mappings_taken : stats_.mappings_refused);
   return bound;

@@ -2,12 +2,14 @@
 // object scheme, registers read and written at the mapped offsets, bad mappings refused by name.
 #include "powerlink/pdo_image.hpp"
 
+#include <array>
 #include <catch2/catch.hpp>
 #include <random>
 #include <vector>
 
 #include "powerlink/frames.hpp"
 #include "powerlink/managing_node.hpp"
+#include "support/alloc_counter.hpp"
 
 using namespace ds1928;
 using namespace ds1928::powerlink;
@@ -185,6 +187,45 @@ TEST_CASE("A mapping lacking a register or with a bad entry is refused by name",
     t.push_back(entry(0x6000, 1, 18, 2));
     CHECK(bind_slot1(t, rearranged_rpdo(7), issue));
   }
+}
+
+TEST_CASE("Binding a mapping allocates nothing, a refusal and its message included",
+          "[powerlink][pdo][noalloc]") {
+  // The MN binds a mapping it read from a CN on the cycle thread (ManagingNode::bind_read_mapping).
+  auto missing = rearranged_tpdo(7);
+  missing.erase(missing.begin() + 4);  // ErrorInfo
+  auto bad_length = rearranged_tpdo(7);
+  bad_length[0].length_bits = 12;
+  auto past_payload = rearranged_tpdo(7);
+  past_payload.push_back(entry(0x6000, 1, 1488, 4));
+  const auto good = rearranged_tpdo(7), rpdo = rearranged_rpdo(7);
+  std::array<PdoBindIssue, 3> issues{};
+  bool bound = false;
+  test::HeapCounts counts;
+  {
+    test::begin_counting();
+    bound = bind_slot1(good, rpdo, issues[0]).has_value();
+    const bool refused = !bind_slot1(missing, rpdo, issues[0]) &&
+                         !bind_slot1(bad_length, rpdo, issues[1]) &&
+                         !bind_slot1(past_payload, rpdo, issues[2]);
+    counts = test::end_counting();
+    CHECK(refused);
+  }
+  CHECK(bound);
+  CHECK(counts.allocations() == 0);
+  CHECK(issues[0].what == "slot 1: ErrorInfo (0x2001/6) is not mapped");
+  CHECK(issues[1].what == "0x1A00/1 (0x2001/4): length 12 bits is no whole number of bytes");
+  CHECK(issues[2].what == "0x1A00/14 (0x6000/1): ends at byte 1492, past the 1490-byte payload");
+}
+
+TEST_CASE("A refusal's message is cut at its capacity, never past it", "[powerlink][pdo]") {
+  FixedText<8> t;
+  t << "slot " << 12345u << ": long";
+  CHECK(t == "slot 12");
+  CHECK(t.view().size() == 7);
+  t.clear();
+  t.object(0x1A00, 2);
+  CHECK(t == "0x1A00/");
 }
 
 TEST_CASE("The MN refuses a node whose written mapping lacks an axis' register, naming it",
