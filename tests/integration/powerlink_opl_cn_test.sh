@@ -27,6 +27,13 @@
 # defaults ride through, after which the CN may drop out on its own; the test says so (NOTE line)
 # and 1.-4. then hold per boot. A reset neither explains — the MN counting a PRes lost that was in
 # time — fails.
+# POWER_CYCLES=n (before the hold): the demo CN loses power n times (SIGKILL: its stack does not
+# shut down) and is started again 1 s later, as a fresh process with a fresh object dictionary.
+# Each time: the MN notices the loss and resets the node (status: a reset for loss of PRes, boot
+# no longer operational), then identifies, configures and starts the new CN until both the MN and
+# the CN's own log say OPERATIONAL; on the wire the MN's SoA asked the new CN for its status with
+# ER = 1 (Exception Reset, DS 301 error signalling) and the CN answered with EC = 1 (Exception
+# Clear). The hold then runs as above on fresh captures, its resets counted from there.
 # A missing openPOWERLINK archive SKIPS the test (77, counted by ctest) with the command that gets it,
 # and FAILS it under CI=true or DS1928_REQUIRE_PEERS=1; a failed peer build FAILS it (exit 1), with the
 # message of tests/peers/openpowerlink.sh. It never passes silently.
@@ -44,6 +51,7 @@ hold=${HOLD_SECONDS:-20}
 # it. MULTIPLEX=n: node 1 polled every n-th cycle.
 prc=${PRC:-0}
 mux=${MULTIPLEX:-0}
+power_cycles=${POWER_CYCLES:-0}
 # The demo pins its threads to CPU 1 (on a 1-CPU machine there is only CPU 0 to share).
 cn_cpu=$(($(nproc) > 1 ? 1 : 0))
 
@@ -135,21 +143,33 @@ netns_add "$ns_mn" "$ns_cn"
 veth_pair "$ns_mn" "$if_mn" "$ns_cn" "$if_cn"
 
 # The CN's frames as the MN receives them, and the MN's as the CN receives them.
-ip netns exec "$ns_mn" tshark -i "$if_mn" -f "ether proto 0x88ab" -w "$tmp/cn_frames.pcapng" \
-    >"$tmp/tshark.log" 2>&1 &
-tshark_pid=$!
-pids+=($tshark_pid)
-ip netns exec "$ns_cn" tshark -i "$if_cn" -f "ether proto 0x88ab" -w "$tmp/mn_frames.pcapng" \
-    >"$tmp/tshark_cn_end.log" 2>&1 &
-tshark_cn_pid=$!
-pids+=($tshark_cn_pid)
-wait_for "$tmp/tshark.log" "Capturing on" 30 || fail "tshark did not start"
-wait_for "$tmp/tshark_cn_end.log" "Capturing on" 30 || fail "tshark at the CN's end did not start"
+start_captures() {
+  ip netns exec "$ns_mn" tshark -i "$if_mn" -f "ether proto 0x88ab" -w "$tmp/cn_frames.pcapng" \
+      >"$tmp/tshark.log" 2>&1 &
+  tshark_pid=$!
+  pids+=($tshark_pid)
+  ip netns exec "$ns_cn" tshark -i "$if_cn" -f "ether proto 0x88ab" -w "$tmp/mn_frames.pcapng" \
+      >"$tmp/tshark_cn_end.log" 2>&1 &
+  tshark_cn_pid=$!
+  pids+=($tshark_cn_pid)
+  wait_for "$tmp/tshark.log" "Capturing on" 30 || fail "tshark did not start"
+  wait_for "$tmp/tshark_cn_end.log" "Capturing on" 30 || fail "tshark at the CN's end did not start"
+}
+stop_captures() {
+  kill -INT "$tshark_pid" "$tshark_cn_pid"
+  wait "$tshark_pid" "$tshark_cn_pid" 2>/dev/null
+}
+start_captures
 
-"$src/tests/peers/opl_run.sh" "$ns_cn" -- "$OPL_DEMO_CN" -d "$if_cn" -n 1 >"$tmp/demo_cn.log" 2>&1 &
-cn_pid=$!
-pids+=($cn_pid)
-wait_for "$tmp/demo_cn.log" "NmtCsNotActive" 30 || fail "the demo CN did not start"
+# The demo CN; its log is $demo_log (a power cycle starts a new process with a log of its own).
+start_cn() {
+  demo_log=$1
+  "$src/tests/peers/opl_run.sh" "$ns_cn" -- "$OPL_DEMO_CN" -d "$if_cn" -n 1 >"$demo_log" 2>&1 &
+  cn_pid=$!
+  pids+=($cn_pid)
+  wait_for "$demo_log" "NmtCsNotActive" 30 || fail "the demo CN did not start"
+}
+start_cn "$tmp/demo_cn.log"
 ip netns exec "$ns_mn" "$daemon" --config "$tmp/opl.yaml" >"$tmp/daemon.log" 2>&1 &
 pids+=($!)
 
@@ -159,7 +179,7 @@ for ((i = 0; i < 300 * wait_scale; i++)); do
   sleep 0.1
 done
 [ $up = 1 ] || fail "ds1928d did not bring the demo CN to OPERATIONAL"
-wait_for "$tmp/demo_cn.log" "NmtCsReadyToOperate->NmtCsOperational" 10 ||
+wait_for "$demo_log" "NmtCsReadyToOperate->NmtCsOperational" 10 ||
   fail "the daemon says OPERATIONAL, the demo CN's log does not"
 s0=$(status)
 c0=$(jq .cycle.count <<<"$s0")
@@ -167,8 +187,83 @@ c0=$(jq .cycle.count <<<"$s0")
   fail "the demo CN reported another configuration date/time than its CDC: $(node1 "$s0" | jq -c .configuration)"
 pass "demo CN OPERATIONAL at ${period_us} us, cycle thread $placement: $(node1 "$s0" | jq -c '{boots, pres_size, preq_size}')"
 
+if [ "$power_cycles" -gt 0 ]; then
+  : >"$tmp/power_cycles.txt"  # per power cycle: the epoch of the loss, of the new CN's start
+  for ((k = 1; k <= power_cycles; k++)); do
+    before=$(node1 "$(status)")
+    resets_before=$(jq .resets <<<"$before")
+    demo=$(pgrep -P "$cn_pid" | head -1)
+    [ -n "$demo" ] || fail "power cycle $k: no demo CN process under opl_run.sh ($cn_pid)"
+    t_loss=$(date +%s.%N)
+    kill -KILL "$demo"
+    wait "$cn_pid" 2>/dev/null
+    lost=0
+    for ((i = 0; i < 50 * wait_scale; i++)); do
+      n=$(node1 "$(status)")
+      [ "$(jq .resets <<<"$n")" -gt "$resets_before" ] && [ "$(jq -r .boot <<<"$n")" != operational ] &&
+        { lost=1; break; }
+      sleep 0.1
+    done
+    [ $lost = 1 ] || fail "power cycle $k: the MN did not reset node 1 after it went silent: $n"
+    reason=$(jq -r .last_reset_reason <<<"$n")
+    case $reason in *"loss of PRes"*) ;; *) fail "power cycle $k: node 1 reset for '$reason', not the loss of its PRes" ;; esac
+    sleep 1
+    t_start=$(date +%s.%N)
+    echo "$t_loss $t_start" >>"$tmp/power_cycles.txt"
+    start_cn "$tmp/demo_cn.$k.log"
+    up=0
+    for ((i = 0; i < 300 * wait_scale; i++)); do
+      n=$(node1 "$(status)")
+      [ "$(jq -r .boot <<<"$n")" = operational ] && { up=1; break; }
+      sleep 0.1
+    done
+    t_up=$(date +%s.%N)
+    [ $up = 1 ] || fail "power cycle $k: the new demo CN did not come back to OPERATIONAL: $n"
+    wait_for "$demo_log" "NmtCsReadyToOperate->NmtCsOperational" 10 ||
+      fail "power cycle $k: the daemon says OPERATIONAL, the new demo CN's log does not"
+    pass "power cycle $k: reset for '$reason'; the new CN OPERATIONAL $(python3 -c "print(round($t_up - $t_start, 1))") s after its start ($(jq -c '{boots, resets}' <<<"$n"))"
+  done
+  # The error signalling of each new CN, on the wire: the MN's SoA to node 1 with ER = 1 (as the
+  # CN's end got it), then node 1's StatusResponse with EC = 1 (as the MN's end got it).
+  sleep 1
+  stop_captures
+  mv "$tmp/cn_frames.pcapng" "$tmp/pc_cn_frames.pcapng"
+  mv "$tmp/mn_frames.pcapng" "$tmp/pc_mn_frames.pcapng"
+  {
+    command tshark --disable-protocol opensafety -r "$tmp/pc_mn_frames.pcapng" \
+        -Y "epl.mtyp == 5 && epl.soa.svtg == 1 && epl.soa.er == 1" -T fields \
+        -e frame.time_epoch 2>/dev/null | sed 's/$/ er/'
+    command tshark --disable-protocol opensafety -r "$tmp/pc_cn_frames.pcapng" \
+        -Y "epl.src == 1 && epl.mtyp == 6 && epl.asnd.sres.ec == 1" -T fields \
+        -e frame.time_epoch 2>/dev/null | sed 's/$/ ec/'
+  } | sort -n -k1,1 >"$tmp/er_ec.txt"
+  handshakes=$(python3 - "$tmp/power_cycles.txt" "$tmp/er_ec.txt" <<'PY'
+import sys
+cycles = [tuple(map(float, l.split())) for l in open(sys.argv[1]) if l.strip()]
+events = [(float(t), k) for t, k in (l.split() for l in open(sys.argv[2]) if l.strip())]
+out = []
+for i, (_, start) in enumerate(cycles):
+    end = cycles[i + 1][0] if i + 1 < len(cycles) else float("inf")
+    er = [t for t, k in events if k == "er" and start <= t < end]
+    ec = [t for t, k in events if k == "ec" and er and er[0] < t < end]
+    out.append(f"{len(er)}/{len(ec)}")
+print(" ".join(out))
+PY
+)
+  for h in $handshakes; do
+    [ "${h%/*}" -gt 0 ] && [ "${h#*/}" -gt 0 ] ||
+      fail "error signalling after a power cycle: SoA with ER=1 / StatusResponse with EC=1 per cycle: $handshakes"
+  done
+  pass "error signalling of each new CN (SoA ER=1 / StatusResponse EC=1 after it): $handshakes"
+  start_captures
+  s0=$(status)
+  c0=$(jq .cycle.count <<<"$s0")
+fi
+resets_base=$(node1 "$s0" | jq .resets)
+lost_base=$(node1 "$s0" | jq .loss_of_pres.events)
+
 # The hold: node 1 sampled every second; a reset is not fatal at once, it must be explained below.
-resets_seen=0
+resets_seen=$resets_base
 for ((t = 0; t < hold; t++)); do
   sleep 1
   n=$(node1 "$(status)")
@@ -183,10 +278,9 @@ done
 # taken (s1: its 0 resets make the strict checks of both sound); a reset counted in a status read
 # before the captures stop (s_pre) has its cause in the captures (the replay must explain those).
 s_pre=$(status)
-resets_pre=$(node1 "$s_pre" | jq .resets)
-kill -INT "$tshark_pid" "$tshark_cn_pid"
-wait "$tshark_pid" "$tshark_cn_pid" 2>/dev/null
-cp "$tmp/demo_cn.log" "$tmp/demo_cn_window.log"
+resets_pre=$(($(node1 "$s_pre" | jq .resets) - resets_base))
+stop_captures
+cp "$demo_log" "$tmp/demo_cn_window.log"
 s1=$(status)
 n=$(node1 "$s1")
 c1=$(jq .cycle.count <<<"$s1")
@@ -198,8 +292,8 @@ skipped=$((k1 - k0))
 # load: counted in `overruns`, reported, not failed here); a slot neither is a cycle the daemon lost.
 [ $((ran + skipped)) -ge $((hold * 1000000 / period_us * 9 / 10)) ] ||
   fail "only $ran cycles run and $skipped skipped in $hold s at $period_us us"
-resets=$(jq .resets <<<"$n")
-lost=$(jq .loss_of_pres.events <<<"$n")
+resets=$(($(jq .resets <<<"$n") - resets_base))
+lost=$(($(jq .loss_of_pres.events <<<"$n") - lost_base))
 threshold=$(jq .loss_of_pres.threshold <<<"$n")
 wake_max_us=$(jq '.cycle.wake_latency_ns.max / 1000 | floor' <<<"$s1")
 cyc=$(jq -c '{wake_p99_us: (.cycle.wake_latency_ns.p99 / 1000), wake_max_us: (.cycle.wake_latency_ns.max / 1000), overruns: .cycle.overruns}' <<<"$s1")
