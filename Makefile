@@ -57,6 +57,9 @@ ASAN_ENV   := ASAN_OPTIONS=detect_leaks=1:abort_on_error=1:strict_string_checks=
 # in the SocketCAN port and virtual-bus tests. They run in `make test`; SANITIZER_CTEST_ARGS=
 # (empty) runs them under the sanitizers too.
 SANITIZER_CTEST_ARGS ?= -LE qemu
+# The test builds' debug information: line tables (file:line in every report and backtrace) at
+# a fraction of -g's compile time (CMakeLists.txt, DS1928_DEBUG_INFO). TEST_DEBUG_INFO= : -g.
+TEST_DEBUG_INFO ?= -DDS1928_DEBUG_INFO=-g1
 TSAN_ENV   := TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1 suppressions=$(CURDIR)/tests/tsan.supp"
 
 .PHONY: all build run run-canio test deps-build deps-test deps-deb deb test-package deps-fuzz deps-stress \
@@ -133,7 +136,7 @@ run-canio: build
 # The developer/CI build keeps zero warnings: DS1928_WERROR=ON here only (Release and package
 # builds leave it off, so a newer compiler's new warning does not break them).
 test: deps-test
-	cmake -S . -B $(BUILD) -DCMAKE_BUILD_TYPE=$(BUILD_TYPE) -DDS1928_WERROR=ON $(LAUNCHER)
+	cmake -S . -B $(BUILD) -DCMAKE_BUILD_TYPE=$(BUILD_TYPE) -DDS1928_WERROR=ON $(TEST_DEBUG_INFO) $(LAUNCHER)
 	cmake --build $(BUILD) -j $(JOBS)
 	@# ctest names skipped tests without their reason: list each one's SKIP line after the summary.
 	cd $(BUILD) || exit 1; rc=0; ctest --output-on-failure --timeout 900 -j 2 \
@@ -142,12 +145,12 @@ test: deps-test
 
 # Sanitizer builds: their own build directories, the same ctest suite (unit and integration).
 check-asan: deps-test
-	cmake -S . -B build-asan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DDS1928_SANITIZE=address,undefined $(LAUNCHER)
+	cmake -S . -B build-asan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DDS1928_SANITIZE=address,undefined $(TEST_DEBUG_INFO) $(LAUNCHER)
 	cmake --build build-asan -j $(JOBS)
 	cd build-asan && $(ASAN_ENV) ctest --output-on-failure --timeout 900 -j 2 $(SANITIZER_CTEST_ARGS)
 
 check-tsan: deps-test
-	cmake -S . -B build-tsan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DDS1928_SANITIZE=thread $(LAUNCHER)
+	cmake -S . -B build-tsan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DDS1928_SANITIZE=thread $(TEST_DEBUG_INFO) $(LAUNCHER)
 	cmake --build build-tsan -j $(JOBS)
 	cd build-tsan && $(TSAN_ENV) ctest --output-on-failure --timeout 900 -j 2 $(SANITIZER_CTEST_ARGS)
 

@@ -240,10 +240,18 @@ void Daemon::on_tick() {
           "first data exchanged: ready (cycle 0, the start-up's one-time work, took {:.0f} "
           "µs; not counted as an overrun)",
           static_cast<double>(engine_->first_cycle_work_ns()) / 1000.0);
-    } else if (bus_->reported_state().state == "waiting_for_link") {
+    } else if (const BusService::Reported r = bus_->reported_state();
+               r.state == "waiting_for_link") {
       ready_sent_ = true;
       notifier_.ready(summary_line());
       spdlog::info("ready, waiting for the link");
+    } else if (r.state == "another_mn") {
+      // Up, but it will not cycle on this segment: said once, at error level, with the remedy.
+      ready_sent_ = true;
+      notifier_.ready(summary_line());
+      control::log_event(spdlog::level::err,
+                         {control::LogEvent::BusState, bus().name(), -1, -1, r.cause},
+                         fmt::format("bus {}: {}", bus().name(), r.cause));
     }
   }
   for (const BusEvent& e : bus_watch_.poll(*bus_)) {

@@ -174,8 +174,9 @@ std::string Daemon::metrics_text(metrics::Format format) const {
              "State of the bus as status reports it: 1 for the "
              "current state.");
   const std::string reported = bus_->reported_state().state;
-  constexpr std::array<std::string_view, 7> kStates{
-      "down", "booting", "operational", "error", "degraded", "no_nodes", "waiting_for_link"};
+  constexpr std::array<std::string_view, 8> kStates{
+      "down",     "booting",          "operational", "error", "degraded",
+      "no_nodes", "waiting_for_link", "another_mn"};
   bool known = false;
   for (std::string_view st : kStates) {
     known = known || st == reported;

@@ -24,6 +24,9 @@ void PowerlinkService::append_metrics(metrics::Exposition& out) const {
   out.family("ds1928_powerlink_unexpected_frames", Type::Counter,
              "POWERLINK frames that fit no expected slot.");
   out.sample(static_cast<uint64_t>(mc.unexpected_frames));
+  out.family("ds1928_powerlink_foreign_mn_frames", Type::Counter,
+             "SoC, PReq or SoA frames of another Managing Node on the segment.");
+  out.sample(static_cast<uint64_t>(mc.foreign_mn_frames));
   out.family("ds1928_powerlink_async_timeouts", Type::Counter,
              "IdentRequests/StatusRequests without their answer within async_timeout.");
   out.sample(static_cast<uint64_t>(mc.async_timeouts));

@@ -87,6 +87,24 @@ std::string inputs_state(const powerlink::CnStatus& n) {
 
 }  // namespace
 
+namespace {
+
+// The message types another MN sends on its own (the ones that give it away).
+std::string_view frame_name(powerlink::MessageType t) {
+  switch (t) {
+    case powerlink::MessageType::kSoC:
+      return "SoC";
+    case powerlink::MessageType::kPReq:
+      return "PReq";
+    case powerlink::MessageType::kSoA:
+      return "SoA";
+    default:
+      return "frame";
+  }
+}
+
+}  // namespace
+
 PowerlinkService::PowerlinkService(std::unique_ptr<powerlink::PowerlinkBus> bus)
     : owned_(std::move(bus)), bus_(*owned_) {}
 
@@ -107,6 +125,18 @@ BusService::Reported PowerlinkService::reported_state() const {
                         "cable to the POWERLINK segment, or `ip link set {} up`; cycling starts "
                         "when the carrier comes",
                         name, name)};
+  }
+  if (st.counters.foreign_mn_at_start) {
+    const auto& m = st.counters.foreign_mn_mac;
+    return {
+        "another_mn",
+        fmt::format("another Managing Node is active on '{}' ({} from "
+                    "{:02x}:{:02x}:{:02x}:{:02x}:{:02x}:{:02x} while listening, MNWaitNotAct): "
+                    "ds1928d stays NOT_ACTIVE and sends nothing, one MN per segment (EPSG DS "
+                    "301); stop the other MN or give ds1928d a segment of its own, then "
+                    "restart it",
+                    interface_.empty() ? std::string("the interface") : interface_,
+                    frame_name(st.counters.foreign_mn_frame), m[0], m[1], m[2], m[3], m[4], m[5])};
   }
   if (s != BusState::Booting) return BusService::reported_state();
   std::string waiting;
@@ -132,7 +162,15 @@ void PowerlinkService::status_extra(nlohmann::json& j) const {
                    {"invalid_frames", st.counters.invalid_frames},
                    {"short_frames", st.counters.short_frames},
                    {"async_timeouts", st.counters.async_timeouts},
-                   {"async_invites_unused", st.counters.async_invites_unused}};
+                   {"async_invites_unused", st.counters.async_invites_unused},
+                   {"foreign_mn_frames", st.counters.foreign_mn_frames}};
+  if (st.counters.foreign_mn_frames > 0) {
+    const auto& m = st.counters.foreign_mn_mac;
+    j["foreign_mn"] = {{"at_start", st.counters.foreign_mn_at_start},
+                       {"last_frame", std::string(frame_name(st.counters.foreign_mn_frame))},
+                       {"last_source_mac", fmt::format("{:02x}:{:02x}:{:02x}:{:02x}:{:02x}:{:02x}",
+                                                       m[0], m[1], m[2], m[3], m[4], m[5])}};
+  }
   nlohmann::json nodes = nlohmann::json::array();
   for (std::size_t i = 0; i < st.node_count; ++i) {
     const auto& n = st.nodes[i];

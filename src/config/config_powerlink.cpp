@@ -359,6 +359,7 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
   t.integer("late_pres", p.thresholds.late_pres, 0, kU32, "(0 = disabled)");
   t.finish();
   Section nmt = s.section("nmt");
+  nmt.integer("wait_not_active_ms", p.nmt.wait_not_active_ms, 0, 600000, "ms");
   nmt.integer("pre_op1_timeout_ms", p.nmt.pre_op1_timeout_ms, 1, 600000, "ms");
   nmt.integer("boot_step_timeout_ms", p.nmt.boot_step_timeout_ms, 1, 600000, "ms");
   nmt.integer("reset_wait_ms", p.nmt.reset_wait_ms, 0, 600000, "ms");
@@ -629,6 +630,8 @@ void dump_powerlink(std::ostream& o, const PowerlinkBusConfig& p) {
     << source_comment(p, "powerlink.thresholds.cycle_time_exceeded") << "\n"
     << "    late_pres: " << p.thresholds.late_pres << "\n"
     << "  nmt:\n"
+    << "    wait_not_active_ms: " << p.nmt.wait_not_active_ms
+    << source_comment(p, "powerlink.nmt.wait_not_active_ms") << "\n"
     << "    pre_op1_timeout_ms: " << p.nmt.pre_op1_timeout_ms
     << source_comment(p, "powerlink.nmt.pre_op1_timeout_ms") << "\n"
     << "    boot_step_timeout_ms: " << p.nmt.boot_step_timeout_ms << "\n"

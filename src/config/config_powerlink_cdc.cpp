@@ -26,6 +26,7 @@ constexpr MnCdcSetting kSettings[] = {
   {obj::kMnCycleTiming, 1, false, kWaitSocPreq, "powerlink.wait_soc_preq_us", 1000, 0, 0, 100'000, "ns"},
   // AsyncSlotTimeout_U32: at least 250 ns (DS 301; openPOWERLINK's object dictionary says so too).
   {obj::kMnCycleTiming, 2, false, kAsyncSlotTimeout, "powerlink.async_slot_timeout_us", 1000, 250, 1, 100'000, "ns"},
+  {obj::kMnBootTime, 1, false, kWaitNotActive, "powerlink.nmt.wait_not_active_ms", 1000, 0, 0, 600'000, "µs"},
   {obj::kMnBootTime, 2, false, kPreOp1Timeout, "powerlink.nmt.pre_op1_timeout_ms", 1000, 1, 1, 600'000, "µs"},
   {obj::kMnCnPResTimeout, 0, true, kPresTimeout, "pres_timeout_us", 1000, 1, 1, 100'000, "ns"},
   {obj::kMnCnLossPResThreshold, 0, true, kLossOfPresThreshold, "loss_of_pres_threshold", 1, 0, 0, kU32, ""},
@@ -192,6 +193,9 @@ void apply_mn_cdc_network(Section& s, const Section& thresholds, const Section& 
       case kPreOp1Timeout:
         given = nmt.has("pre_op1_timeout_ms");
         break;
+      case kWaitNotActive:
+        given = nmt.has("wait_not_active_ms");
+        break;
       default:
         break;
     }
@@ -211,6 +215,9 @@ void apply_mn_cdc_network(Section& s, const Section& thresholds, const Section& 
           break;
         case kPreOp1Timeout:
           p.nmt.pre_op1_timeout_ms = u;
+          break;
+        case kWaitNotActive:
+          p.nmt.wait_not_active_ms = u;
           break;
         default:
           break;

@@ -23,6 +23,7 @@ enum class MnCdcTarget : uint8_t {
   kWaitSocPreq,          // powerlink.wait_soc_preq_us
   kAsyncSlotTimeout,     // powerlink.async_slot_timeout_us
   kPreOp1Timeout,        // powerlink.nmt.pre_op1_timeout_ms
+  kWaitNotActive,        // powerlink.nmt.wait_not_active_ms
   kPresTimeout,          // powerlink.nodes[].pres_timeout_us
   kLossOfPresThreshold,  // powerlink.nodes[].loss_of_pres_threshold
 };

@@ -34,14 +34,15 @@ enum class IncidentKind : uint8_t {
   AxisError,        // an axis went to module_error
   AxisBusDown,      // an axis went to bus_down
   OverrunBurst,     // cycle overruns beyond flight_recorder.overrun_burst within one second
+  ForeignMn,        // POWERLINK: another MN's SoC/PReq/SoA on the segment while running
 };
-inline constexpr std::size_t kIncidentKindCount = 10;
+inline constexpr std::size_t kIncidentKindCount = 11;
 
 // "manual", "node_lost", ... (file names, journal, `ds1928ctl incidents`, metrics labels).
 [[nodiscard]] constexpr std::string_view incident_kind_name(IncidentKind k) noexcept {
   constexpr std::string_view names[kIncidentKindCount] = {
-      "manual",  "node_lost",        "node_reset", "pres_threshold", "bus_off",
-      "boot_up", "heartbeat_missed", "axis_error", "axis_bus_down",  "overrun_burst"};
+      "manual",           "node_lost",  "node_reset",    "pres_threshold", "bus_off",   "boot_up",
+      "heartbeat_missed", "axis_error", "axis_bus_down", "overrun_burst",  "foreign_mn"};
   const auto i = static_cast<std::size_t>(k);
   return i < kIncidentKindCount ? names[i] : std::string_view("unknown");
 }

@@ -93,6 +93,7 @@ const ManagingNode::Handler ManagingNode::kHandlers[] = {
 
 ManagingNode::ManagingNode(const MnConfig& config)
     : config_(config), mapping_(config.bus.sdo_overrides) {
+  if (config_.bus.nmt.wait_not_active_ms > 0) mn_state_ = NmtState::kNotActive;
   status_view_.reserve(config_.bus.nodes.size());
   iso_list_.resize(config_.bus.nodes.size());
   prc_list_.resize(config_.bus.nodes.size());
@@ -476,7 +477,11 @@ void ManagingNode::stamp_soc(int64_t send_ns, NetTime net_time) noexcept {
 }
 
 bool ManagingNode::full_cycle() const noexcept {
-  return mn_state_ != NmtState::kPreOperational1;
+  return mn_state_ != NmtState::kPreOperational1 && mn_state_ != NmtState::kNotActive;
+}
+
+void ManagingNode::not_active_cycle() noexcept {
+  update_mn_state();
 }
 
 std::span<const uint8_t> ManagingNode::isochronous_nodes() const noexcept {
@@ -575,6 +580,10 @@ std::error_code ManagingNode::on_frame(std::span<const uint8_t> bytes) noexcept 
   }
   // SoC/PReq/SoA from someone else: another MN on the segment.
   ++counters_.unexpected_frames;
+  ++counters_.foreign_mn_frames;
+  counters_.foreign_mn_mac = h.src_mac;
+  counters_.foreign_mn_frame = h.type;
+  if (mn_state_ == NmtState::kNotActive) counters_.foreign_mn_at_start = true;
   return {};
 }
 
@@ -607,6 +616,16 @@ void ManagingNode::handle_pres(Cn& cn, const PRes& pres, std::span<const uint8_t
 }
 
 void ManagingNode::update_mn_state() noexcept {
+  if (mn_state_ == NmtState::kNotActive) {
+    // Another MN heard while listening: stay NOT_ACTIVE (openPOWERLINK's MN freezes there too,
+    // nmtk.c doStateMsNotActive()); two MNs' SoCs on one segment would wreck both cycles.
+    if (!counters_.foreign_mn_at_start &&
+        now_ns_ - mn_state_since_ns_ >= ms(config_.bus.nmt.wait_not_active_ms)) {
+      mn_state_ = NmtState::kPreOperational1;
+      mn_state_since_ns_ = now_ns_;
+    }
+    return;
+  }
   if (mn_state_ == NmtState::kPreOperational1) {
     bool all_identified = !cns_.empty();
     for (const auto& cn : cns_)

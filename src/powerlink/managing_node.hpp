@@ -185,6 +185,12 @@ struct MnCounters {
   // UnspecifiedInvite/NMTRequestInvite the CN let pass: it may legitimately have nothing to send
   // (its RS was already served, an SDO answer is not ready yet), so this is no error.
   uint32_t async_invites_unused = 0;
+  // SoC, PReq or SoA of another MN (DS 301: one MN per segment). Seen while NOT_ACTIVE, it keeps
+  // this MN there (foreign_mn_at_start); seen later, it is counted and named here.
+  uint32_t foreign_mn_frames = 0;
+  bool foreign_mn_at_start = false;
+  MacAddress foreign_mn_mac{};
+  MessageType foreign_mn_frame = MessageType::kSoC;
 };
 
 struct MnConfig {
@@ -279,6 +285,10 @@ class ManagingNode {
 
   // ---- State ----
   [[nodiscard]] NmtState mn_state() const noexcept { return mn_state_; }
+  // NOT_ACTIVE (MNWaitNotAct): the bus sends nothing and calls not_active_cycle() instead of
+  // running a cycle; frames received meanwhile still go to on_frame().
+  [[nodiscard]] bool not_active() const noexcept { return mn_state_ == NmtState::kNotActive; }
+  void not_active_cycle() noexcept;
   [[nodiscard]] std::span<const CnStatus> nodes() const noexcept;
   [[nodiscard]] const CnStatus* node(uint8_t id) const noexcept;
   [[nodiscard]] const MnCounters& counters() const noexcept { return counters_; }

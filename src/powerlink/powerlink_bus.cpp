@@ -196,6 +196,14 @@ ExchangeResult PowerlinkBus::exchange(std::span<AxisIo> axes, int64_t cycle_star
   // for this cycle's answer (frames carry no cycle number). The MN drops such PRes (counted as
   // stale); late ASnds are still served, they identify themselves (SDO sequence numbers).
   drain(0);
+  if (mn_.not_active()) {
+    // Listening for another MN (MNWaitNotAct): nothing is sent.
+    mn_.not_active_cycle();
+    state_.store(mn_.counters().foreign_mn_at_start ? BusState::Error : BusState::Booting,
+                 std::memory_order_relaxed);
+    publish_status();
+    return result;
+  }
   // A CN's own mapping was read and bound at boot: its axes move to where it puts them.
   if (mn_.layouts_version() != layouts_version_) sync_layouts();
   const std::size_t n_axes = std::min(axes.size(), axis_map_.size());
@@ -283,6 +291,12 @@ ExchangeResult PowerlinkBus::exchange(std::span<AxisIo> axes, int64_t cycle_star
   }
   RegisterResult r;
   while (registers().flush() && mn_.poll(r)) (void)registers().complete(r);
+
+  // Another MN's frames while running: one incident per run of cycles that saw them.
+  const uint32_t foreign = mn_.counters().foreign_mn_frames;
+  if (foreign != foreign_mn_frames_ && !foreign_mn_seen_) raise_incident(IncidentKind::ForeignMn);
+  foreign_mn_seen_ = foreign != foreign_mn_frames_;
+  foreign_mn_frames_ = foreign;
 
   result.net_time = {mn_.net_time_us(), mn_.soc_time_ns(), mn_.full_cycle()};
   result.bus_up = mn_.all_operational();

@@ -158,8 +158,10 @@ class PowerlinkBus final : public BusDriver, private RegisterTarget {
   Link& link_;
   ManagingNode mn_;
   std::vector<AxisMap> axis_map_;
-  uint32_t layouts_version_ = 0;  // of the MN's layouts axis_map_ was taken from
-  std::vector<int64_t> rx_time_;  // per axis: reception time of its PRes this cycle
+  uint32_t layouts_version_ = 0;    // of the MN's layouts axis_map_ was taken from
+  uint32_t foreign_mn_frames_ = 0;  // the MN's count at the last cycle's end
+  bool foreign_mn_seen_ = false;    // the last cycle saw another MN's frames
+  std::vector<int64_t> rx_time_;    // per axis: reception time of its PRes this cycle
   std::array<uint8_t, kMaxFrameSize> tx_{};
   std::array<uint8_t, kMaxFrameSize> rx_{};
   std::atomic<BusState> state_{BusState::Down};

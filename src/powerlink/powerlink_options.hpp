@@ -107,6 +107,10 @@ enum class RxWait : uint8_t {
 };
 // The MN's NMT timing while booting CNs (docs/powerlink.md, boot sequence).
 struct PowerlinkNmtConfig {
+  // NOT_ACTIVE (MNWaitNotAct, 0x1F89/1): the MN listens this long before it sends anything; an
+  // SoC, PReq or SoA of another MN then keeps it NOT_ACTIVE. 0: start at once. openPOWERLINK's MN
+  // object dictionary has 1 s.
+  uint32_t wait_not_active_ms = 1000;
   uint32_t pre_op1_timeout_ms = 500;     // reduced cycle before the MN starts full cycles
   uint32_t boot_step_timeout_ms = 5000;  // a CN stuck in a boot step is reset
   uint32_t reset_wait_ms = 100;          // after NMTResetNode, before identifying again

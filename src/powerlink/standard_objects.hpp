@@ -174,6 +174,7 @@ inline constexpr std::array kStandardObjects = std::to_array<StandardObject>({
   {kMnProductCodeList, 1, 254, "NMT_MNProductCodeList_AU32", kU32, kRw, kMn, 0, "product code expected per node"},
   {kMnRevisionNoList, 1, 254, "NMT_MNRevisionNoList_AU32", kU32, kRw, kMn, 0, "revision number expected per node"},
   {kMnSerialNoList, 1, 254, "NMT_MNSerialNoList_AU32", kU32, kRw, kMn, 0, "serial number expected per node"},
+  {kMnBootTime, 1, 1, "NMT_BootTime_REC.MNWaitNotAct_U32", kU32, kRw, kMn, 1'000'000, "MN listens in NOT_ACTIVE for another MN before it starts, µs"},
   {kMnBootTime, 2, 2, "NMT_BootTime_REC.MNTimeoutPreOp1_U32", kU32, kRw, kMn, 500'000, "MN in PRE_OPERATIONAL_1 until the mandatory CNs are identified, µs"},
   {kMnCycleTiming, 1, 1, "NMT_MNCycleTiming_REC.WaitSoCPReq_U32", kU32, kRw, kMn, 0, "pause SoC to first PReq, ns"},
   {kMnCycleTiming, 2, 2, "NMT_MNCycleTiming_REC.AsyncSlotTimeout_U32", kU32, kRw, kMn, 0, "wait for the invited ASnd, ns"},

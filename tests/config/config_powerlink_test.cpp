@@ -213,6 +213,7 @@ TEST_CASE("The MN's objects in its mnobd.cdc are the configuration, the YAML ove
       {0x1C09, 3, le(40, 4)},          // DLL_MNCNLossPResThreshold_AU32/3
       {0x1F8A, 1, le(2000, 4)},        // WaitSoCPReq_U32, ns
       {0x1F8A, 2, le(50000, 4)},       // AsyncSlotTimeout_U32, ns
+      {0x1F89, 1, le(2500, 4)},        // MNWaitNotAct_U32, µs: 2.5 ms
       {0x1F89, 2, le(300000, 4)},      // MNTimeoutPreOp1_U32, µs
       {0x1F92, 3, le(120001, 4)},      // NMT_MNCNPResTimeout_AU32/3, ns: 120.001 µs
       {0x1F92, 4, le(100000, 4)},
@@ -232,6 +233,7 @@ TEST_CASE("The MN's objects in its mnobd.cdc are the configuration, the YAML ove
   CHECK(p.wait_soc_preq_us == 2);
   CHECK(p.async_timeout_us == 50);
   CHECK(p.nmt.pre_op1_timeout_ms == 300);
+  CHECK(p.nmt.wait_not_active_ms == 3);      // rounded up
   CHECK(p.nodes[0].pres_timeout_us == 121);  // rounded up: a timeout is never shortened
   CHECK(p.nodes[1].pres_timeout_us == 100);
   CHECK_FALSE(p.nodes[0].mandatory);
@@ -248,6 +250,7 @@ TEST_CASE("The MN's objects in its mnobd.cdc are the configuration, the YAML ove
                                      "= 0x00000007"));
   CHECK_THAT(dumped, Catch::Contains("async_slot_timeout_us: 50  # cdc 0x1F8A/2"));
   CHECK_THAT(dumped, Catch::Contains("pre_op1_timeout_ms: 300  # cdc 0x1F89/2"));
+  CHECK_THAT(dumped, Catch::Contains("wait_not_active_ms: 3  # cdc 0x1F89/1"));
   const ConfigResult again = from(dumped, cfg);
   INFO(again.error_report());
   REQUIRE(again.ok());

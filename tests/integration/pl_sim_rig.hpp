@@ -123,6 +123,8 @@ struct Setup {
     pl::MnConfig config;
     config.cycle_us = 1000;
     config.bus.multiplex_cycles = multiplex_cycles;
+    // Listening for another MN first (MNWaitNotAct) has tests of its own; these start at once.
+    config.bus.nmt.wait_not_active_ms = 0;
     config.mac = wire.mac();
     config.bus.thresholds.loss_of_pres = 15;
     for (const NodeSpec& s : specs) {

@@ -94,6 +94,8 @@ TEST_CASE(
   mn_config.bus.nodes.push_back(node);
   mn_config.cycle_us = 1000;
   mn_config.mac = wire.mac();
+  // Listening for another MN first (MNWaitNotAct) has tests of its own; these start at once.
+  mn_config.bus.nmt.wait_not_active_ms = 0;
   pl::PowerlinkBus mn(mn_config, wire);
   mn.set_clock(&fake_clock);
   REQUIRE_FALSE(mn.start());

@@ -100,6 +100,8 @@ struct Setup {
     mn_config.axes = axes;
     mn_config.cycle_us = 1000;
     mn_config.mac = wire.mac();
+    // Listening for another MN first (MNWaitNotAct) has tests of its own; these start at once.
+    mn_config.bus.nmt.wait_not_active_ms = 0;
     mn = std::make_unique<pl::PowerlinkBus>(mn_config, wire);
     mn->set_clock(&fake_clock);
     REQUIRE_FALSE(mn->start());

@@ -8,7 +8,10 @@
 #     becomes operational and the axis valid, without a restart;
 #  3. the interface gets an IPv4 address: start refuses it, naming the address and the key that
 #     allows it; `--check-config` in the namespace says the same; with
-#     powerlink.allow_shared_interface: true it starts.
+#     powerlink.allow_shared_interface: true it starts;
+#  4. a second MN started on the segment listens (MNWaitNotAct), hears the first one's SoCs and
+#     stays NOT_ACTIVE and silent, status another_mn naming the sender; the first runs on;
+#  5. another MN's SoCs while running are counted, the sender named, a foreign_mn incident made.
 # Usage: powerlink_link_wait_test.sh BUILD_DIR SOURCE_DIR   (root; 77 = skipped)
 set -u
 . "${2:?source dir}/tests/lib/netns.sh"
@@ -116,3 +119,53 @@ track $dpid
 until_true 20 operational || fail "allow_shared_interface: true did not start: $(tail -n 3 "$tmp/shared.log")"
 grep -q "is shared (it has the address 10.77.0.1/24)" "$tmp/shared.log" || fail "no warning about the shared interface"
 pass "an interface with 10.77.0.1/24: refused with the address, started with allow_shared_interface"
+
+# ---- 4. another MN on the segment at start: NOT_ACTIVE for good ------------------------------
+# A second ds1928d at the CN's end listens first (MNWaitNotAct, 1 s by default), hears the running
+# MN's SoCs and stays NOT_ACTIVE, sending nothing: the running MN sees no foreign frame.
+cat >"$tmp/second.yaml" <<YAML
+bus: powerlink
+cycle: {period_us: 2000, hold_cpu_dma_latency: false}
+powerlink:
+  interface: plw_cn
+  nodes: [{node_id: 1}]
+axes: [{name: axis0, node: 1, slot: 1}]
+shm: {name: /ds1928d_plw2_$tag}
+socket: {path: $tmp/ctl2.sock, privileged_group: ""}
+YAML
+on_cleanup 'rm -f "/dev/shm/ds1928d_plw2_$tag" "/dev/shm/ds1928d_plw2_$tag.wait"'
+ip netns exec "$ns_cn" "$daemon" --config "$tmp/second.yaml" >"$tmp/second.log" 2>&1 &
+second=$!
+track $second
+status2() { ip netns exec "$ns_cn" "$ctl" -s "$tmp/ctl2.sock" --json status 2>/dev/null; }
+until_true 20 bash -c "[ \"\$(ip netns exec $ns_cn $ctl -s $tmp/ctl2.sock --json status 2>/dev/null | jq -r .bus.state)\" = another_mn ]" ||
+  fail "the second MN does not report another_mn: $(status2 | jq -c .bus)"
+s2=$(status2)
+mac_mn=$(ip -n "$ns_mn" link show plw_mn | awk '/link\/ether/ {print $2}')
+cause=$(jq -r .bus.cause <<<"$s2")
+grep -qE "another Managing Node is active on 'plw_cn' \((SoC|PReq|SoA) from $mac_mn" <<<"$cause" ||
+  fail "the cause does not name the interface, the frame and the sender $mac_mn: $cause"
+[ "$(jq -r .bus.mn_state <<<"$s2")" = NOT_ACTIVE ] || fail "the second MN is not NOT_ACTIVE: $(jq -c .bus.mn_state <<<"$s2")"
+[ "$(jq -r .bus.foreign_mn.at_start <<<"$s2")" = true ] || fail "foreign_mn.at_start: $(jq -c .bus.foreign_mn <<<"$s2")"
+wait_for "$tmp/second.log" "another Managing Node is active on 'plw_cn'" 10 || fail "the second MN's log does not say it"
+sleep 1
+operational || fail "the running MN lost its bus to the second one: $(status | jq -c '.bus | {state, cause}')"
+[ "$(status | jq .bus.counters.foreign_mn_frames)" = 0 ] ||
+  fail "the running MN heard the silent second one: $(status | jq -c .bus.counters)"
+kill $second
+wait $second 2>/dev/null
+pass "a second MN at start: another_mn ('$cause'), NOT_ACTIVE, silent; the running MN undisturbed"
+
+# ---- 5. another MN's SoC while running: counted, named, an incident --------------------------
+ip netns exec "$ns_cn" python3 "$src/tests/integration/pl_send_frames.py" plw_cn soc:3:54 >"$tmp/send.log" 2>&1 ||
+  fail "could not send the foreign SoCs: $(cat "$tmp/send.log")"
+until_true 10 bash -c "[ \"\$(ip netns exec $ns_mn $ctl -s $tmp/ctl.sock --json status 2>/dev/null | jq .bus.counters.foreign_mn_frames)\" = 3 ]" ||
+  fail "3 foreign SoCs sent, the MN counts $(status | jq -c .bus.counters)"
+s=$(status)
+[ "$(jq -r .bus.foreign_mn.last_source_mac <<<"$s")" = 02:00:00:00:54:54 ] ||
+  fail "the sender is not named: $(jq -c .bus.foreign_mn <<<"$s")"
+[ "$(jq -r .bus.foreign_mn.at_start <<<"$s")" = false ] || fail "at_start for a frame while running"
+until_true 10 bash -c "ip netns exec $ns_mn $ctl -s $tmp/ctl.sock --json incidents 2>/dev/null | jq -e '[.incidents[] | select(.kind == \"foreign_mn\")] | length >= 1' >/dev/null" ||
+  fail "no foreign_mn incident: $(ip netns exec "$ns_mn" "$ctl" -s "$tmp/ctl.sock" --json incidents 2>&1 | head -c 400)"
+operational || fail "the MN stopped on another MN's SoCs"
+pass "3 SoCs of another MN while running: counted, sender 02:00:00:00:54:54 named, foreign_mn incident, still operational"

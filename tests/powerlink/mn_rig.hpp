@@ -48,6 +48,8 @@ struct Rig {
     g_clock_step_ns = 0;
     config.cycle_us = 1000;
     config.mac = link.mac();
+    // Listening for another MN first (MNWaitNotAct) has tests of its own; these start at once.
+    config.bus.nmt.wait_not_active_ms = 0;
     // The standard's threshold (two losses in a row): tests count losses against it.
     config.bus.thresholds.loss_of_pres = 15;
     for (uint8_t n : nodes) {

@@ -712,3 +712,66 @@ TEST_CASE("MN writes the configured EnDatInfoCmd channels at boot, and only thos
   CHECK(cn.objects.count({0x2001, 0x12}) == 0);  // slot 1 has none
   CHECK(cn.objects.size() == 32);                // the boot's 30 and the two channels
 }
+
+TEST_CASE(
+    "The MN listens NOT_ACTIVE for MNWaitNotAct first and stays there when another MN is heard",
+    "[powerlink][mn][nmt]") {
+  auto config_with_wait = [](uint32_t wait_ms, uint8_t mac_last) {
+    MnConfig c;
+    PowerlinkNodeConfig nc;
+    nc.node_id = 1;
+    c.bus.nodes.push_back(nc);
+    c.bus.nmt.wait_not_active_ms = wait_ms;
+    c.mac = {0x02, 0, 0, 0, 0, mac_last};
+    return c;
+  };
+  // Another MN's SoC, as it would come over the wire.
+  ManagingNode other(config_with_wait(0, 0x99));
+  other.begin_cycle(0);
+  std::array<uint8_t, kMaxFrameSize> soc{};
+  const auto soc_len = other.build_soc(soc);
+  REQUIRE(soc_len);
+  const std::span<const uint8_t> foreign(soc.data(), *soc_len);
+  constexpr int64_t kMs = 1'000'000;
+
+  ManagingNode mn(config_with_wait(10, 0x01));
+  auto run_until = [&](int64_t& t, int64_t end_ms) {
+    for (; t <= end_ms * kMs; t += kMs) {
+      mn.begin_cycle(t);
+      if (mn.not_active()) mn.not_active_cycle();
+    }
+  };
+  int64_t t = 0;
+  CHECK(mn.mn_state() == NmtState::kNotActive);
+  SECTION("silence for MNWaitNotAct: PRE_OPERATIONAL_1") {
+    run_until(t, 9);
+    CHECK(mn.not_active());
+    CHECK_FALSE(mn.full_cycle());
+    run_until(t, 11);
+    CHECK(mn.mn_state() == NmtState::kPreOperational1);
+    CHECK(mn.counters().foreign_mn_frames == 0);
+  }
+  SECTION("another MN's SoC while listening: NOT_ACTIVE for good, the sender named") {
+    run_until(t, 5);
+    CHECK_FALSE(mn.on_frame(foreign));
+    run_until(t, 100);
+    CHECK(mn.mn_state() == NmtState::kNotActive);
+    CHECK(mn.counters().foreign_mn_at_start);
+    CHECK(mn.counters().foreign_mn_frames == 1);
+    CHECK(mn.counters().foreign_mn_frame == MessageType::kSoC);
+    CHECK(mn.counters().foreign_mn_mac == MacAddress{0x02, 0, 0, 0, 0, 0x99});
+  }
+  SECTION("another MN's SoC once running: counted and named, the MN runs on") {
+    run_until(t, 20);
+    REQUIRE(mn.mn_state() != NmtState::kNotActive);
+    CHECK_FALSE(mn.on_frame(foreign));
+    run_until(t, 30);
+    CHECK(mn.mn_state() != NmtState::kNotActive);
+    CHECK_FALSE(mn.counters().foreign_mn_at_start);
+    CHECK(mn.counters().foreign_mn_frames == 1);
+  }
+  SECTION("MNWaitNotAct 0: no listening") {
+    ManagingNode at_once(config_with_wait(0, 0x01));
+    CHECK(at_once.mn_state() == NmtState::kPreOperational1);
+  }
+}
