@@ -178,7 +178,7 @@ TEST_CASE(
 
 TEST_CASE(
     "the simulated encoder's own words end to end: a warning stays valid, an error is "
-    "module_error, both clear after EnDatAck; a low encoder supply is module_error",
+    "module_error, both clear after EnDatAck, and a low encoder supply is module_error",
     "[errors][e2e]") {
   Bench b;
   REQUIRE(b.run(300).validity == DS1928_AXIS_VALID);
