@@ -60,12 +60,23 @@ bool has_info(const ModuleSettings& m) noexcept {
   return std::to_string(reg) + " (" + std::string(info ? info->name : "?") + ")";
 }
 
-// The three registers read after a silence: enough to tell a module that kept its configuration
-// from one that was power cycled (EnDat disabled, MTUs unset).
-[[nodiscard]] std::array<RegisterWrite, 3> configuration_checks(const ModuleSettings& m) noexcept {
-  return {{{reg::kEnDatMode, 1, m.endat_mode()},
-           {reg::kOutputMtu, 1, m.output_mtu},
-           {reg::kInputMtu, 1, m.input_mtu}}};
+// The registers read after a silence: three tell a module that kept its configuration from one
+// that was power cycled (EnDat disabled, MTUs unset); each configured additional-information
+// channel's EnDatInfoCmd0n is read back as well, like every register the configuration wrote
+// and the cycle depends on.
+struct ConfigurationChecks {
+  std::array<RegisterWrite, 3 + std::tuple_size_v<decltype(ModuleSettings::info_cmd)>> checks{};
+  std::size_t count = 0;
+  [[nodiscard]] const RegisterWrite& operator[](std::size_t i) const noexcept { return checks[i]; }
+};
+[[nodiscard]] ConfigurationChecks configuration_checks(const ModuleSettings& m) noexcept {
+  ConfigurationChecks c;
+  c.checks[c.count++] = {reg::kEnDatMode, 1, m.endat_mode()};
+  c.checks[c.count++] = {reg::kOutputMtu, 1, m.output_mtu};
+  c.checks[c.count++] = {reg::kInputMtu, 1, m.input_mtu};
+  const InfoCommandWrites info = info_command_writes(m);
+  for (const RegisterWrite& w : info.span()) c.checks[c.count++] = w;
+  return c;
 }
 
 }  // namespace
@@ -586,7 +597,7 @@ void CanioBus::check_step_done(int64_t now, std::error_code ec, uint32_t value,
     start_configure(axis);
     return;
   }
-  if (++job_.step < 3) return;
+  if (++job_.step < configuration_checks(options_.axes[axis].module).count) return;
   note(axis, {});
   job_.kind = SdoJobKind::None;
   mark_configured(axis, now);

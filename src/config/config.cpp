@@ -223,6 +223,11 @@ void parse_sim_axis(Section s, SimAxisConfig& a, const std::filesystem::path& ba
     }
   }
   s.integer("inject_error_info", a.inject_error_info, 0, kU8);
+  s.integer("endat_error", a.endat_error, 0, 0x7F);
+  s.integer("endat_warning", a.endat_warning, 0, 0x1F);
+  s.integer("vss_mv", a.vss_mv, 0, 3000, "mV");
+  s.integer("supply_mv", a.supply_mv, 0, 6000, "mV");
+  s.integer("faults_after_ms", a.faults_after_ms, 0, 3'600'000, "ms");
   s.finish();
 }
 
@@ -584,7 +589,12 @@ std::string dump_config(const DaemonConfig& c) {
       << "      frequency_hz: " << real_text(a.frequency_hz) << "\n"
       << "      module_cycle_us: " << a.module_cycle_us << "\n"
       << "      encoder_file: " << quote(a.encoder_file) << "\n"
-      << "      inject_error_info: " << hex(a.inject_error_info) << "\n";
+      << "      inject_error_info: " << hex(a.inject_error_info) << "\n"
+      << "      endat_error: " << hex(a.endat_error) << "\n"
+      << "      endat_warning: " << hex(a.endat_warning) << "\n"
+      << "      vss_mv: " << a.vss_mv << "\n"
+      << "      supply_mv: " << a.supply_mv << "\n"
+      << "      faults_after_ms: " << a.faults_after_ms << "\n";
   }
   dump_powerlink(o, c.powerlink);
   dump_canio(o, c.canio);

@@ -80,9 +80,12 @@ struct Ds1928Module::State {
   Registers regs;
   ModuleInputs in;
   ModuleOutputs out;
-  uint8_t latched_errors = 0;  // present until acknowledged
-  uint32_t vss_mv = 1000;      // sin/cos amplitude (set_vss_mv)
-  bool vss_bad = false;        // the last EnDat cycle saw the amplitude outside the window
+  uint8_t latched_errors = 0;   // present until acknowledged
+  uint32_t vss_mv = 1000;       // sin/cos amplitude (set_vss_mv)
+  uint32_t supply_mv = 5000;    // encoder supply (set_supply_mv)
+  bool faults_applied = false;  // SimAxisConfig's faults are in place
+  int64_t faults_at_ns = 0;     // when they appear (module time)
+  bool vss_bad = false;         // the last EnDat cycle saw the amplitude outside the window
   int64_t vss_good_from_ns = INT64_MIN;  // end of SinCosQuitTime after the window was left
   uint8_t prev_ack = 0;                  // AckErrorInfo acts on rising edges
   std::array<uint32_t, kInfoChannels> info_cmd{};  // EnDatInfoCmd01..04 (0 at power-up)
@@ -120,7 +123,9 @@ void Ds1928Module::power_up() noexcept {
   s.regs = Registers::power_up(s.model);
   s.in = ModuleInputs{};
   s.out = ModuleOutputs{};
-  s.latched_errors = s.sim.inject_error_info;
+  s.latched_errors = 0;
+  s.faults_applied = false;
+  if (s.sim.faults_after_ms == 0) apply_configured_faults();
   s.vss_bad = false;
   s.vss_good_from_ns = INT64_MIN;
   s.prev_ack = 0;
@@ -158,7 +163,24 @@ void Ds1928Module::set_vss_mv(uint32_t millivolts) noexcept {
   state_->vss_mv = millivolts;
 }
 
+void Ds1928Module::set_supply_mv(uint32_t millivolts) noexcept {
+  state_->supply_mv = millivolts;
+}
+
+// SimAxisConfig's faults, through the same calls a test makes.
+void Ds1928Module::apply_configured_faults() noexcept {
+  State& s = *state_;
+  s.faults_applied = true;
+  s.latched_errors |= s.sim.inject_error_info;
+  if (s.sim.endat_error != 0) s.bridge.encoder().set_error_conditions(s.sim.endat_error);
+  if (s.sim.endat_warning != 0) s.bridge.encoder().set_warning_conditions(s.sim.endat_warning);
+  if (s.sim.vss_mv != 1000) s.vss_mv = s.sim.vss_mv;
+  if (s.sim.supply_mv != 5000) s.supply_mv = s.sim.supply_mv;
+}
+
 namespace {
+
+constexpr uint32_t kSupplyMinMv = 4750;
 
 [[nodiscard]] double profile_position(const SimAxisConfig& sim, double t_s) noexcept {
   switch (sim.profile) {
@@ -201,7 +223,9 @@ void Ds1928Module::tick(int64_t monotonic_ns, uint64_t net_time_us) noexcept {
     s.started = true;
     s.origin_ns = monotonic_ns;
     s.next_tick_ns = monotonic_ns;
+    s.faults_at_ns = monotonic_ns + int64_t{s.sim.faults_after_ms} * 1'000'000;
   }
+  if (!s.faults_applied && monotonic_ns >= s.faults_at_ns) apply_configured_faults();
   // Catch up every system tick up to now; a long gap (power-cycled bus, stopped debugger) does
   // not replay thousands of ticks: at most one EnDat cycle's worth matters.
   if (monotonic_ns - s.next_tick_ns > 64 * tick_ns) {
@@ -218,6 +242,14 @@ void Ds1928Module::tick(int64_t monotonic_ns, uint64_t net_time_us) noexcept {
     const uint32_t prescaler =
         s.regs[reg::kSystemCyclePrescaler] == 0 ? 1 : s.regs[reg::kSystemCyclePrescaler];
     if (s.ticks % prescaler != 0) continue;
+    // The encoder supply (5 V ±5 %, §3 technical data; the datasheet gives no trip point, the
+    // strict reading takes the tolerance's lower end): an underpowered encoder's position is not
+    // taken, whether or not the error is reported.
+    if (s.supply_mv < kSupplyMinMv) {
+      if ((s.regs[reg::kErrorEnable] & error_info::kEncoderSupplyError) != 0)
+        s.latched_errors |= error_info::kEncoderSupplyError;
+      continue;
+    }
     // One EnDat cycle: acquire a position when the interface is enabled.
     if ((s.regs[reg::kEnDatMode] & endat_mode::kEnable) == 0) continue;
     const uint8_t mode = static_cast<uint8_t>(s.regs[reg::kEnDatMode]);

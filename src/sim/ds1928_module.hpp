@@ -50,6 +50,13 @@ class Ds1928Module {
   // stands. Back inside the window it ignores good values for SinCosQuitTime before it takes
   // positions again (§11.7.4–11.7.6).
   void set_vss_mv(uint32_t millivolts) noexcept;
+  // The encoder supply as the module measures it in mV (5000 at power-up). Below 4750 (the
+  // datasheet's 5 V −5 %) the module sets EncoderSupplyError (while ErrorEnable bit 0 allows it)
+  // and takes no position from the underpowered encoder: PosCycle stands until it is back.
+  void set_supply_mv(uint32_t millivolts) noexcept;
+  // The encoder's error and warning words are set through endat().encoder()
+  // (set_error_conditions / set_warning_conditions); SimAxisConfig's faults are applied through
+  // the same calls.
 
   [[nodiscard]] FunctionModel function_model() const noexcept;
 
@@ -61,6 +68,7 @@ class Ds1928Module {
   void run_flatstream(int64_t now_ns) noexcept;
   void update_error_info() noexcept;
   void serve_info_channels() noexcept;
+  void apply_configured_faults() noexcept;
   struct State;
   std::unique_ptr<State> state_;
 };

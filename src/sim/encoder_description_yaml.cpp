@@ -175,7 +175,8 @@ EncoderDescription parse(const YAML::Node& root, std::string_view origin) {
   }
   if (auto f = root["faults"]) {
     only_keys(f, origin, "faults",
-              {"crc_error_rate", "seed", "position_error", "battery_warning", "battery_error"});
+              {"crc_error_rate", "seed", "position_error", "battery_warning", "battery_error",
+               "error_bits", "warning_bits"});
     if (auto n = f["crc_error_rate"]) {
       d.faults.crc_error_rate = real(n, origin, "faults.crc_error_rate");
       if (!(d.faults.crc_error_rate >= 0.0 && d.faults.crc_error_rate <= 1.0)) {
@@ -190,6 +191,10 @@ EncoderDescription parse(const YAML::Node& root, std::string_view origin) {
       d.faults.battery_warning = boolean(n, origin, "faults.battery_warning");
     if (auto n = f["battery_error"])
       d.faults.battery_error = boolean(n, origin, "faults.battery_error");
+    if (auto n = f["error_bits"])
+      d.faults.error_bits = static_cast<uint16_t>(number(n, origin, "faults.error_bits", 0x7F));
+    if (auto n = f["warning_bits"])
+      d.faults.warning_bits = static_cast<uint16_t>(number(n, origin, "faults.warning_bits", 0x1F));
   }
   apply_identification(d);
   if (d.type == endat::EncoderType::Rotary) {

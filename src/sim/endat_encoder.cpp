@@ -139,10 +139,22 @@ void EnDatEncoder::apply_conditions() {
   if (auto* e = status_word(0)) {
     if (f.position_error) *e |= 0x0004;
     if (f.battery_error) *e |= 0x0040;
+    *e |= f.error_bits;
   }
   if (auto* w = status_word(1)) {
     if (f.battery_warning) *w |= 0x0008;
+    *w |= f.warning_bits;
   }
+}
+
+void EnDatEncoder::set_error_conditions(uint16_t bits) noexcept {
+  description_.faults.error_bits = bits;
+  apply_conditions();
+}
+
+void EnDatEncoder::set_warning_conditions(uint16_t bits) noexcept {
+  description_.faults.warning_bits = bits;
+  apply_conditions();
 }
 
 void EnDatEncoder::reset_state() {

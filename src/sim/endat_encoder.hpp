@@ -43,6 +43,12 @@ struct EncoderFaults {
   bool position_error = false;   // operating status error bit 2 "position value" + F1
   bool battery_warning = false;  // warning bit 3 "battery charge low"
   bool battery_error = false;    // error bit 6 "battery change required"
+  // Any further conditions by bit: operating status word 0 (EnDatError: 0 lighting, 1 signal
+  // amplitude, 2 position, 3 overvoltage, 4 undervoltage, 5 overcurrent, 6 battery) and word 1
+  // (EnDatWarning: 0 frequency collision, 1 temperature, 2 lighting reserve, 3 battery charge,
+  // 4 reference point).
+  uint16_t error_bits = 0;
+  uint16_t warning_bits = 0;
 };
 
 struct EncoderDescription {
@@ -101,6 +107,11 @@ class EnDatEncoder {
   void set_position_error(bool on) noexcept { description_.faults.position_error = on; }
   void set_battery_warning(bool on) noexcept { description_.faults.battery_warning = on; }
   void set_battery_error(bool on) noexcept { description_.faults.battery_error = on; }
+  // Conditions by bit of the error and warning words. A condition sets its bits at once and again
+  // after every clear while it lasts; a condition that ends leaves its bits set until the master
+  // clears them (error reset or writing the word), as an encoder's status words behave.
+  void set_error_conditions(uint16_t bits) noexcept;
+  void set_warning_conditions(uint16_t bits) noexcept;
   // Additional information a test can move: the temperatures (°C) and position value 2 (MRS
   // 0x42–0x44; unset, it follows the position).
   void set_temperature_c(double c) noexcept { description_.temperature_c = c; }

@@ -303,3 +303,41 @@ TEST_CASE(
   }));
   CHECK(info.value[0] == endat::temperature_raw(80.0));
 }
+
+TEST_CASE(
+    "CAN-I/O SDO: the check after a silence reads the configured EnDatInfoCmd0n back too, and "
+    "configures a module that lost one again",
+    "[canio][sdo][engine][info]") {
+  DaemonConfig c = canio_config(1);
+  const NamedInfo* n = find_named_info("temperature1");
+  REQUIRE(n != nullptr);
+  const uint32_t command = encode_info_command(named_info_request(*n));
+  c.axes[0].module.info_cmd[0] = command;
+  c.axes[0].info.push_back({"temperature1", named_info_request(*n), n->is_signed});
+  // Configuration registers readable (the simulator's default is FM254's write-only access).
+  Rig rig(c, true, false, [](sim::CanioNodeConfig& nc) { nc.faults.config_write_only = false; });
+  REQUIRE_FALSE(rig.canio->start());
+  Steps steps{rig};
+  const auto configurations = [&] { return rig.canio->axis_counters(0).configurations.load(); };
+  const auto silence = [&] {
+    rig.nodes[0]->set_silent(true);
+    REQUIRE(steps.until([&] { return rig.canio->axis_counters(0).silent.load(); }));
+  };
+  REQUIRE(steps.until([&] { return rig.io[0].inputs_fresh; }));
+  REQUIRE(configurations() == 1);
+  // Silent and back with everything kept: checked, not configured again.
+  silence();
+  rig.nodes[0]->set_silent(false);
+  REQUIRE(steps.until([&] { return rig.io[0].inputs_fresh; }));
+  CHECK(configurations() == 1);
+  // Silent again, and meanwhile the module lost channel 1's command while EnDatMode and the MTUs
+  // stayed: the check reads EnDatInfoCmd01 back, finds 0 and configures the module again.
+  silence();
+  REQUIRE_FALSE(rig.nodes[0]->module(0).write_register(reg::kEnDatInfoCmd01, 4, 0));
+  rig.nodes[0]->set_silent(false);
+  REQUIRE(steps.until([&] { return rig.io[0].inputs_fresh; }));
+  CHECK(configurations() == 2);
+  uint32_t cmd = 0;
+  REQUIRE_FALSE(rig.nodes[0]->module(0).read_register(reg::kEnDatInfoCmd01, 4, cmd));
+  CHECK(cmd == command);
+}

@@ -304,6 +304,26 @@ TEST_CASE("defaults are the datasheet's", "[config][defaults]") {
   REQUIRE(from("# nothing here\n\n").ok());
 }
 
+TEST_CASE("simulated faults: the encoder's words, Vss, supply and their delay, range-checked",
+          "[config][simulated]") {
+  const ConfigResult r = from(R"(
+simulated:
+  axes:
+    - {endat_error: 0x41, endat_warning: 0x03, vss_mv: 300, supply_mv: 4500, faults_after_ms: 500}
+)");
+  INFO(r.error_report());
+  REQUIRE(r.ok());
+  const SimAxisConfig& a = r.config().simulated.axes[0];
+  CHECK(a.endat_error == 0x41);
+  CHECK(a.endat_warning == 0x03);
+  CHECK(a.vss_mv == 300u);
+  CHECK(a.supply_mv == 4500u);
+  CHECK(a.faults_after_ms == 500u);
+  const ConfigResult bad = from("simulated:\n  axes:\n    - {endat_warning: 0x20}\n");
+  REQUIRE_FALSE(bad.ok());
+  CHECK_THAT(bad.error_report(), Catch::Contains("simulated.axes[0].endat_warning"));
+}
+
 TEST_CASE("numbers accept decimal and 0x hex, modes are octal", "[config][numbers]") {
   const ConfigResult r = from(R"(
 cycle: {period_us: 0x3E8, cpu: -1}
@@ -328,6 +348,8 @@ socket: {mode: "0o640"}
   CHECK(c.axes[0].module.prescaler == 4);
   CHECK(c.simulated.axes[0].inject_error_info == 0x14);
   CHECK(c.simulated.axes[0].velocity_periods_per_s == -250.0);
+  CHECK(c.simulated.axes[0].endat_warning == 0);
+  CHECK(c.simulated.axes[0].supply_mv == 5000u);
   CHECK(c.powerlink.nettime_offset_us == -16);
   CHECK(c.powerlink.nodes[0].vendor_id == 0xFFFFFFFFu);
   CHECK(c.shm.mode == 0600u);

@@ -14,7 +14,11 @@
 #      the second with its axes named by index) in a 50 µs thread: every sampled (cycle, position) pair is one the daemon published (equal to
 #      ds1928ctl's where both saw the cycle, and one position per cycle, nondecreasing with the
 #      cycle at the simulated constant velocity); a read given up (the daemon preempted in the
-#      middle of a write) keeps the previous values with valid false.
+#      middle of a write) keeps the previous values with valid false;
+#   5. the error classes, each from the simulated module (simulated.axes[] faults) to the pins
+#      (<axis>.warning / .fault / .stale / .valid), ctl status and position (shared memory) and
+#      the metric ds1928_axis_module_error: a warning stays valid, an analogue error holds the
+#      last good position stale, a fault is module_error.
 #
 # LinuxCNC's realtime environment is one per machine (SysV shm key, `ps -C rtapi_app`): the test
 # runs in its own mount, IPC and PID namespaces, with the module directory overlaid so that the
@@ -30,7 +34,7 @@ here=$(cd "$(dirname "$0")" && pwd)
 module=$build/linuxcnc/ds1928.so
 
 if [ "$(id -u)" != 0 ]; then echo "SKIP: needs root (namespaces, bind mounts)"; exit 77; fi
-for t in halcmd halsampler strace unshare python3; do
+for t in halcmd halsampler strace unshare python3 curl; do
   command -v $t >/dev/null || { echo "SKIP: $t missing (make deps-test installs it)"; exit 77; }
 done
 [ -f "$module" ] || { echo "FAIL: $module not built (linuxcnc-uspace-dev installed?)"; exit 1; }
@@ -137,4 +141,84 @@ echo "read-retries $(getp ds1928.read-retries), read-failures $(getp ds1928.read
 # a record (a loaded machine without PREEMPT_RT): then the pins must keep the last value, invalid.
 check "stress: every sampled position is one the daemon published; a failed read kept the last value, invalid" \
   python3 "$here/hal_compare.py" published "$work/samples4.txt" "$work/ctl4.json" 1 0
+halcmd stop; halcmd unload all
+
+echo "--- 5. error classes from the simulated module to status, shared memory, pins and metrics"
+# Three axes, each failing as the module does (simulated.axes[] faults): w's encoder reports a
+# temperature warning (EnDatWarning bit 1), h's sin/cos amplitude leaves the Vss window after 1 s
+# of good positions (VssCheckError: the last good position held), f's encoder reports its light
+# source failed (EnDatError bit 0, and F1 → EnDatPosError).
+stop_daemon TERM
+port=$((20000 + RANDOM % 20000))
+cat >"$work/daemon.yaml" <<EOF
+cycle: {period_us: 1000, hold_cpu_dma_latency: false}
+bus: simulated
+simulated:
+  axes:
+    - {endat_warning: 0x02}
+    - {vss_mv: 300, faults_after_ms: 1000}
+    - {endat_error: 0x01}
+axes: [{name: w}, {name: h}, {name: f}]
+shm: {name: $shm}
+socket: {path: $work/control.sock}
+metrics: {listen: "127.0.0.1:$port"}
+EOF
+start_daemon
+halcmd loadrt ds1928 shm="$shm" axes=w:h:f || { echo "FAIL: loadrt ds1928 (three axes)"; exit 1; }
+halcmd loadrt threads name1=servo period1=1000000 || exit 1
+halcmd addf ds1928.read servo && halcmd start || exit 1
+check "HAL: w.warning (EnDatWarning read by the daemon)" wait_pin ds1928.w.warning TRUE 10
+check "HAL: h.stale (VssCheckError)" wait_pin ds1928.h.stale TRUE 10
+check "HAL: f.fault" wait_pin ds1928.f.fault TRUE 10
+check "HAL: w.valid, w.fault false" test "$(getp ds1928.w.valid)/$(getp ds1928.w.fault)" = TRUE/FALSE
+check "HAL: h.fault, h.valid false" test "$(getp ds1928.h.fault)/$(getp ds1928.h.valid)" = TRUE/FALSE
+check "HAL: f.valid false, f.stale false" \
+  test "$(getp ds1928.f.valid)/$(getp ds1928.f.stale)" = FALSE/FALSE
+"$ctl" --socket "$work/control.sock" --json status >"$work/status5.json"
+for a in 0 1 2; do
+  "$ctl" --shm "$shm" --json position --axis $a >"$work/pos5-$a-1.json"
+done
+sleep 0.2
+"$ctl" --shm "$shm" --json position --axis 1 >"$work/pos5-1-2.json"
+curl -sf "http://127.0.0.1:$port/metrics" >"$work/metrics5.txt" || echo "      (no metrics on $port)"
+check_classes() {
+  python3 - "$work" <<'PY'
+import json, re, sys
+work = sys.argv[1]
+status = json.load(open(f"{work}/status5.json"))
+axes = {a["name"]: a for a in status["axes"]}
+pos = [json.load(open(f"{work}/pos5-{i}-1.json")) for i in range(3)]
+later = json.load(open(f"{work}/pos5-1-2.json"))
+metrics = open(f"{work}/metrics5.txt").read()
+def bits(a):
+    return {(b["name"], b["class"]) for b in a["errors"]}
+def metric(name, register, bit, cls):
+    m = re.search(r'^ds1928_axis_module_error\{[^}]*name="%s",register="%s",bit="%s",'
+                  r'class="%s"\} (\d)$' % (name, register, bit, cls), metrics, re.M)
+    return m.group(1) if m else None
+want = [
+    ("w", "valid", ("Temperature", "warning"), "EnDatWarning", dict(warning=True, fault=False)),
+    ("h", "stale", ("VssCheckError", "fault"), "ErrorInfo", dict(held=True, fault=True)),
+    ("f", "module_error", ("Lighting", "fault"), "EnDatError", dict(fault=True, held=False)),
+]
+ok = True
+for i, (name, state, bit, register, flags) in enumerate(want):
+    a, p = axes[name], pos[i]
+    got = dict(status=a["state"], shm=p["state"], bit=bit in bits(a),
+               shm_bit=bit in bits(p), flags={k: p[k] for k in flags},
+               metric=metric(name, register, bit[0], bit[1]))
+    print(f"      {name}: {got}")
+    ok = ok and (got["status"] == state and got["shm"] == state and got["bit"]
+                 and got["shm_bit"] and got["flags"] == flags and got["metric"] == "1")
+# The held axis keeps its last good position: the same raw value 0.2 s later, stale still.
+print(f"      h: held {pos[1]['position_raw']}, 0.2 s later {later['position_raw']}")
+ok = ok and later["state"] == "stale" and later["position_raw"] == pos[1]["position_raw"] \
+    and pos[1]["position_raw"] != 0
+# The failed light source's F1 is in ErrorInfo too (EnDatPosError).
+ok = ok and ("EnDatPosError", "fault") in bits(axes["f"])
+sys.exit(0 if ok else 1)
+PY
+}
+check "each class in ctl status, shared memory (ctl position), the flags and the metric" check_classes
+halcmd stop; halcmd unload all
 exit $fail

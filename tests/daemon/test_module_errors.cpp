@@ -6,6 +6,7 @@
 #include <spdlog/spdlog.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <catch2/catch.hpp>
 #include <string>
 
@@ -14,6 +15,7 @@
 #include "metrics/exposition.hpp"
 #include "module_errors.hpp"
 #include "sim/simulated_bus.hpp"
+#include "x20ds1928/object_dictionary.hpp"
 
 using namespace ds1928;
 
@@ -51,6 +53,27 @@ class Bench {
     return d;
   }
   sim::Ds1928Module& module() { return bus->module(0); }
+  // One register access through the bus's register path, served in the next cycle.
+  uint32_t access(uint16_t reg, bool write = false, uint32_t value = 0) {
+    RegisterRequest r;
+    r.tag = ++tag_;
+    r.reg = reg;
+    r.size = write ? 1 : 2;
+    r.write = write;
+    r.value = value;
+    REQUIRE(bus->submit(r));
+    run(1);
+    RegisterResult out;
+    REQUIRE(bus->poll(out));
+    REQUIRE(out.tag == r.tag);
+    REQUIRE_FALSE(out.error);
+    return out.value;
+  }
+  // What the EnDat service does every second: EnDatError and EnDatWarning into the counters.
+  void read_encoder_words() {
+    work->counters(0).endat_error.store(static_cast<uint16_t>(access(reg::kEnDatError)));
+    work->counters(0).endat_warning.store(static_cast<uint16_t>(access(reg::kEnDatWarning)));
+  }
 
   DaemonConfig config;
   std::unique_ptr<sim::SimulatedBus> bus;
@@ -60,6 +83,7 @@ class Bench {
 
  private:
   uint64_t index_ = 0;
+  uint32_t tag_ = 0;
   int64_t t0_ = 1'000'000'000;
 };
 
@@ -150,6 +174,70 @@ TEST_CASE(
         std::string::npos);
   CHECK(text.find("register=\"EnDatWarning\",bit=\"Temperature\",class=\"warning\"} 1") !=
         std::string::npos);
+}
+
+TEST_CASE(
+    "the simulated encoder's own words end to end: a warning stays valid, an error is "
+    "module_error, both clear after EnDatAck, and a low encoder supply is module_error",
+    "[errors][e2e]") {
+  Bench b;
+  REQUIRE(b.run(300).validity == DS1928_AXIS_VALID);
+  sim::EnDatEncoder& encoder = b.module().endat().encoder();
+  // Temperature exceeded (EnDatWarning bit 1): the module's status refresh (0.5 s) mirrors it.
+  encoder.set_warning_conditions(0x0002);
+  b.run(1200);
+  b.read_encoder_words();
+  const ds1928_axis_data before = b.run(1);
+  ds1928_axis_data d = b.run(5);
+  CHECK(d.validity == DS1928_AXIS_VALID);
+  CHECK(d.endat_warning == 0x0002);
+  CHECK((d.flags & DS1928_AXIS_WARNING) != 0);
+  CHECK((d.flags & DS1928_AXIS_FAULT) == 0);
+  CHECK(d.position_raw != before.position_raw);
+  std::string text = metrics_of(b);
+  CHECK(text.find("register=\"EnDatWarning\",bit=\"Temperature\",class=\"warning\"} 1") !=
+        std::string::npos);
+  // Light source failed (EnDatError bit 0): F1 in the next position frame → EnDatPosError.
+  encoder.set_error_conditions(0x0001);
+  d = b.run(5);
+  CHECK(d.validity == DS1928_AXIS_MODULE_ERROR);
+  CHECK((d.error_info & error_info::kEnDatPosError) != 0);
+  b.run(1200);
+  b.read_encoder_words();
+  d = b.run(2);
+  CHECK(d.endat_error == 0x0001);
+  const nlohmann::json bits =
+      error_bits_json(error_words(b.work->counters(0)), b.config.axes[0].error_policy());
+  CHECK(std::any_of(bits.begin(), bits.end(), [](const nlohmann::json& j) {
+    return j["name"] == "Lighting" && j["class"] == "fault" && j["effect"] == "module_error";
+  }));
+  text = metrics_of(b);
+  CHECK(text.find("register=\"EnDatError\",bit=\"Lighting\",class=\"fault\"} 1") !=
+        std::string::npos);
+  // Both conditions gone: the words stay until EnDatAck bit 0, ErrorInfo until AckErrorInfo.
+  encoder.set_error_conditions(0);
+  encoder.set_warning_conditions(0);
+  b.run(1200);
+  b.read_encoder_words();
+  CHECK(b.run(2).endat_error == 0x0001);
+  (void)b.access(reg::kEnDatAck, true, 0x01);
+  b.run(1200);
+  b.read_encoder_words();
+  REQUIRE(b.work->post({AxisCommand::Kind::AckErrors, 0, error_info::kEnDatPosError}));
+  d = b.run(20);
+  CHECK(d.endat_error == 0);
+  CHECK(d.endat_warning == 0);
+  CHECK(d.error_info == 0);
+  CHECK(d.validity == DS1928_AXIS_VALID);
+  CHECK((d.flags & (DS1928_AXIS_FAULT | DS1928_AXIS_WARNING)) == 0);
+  // The encoder supply drops below 4750 mV: EncoderSupplyError, a fault.
+  b.module().set_supply_mv(4500);
+  d = b.run(5);
+  CHECK(d.validity == DS1928_AXIS_MODULE_ERROR);
+  CHECK(d.error_info == error_info::kEncoderSupplyError);
+  b.module().set_supply_mv(5000);
+  REQUIRE(b.work->post({AxisCommand::Kind::AckErrors, 0, error_info::kEncoderSupplyError}));
+  CHECK(b.run(20).validity == DS1928_AXIS_VALID);
 }
 
 TEST_CASE("axes[].invalidate_on overrides the class per bit", "[errors][e2e]") {
