@@ -17,7 +17,7 @@ dpid="" spid=""
 cleanup() {
   [ -n "$dpid" ] && kill -TERM "$dpid" 2>/dev/null && timeout 10 tail --pid="$dpid" -f /dev/null
   [ -n "$spid" ] && kill -TERM "$spid" 2>/dev/null && timeout 10 tail --pid="$spid" -f /dev/null
-  rm -f /dev/shm"$shm" /dev/shm"$shm".wait
+  rm -f /dev/shm"$shm" /dev/shm"$shm".wait /dev/shm/ds1928-vcan."$vbus"
   rm -rf "$work"
 }
 trap cleanup EXIT
