@@ -126,11 +126,12 @@ run: build
 	./$(BUILD)/daemon/ds1928d --config $(CONFIG)
 
 # The simulated CAN-I/O node runs in the background on the virtual bus of config/canio-sim.yaml
-# and stops with the daemon (Ctrl-C).
+# and stops with the daemon (Ctrl-C); the bus (/dev/shm/ds1928-vcan.ds1928-sim, mode 0600) is
+# removed after both, so the next run, as any user, creates it afresh.
 CANIO_CONFIG ?= config/canio-sim.yaml
 run-canio: build
 	./$(BUILD)/tools/ds1928-sim/ds1928-sim canio --virtual ds1928-sim --config $(CANIO_CONFIG) & \
-	  sim=$$!; trap 'kill $$sim 2>/dev/null; wait $$sim 2>/dev/null' EXIT INT TERM; \
+	  sim=$$!; trap 'kill $$sim 2>/dev/null; wait $$sim 2>/dev/null; rm -f /dev/shm/ds1928-vcan.ds1928-sim' EXIT INT TERM; \
 	  ./$(BUILD)/daemon/ds1928d --config $(CANIO_CONFIG)
 
 # The developer/CI build keeps zero warnings: DS1928_WERROR=ON here only (Release and package

@@ -368,8 +368,9 @@ std::unique_ptr<BusService> make_canio_service(const DaemonConfig& config, std::
     auto bus = canio::VirtualCanBus::open_shared(config.canio.virtual_bus,
                                                  canio::virtual_bus_options(config.canio.bitrate));
     if (!bus) {
-      why_not = fmt::format("canio: virtual bus '{}': {}", config.canio.virtual_bus,
-                            bus.error().message());
+      why_not =
+          fmt::format("canio: virtual bus '{}': {}", config.canio.virtual_bus,
+                      canio::VirtualCanBus::open_error_text(config.canio.virtual_bus, bus.error()));
       return nullptr;
     }
     vbus = bus.value();

@@ -1,12 +1,14 @@
 #include "can/virtual_bus.hpp"
 
 #include <fcntl.h>
+#include <pwd.h>
 #include <sys/mman.h>
 #include <sys/stat.h>
 
 #include <array>
 #include <cerrno>
 #include <climits>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <new>
@@ -269,6 +271,20 @@ std::error_code VirtualCanBus::remove_shared(std::string_view name) noexcept {
   }
   if (shm_unlink(shm.c_str()) != 0 && errno != ENOENT) return {errno, std::system_category()};
   return {};
+}
+
+std::string VirtualCanBus::open_error_text(std::string_view name, std::error_code ec) {
+  std::string text = ec.message();
+  if (ec != std::error_code(EACCES, std::system_category()) || !valid_bus_name(name)) return text;
+  const std::string file = "/dev/shm" + shm_object_name(name);
+  struct stat st {};
+  if (::stat(file.c_str(), &st) != 0) return text;
+  std::string owner = "uid " + std::to_string(st.st_uid);
+  if (const passwd* pw = ::getpwuid(st.st_uid)) owner += " (" + std::string(pw->pw_name) + ")";
+  char mode[8];
+  std::snprintf(mode, sizeof mode, "%04o", static_cast<unsigned>(st.st_mode & 07777));
+  return text + ": " + file + " belongs to " + owner + ", mode " + mode +
+         " (a bus another user's run left behind): remove it (rm " + file + ") or run as that user";
 }
 
 VirtualCanBus::~VirtualCanBus() {

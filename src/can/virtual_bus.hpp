@@ -176,6 +176,10 @@ class VirtualCanBus : public std::enable_shared_from_this<VirtualCanBus> {
       std::string_view name, VirtualBusOptions options = {}, bool unlink_on_close = false);
   // Removes the shared-memory name of a bus (leftovers of a crashed run).
   static std::error_code remove_shared(std::string_view name) noexcept;
+  // The text for an open_shared() error: its message, and for a bus another user left behind
+  // (EACCES: a stopped run's bus stays in /dev/shm, mode 0600) its file, owner and the command
+  // that removes it.
+  [[nodiscard]] static std::string open_error_text(std::string_view name, std::error_code ec);
 
   ~VirtualCanBus();
   VirtualCanBus(const VirtualCanBus&) = delete;

@@ -411,6 +411,36 @@ TEST_CASE("two processes talk over a shared virtual bus", "[canio][vbus][process
   CHECK(VirtualCanBus::open_shared("bad/name").error() == CanError::kInterfaceNameInvalid);
 }
 
+TEST_CASE("a bus another user left behind: the error names its file, owner and the fix",
+          "[canio][vbus][process]") {
+  const std::string name = "test-owner-" + std::to_string(getpid());
+  const std::string file = "/dev/shm/ds1928-vcan." + name;
+  REQUIRE_FALSE(VirtualCanBus::remove_shared(name));
+  auto bus = VirtualCanBus::open_shared(name, {}, true);
+  REQUIRE(bus);
+  const std::string text =
+      VirtualCanBus::open_error_text(name, std::error_code(EACCES, std::system_category()));
+  CHECK(text.find(file + " belongs to uid " + std::to_string(getuid())) != std::string::npos);
+  CHECK(text.find("mode 0600") != std::string::npos);
+  CHECK(text.find("(rm " + file + ")") != std::string::npos);
+  // Any other error is its message alone.
+  CHECK(VirtualCanBus::open_error_text(name, std::error_code(ENOMEM, std::system_category())) ==
+        std::error_code(ENOMEM, std::system_category()).message());
+  if (getuid() == 0) {
+    // The real refusal: another uid opening root's bus gets EACCES, and the text above.
+    const pid_t child = fork();
+    REQUIRE(child >= 0);
+    if (child == 0) {
+      if (setresgid(65534, 65534, 65534) != 0 || setresuid(65534, 65534, 65534) != 0) _exit(2);
+      auto other = VirtualCanBus::open_shared(name);
+      _exit(!other && other.error() == std::error_code(EACCES, std::system_category()) ? 0 : 1);
+    }
+    int status = 0;
+    REQUIRE(waitpid(child, &status, 0) == child);
+    CHECK((WIFEXITED(status) && WEXITSTATUS(status) == 0));
+  }
+}
+
 TEST_CASE("send and receive allocate nothing and take no lock", "[canio][vbus][alloc]") {
   auto bus = VirtualCanBus::create_local();
   auto tx = port(bus), rx = port(bus);

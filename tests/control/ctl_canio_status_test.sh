@@ -2,7 +2,9 @@
 # `ds1928ctl status` against the real daemon on the CAN-I/O bus (the virtual bus and ds1928-sim
 # canio, as `make run-canio`): the CANopen node's own fields — NMT state, heartbeat, boot-ups —
 # and each axis' sampling (samples counting, missing, late), no POWERLINK fields; `status --check`
-# exits 0 when every axis of its reply is valid, else 5 (also once the node is gone).
+# exits 0 when every axis of its reply is valid, else 5 (also once the node is gone). The node's
+# first samples are logged as its first contact, not as a return or a reset; when the node comes
+# back after it was gone, "answering again".
 #
 # Usage: ctl_canio_status_test.sh BUILD_DIR SOURCE_DIR     (root: SCHED_FIFO daemon; 77 = skipped)
 set -u
@@ -17,7 +19,7 @@ dpid="" spid=""
 cleanup() {
   [ -n "$dpid" ] && kill -TERM "$dpid" 2>/dev/null && timeout 10 tail --pid="$dpid" -f /dev/null
   [ -n "$spid" ] && kill -TERM "$spid" 2>/dev/null && timeout 10 tail --pid="$spid" -f /dev/null
-  rm -f /dev/shm"$shm" /dev/shm"$shm".wait
+  rm -f /dev/shm"$shm" /dev/shm"$shm".wait /dev/shm/ds1928-vcan."$vbus"
   rm -rf "$work"
 }
 trap cleanup EXIT
@@ -57,6 +59,11 @@ grep -Eq "^    node 1: NMT [a-z_-]+, (heartbeats [0-9]+ \([0-9]+ missed\)|heartb
 samples=$(sed -n 's/^      axis 0: .*, samples \([0-9]*\), missing [0-9]*, late [0-9]*$/\1/p' "$work/status.txt")
 [ -n "$samples" ] && [ "$samples" -gt 0 ] || fail "no axis line with samples"
 grep -q "PRes\|NMT ?" "$work/status.txt" && fail "POWERLINK fields on a CAN-I/O bus"
+# The node's first contact is no reset and no return: "answering (first samples)" only.
+grep -q "canio node 1: axis 'axis0' answering (first samples)" "$work/daemon.log" ||
+  fail "no first-contact line: $(grep 'canio node' "$work/daemon.log")"
+grep -Eq "answering again|boot-up \(the node reset" "$work/daemon.log" &&
+  fail "the first contact logged as a return or a reset: $(grep 'canio node' "$work/daemon.log")"
 echo "ok:   CAN-I/O status: $(grep -E '^    (node|interface)|^      axis' "$work/status.txt" | tr -s ' ' | paste -sd'|')"
 # The node goes away: the axis leaves valid, --check says so with 5.
 kill -TERM "$spid"; timeout 10 tail --pid="$spid" -f /dev/null; spid=""
@@ -64,3 +71,12 @@ rc=0
 for _ in $(seq 200); do rc=0; "$ctl" status --check >"$work/check.txt" 2>&1 || rc=$?; [ $rc = 5 ] && break; sleep 0.05; done
 [ $rc = 5 ] || fail "status --check exit $rc after the node went away: $(cat "$work/check.txt")"
 echo "ok:   status --check exits 5 once the node is gone: $(grep 'not valid' "$work/check.txt")"
+# The node comes back (a power cycle): now it is a reset and a return, and logged as such.
+"$sim" canio --virtual "$vbus" --config "$work/daemon.yaml" >"$work/sim2.log" 2>&1 &
+spid=$!
+rc=5
+for _ in $(seq 400); do rc=0; "$ctl" status --check >/dev/null 2>&1 || rc=$?; [ $rc = 0 ] && break; sleep 0.05; done
+[ $rc = 0 ] || fail "the axis did not become valid again after the node came back"
+grep -q "canio node 1: axis 'axis0' answering again" "$work/daemon.log" ||
+  fail "the return is not logged as 'answering again': $(grep 'canio node' "$work/daemon.log")"
+echo "ok:   the node's return: $(grep -E "canio node 1: (boot-up|axis 'axis0' answering again)" "$work/daemon.log" | cut -c25- | paste -sd'|')"

@@ -8,6 +8,8 @@
 #     shm.group / socket.group, an interface with an IP address (lo) unless
 #     powerlink.allow_shared_interface — each named; --no-host-checks checks the file alone; a
 #     valid file's verdict says what is left to the start;
+#     config/simulated.yaml and config/canio-sim.yaml (make run, make run-canio) share no
+#     socket, shared memory or metrics port;
 #  4. start with a missing shm.group names the group;
 #  5. `ds1928d -c FILE | head -1`: the pipe's reader leaves, the daemon stops cleanly (exit 0, the
 #     shared memory and the socket removed), not killed by SIGPIPE (141).
@@ -65,6 +67,21 @@ loads_back "$src/config/canio-sim.yaml"
 loads_back "$src/config/powerlink.yaml" --no-host-checks
 loads_back "$src/config/canio.yaml" --no-host-checks
 pass "--check-config F --print-config loads back and prints the same (5 files)"
+
+# make run and make run-canio run side by side: their configurations share no control socket,
+# shared memory or metrics port (else the second start fails with "Address already in use").
+shared_names() {  # FILE: socket.path, shm.name, metrics.listen of its printed configuration
+  awk '/^[a-z_]+:/ { sec = $1; sub(":.*", "", sec) }
+       (sec == "socket" && $1 == "path:") || (sec == "shm" && $1 == "name:") ||
+       (sec == "metrics" && $1 == "listen:") { print sec "." $1 " " $2 }' "$1"
+}
+shared_names "$tmp/simulated.p1.yaml" >"$tmp/run.names"
+shared_names "$tmp/canio-sim.p1.yaml" >"$tmp/run-canio.names"
+[ "$(wc -l <"$tmp/run.names")" = 3 ] && [ "$(wc -l <"$tmp/run-canio.names")" = 3 ] ||
+  fail "socket.path, shm.name, metrics.listen not all printed: $(cat "$tmp/run.names" "$tmp/run-canio.names")"
+common=$(comm -12 <(sort "$tmp/run.names") <(sort "$tmp/run-canio.names") | tr '\n' ' ')
+[ -z "$common" ] || fail "config/simulated.yaml and config/canio-sim.yaml share $common"
+pass "make run's and make run-canio's configurations share no socket, shared memory or port"
 
 # config/simulated.yaml is "every key" of the sections the simulated bus uses: each key the
 # effective configuration prints there is written in the file.

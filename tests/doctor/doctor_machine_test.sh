@@ -32,6 +32,17 @@ for cfg in powerlink simulated; do
 done
 grep -q "PASS  irq_affinity    no bus interface" "$tmp/simulated.txt" || fail "simulated: irq_affinity line"
 
+# An interface this machine does not have: start refuses it, so the doctor FAILs (exit 1) naming
+# it, and asks ethtool nothing about it.
+sed 's/^\(  interface:\) eth1 /\1 ds1928none0 /' "$src/config/powerlink.yaml" >"$tmp/nonic.yaml"
+grep -q "interface: ds1928none0 " "$tmp/nonic.yaml" || fail "could not derive nonic.yaml"
+rc=0
+"$ctl" doctor --config "$tmp/nonic.yaml" >"$tmp/nonic.txt" 2>&1 || rc=$?
+[ $rc = 1 ] && grep -q "^FAIL  irq_affinity    ds1928none0: no such interface" "$tmp/nonic.txt" &&
+  ! grep -qE "^(PASS|WARN|FAIL)  (coalescing|eee) " "$tmp/nonic.txt" ||
+  fail "a missing interface: exit $rc: $(cat "$tmp/nonic.txt")"
+echo "ok: a missing interface FAILs (exit 1): $(grep '^FAIL  irq_affinity' "$tmp/nonic.txt")"
+
 rc=0
 "$ctl" doctor --config "$tmp/nothing.yaml" >"$tmp/bad.txt" 2>&1 || rc=$?
 [ $rc = 2 ] && grep -q "nothing.yaml" "$tmp/bad.txt" || fail "a missing configuration: exit $rc: $(cat "$tmp/bad.txt")"

@@ -112,7 +112,13 @@ TEST_CASE("doctor: IRQ affinity of the POWERLINK NIC against the cycle CPU", "[d
   FakeRoot r;
   r.in.config.bus = BusKind::Powerlink;
   r.in.config.powerlink.interface = "eth1";
-  CHECK(check_irq_affinity(r.in).verdict == Verdict::Warn);  // no such interface
+  // No such interface: start refuses it, so does the doctor (FAIL naming the key), and the
+  // NIC checks have nothing to ask ethtool about.
+  const Check missing = check_irq_affinity(r.in);
+  CHECK(missing.verdict == Verdict::Fail);
+  CHECK(missing.detail.find("eth1: no such interface") != std::string::npos);
+  CHECK(missing.fix.find("powerlink.interface") != std::string::npos);
+  CHECK(check_nic(r.in).empty());
   r.put("/sys/class/net/eth1/operstate", "up");
   // No hardware interrupt (veth): nothing to place.
   CHECK(check_irq_affinity(r.in).verdict == Verdict::Pass);
@@ -142,6 +148,7 @@ TEST_CASE("doctor: NIC coalescing and EEE from ethtool", "[doctor]") {
   FakeRoot r;
   r.in.config.bus = BusKind::Powerlink;
   r.in.config.powerlink.interface = "eth1";
+  r.put("/sys/class/net/eth1/operstate", "up");
   r.commands["ethtool -c eth1"] = "Coalesce parameters for eth1:\nrx-usecs: 50\nrx-frames: 0\n";
   r.commands["ethtool --show-eee eth1"] =
       "EEE settings for eth1:\n\tEEE status: enabled - active\n";

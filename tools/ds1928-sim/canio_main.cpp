@@ -80,7 +80,7 @@ int run_canio(const CanioOptions& o, const std::atomic<bool>& stop, std::atomic<
         o.virtual_bus, canio::virtual_bus_options(bitrate == 0 ? 500'000 : bitrate));
     if (!bus) {
       std::fprintf(stderr, "ds1928-sim: virtual bus '%s': %s\n", o.virtual_bus.c_str(),
-                   bus.error().message().c_str());
+                   canio::VirtualCanBus::open_error_text(o.virtual_bus, bus.error()).c_str());
       return 2;
     }
     vbus = bus.value();

@@ -85,6 +85,11 @@ std::optional<std::string> unit_value(const std::string& text, const std::string
   return v;
 }
 
+bool interface_exists(const DoctorInput& in, const std::string& ifname) {
+  std::error_code ec;
+  return fs::exists(path_in(in, "/sys/class/net/" + ifname), ec);
+}
+
 }  // namespace
 
 const char* to_string(Verdict v) noexcept {
@@ -234,9 +239,13 @@ Check check_irq_affinity(const DoctorInput& in) {
   if (ifname.empty()) return pass("irq_affinity", "no bus interface (simulated or virtual bus)");
   const int cpu = cycle_cpu(in);
   std::error_code ec;
-  if (!fs::exists(path_in(in, "/sys/class/net/" + ifname), ec))
-    return warn("irq_affinity", ifname + ": no such interface on this machine",
-                "check powerlink.interface / canio.interface (ip link)");
+  // The daemon refuses to start on an interface that does not exist: a FAIL, not a hint.
+  if (!interface_exists(in, ifname))
+    return fail("irq_affinity",
+                ifname + ": no such interface on this machine (ds1928d would refuse to start)",
+                fmt::format("set {} to one of the interfaces `ip -br link` lists",
+                            in.config.bus == BusKind::Powerlink ? "powerlink.interface"
+                                                                : "canio.interface"));
   // MSI(-X) vectors of the device, else lines of /proc/interrupts that name the interface.
   std::vector<int> irqs;
   const std::string msi = path_in(in, "/sys/class/net/" + ifname + "/device/msi_irqs");
@@ -279,6 +288,8 @@ std::vector<Check> check_nic(const DoctorInput& in) {
   std::vector<Check> out;
   if (in.config.bus != BusKind::Powerlink || in.config.powerlink.interface.empty()) return out;
   const std::string ifname = in.config.powerlink.interface;
+  // No such interface: irq_affinity FAILs naming it; ethtool has nothing to say about it.
+  if (!interface_exists(in, ifname)) return out;
   const auto coal = in.run ? in.run("ethtool -c " + ifname) : std::nullopt;
   if (!coal) {
     out.push_back(warn("coalescing",
