@@ -85,10 +85,6 @@ std::string inputs_state(const powerlink::CnStatus& n) {
   return "taken";
 }
 
-}  // namespace
-
-namespace {
-
 // The message types another MN sends on its own (the ones that give it away).
 std::string_view frame_name(powerlink::MessageType t) {
   switch (t) {

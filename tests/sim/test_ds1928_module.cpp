@@ -2,6 +2,7 @@
 #include <catch2/catch.hpp>
 
 #include "endat/names.hpp"
+#include "module_ticks.hpp"
 #include "sim/ds1928_module.hpp"
 #include "sim/sim_error.hpp"
 #include "sim/simulated_bus.hpp"
@@ -12,31 +13,20 @@ using namespace ds1928;
 using sim::Ds1928Module;
 
 namespace {
-constexpr int64_t kUs = 1000;
-
-SimAxisConfig constant(double v) {
-  SimAxisConfig c;
-  c.profile = MotionProfile::ConstantVelocity;
-  c.velocity_periods_per_s = v;
-  c.module_cycle_us = 100;
-  return c;
-}
+using sim::test::constant;
+using sim::test::kUs;
+using sim::test::step;
 
 // Runs the module for `ticks` system ticks of 100 µs, one bus cycle per tick.
 int count_pos_cycle_changes(Ds1928Module& m, int ticks, int64_t& t) {
   int changes = 0;
   int8_t last = m.inputs().pos_cycle;
   for (int i = 0; i < ticks; ++i) {
-    t += 100 * kUs;
-    m.tick(t, static_cast<uint64_t>(t / kUs));
+    step(m, t);
     if (m.inputs().pos_cycle != last) ++changes;
     last = m.inputs().pos_cycle;
   }
   return changes;
-}
-void step(Ds1928Module& m, int64_t& t) {
-  t += 100 * kUs;
-  m.tick(t, static_cast<uint64_t>(t / kUs));
 }
 }  // namespace
 

@@ -2,28 +2,18 @@
 // supply, the encoder's own error and warning words, and the faults a configuration schedules.
 #include <catch2/catch.hpp>
 
+#include "module_ticks.hpp"
 #include "sim/ds1928_module.hpp"
 #include "x20ds1928/object_dictionary.hpp"
 
 using namespace ds1928;
 using sim::Ds1928Module;
+using sim::test::constant;
 
 namespace {
-constexpr int64_t kUs = 1000;
-
-SimAxisConfig constant(double v) {
-  SimAxisConfig c;
-  c.profile = MotionProfile::ConstantVelocity;
-  c.velocity_periods_per_s = v;
-  c.module_cycle_us = 100;
-  return c;
-}
 // `n` system ticks of 100 µs.
 void run(Ds1928Module& m, int64_t& t, int n) {
-  for (int i = 0; i < n; ++i) {
-    t += 100 * kUs;
-    m.tick(t, static_cast<uint64_t>(t / kUs));
-  }
+  for (int i = 0; i < n; ++i) sim::test::step(m, t);
 }
 uint16_t read(const Ds1928Module& m, uint16_t reg) {
   uint32_t v = 0;
