@@ -77,6 +77,9 @@ spid=$!
 rc=5
 for _ in $(seq 400); do rc=0; "$ctl" status --check >/dev/null 2>&1 || rc=$?; [ $rc = 0 ] && break; sleep 0.05; done
 [ $rc = 0 ] || fail "the axis did not become valid again after the node came back"
+# The log line follows the axis' validity (the service logs node events every 10 ms, the
+# journal is written off the cycle): waited for, not read at once.
+for _ in $(seq 100); do grep -q "canio node 1: axis 'axis0' answering again" "$work/daemon.log" && break; sleep 0.05; done
 grep -q "canio node 1: axis 'axis0' answering again" "$work/daemon.log" ||
   fail "the return is not logged as 'answering again': $(grep 'canio node' "$work/daemon.log")"
 echo "ok:   the node's return: $(grep -E "canio node 1: (boot-up|axis 'axis0' answering again)" "$work/daemon.log" | cut -c25- | paste -sd'|')"
