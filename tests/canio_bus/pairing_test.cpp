@@ -27,7 +27,7 @@ canio::CanObject obj(uint8_t tag) {
 }
 
 std::string shipped_canio_yaml(uint32_t bitrate) {
-  std::ifstream in(std::string(DS1928_SOURCE_DIR) + "/config/canio.yaml");
+  std::ifstream in(DS1928_SOURCE_DIR "/config/canio.yaml");
   std::stringstream text;
   text << in.rdbuf();
   std::string s = text.str();

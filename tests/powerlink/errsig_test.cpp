@@ -98,7 +98,7 @@ TEST_CASE("Wireshark reads the error signalling fields as the codec writes them"
   auto len = build_soa(buf, soa_header(kMnMac), soa);
   REQUIRE(len);
   frames.emplace_back(buf.begin(), buf.begin() + static_cast<std::ptrdiff_t>(*len));
-  const std::string path = std::string(DS1928_TEST_TMPDIR) + "/powerlink_errsig.pcap";
+  const std::string path = DS1928_TEST_TMPDIR "/powerlink_errsig.pcap";
   ds1928::powerlink::test::write_pcap(path, frames);
   using ds1928::powerlink::test::run_command;
   const std::string sres = run_command(

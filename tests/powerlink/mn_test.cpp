@@ -444,7 +444,7 @@ TEST_CASE("Wireshark decodes the MN's boot traffic without errors", "[powerlink]
   Rig rig({1}, 1);
   rig.link.log = true;
   REQUIRE(rig.run_until([&] { return rig.bus->state() == BusState::Operational; }));
-  const std::string path = std::string(DS1928_TEST_TMPDIR) + "/powerlink_mn_boot.pcap";
+  const std::string path = DS1928_TEST_TMPDIR "/powerlink_mn_boot.pcap";
   test::write_pcap(path, rig.link.sent_log);
   const std::string out = test::run_command("tshark -n -r " + path + " -V 2>&1");
   CHECK(out.find("Malformed") == std::string::npos);

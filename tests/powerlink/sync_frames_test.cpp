@@ -158,7 +158,7 @@ TEST_CASE("Wireshark decodes SyncRequest, SyncResponse and a PResMN", "[powerlin
   len = pl::build_pres(out, pl::pres_header(kMnMac, pl::kNodeMn), pres_mn);
   REQUIRE(len);
   frames.emplace_back(out.begin(), out.begin() + static_cast<long>(*len));
-  const std::string path = std::string(DS1928_TEST_TMPDIR) + "/powerlink_prc_samples.pcap";
+  const std::string path = DS1928_TEST_TMPDIR "/powerlink_prc_samples.pcap";
   ds1928::powerlink::test::write_pcap(path, frames);
   using ds1928::powerlink::test::run_command;
   const std::string verbose = run_command("tshark -n -r " + path + " -V 2>&1");

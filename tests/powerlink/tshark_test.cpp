@@ -29,7 +29,7 @@ TEST_CASE("Wireshark decodes every frame type the codec builds", "[powerlink][co
   }
   const auto samples = ds1928::powerlink::test::build_samples();
   REQUIRE(samples.size() == 15);
-  const std::string path = std::string(DS1928_TEST_TMPDIR) + "/powerlink_samples.pcap";
+  const std::string path = DS1928_TEST_TMPDIR "/powerlink_samples.pcap";
   std::vector<std::vector<uint8_t>> frames;
   for (const auto& sample : samples) frames.push_back(sample.bytes);
   write_pcap(path, frames);
@@ -74,7 +74,7 @@ TEST_CASE("Wireshark decodes unpadded 54-byte frames the codec accepts",
     REQUIRE(ds1928::powerlink::parse_frame(f));
     frames.push_back(f);
   }
-  const std::string path = std::string(DS1928_TEST_TMPDIR) + "/powerlink_short.pcap";
+  const std::string path = DS1928_TEST_TMPDIR "/powerlink_short.pcap";
   write_pcap(path, frames);
   const std::string verbose = run_command("tshark -n -r " + path + " -V 2>&1");
   INFO(verbose);
