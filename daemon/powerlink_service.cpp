@@ -85,20 +85,6 @@ std::string inputs_state(const powerlink::CnStatus& n) {
   return "taken";
 }
 
-// The message types another MN sends on its own (the ones that give it away).
-std::string_view frame_name(powerlink::MessageType t) {
-  switch (t) {
-    case powerlink::MessageType::kSoC:
-      return "SoC";
-    case powerlink::MessageType::kPReq:
-      return "PReq";
-    case powerlink::MessageType::kSoA:
-      return "SoA";
-    default:
-      return "frame";
-  }
-}
-
 }  // namespace
 
 PowerlinkService::PowerlinkService(std::unique_ptr<powerlink::PowerlinkBus> bus)
@@ -124,15 +110,15 @@ BusService::Reported PowerlinkService::reported_state() const {
   }
   if (st.counters.foreign_mn_at_start) {
     const auto& m = st.counters.foreign_mn_mac;
-    return {
-        "another_mn",
-        fmt::format("another Managing Node is active on '{}' ({} from "
-                    "{:02x}:{:02x}:{:02x}:{:02x}:{:02x}:{:02x} while listening, MNWaitNotAct): "
-                    "ds1928d stays NOT_ACTIVE and sends nothing, one MN per segment (EPSG DS "
-                    "301); stop the other MN or give ds1928d a segment of its own, then "
-                    "restart it",
-                    interface_.empty() ? std::string("the interface") : interface_,
-                    frame_name(st.counters.foreign_mn_frame), m[0], m[1], m[2], m[3], m[4], m[5])};
+    return {"another_mn",
+            fmt::format("another Managing Node is active on '{}' ({} from "
+                        "{:02x}:{:02x}:{:02x}:{:02x}:{:02x}:{:02x} while listening, MNWaitNotAct): "
+                        "ds1928d stays NOT_ACTIVE and sends nothing, one MN per segment (EPSG DS "
+                        "301); stop the other MN or give ds1928d a segment of its own, then "
+                        "restart it",
+                        interface_.empty() ? std::string("the interface") : interface_,
+                        powerlink::to_string(st.counters.foreign_mn_frame), m[0], m[1], m[2], m[3],
+                        m[4], m[5])};
   }
   if (s != BusState::Booting) return BusService::reported_state();
   std::string waiting;
@@ -162,10 +148,11 @@ void PowerlinkService::status_extra(nlohmann::json& j) const {
                    {"foreign_mn_frames", st.counters.foreign_mn_frames}};
   if (st.counters.foreign_mn_frames > 0) {
     const auto& m = st.counters.foreign_mn_mac;
-    j["foreign_mn"] = {{"at_start", st.counters.foreign_mn_at_start},
-                       {"last_frame", std::string(frame_name(st.counters.foreign_mn_frame))},
-                       {"last_source_mac", fmt::format("{:02x}:{:02x}:{:02x}:{:02x}:{:02x}:{:02x}",
-                                                       m[0], m[1], m[2], m[3], m[4], m[5])}};
+    j["foreign_mn"] = {
+        {"at_start", st.counters.foreign_mn_at_start},
+        {"last_frame", std::string(powerlink::to_string(st.counters.foreign_mn_frame))},
+        {"last_source_mac", fmt::format("{:02x}:{:02x}:{:02x}:{:02x}:{:02x}:{:02x}", m[0], m[1],
+                                        m[2], m[3], m[4], m[5])}};
   }
   nlohmann::json nodes = nlohmann::json::array();
   for (std::size_t i = 0; i < st.node_count; ++i) {

@@ -323,6 +323,22 @@ std::string_view to_string(NmtState s) noexcept {
   return "?";
 }
 
+std::string_view to_string(MessageType t) noexcept {
+  switch (t) {
+    case MessageType::kSoC:
+      return "SoC";
+    case MessageType::kPReq:
+      return "PReq";
+    case MessageType::kPRes:
+      return "PRes";
+    case MessageType::kSoA:
+      return "SoA";
+    case MessageType::kASnd:
+      return "ASnd";
+  }
+  return "frame";
+}
+
 std::string_view to_string(NmtCommandId c) noexcept {
   switch (c) {
     case NmtCommandId::kStartNode:

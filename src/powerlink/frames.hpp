@@ -62,6 +62,8 @@ enum class MessageType : uint8_t {
   kSoA = 0x05,
   kASnd = 0x06
 };
+// The message type's name as DS 301 writes it ("SoC", "PReq", ...); "frame" for another value.
+[[nodiscard]] std::string_view to_string(MessageType t) noexcept;
 
 enum class NmtState : uint8_t {
   kOff = 0x00,

@@ -43,6 +43,18 @@ TEST_CASE("SoC bytes are built and parsed exactly", "[powerlink][codec]") {
   CHECK(parsed->relative_time_us == 0x0102030405060708ULL);
 }
 
+// The names the foreign-MN report and the logs give a frame: the standard's own (the frame
+// header's MessageType, byte 14), and a value outside them named as a frame, not as one of them.
+TEST_CASE("Message types are named as DS 301 writes them", "[powerlink][codec]") {
+  CHECK(to_string(MessageType::kSoC) == "SoC");
+  CHECK(to_string(MessageType::kPReq) == "PReq");
+  CHECK(to_string(MessageType::kPRes) == "PRes");
+  CHECK(to_string(MessageType::kSoA) == "SoA");
+  CHECK(to_string(MessageType::kASnd) == "ASnd");
+  CHECK(to_string(static_cast<MessageType>(0x00)) == "frame");
+  CHECK(to_string(static_cast<MessageType>(0x02)) == "frame");
+}
+
 TEST_CASE("PRes bytes parse to state, flags and payload", "[powerlink][codec]") {
   // PRes from node 5, OPERATIONAL, RD + EN, PR 7 RS 2, payload 4 bytes.
   const auto wire =
