@@ -4,12 +4,14 @@
 // no mutex on the cycle thread once the bus is operational. Run by powerlink_veth_test.sh in the
 // MN's network namespace with ds1928-sim answering on the other end of a veth pair:
 //
-//   powerlink_cycle_noalloc CONFIG [CYCLES] [capture]
+//   powerlink_cycle_noalloc CONFIG [CYCLES] [capture] [foreign]
 //
 // With `capture` a capture runs on every capture point of the bus through the counted cycles
 // (ds1928ctl capture: the cycle thread copies each frame into the tap's ring, this thread drains
-// it) and the frames it took must be there. The flight recorder is on in both cases (every frame
-// into its ring, incidents into the sink), as in the daemon.
+// it) and the frames it took must be there. With `foreign` another MN's SoCs arrive throughout
+// (the caller sends them): the counted cycles must have taken at least 10 of them, each counted,
+// named and raised as an incident on the cycle thread. The flight recorder is on in both cases
+// (every frame into its ring, incidents into the sink), as in the daemon.
 //
 // Exit 0: zero allocations and mutex locks with the traffic really flowing; 1: something counted
 // or the traffic did not get through; 2: the bus did not come up (or a setup error).
@@ -30,6 +32,7 @@
 #include "daemon.hpp"
 #include "endat/command.hpp"
 #include "incident_service.hpp"
+#include "powerlink/powerlink_bus.hpp"
 #include "shm/publisher.hpp"
 #include "support/alloc_counter.hpp"
 #include "support/wait.hpp"
@@ -38,11 +41,23 @@ using namespace ds1928;
 
 int main(int argc, char** argv) {
   if (argc < 2) {
-    std::fprintf(stderr, "usage: %s CONFIG [CYCLES]\n", argv[0]);
+    std::fprintf(stderr, "usage: %s CONFIG [CYCLES] [capture] [foreign]\n", argv[0]);
     return 2;
   }
   const uint64_t cycles = argc > 2 ? std::strtoull(argv[2], nullptr, 10) : 3000;
-  const bool with_capture = argc > 3 && std::string(argv[3]) == "capture";
+  bool with_capture = false;
+  bool expect_foreign = false;
+  for (int i = 3; i < argc; ++i) {
+    const std::string word = argv[i];
+    if (word == "capture") {
+      with_capture = true;
+    } else if (word == "foreign") {
+      expect_foreign = true;
+    } else {
+      std::fprintf(stderr, "unknown word '%s' (capture, foreign)\n", argv[i]);
+      return 2;
+    }
+  }
   const ConfigResult loaded = load_config(argv[1]);
   if (!loaded.ok()) {
     std::fprintf(stderr, "%s", loaded.error_report().c_str());
@@ -103,7 +118,16 @@ int main(int argc, char** argv) {
       while (tap->pop([&](const capture::TapFrame&) { ++drained; })) {
       }
   };
+  // Another MN's frames as the MN counts them (read on this thread, outside the counted work).
+  const auto* powerlink_bus = dynamic_cast<const powerlink::PowerlinkBus*>(bus);
+  auto foreign_frames = [&]() -> uint64_t {
+    return powerlink_bus ? powerlink_bus->status().counters.foreign_mn_frames : 0;
+  };
   task.arm();  // count from here on
+  // Read after arming and again once the counted cycles are done: at most the few cycles between
+  // done and this thread's look at it lie outside the window, which the margin of 10 covers.
+  const uint64_t foreign_before = foreign_frames();
+  uint64_t foreign_after = foreign_before;
 
   // The normal thread's traffic while the cycles are counted: EnDat read-param through the
   // Flatstream tunnel of every axis, error acknowledgements, register reads (SDO over ASnd).
@@ -118,6 +142,7 @@ int main(int argc, char** argv) {
     const uint64_t next = engine->cycle_count() + 5;
     if (!test::wait_until([&] { return task.done() || engine->cycle_count() >= next; })) break;
   }
+  foreign_after = foreign_frames();
   engine->stop();
   bus->stop();
   uint64_t dropped = 0;
@@ -166,6 +191,13 @@ int main(int argc, char** argv) {
   const bool no_faults = faults.minor == 0 && faults.major == 0;
   if (!no_faults) std::printf("FAIL: the cycle thread took page faults in steady cycles\n");
 #endif
+  const uint64_t foreign = foreign_after - foreign_before;
+  if (expect_foreign)
+    std::printf("another MN's frames taken in the counted cycles: %llu\n",
+                static_cast<unsigned long long>(foreign));
+  const bool foreign_ok = !expect_foreign || foreign >= 10;
+  if (!foreign_ok)
+    std::printf("FAIL: fewer than 10 of another MN's frames in the counted cycles\n");
   const bool captured = !with_capture || drained >= cycles;
   if (!captured) std::printf("FAIL: the capture took fewer frames than cycles\n");
   const bool clean =
@@ -175,5 +207,5 @@ int main(int argc, char** argv) {
   if (!ds1928::test::counts_mutexes())
     std::printf("TSan build: mutex locks are not counted; the mutex check is void\n");
   if (!traffic) std::printf("FAIL: too little traffic went through the counted cycles\n");
-  return clean && traffic && captured && recorded && no_faults ? 0 : 1;
+  return clean && traffic && captured && recorded && no_faults && foreign_ok ? 0 : 1;
 }

@@ -8,6 +8,10 @@ KIND: soc | soa-ident (SoA IdentRequest to node 1) | soa-none | pres (PRes of no
 payload). LENGTH: bytes on the wire without FCS (54 = 14 Ethernet + 40 POWERLINK; shorter
 lengths cut the message's fields, to check that truncated frames are refused).
 --after-soa-from N: first wait until a SoA from node N is seen (the receiver's socket is open).
+--every MS: one frame every MS milliseconds instead of all at once (COUNT 0: until killed).
+--bypass: send past the qdisc (PACKET_QDISC_BYPASS), as ds1928d's own socket does: the frames
+  then go to the link's other end only, not to another packet socket on the sending interface
+  (a CN there would take a SoC of ours for its MN's).
 Then, so that the caller knows every frame above was handled (a socket's frames are handled in
 order), one of:
 --probe-ident: send a 54-byte SoA IdentRequest to node 1 every 100 ms until node 1's
@@ -76,7 +80,8 @@ def main():
     after_soa_from = None
     timeout = 30.0
     specs = []
-    probe = answer = False
+    probe = answer = bypass = False
+    every = 0.0
     while args:
         a = args.pop(0)
         if a == "--probe-ident":
@@ -85,6 +90,10 @@ def main():
             answer = True
         elif a == "--after-soa-from":
             after_soa_from = int(args.pop(0))
+        elif a == "--every":
+            every = float(args.pop(0)) / 1000.0
+        elif a == "--bypass":
+            bypass = True
         elif a == "--timeout":
             timeout = float(args.pop(0))
         else:
@@ -92,6 +101,8 @@ def main():
             specs.append((kind, int(count), int(length)))
     s = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(ETH_P_PLK))
     s.bind((iface, 0))
+    if bypass:
+        s.setsockopt(263, 20, 1)  # SOL_PACKET, PACKET_QDISC_BYPASS (linux/if_packet.h)
     if after_soa_from is not None:
         s.settimeout(timeout)
         while True:
@@ -101,9 +112,13 @@ def main():
     sent = 0
     for kind, count, length in specs:
         f = frame(kind, length)
-        for _ in range(count):
+        n = 0
+        while count == 0 or n < count:
             s.send(f)
             sent += 1
+            n += 1
+            if every > 0:
+                time.sleep(every)
     print("sent %d frames" % sent)
     deadline = time.monotonic() + timeout
     if probe:
