@@ -31,6 +31,18 @@ void PowerlinkService::append_metrics(metrics::Exposition& out) const {
              "IdentRequests/StatusRequests without their answer within async_timeout.");
   out.sample(static_cast<uint64_t>(mc.async_timeouts));
 
+  if (budget_) {
+    out.family("ds1928_powerlink_cycle_budget_seconds", Type::Gauge,
+               "The POWERLINK cycle on the wire by the configuration: nominal (each CN at its "
+               "expected latency) and worst (each CN at its PRes timeout).",
+               "seconds");
+    out.sample({{"case", "nominal"}}, budget_->nominal.total_us() / 1e6);
+    out.sample({{"case", "worst"}}, budget_->worst.total_us() / 1e6);
+    out.family("ds1928_powerlink_cycle_budget_worst_fits", Type::Gauge,
+               "1 when the worst-case POWERLINK cycle fits the period, 0 when a CN answering at "
+               "its timeout overruns it.");
+    out.sample(uint64_t{budget_->worst_fits() ? 1u : 0u});
+  }
   std::vector<std::string> node(st.node_count);
   for (std::size_t i = 0; i < st.node_count; ++i) node[i] = std::to_string(st.nodes[i].node);
 

@@ -4,6 +4,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <cmath>
 
 #include "capture/capturing_link.hpp"
 #include "powerlink/interface_check.hpp"
@@ -54,6 +55,32 @@ nlohmann::json exception_json(const powerlink::CnStatus& n) {
 
 // Where the CN's process image comes from and the PDO mapping it was bound from, entry by entry
 // (docs/powerlink.md §Process image from the PDO mapping).
+// A figure in µs to 0.01 µs (the wire's resolution is 0.08 µs).
+double us(double v) {
+  return std::round(v * 100.0) / 100.0;
+}
+
+nlohmann::json budget_terms_json(const powerlink::CycleBudget& b) {
+  return {{"total_us", us(b.total_us())},
+          {"soc_us", us(b.soc_us)},
+          {"wait_soc_preq_us", us(b.wait_soc_preq_us)},
+          {"prc_nodes", b.prc_nodes},
+          {"prc_slot_us", us(b.prc_us)},
+          {"polled", b.polled_in_worst_cycle},
+          {"isochronous_us", us(b.isochronous_us)},
+          {"soa_us", us(b.soa_us)},
+          {"async_wait_us", us(b.async_wait_us)},
+          {"asnd_us", us(b.asnd_us)}};
+}
+
+nlohmann::json occupancy_json(const powerlink::OccupancyHistogram& h) {
+  const powerlink::OccupancySummary s = h.summary();
+  return {{"count", s.count},
+          {"p50_us", us(static_cast<double>(s.p50_ns) / 1e3)},
+          {"p99_us", us(static_cast<double>(s.p99_ns) / 1e3)},
+          {"max_us", us(static_cast<double>(s.max_ns) / 1e3)}};
+}
+
 nlohmann::json image_json(const powerlink::PowerlinkBus& bus, uint8_t node) {
   // Large (two mappings of up to 254 entries): on the heap, once per status request.
   auto img = std::make_unique<powerlink::PowerlinkBus::MappedImage>();
@@ -154,6 +181,18 @@ void PowerlinkService::status_extra(nlohmann::json& j) const {
         {"last_source_mac", fmt::format("{:02x}:{:02x}:{:02x}:{:02x}:{:02x}:{:02x}", m[0], m[1],
                                         m[2], m[3], m[4], m[5])}};
   }
+  if (budget_) {
+    const std::string warning = worst_case_warning(*budget_, async_mtu_);
+    j["cycle_budget"] = {{"period_us", budget_->period_us},
+                         {"async_mtu", async_mtu_},
+                         {"nominal", budget_terms_json(budget_->nominal)},
+                         {"worst_case", budget_terms_json(budget_->worst)},
+                         {"worst_case_fits", budget_->worst_fits()},
+                         {"warning", warning.empty() ? nlohmann::json() : nlohmann::json(warning)}};
+  }
+  // Measured after the SoC: the last PRes (or its timeout), the end of the asynchronous phase.
+  j["cycle_occupancy"] = {{"isochronous_end", occupancy_json(bus_.isochronous_end())},
+                          {"async_end", occupancy_json(bus_.async_end())}};
   nlohmann::json nodes = nlohmann::json::array();
   for (std::size_t i = 0; i < st.node_count; ++i) {
     const auto& n = st.nodes[i];
@@ -359,6 +398,14 @@ std::unique_ptr<BusService> make_powerlink_service(const DaemonConfig& config,
     auto service = std::make_unique<PowerlinkService>(
         std::make_unique<powerlink::PowerlinkBus>(mn, std::move(tapped)));
     service->set_interface(interface);
+    // The configuration refused a nominal cycle that does not fit; one that fits only while every
+    // CN answers in time is said here, in status and in the metrics.
+    const PowerlinkCycleBudget budget = powerlink_cycle_budget(config);
+    service->set_cycle_budget(budget, config.powerlink.async_mtu);
+    spdlog::info("powerlink: cycle budget {:.1f} us nominal, {:.1f} us worst case, of {} us",
+                 budget.nominal.total_us(), budget.worst.total_us(), budget.period_us);
+    if (const std::string w = worst_case_warning(budget, config.powerlink.async_mtu); !w.empty())
+      spdlog::warn("powerlink: {}", w);
     service->add_capture_tap(tap);
     return service;
   } catch (const std::exception& e) {

@@ -3,10 +3,12 @@
 #pragma once
 
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "bus_service.hpp"
+#include "config/powerlink_budget.hpp"
 #include "powerlink/powerlink_bus.hpp"
 
 namespace ds1928 {
@@ -24,6 +26,11 @@ class PowerlinkService final : public BusService {
   [[nodiscard]] Reported reported_state() const override;
   // The interface's name, for the causes (set by the factory).
   void set_interface(std::string name) { interface_ = std::move(name); }
+  // The configuration's cycle budget (nominal and worst case), shown in status and metrics.
+  void set_cycle_budget(const PowerlinkCycleBudget& budget, uint16_t async_mtu) {
+    budget_ = budget;
+    async_mtu_ = async_mtu;
+  }
   void register_commands(control::Server& server, const SocketConfig& socket) override;
   void watch(std::vector<BusEvent>& events, bool first,
              std::chrono::steady_clock::time_point now) override;
@@ -49,6 +56,8 @@ class PowerlinkService final : public BusService {
   SaidCounter cycle_time_exceeded_;
   std::vector<NodeSeen> nodes_;
   std::string interface_;
+  std::optional<PowerlinkCycleBudget> budget_;
+  uint16_t async_mtu_ = 300;
 };
 
 }  // namespace ds1928

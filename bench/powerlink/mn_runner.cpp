@@ -265,17 +265,23 @@ int main(int argc, char** argv) {
     std::vector<pl::BudgetNode> budget_nodes;
     for (const auto& n : config.powerlink.nodes)
       budget_nodes.push_back({n.node_id, 9, 23, n.pres_timeout_us,
-                              n.multiplexed ? n.multiplex_slot.value_or(0) : uint8_t{0}});
-    const pl::CycleBudget b =
-        pl::cycle_budget(budget_nodes, config.powerlink.wait_soc_preq_us,
-                         config.powerlink.async_timeout_us, 36, config.powerlink.multiplex_cycles);
+                              n.multiplexed ? n.multiplex_slot.value_or(0) : uint8_t{0}, false,
+                              n.pres_latency_us});
+    pl::BudgetNetwork net;
+    net.wait_soc_preq_us = config.powerlink.wait_soc_preq_us;
+    net.async_slot_timeout_us = config.powerlink.async_timeout_us;
+    net.async_mtu = config.powerlink.async_mtu;
+    net.multiplex_cycles = config.powerlink.multiplex_cycles;
+    const pl::CycleBudget nominal = pl::cycle_budget(budget_nodes, net, pl::BudgetCase::kNominal);
+    const pl::CycleBudget worst = pl::cycle_budget(budget_nodes, net, pl::BudgetCase::kWorst);
     std::printf(
         "CONFIG period_us=%u rx_wait=%s rx_spin_us=%u ring_spin_ns=%lld rx_mode=%s "
-        "wait_soc_preq_us=%u async_slot_timeout_us=%u budget_us=%.1f\n",
+        "wait_soc_preq_us=%u async_slot_timeout_us=%u budget_nominal_us=%.1f "
+        "budget_worst_us=%.1f\n",
         config.cycle.period_us, pl::to_string(config.powerlink.rx_wait),
         config.powerlink.rx_spin_us, static_cast<long long>(lo.ring_spin_ns),
         pl::to_string(lo.rx_mode), config.powerlink.wait_soc_preq_us,
-        config.powerlink.async_timeout_us, b.total_us());
+        config.powerlink.async_timeout_us, nominal.total_us(), worst.total_us());
   }
   if (auto ec = raw.open(lo)) {
     std::fprintf(stderr, "open %s: %s\n", o.iface.c_str(), ec.message().c_str());

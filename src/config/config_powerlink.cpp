@@ -277,6 +277,10 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
     n.boolean("cycle_objects", node.cycle_objects);
     n.integer("pres_timeout_us", node.pres_timeout_us, 1, 100000, "µs");
     sites.pres_timeout_at.push_back(n.value_at("pres_timeout_us"));
+    n.integer("pres_latency_us", node.pres_latency_us, 0, 100000, "µs");
+    sites.pres_latency_at.push_back(n.has("pres_latency_us")
+                                        ? std::optional<Loc>(n.value_at("pres_latency_us"))
+                                        : std::nullopt);
     n.optional_integer("loss_of_pres_threshold", node.loss_of_pres_threshold, 0, kU32);
     n.boolean("mandatory", node.mandatory);
     if (n.has("multiplex")) {
@@ -371,6 +375,7 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
   s.integer("async_slot_timeout_us", p.async_timeout_us, 1, 100000, "µs");
   s.integer("async_timeout_us", p.async_timeout_us, 1, 100000, "µs");
   s.integer("wait_soc_preq_us", p.wait_soc_preq_us, 0, 100000, "µs");
+  s.integer("async_mtu", p.async_mtu, 300, 1500, "bytes (AsyncMTU, DS 301)");
   if (!mn_cdc.empty()) apply_mn_cdc_network(s, t, nmt, p, mn_cdc);
   sites.mn_cdc = mn_cdc;
   // PResMN payload: the key, else the MN's CDC (NMT_CycleTiming_REC.PResActPayloadLimit_U16).
@@ -428,11 +433,10 @@ void parse_powerlink(Section s, PowerlinkBusConfig& p, PowerlinkSites& sites,
   s.finish();
 }
 
-// The worst cycle on the wire must fit the period (docs/powerlink.md §Cycle timing).
 // The outputs of a chained node take its PReq image's bytes in the PResMN (docs/powerlink.md
 // §PollResponse Chaining): the end of its packed blocks (or offsets), or of its written RPDO
 // mapping.
-static std::size_t output_image_size(const DaemonConfig& c, const PowerlinkNodeConfig& n) {
+std::size_t output_image_size(const DaemonConfig& c, const PowerlinkNodeConfig& n) {
   if (image_from_mapping(n)) {
     std::vector<powerlink::CdcEntry> written;
     for (const auto& w : n.object_writes) written.push_back({w.index, w.subindex, w.data});
@@ -460,69 +464,6 @@ static std::size_t output_image_size(const DaemonConfig& c, const PowerlinkNodeC
     packed += size;
   }
   return end;
-}
-
-static void check_cycle_budget(Diagnostics& diag, const DaemonConfig& c,
-                               const PowerlinkSites& sites) {
-  std::vector<powerlink::BudgetNode> nodes;
-  std::vector<powerlink::PresMnNode> chained;
-  for (const PowerlinkNodeConfig& n : c.powerlink.nodes) {
-    powerlink::BudgetNode b;
-    b.node_id = n.node_id;
-    b.pres_timeout_us = n.pres_timeout_us;
-    b.multiplex_slot = n.multiplexed ? n.multiplex_slot.value_or(0) : uint8_t{0};
-    b.prc = n.prc;
-    if (n.prc)
-      chained.push_back(
-          {n.node_id, static_cast<uint16_t>(std::min<std::size_t>(output_image_size(c, n), 1490)),
-           0});
-    std::size_t preq = 0, pres = 0;
-    for (const AxisConfig& a : c.axes) {
-      if (a.node != n.node_id) continue;
-      preq += 2u + a.module.output_mtu;
-      pres += 16u + a.module.input_mtu;
-    }
-    b.preq_payload = n.preq_size.value_or(static_cast<uint16_t>(std::min<std::size_t>(preq, 1490)));
-    b.pres_payload = n.pres_size.value_or(static_cast<uint16_t>(std::min<std::size_t>(pres, 1490)));
-    nodes.push_back(b);
-  }
-  // The PResMN carries the chained nodes' outputs: pres_mn_size is at least their end.
-  const std::size_t outputs_end = powerlink::place_pres_mn_outputs(chained);
-  if (outputs_end > c.powerlink.pres_mn_size && sites.pres_mn_size_at) {
-    std::string where;
-    for (const auto& p : chained)
-      where += (where.empty() ? "" : ", ") + std::string("node ") + std::to_string(p.node_id) +
-               ": " + std::to_string(p.preq_size) + " bytes at " + std::to_string(p.base);
-    diag.error(*sites.pres_mn_size_at, "powerlink.pres_mn_size",
-               std::to_string(c.powerlink.pres_mn_size) +
-                   " bytes cannot carry the outputs of the chained (prc) nodes, " +
-                   std::to_string(outputs_end) + " bytes (" + where +
-                   "); give at least that, or leave it out to have it derived");
-  }
-  if (outputs_end > 1490) {
-    diag.error(sites.async_timeout_at, "powerlink",
-               "the outputs of the chained (prc) nodes take " + std::to_string(outputs_end) +
-                   " bytes, more than a PResMN carries (1490)");
-    return;
-  }
-  const auto pres_mn_size =
-      static_cast<uint16_t>(std::max<std::size_t>(c.powerlink.pres_mn_size, outputs_end));
-  const powerlink::CycleBudget b =
-      powerlink::cycle_budget(nodes, c.powerlink.wait_soc_preq_us, c.powerlink.async_timeout_us,
-                              pres_mn_size, c.powerlink.multiplex_cycles);
-  const double period = c.cycle.period_us;
-  if (b.total_us() <= period) return;
-  char text[512];
-  std::snprintf(text, sizeof text,
-                "the POWERLINK cycle does not fit cycle.period_us %u: its worst case on the wire "
-                "takes %.1f us, %.1f us more (SoC %.1f, WaitSoCPReq %.1f, PRC slot of %zu node(s) "
-                "%.1f, %zu PReq/PRes with their PRes timeouts %.1f, SoA + async slot timeout + "
-                "longest ASnd %.1f); lengthen the period or shorten pres_timeout_us / "
-                "async_slot_timeout_us",
-                c.cycle.period_us, b.total_us(), b.total_us() - period, b.soc_us,
-                b.wait_soc_preq_us, b.prc_nodes, b.prc_us, b.polled_in_worst_cycle,
-                b.isochronous_us, b.async_us);
-  diag.error(sites.async_timeout_at, "powerlink", text);
 }
 
 void check_powerlink(const BusDocument& d) {
@@ -553,6 +494,17 @@ void check_powerlink(const BusDocument& d) {
           sites.pres_timeout_at[i], "powerlink.nodes[" + std::to_string(i) + "].pres_timeout_us",
           "pres_timeout_us (" + std::to_string(n.pres_timeout_us) +
               ") must be less than cycle.period_us (" + std::to_string(c.cycle.period_us) + ")");
+    }
+  }
+  // A CN expected to answer after its timeout would lose every PRes.
+  for (size_t i = 0; i < c.powerlink.nodes.size() && i < sites.pres_latency_at.size(); ++i) {
+    const auto& n = c.powerlink.nodes[i];
+    if (sites.pres_latency_at[i] && n.pres_latency_us >= n.pres_timeout_us) {
+      diag.error(
+          *sites.pres_latency_at[i], "powerlink.nodes[" + std::to_string(i) + "].pres_latency_us",
+          "pres_latency_us (" + std::to_string(n.pres_latency_us) +
+              ") must be less than the node's pres_timeout_us (" +
+              std::to_string(n.pres_timeout_us) + "): the MN would count every PRes of it as lost");
     }
   }
   // One error per cause: a PRes timeout longer than the period is reported above already.
@@ -591,6 +543,7 @@ void dump_powerlink(std::ostream& o, const PowerlinkBusConfig& p) {
       << "      cdc: " << quote(n.cdc) << "\n"
       << "      cycle_objects: " << yes(n.cycle_objects) << "\n"
       << "      pres_timeout_us: " << n.pres_timeout_us << src("pres_timeout_us") << "\n"
+      << "      pres_latency_us: " << n.pres_latency_us << "\n"
       << "      mandatory: " << yes(n.mandatory) << src("mandatory") << "\n"
       << "      loss_of_pres_threshold: " << opt_dec(n.loss_of_pres_threshold)
       << src("loss_of_pres_threshold") << "\n"
@@ -641,6 +594,7 @@ void dump_powerlink(std::ostream& o, const PowerlinkBusConfig& p) {
     << source_comment(p, "powerlink.async_slot_timeout_us") << "\n"
     << "  wait_soc_preq_us: " << p.wait_soc_preq_us
     << source_comment(p, "powerlink.wait_soc_preq_us") << "\n"
+    << "  async_mtu: " << p.async_mtu << source_comment(p, "powerlink.async_mtu") << "\n"
     << "  multiplex_cycles: " << unsigned{p.multiplex_cycles} << "\n"
     << "  pres_mn_size: " << p.pres_mn_size << "\n"
     << "  rx_wait: "

@@ -26,6 +26,8 @@ constexpr MnCdcSetting kSettings[] = {
   {obj::kMnCycleTiming, 1, false, kWaitSocPreq, "powerlink.wait_soc_preq_us", 1000, 0, 0, 100'000, "ns"},
   // AsyncSlotTimeout_U32: at least 250 ns (DS 301; openPOWERLINK's object dictionary says so too).
   {obj::kMnCycleTiming, 2, false, kAsyncSlotTimeout, "powerlink.async_slot_timeout_us", 1000, 250, 1, 100'000, "ns"},
+  // AsyncMTU_U16: DS 301's range, 300..1500 bytes.
+  {obj::kCycleTiming, obj::kCycleTimingAsyncMtu, false, kAsyncMtu, "powerlink.async_mtu", 1, 300, 300, 1500, "bytes"},
   {obj::kMnBootTime, 1, false, kWaitNotActive, "powerlink.nmt.wait_not_active_ms", 1000, 0, 0, 600'000, "µs"},
   {obj::kMnBootTime, 2, false, kPreOp1Timeout, "powerlink.nmt.pre_op1_timeout_ms", 1000, 1, 1, 600'000, "µs"},
   {obj::kMnCnPResTimeout, 0, true, kPresTimeout, "pres_timeout_us", 1000, 1, 1, 100'000, "ns"},
@@ -196,6 +198,9 @@ void apply_mn_cdc_network(Section& s, const Section& thresholds, const Section& 
       case kWaitNotActive:
         given = nmt.has("wait_not_active_ms");
         break;
+      case kAsyncMtu:
+        given = s.has("async_mtu");
+        break;
       default:
         break;
     }
@@ -218,6 +223,9 @@ void apply_mn_cdc_network(Section& s, const Section& thresholds, const Section& 
           break;
         case kWaitNotActive:
           p.nmt.wait_not_active_ms = u;
+          break;
+        case kAsyncMtu:
+          p.async_mtu = static_cast<uint16_t>(u);
           break;
         default:
           break;

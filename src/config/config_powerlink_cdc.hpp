@@ -24,6 +24,7 @@ enum class MnCdcTarget : uint8_t {
   kAsyncSlotTimeout,     // powerlink.async_slot_timeout_us
   kPreOp1Timeout,        // powerlink.nmt.pre_op1_timeout_ms
   kWaitNotActive,        // powerlink.nmt.wait_not_active_ms
+  kAsyncMtu,             // powerlink.async_mtu
   kPresTimeout,          // powerlink.nodes[].pres_timeout_us
   kLossOfPresThreshold,  // powerlink.nodes[].loss_of_pres_threshold
 };
@@ -62,7 +63,8 @@ void apply_mn_cdc(Section& n, PowerlinkNodeConfig& node, std::size_t i,
                   std::span<const powerlink::CdcEntry> mn, bool node_has_own_cdc,
                   std::map<std::string, std::string>& sources);
 
-// The network-wide MN objects (thresholds, NMT boot time, WaitSoCPReq, AsyncSlotTimeout) on the
+// The network-wide MN objects (thresholds, NMT boot time, WaitSoCPReq, AsyncSlotTimeout,
+// AsyncMTU) on the
 // powerlink section `s` and its `thresholds` / `nmt` sections, where those leave them unset.
 void apply_mn_cdc_network(Section& s, const Section& thresholds, const Section& nmt,
                           PowerlinkBusConfig& p, std::span<const powerlink::CdcEntry> mn);

@@ -1,11 +1,17 @@
-// Does a POWERLINK cycle fit its period? The worst case on the wire at 100 Mbit/s (seed 001):
-// SoC, WaitSoCPReq, then per polled CN its PReq, PResTimeout and PRes, then SoA and the
-// asynchronous slot (AsyncSlotTimeout plus the longest ASnd). Multiplexed CNs (EPSG DS 301) count
-// in the cycle of their slot of the multiplexed cycle; the worst cycle is what must fit. PRC nodes
-// (PollResponse Chaining) take the PRC slot instead: the PResMN, each PRC node's PRes with an
-// inter-frame gap before it (the propagation delay the MN assigns, at least that), and the
-// longest PRes timeout among them (how long the MN waits past the last PRes time).
-// Header-only and pure: the configuration check, the Managing Node and the benchmarks use it.
+// Does a POWERLINK cycle fit its period? Two figures on the wire at 100 Mbit/s (seed 001):
+// - nominal: every node answers as expected: SoC, WaitSoCPReq, per polled CN its PReq, its PRes
+//   latency (pres_latency_us) and its PRes, then SoA, the invited answer's latency and one ASnd
+//   of AsyncMTU (NMT_CycleTiming_REC.AsyncMTU_U16, 0x1F98/8: every asynchronous frame of the
+//   network is at most that long);
+// - worst case: every node times out: each PRes arrives just at its PRes timeout and the ASnd
+//   just at the AsyncSlotTimeout (0x1F8A/2).
+// Multiplexed CNs (EPSG DS 301) count in the cycle of their slot of the multiplexed cycle; the
+// fullest cycle is what must fit. PRC nodes (PollResponse Chaining) take the PRC slot instead:
+// the PResMN, each PRC node's PRes with an inter-frame gap before it (the propagation delay the
+// MN assigns, at least that), and past the last PRes time the longest latency (nominal) or PRes
+// timeout (worst) among them. The configuration refuses a nominal cycle that does not fit and
+// warns about a worst case that does not (docs/powerlink.md, cycle budget).
+// Header-only and pure: the configuration check, the daemon's status and the benchmarks use it.
 #pragma once
 
 #include <algorithm>
@@ -27,20 +33,42 @@ struct BudgetNode {
   uint16_t preq_payload = 0;
   uint16_t pres_payload = 0;
   uint32_t pres_timeout_us = 0;
-  uint8_t multiplex_slot = 0;  // 0 = every cycle, k = cycle k of each multiplexed cycle
-  bool prc = false;            // PollResponse Chaining: in the PRC slot, not polled with PReq
+  uint8_t multiplex_slot = 0;    // 0 = every cycle, k = cycle k of each multiplexed cycle
+  bool prc = false;              // PollResponse Chaining: in the PRC slot, not polled with PReq
+  uint32_t pres_latency_us = 2;  // PReq received → PRes sent, expected (nominal figure)
+};
+
+enum class BudgetCase : uint8_t {
+  kNominal,  // each node answers within its expected latency
+  kWorst,    // each node answers just at its timeout
+};
+[[nodiscard]] constexpr const char* to_string(BudgetCase c) noexcept {
+  return c == BudgetCase::kNominal ? "nominal" : "worst";
+}
+
+// The network-wide figures of the budget.
+struct BudgetNetwork {
+  uint32_t wait_soc_preq_us = 0;         // WaitSoCPReq (0x1F8A/1)
+  uint32_t async_slot_timeout_us = 100;  // AsyncSlotTimeout (0x1F8A/2)
+  uint16_t async_mtu = 300;              // AsyncMTU (0x1F98/8), bytes after the Ethernet header
+  uint16_t pres_mn_payload = 36;         // PResMN payload when PRC nodes are present
+  uint8_t multiplex_cycles = 0;          // MultiplCycleCnt (0x1F98/7)
 };
 
 struct CycleBudget {
+  BudgetCase which = BudgetCase::kWorst;
   double soc_us = 0;
   double wait_soc_preq_us = 0;
-  double prc_us = 0;  // PResMN + the PRC nodes' PRes + their longest PRes timeout (0: no PRC)
+  double prc_us = 0;  // PResMN + the PRC nodes' PRes + their longest latency/timeout (0: no PRC)
   std::size_t prc_nodes = 0;
-  double isochronous_us = 0;  // PReq + PResTimeout + PRes of the CNs of the worst cycle
+  double isochronous_us = 0;  // PReq + latency/timeout + PRes of the CNs of the fullest cycle
   std::size_t polled_in_worst_cycle = 0;
-  double async_us = 0;  // SoA + AsyncSlotTimeout + longest ASnd (1514 bytes)
+  double soa_us = 0;
+  double async_wait_us = 0;  // SoA to the ASnd: the invited node's latency, or AsyncSlotTimeout
+  double asnd_us = 0;        // one ASnd of AsyncMTU
+  [[nodiscard]] double async_us() const noexcept { return soa_us + async_wait_us + asnd_us; }
   [[nodiscard]] double total_us() const noexcept {
-    return soc_us + wait_soc_preq_us + prc_us + isochronous_us + async_us;
+    return soc_us + wait_soc_preq_us + prc_us + isochronous_us + async_us();
   }
 };
 
@@ -90,32 +118,44 @@ inline std::size_t place_pres_mn_outputs(std::span<PresMnNode> nodes) noexcept {
   return end;
 }
 
+// The largest frame an AsyncMTU allows on the wire: Ethernet header (14) + AsyncMTU bytes.
+[[nodiscard]] constexpr std::size_t async_frame_length(uint16_t async_mtu) noexcept {
+  return 14u + async_mtu;
+}
+
 [[nodiscard]] inline CycleBudget cycle_budget(std::span<const BudgetNode> nodes,
-                                              uint32_t wait_soc_preq_us,
-                                              uint32_t async_slot_timeout_us,
-                                              uint16_t pres_mn_payload = 36,
-                                              uint8_t multiplex_cycles = 0) noexcept {
+                                              const BudgetNetwork& net, BudgetCase which) noexcept {
   CycleBudget b;
-  uint32_t prc_timeout_us = 0;
+  b.which = which;
+  // What a node's answer costs past its request: its latency, but never more than the MN
+  // waits for it (a latency beyond the timeout is a timeout).
+  const auto wait = [which](uint32_t latency_us, uint32_t timeout_us) -> uint32_t {
+    return which == BudgetCase::kWorst ? timeout_us : std::min(latency_us, timeout_us);
+  };
+  uint32_t prc_wait_us = 0;
+  uint32_t slowest_us = 0;  // the slowest expected answer of any node (the invited ASnd)
   for (const BudgetNode& n : nodes) {
+    slowest_us = std::max(slowest_us, n.pres_latency_us);
     if (!n.prc) continue;
     b.prc_us += wire_time_us(24u + n.pres_payload) + 0.96;  // PRes + inter-frame gap
-    prc_timeout_us = std::max(prc_timeout_us, n.pres_timeout_us);
+    prc_wait_us = std::max(prc_wait_us, wait(n.pres_latency_us, n.pres_timeout_us));
     ++b.prc_nodes;
   }
-  if (b.prc_nodes > 0) b.prc_us += wire_time_us(24u + pres_mn_payload) + prc_timeout_us;
+  if (b.prc_nodes > 0) b.prc_us += wire_time_us(24u + net.pres_mn_payload) + prc_wait_us;
   b.soc_us = wire_time_us(36);
-  b.wait_soc_preq_us = wait_soc_preq_us;
-  b.async_us = wire_time_us(23) + async_slot_timeout_us + wire_time_us(1514);
+  b.wait_soc_preq_us = net.wait_soc_preq_us;
+  b.soa_us = wire_time_us(23);
+  b.async_wait_us = wait(slowest_us, net.async_slot_timeout_us);
+  b.asnd_us = wire_time_us(async_frame_length(net.async_mtu));
   // The continuous CNs in every cycle, the multiplexed ones in the cycle of their slot.
-  const unsigned cycles = multiplex_cycles > 1 ? multiplex_cycles : 1;
+  const unsigned cycles = net.multiplex_cycles > 1 ? net.multiplex_cycles : 1;
   for (unsigned cycle = 1; cycle <= cycles; ++cycle) {
     double iso = 0;
     std::size_t polled = 0;
     for (const BudgetNode& n : nodes) {
       if (n.prc) continue;
       if (n.multiplex_slot != 0 && n.multiplex_slot != cycle) continue;
-      iso += wire_time_us(24u + n.preq_payload) + n.pres_timeout_us +
+      iso += wire_time_us(24u + n.preq_payload) + wait(n.pres_latency_us, n.pres_timeout_us) +
              wire_time_us(24u + n.pres_payload);
       ++polled;
     }

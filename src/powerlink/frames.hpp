@@ -39,6 +39,13 @@ inline constexpr std::size_t kSdoPayloadOffset = 30;
 inline constexpr std::size_t kSdoCmdHeaderSize = 8;
 // Largest SDO command payload one frame carries.
 inline constexpr std::size_t kMaxSdoSegment = kMaxFrameSize - kSdoPayloadOffset;
+// The SDO command payload a frame of at most AsyncMTU bytes (NMT_CycleTiming_REC.AsyncMTU_U16,
+// counted after the 14-byte Ethernet header) carries, the initiate segment's 4-byte size
+// included: every asynchronous frame of the network keeps to AsyncMTU (EPSG DS 301).
+[[nodiscard]] constexpr std::size_t sdo_segment_for_async_mtu(std::size_t async_mtu) noexcept {
+  const std::size_t frame = 14 + async_mtu < kMaxFrameSize ? 14 + async_mtu : kMaxFrameSize;
+  return frame - kSdoPayloadOffset - 4;
+}
 inline constexpr uint8_t kEplVersion = 0x20;
 
 inline constexpr uint8_t kNodeInvalid = 0;

@@ -193,6 +193,8 @@ ManagingNode::ManagingNode(const MnConfig& config)
     sc.node = nc.node_id;
     sc.own_mac = config_.mac;
     sc.timeout_ns = ms(config_.bus.sdo_timeout_ms);
+    // The MN's own ASnd keeps to AsyncMTU: the cycle budget counts no longer one.
+    sc.max_segment = sdo_segment_for_async_mtu(config_.bus.async_mtu);
     cn->sdo = std::make_unique<SdoClient>(
         sc, [raw](std::span<const uint8_t> f) { raw->push_outbox(f); },
         [this, raw](std::error_code ec, std::span<const uint8_t> d) { sdo_done(*raw, ec, d); });

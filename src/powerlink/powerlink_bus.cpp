@@ -21,7 +21,12 @@ PowerlinkBus::PowerlinkBus(const MnConfig& config, std::unique_ptr<Link> link)
 }
 
 PowerlinkBus::PowerlinkBus(const MnConfig& config, Link& link)
-    : config_(config), link_(link), mn_(config), clock_(&rt::now_ns) {
+    : config_(config),
+      link_(link),
+      mn_(config),
+      iso_end_(static_cast<int64_t>(config.cycle_us) * 1000),
+      async_end_(static_cast<int64_t>(config.cycle_us) * 1000),
+      clock_(&rt::now_ns) {
   axis_map_.resize(config_.axes.size());
   rx_time_.resize(config_.axes.size());
   raw_.resize(config_.bus.nodes.size());
@@ -218,10 +223,13 @@ ExchangeResult PowerlinkBus::exchange(std::span<AxisIo> axes, int64_t cycle_star
   // written; bytes set through set_preq() are copied in before each PReq.
   for (const NodeRaw& r : raw_)
     if (r.outputs_ok) mn_.outputs_written(r.node);
+  int64_t soc_ns = -1;
+  iso_end_ns_ = 0;
   if (mn_.full_cycle()) {
     // RelativeTime and the NetTimeRef describe the instant the SoC leaves, which is the cycle
     // thread's wake-up latency (tens of µs, ms in a stall) after the nominal cycle start.
-    const int64_t soc_ns = clock_();
+    soc_ns = clock_();
+    iso_end_ns_ = soc_ns;
     mn_.stamp_soc(soc_ns, wall_clock());
     send(mn_.build_soc(tx_));
     // WaitSoCPReq: the CNs get this long to take the SoC before the first PReq; frames that come
@@ -251,6 +259,7 @@ ExchangeResult PowerlinkBus::exchange(std::span<AxisIo> axes, int64_t cycle_star
       Received r = link_.receive(rx_, deadline);
       if (r.length == 0 || r.error) {
         mn_.on_pres_timeout(node);
+        iso_end_ns_ = std::max(iso_end_ns_, deadline);
         ++result.frames_lost;
         break;
       }
@@ -276,7 +285,12 @@ ExchangeResult PowerlinkBus::exchange(std::span<AxisIo> axes, int64_t cycle_star
   }
   drain(0);  // late and foreign frames
   const int64_t period_ns = static_cast<int64_t>(config_.cycle_us) * 1000;
-  mn_.end_cycle(clock_() - cycle_start_ns > period_ns);
+  const int64_t end_ns = clock_();
+  mn_.end_cycle(end_ns - cycle_start_ns > period_ns);
+  if (soc_ns >= 0) {
+    if (iso_end_ns_ > soc_ns) iso_end_.record(iso_end_ns_ - soc_ns);  // a CN was polled
+    async_end_.record(end_ns - soc_ns);
+  }
   if (mn_.layouts_version() != layouts_version_) sync_layouts();
 
   for (std::size_t i = 0; i < n_axes; ++i) {
@@ -310,6 +324,7 @@ void PowerlinkBus::note_pres(uint8_t node, int64_t t, int64_t sent_ns,
                              std::size_t n_axes) noexcept {
   for (std::size_t i = 0; i < n_axes; ++i)
     if (axis_map_[i].node == node) rx_time_[i] = t;
+  iso_end_ns_ = std::max(iso_end_ns_, t);
   if (NodeRaw* nr = raw(node)) {
     pres_latency_[static_cast<std::size_t>(nr - raw_.data())].record(t - sent_ns);
     nr->pres_fresh = nr->pres_received = true;
@@ -348,6 +363,7 @@ void PowerlinkBus::prc_slot(ExchangeResult& result, std::size_t n_axes) noexcept
   for (uint8_t node : nodes) {
     if (mn_.pres_seen(node)) continue;
     mn_.on_pres_timeout(node);
+    iso_end_ns_ = std::max(iso_end_ns_, deadline);
     ++result.frames_lost;
   }
 }

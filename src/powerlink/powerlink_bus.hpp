@@ -14,6 +14,7 @@
 #include "core/bus.hpp"
 #include "core/spsc_queue.hpp"
 #include "core/triple_buffer.hpp"
+#include "powerlink/cycle_occupancy.hpp"
 #include "powerlink/link.hpp"
 #include "powerlink/managing_node.hpp"
 
@@ -106,6 +107,10 @@ class PowerlinkBus final : public BusDriver, private RegisterTarget {
   [[nodiscard]] bool mapped_image(uint8_t node, MappedImage& out) const;
   // Any thread: the PRes latency of a configured CN; nullptr when `node` is not configured.
   [[nodiscard]] const PresLatencyHistogram* pres_latency(uint8_t node) const noexcept;
+  // Measured cycle occupancy after the SoC left: the end of the isochronous phase (last PRes
+  // received or timed out) and of the asynchronous phase (the exchange's end). Any thread.
+  [[nodiscard]] const OccupancyHistogram& isochronous_end() const noexcept { return iso_end_; }
+  [[nodiscard]] const OccupancyHistogram& async_end() const noexcept { return async_end_; }
   // Cycle thread (or tests driving exchange() themselves).
   [[nodiscard]] const ManagingNode& managing_node() const noexcept { return mn_; }
 
@@ -167,6 +172,9 @@ class PowerlinkBus final : public BusDriver, private RegisterTarget {
   std::atomic<BusState> state_{BusState::Down};
   std::vector<NodeRaw> raw_;
   std::unique_ptr<PresLatencyHistogram[]> pres_latency_;  // per raw_ entry
+  OccupancyHistogram iso_end_;
+  OccupancyHistogram async_end_;
+  int64_t iso_end_ns_ = 0;  // this cycle: the last PRes received or given up on
   SpscQueue<PreqWrite, 16> preq_writes_;
   // What the cycle thread publishes each cycle for the normal thread; `pres` per raw_ entry.
   struct Snapshot {

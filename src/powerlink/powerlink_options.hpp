@@ -38,6 +38,8 @@ enum class ImageLayout : uint8_t {
 };
 
 // POWERLINK Controlled Node as the MN sees it.
+inline constexpr uint32_t kDefaultPresLatencyUs = 2;
+
 struct PowerlinkNodeConfig {
   uint8_t node_id = 1;
   // Identity (docs/powerlink.md §Third-party CNs): checked in the IdentResponse and read back
@@ -61,6 +63,11 @@ struct PowerlinkNodeConfig {
   // PResTimeout (0x1F92/node): how long the MN waits for the PRes after the PReq. Long enough for
   // a CN that answers from software on a busy PC (docs/realtime.md); a lost PRes costs it once.
   uint32_t pres_timeout_us = 200;
+  // How soon the CN answers a PReq (end of PReq to start of PRes) when all is well: the cycle
+  // budget's nominal figure counts this instead of the timeout. The default is a hardware CN's:
+  // seed 001's gap between PReq and PRes (about 2 µs) and PResMaxLatency_U32 (0x1F98/3) of
+  // openPOWERLINK's device descriptions (2000 ns).
+  uint32_t pres_latency_us = kDefaultPresLatencyUs;
   // DLL_MNCNLossPResThreshold (0x1C09/node); unset: powerlink.thresholds.loss_of_pres.
   std::optional<uint32_t> loss_of_pres_threshold;
   bool mandatory = true;
@@ -128,6 +135,10 @@ struct PowerlinkBusConfig {
   PowerlinkNmtConfig nmt;
   // AsyncSlotTimeout (0x1F8A/2): wait for the invited ASnd after the SoA.
   uint32_t async_timeout_us = 100;
+  // AsyncMTU (NMT_CycleTiming_REC.AsyncMTU_U16, 0x1F98/8): the longest asynchronous frame of the
+  // network, bytes after the Ethernet header (DS 301: 300..1500, default 300). The MN's own SDO
+  // segments keep to it; the cycle budget counts one ASnd of it per cycle.
+  uint16_t async_mtu = 300;
   // WaitSoCPReq (0x1F8A/1): pause between the SoC and the first PReq, for CNs that need time to
   // take the SoC (a software CN) before they can answer a PReq.
   uint32_t wait_soc_preq_us = 0;

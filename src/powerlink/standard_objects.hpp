@@ -57,6 +57,7 @@ inline constexpr uint16_t kMultiplCycleAssign = 0x1F9B;
 inline constexpr uint8_t kCycleTimingPReqActPayload = 4;   // kCycleTiming/4
 inline constexpr uint8_t kCycleTimingPResActPayload = 5;   // kCycleTiming/5
 inline constexpr uint8_t kCycleTimingMultiplCycleCnt = 7;  // kCycleTiming/7
+inline constexpr uint8_t kCycleTimingAsyncMtu = 8;         // kCycleTiming/8
 // NMT_NodeAssignment bit 14: the node is polled by PollResponse Chaining.
 inline constexpr uint32_t kNodeAssignmentPrc = 0x00004000;
 // NMT_NodeAssignment bit 9: the node is polled in a multiplexed slot.

@@ -349,25 +349,6 @@ TEST_CASE("Timing keys by the standard's names, receive strategy, defaults",
             .find("not both") != std::string::npos);
 }
 
-TEST_CASE("A cycle that does not fit the period is refused, saying by how much",
-          "[config][powerlink][timing]") {
-  // 200 µs: SoC 6.72 + (6.72 + 200 + 6.72) + SoA 6.72 + 100 + 123.04 = 449.92 µs.
-  const std::string e = one_error(
-      "bus: powerlink\ncycle: {period_us: 500}\npowerlink:\n  interface: eth1\n  nodes:\n"
-      "    - {node_id: 1, pres_timeout_us: 200}\n    - {node_id: 2, pres_timeout_us: 200}\n");
-  CHECK(e.find("does not fit cycle.period_us 500") != std::string::npos);
-  CHECK(e.find("663.4 us, 163.4 us more") != std::string::npos);
-  CHECK(e.find("2 PReq/PRes") != std::string::npos);
-  // Multiplexed: only the nodes of the worst cycle count.
-  const ConfigResult ok = from(
-      "bus: powerlink\ncycle: {period_us: 500}\npowerlink:\n  interface: eth1\n  nodes:\n"
-      "    - {node_id: 1, pres_timeout_us: 200, multiplexed: true}\n"
-      "    - {node_id: 2, pres_timeout_us: 200, multiplexed: true}\n"
-      "  multiplex_cycles: 2\n");
-  INFO(ok.error_report());
-  CHECK(ok.errors().empty());
-}
-
 TEST_CASE("PollResponse Chaining: prc per node, from the MN's CDC, and what it cannot be",
           "[config][powerlink][prc]") {
   TempDir dir;
@@ -404,26 +385,6 @@ TEST_CASE("PollResponse Chaining: prc per node, from the MN's CDC, and what it c
              Catch::Contains("PRC has no multiplexed slots"));
 }
 
-TEST_CASE("The cycle budget counts PRC nodes in the PRC slot", "[config][powerlink][prc][timing]") {
-  // Two nodes with PRes timeout 200: PReq/PRes needs 663.4 µs (above); in PRC the PResMN and the
-  // two PRes with their gaps share one timeout: 6.72 + 2 × (6.72 + 0.96) + 200 = 222.08, plus SoC
-  // 6.72 and SoA + async 229.76 = 458.56 µs, which fits 500.
-  const ConfigResult ok = from(
-      "bus: powerlink\ncycle: {period_us: 500}\npowerlink:\n  interface: eth1\n  nodes:\n"
-      "    - {node_id: 1, pres_timeout_us: 200, prc: true}\n"
-      "    - {node_id: 2, pres_timeout_us: 200, prc: true}\n");
-  INFO(ok.error_report());
-  CHECK(ok.errors().empty());
-  // Mixed, at 400: PRC slot of node 1 (6.72 + 7.68 + 200) + node 2's PReq/PRes (213.44) no longer
-  // fits; the message names the PRC slot.
-  const std::string e = one_error(
-      "bus: powerlink\ncycle: {period_us: 400}\npowerlink:\n  interface: eth1\n  nodes:\n"
-      "    - {node_id: 1, pres_timeout_us: 200, prc: true}\n"
-      "    - {node_id: 2, pres_timeout_us: 200}\n");
-  CHECK_THAT(e, Catch::Contains("PRC slot of 1 node(s) 214.4"));
-  CHECK_THAT(e, Catch::Contains("1 PReq/PRes"));
-}
-
 TEST_CASE("The PResMN carries the chained nodes' outputs: its size derived and checked",
           "[config][powerlink][prc][timing]") {
   const std::string head =
@@ -442,19 +403,6 @@ TEST_CASE("The PResMN carries the chained nodes' outputs: its size derived and c
   const ConfigResult ok = from(head + "  pres_mn_size: 18\n" + axes);
   INFO(ok.error_report());
   CHECK(ok.errors().empty());
-  // Unset, the PResMN grows with the outputs, and the budget counts it: node 1 with three modules
-  // of MTU 15 has 51 bytes of outputs, a PResMN of 7.92 µs on the wire instead of 6.72; its PRes
-  // (93 bytes) 11.28 + 0.96; with the 200 µs timeout the PRC slot is 220.16 µs (218.96 with a
-  // PResMN of 36 bytes).
-  const std::string e2 = one_error(
-      "bus: powerlink\ncycle: {period_us: 400}\npowerlink:\n  interface: eth1\n  nodes:\n"
-      "    - {node_id: 1, pres_timeout_us: 200, prc: true}\n"
-      "    - {node_id: 2, pres_timeout_us: 200}\n"
-      "axes:\n"
-      "  - {name: a, node: 1, slot: 1, module: {input_mtu: 15, output_mtu: 15}}\n"
-      "  - {name: b, node: 1, slot: 2, module: {input_mtu: 15, output_mtu: 15}}\n"
-      "  - {name: c, node: 1, slot: 3, module: {input_mtu: 15, output_mtu: 15}}\n");
-  CHECK_THAT(e2, Catch::Contains("PRC slot of 1 node(s) 220.2"));
 }
 
 TEST_CASE("One multiplexed cycle: multiplex_cycles, slots given or assigned, refusals by key",

@@ -79,3 +79,53 @@ TEST_CASE("POWERLINK metrics: NMT state, PRes counters and latency per node", "[
   j = service.status_json();
   CHECK(j["nodes"][0]["inputs"] == "taken");
 }
+
+TEST_CASE("POWERLINK status and metrics: the cycle budget's two figures and the measured occupancy",
+          "[daemon][metrics][budget]") {
+  powerlink::test::Rig rig({1, 2}, 1);
+  PowerlinkService service(*rig.bus);
+  // Two CNs at 1 ms with a 500 µs PRes timeout: nominal 6.72 + 2 × 15.44 + 35.76 = 73.36 µs,
+  // worst case 6.72 + 2 × 513.44 + 133.76 = 1167.36 µs, over the period.
+  std::vector<powerlink::BudgetNode> nodes{{1, 0, 0, 500, 0, false, 2},
+                                           {2, 0, 0, 500, 0, false, 2}};
+  PowerlinkCycleBudget budget;
+  budget.period_us = 1000;
+  budget.nominal = powerlink::cycle_budget(nodes, {}, powerlink::BudgetCase::kNominal);
+  budget.worst = powerlink::cycle_budget(nodes, {}, powerlink::BudgetCase::kWorst);
+  service.set_cycle_budget(budget, 300);
+  REQUIRE(rig.run_until([&] { return rig.bus->state() == BusState::Operational; }));
+  // Each clock read inside the exchange advances 10 µs: the phases end a fixed number of reads
+  // after the SoC's, so the occupancy is known and above 0.
+  powerlink::test::g_clock_step_ns = 10'000;
+  for (int i = 0; i < 20; ++i) rig.step();
+  powerlink::test::g_clock_step_ns = 0;
+  rig.step();
+
+  const nlohmann::json j = service.status_json();
+  INFO(j.dump(2));
+  const auto& b = j["cycle_budget"];
+  CHECK(b["period_us"] == 1000);
+  CHECK(b["nominal"]["total_us"].get<double>() == Approx(73.36));
+  CHECK(b["nominal"]["polled"] == 2);
+  CHECK(b["nominal"]["asnd_us"].get<double>() == Approx(27.04));
+  CHECK(b["worst_case"]["total_us"].get<double>() == Approx(1167.36));
+  CHECK(b["worst_case_fits"] == false);
+  CHECK_THAT(b["warning"].get<std::string>(), Catch::Contains("1167.4 us, 167.4 us more"));
+  const auto& iso = j["cycle_occupancy"]["isochronous_end"];
+  const auto& async = j["cycle_occupancy"]["async_end"];
+  CHECK(iso["count"].get<uint64_t>() >= 20);
+  CHECK(async["count"].get<uint64_t>() >= iso["count"].get<uint64_t>());
+  // The stepped cycles: the last PRes comes tens of µs after the SoC, the async phase later.
+  CHECK(iso["max_us"].get<double>() >= 20);
+  CHECK(async["max_us"].get<double>() > iso["max_us"].get<double>());
+  CHECK(iso["p50_us"].get<double>() <= iso["p99_us"].get<double>());
+  CHECK(iso["p99_us"].get<double>() <= iso["max_us"].get<double>());
+
+  const std::string text = render(service);
+  INFO(text);
+  CHECK(value_of(text, "ds1928_powerlink_cycle_budget_seconds{case=\"nominal\"}") ==
+        Approx(73.36e-6));
+  CHECK(value_of(text, "ds1928_powerlink_cycle_budget_seconds{case=\"worst\"}") ==
+        Approx(1167.36e-6));
+  CHECK(value_of(text, "ds1928_powerlink_cycle_budget_worst_fits") == 0);
+}

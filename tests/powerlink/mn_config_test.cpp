@@ -343,3 +343,36 @@ TEST_CASE("A CN that never answers EC=1 still boots, the MN gives up on the hand
   REQUIRE(rig.st(1).error_entry_count == 1);
   CHECK(rig.st(1).error_entries[0].code == 0x4242);
 }
+
+TEST_CASE("The MN's SDO frames keep to AsyncMTU: a long download goes in segments that fit",
+          "[powerlink][mn][configure][budget]") {
+  // 600 bytes to one object: at AsyncMTU 300 no ASnd of the MN is longer than 314 bytes with its
+  // Ethernet header (the cycle budget counts one of them); at 1500 the download is one frame.
+  std::vector<uint8_t> domain(600);
+  for (std::size_t i = 0; i < domain.size(); ++i) domain[i] = static_cast<uint8_t>(i * 7);
+  for (const uint16_t mtu : {uint16_t{300}, uint16_t{1500}}) {
+    Rig rig({3}, 1, {}, [&](PowerlinkNodeConfig& n) {
+      n.object_writes = {{0x2010, 0x7F, domain, false}};
+    });
+    rig.config.bus.async_mtu = mtu;
+    rig.rebuild();
+    std::size_t longest = 0, downloads = 0;
+    rig.link.on_send = [&](std::span<const uint8_t> f) {
+      const auto frame = parse_frame(f);
+      if (!frame || frame->header.src_node != kNodeMn) return;
+      const auto* a = std::get_if<Asnd>(&frame->message);
+      if (!a || a->service != AsndService::kSdo) return;
+      longest = std::max(longest, f.size());
+      ++downloads;
+    };
+    REQUIRE(rig.run_until([&] { return operational(rig); }, 5000));
+    CHECK(rig.cns[0]->objects[{0x2010, 0x7F}] == domain);
+    INFO("AsyncMTU " << mtu << ": " << downloads << " SDO frames, the longest " << longest);
+    if (mtu == 300) {
+      CHECK(longest <= 314);
+      CHECK(longest >= 300);  // the segments fill the frame
+    } else {
+      CHECK(longest > 600);
+    }
+  }
+}

@@ -1,12 +1,12 @@
 // DLL timing of the MN: threshold counters that count every cycle, the default loss-of-PRes
-// threshold, one multiplexed cycle (slots, order, the SoC MC flag), WaitSoCPReq, the cycle budget.
+// threshold, one multiplexed cycle (slots, order, the SoC MC flag), WaitSoCPReq (the cycle budget:
+// cycle_budget_test.cpp).
 #include <algorithm>
 #include <catch2/catch.hpp>
 #include <cstdlib>
 #include <map>
 
 #include "mn_rig.hpp"
-#include "powerlink/cycle_budget.hpp"
 
 using namespace ds1928;
 using namespace ds1928::powerlink;
@@ -183,26 +183,6 @@ TEST_CASE(
   for (uint8_t n : {1, 2, 3, 4}) CHECK(rig.st(n).loss_of_pres.events == 0);
 }
 
-TEST_CASE("The budget counts the multiplexed CNs in their slots' cycles",
-          "[powerlink][timing][multiplex]") {
-  std::vector<MultiplexNode> mux{{5, 0}, {2, 3}, {9, 0}, {7, 0}};
-  assign_multiplex_slots(mux, 3);
-  // Node 2 holds slot 3; 5, 7, 9 in node order take the least loaded, lowest first: 1, 2, 1.
-  std::map<uint8_t, uint8_t> slot;
-  for (const auto& m : mux) slot[m.node_id] = m.slot;
-  CHECK(slot[2] == 3);
-  CHECK(slot[5] == 1);
-  CHECK(slot[7] == 2);
-  CHECK(slot[9] == 1);
-  // Two CNs in slot 1 and one in slot 2 of 2: the worst cycle polls the continuous one and two.
-  const std::vector<BudgetNode> nodes{{1, 10, 10, 100, 0, false},
-                                      {2, 10, 10, 100, 1, false},
-                                      {3, 10, 10, 100, 1, false},
-                                      {4, 10, 10, 100, 2, false}};
-  const CycleBudget b = cycle_budget(nodes, 0, 100, 36, 2);
-  CHECK(b.polled_in_worst_cycle == 3);
-}
-
 TEST_CASE("WaitSoCPReq delays the first PReq after the SoC", "[powerlink][mn][timing]") {
   Rig rig({1}, 1);
   rig.config.bus.wait_soc_preq_us = 30;
@@ -226,25 +206,4 @@ TEST_CASE("WaitSoCPReq delays the first PReq after the SoC", "[powerlink][mn][ti
   REQUIRE(soc_at >= 0);
   REQUIRE(preq_sent);
   CHECK(std::find(waits.begin(), waits.end(), soc_at + 30'000) != waits.end());
-}
-
-TEST_CASE("Cycle budget: worst cycle on the wire against the period", "[powerlink][timing]") {
-  // Seed 001: a 60-byte frame takes 6.72 µs with preamble and inter-frame gap.
-  CHECK(wire_time_us(60) == Approx(6.72));
-  CHECK(wire_time_us(20) == Approx(6.72));
-  CHECK(wire_time_us(1514) == Approx(123.04));
-  std::vector<BudgetNode> nodes{{1, 9, 23, 200, 0}};
-  const CycleBudget one = cycle_budget(nodes, 0, 100);
-  // SoC 6.72 + (PReq 6.72 + 200 + PRes 6.72) + SoA 6.72 + 100 + 123.04
-  CHECK(one.total_us() == Approx(449.92));
-  CHECK(one.polled_in_worst_cycle == 1);
-  // Multiplexed CNs count in the cycles that poll them: 1 continuous + nodes 2..9 over 4 slots.
-  nodes.clear();
-  nodes.push_back({1, 9, 23, 100, 0});
-  for (uint8_t n = 2; n <= 9; ++n)
-    nodes.push_back({n, 9, 23, 100, static_cast<uint8_t>((n - 2) % 4 + 1)});
-  const CycleBudget mux = cycle_budget(nodes, 10, 100, 36, 4);
-  CHECK(mux.polled_in_worst_cycle == 3);  // node 1 + two of the eight
-  CHECK(mux.isochronous_us == Approx(3 * (100 + 2 * 6.72)));
-  CHECK(mux.wait_soc_preq_us == 10);
 }

@@ -164,6 +164,32 @@ void print_canio_nodes(const json& b) {
   }
 }
 
+// POWERLINK: the configuration's cycle budget and the measured occupancy after the SoC.
+void print_powerlink_budget(const json& b) {
+  if (b.contains("cycle_budget")) {
+    const json c = b["cycle_budget"];
+    std::printf("    cycle budget: %.1f us nominal, %.1f us worst case, of %" PRIu64 " us%s\n",
+                get<double>(c.value("nominal", json::object()), "total_us", 0.0),
+                get<double>(c.value("worst_case", json::object()), "total_us", 0.0),
+                get<uint64_t>(c, "period_us", 0),
+                get<bool>(c, "worst_case_fits", true)
+                    ? ""
+                    : " (the worst case does not fit: a CN answering at its PRes timeout "
+                      "overruns the cycle)");
+  }
+  if (b.contains("cycle_occupancy")) {
+    const json o = b["cycle_occupancy"];
+    for (const auto& [key, label] : {std::pair{"isochronous_end", "isochronous phase ends"},
+                                     std::pair{"async_end", "async phase ends"}}) {
+      const json h = o.value(key, json::object());
+      if (get<uint64_t>(h, "count", 0) == 0) continue;
+      std::printf("    %s after the SoC: p50 %.1f us, p99 %.1f us, max %.1f us\n", label,
+                  get<double>(h, "p50_us", 0.0), get<double>(h, "p99_us", 0.0),
+                  get<double>(h, "max_us", 0.0));
+    }
+  }
+}
+
 void print_status(const json& r) {
   const json d = r.value("daemon", json::object());
   std::cout << "ds1928d " << get<std::string>(d, "version", "?") << " (pid "
@@ -180,6 +206,7 @@ void print_status(const json& r) {
   std::cout << "\n";
   if (const auto cause = get<std::string>(b, "cause", ""); !cause.empty())
     std::cout << "    cause: " << cause << "\n";
+  print_powerlink_budget(b);
   if (kind == "canio")
     print_canio_nodes(b);
   else
