@@ -61,6 +61,19 @@ std::string BusService::axis_cause(std::size_t) const {
   return {};
 }
 
+NodePhase BusService::node_phase(std::size_t) const {
+  switch (driver().state()) {
+    case BusState::Operational:
+      return NodePhase::Operational;
+    case BusState::Booting:
+      return NodePhase::Boot;
+    case BusState::Down:
+    case BusState::Error:
+      break;
+  }
+  return NodePhase::Unknown;
+}
+
 nlohmann::json BusService::status_json() const {
   Reported r = reported_state();
   nlohmann::json j{{"kind", std::string(driver().name())}, {"state", r.state}};

@@ -17,6 +17,7 @@
 #include "core/bus.hpp"
 #include "metrics/exposition.hpp"
 #include "service/journal.hpp"
+#include "x20ds1928/module_state.hpp"
 
 namespace ds1928::capture {
 class Tap;
@@ -74,6 +75,10 @@ class BusService {
   // Why the bus gives an axis no data, in the bus' own words (a node's SDO timeout); empty when
   // the bus knows no reason.
   [[nodiscard]] virtual std::string axis_cause(std::size_t axis) const;
+  // What the bus shows of the node that holds the axis' module, for its module state
+  // (module_leds.hpp). The default, for a bus without node states (simulated), follows the
+  // driver's state.
+  [[nodiscard]] virtual NodePhase node_phase(std::size_t axis) const;
 
   // {"kind", "state", "cause"} plus what the kind adds (status_extra). Normal thread.
   [[nodiscard]] nlohmann::json status_json() const;

@@ -5,6 +5,7 @@
 #include <algorithm>
 
 #include "can/socketcan_port.hpp"
+#include "canio/module_phase.hpp"
 #include "capture/capturing_can_port.hpp"
 
 namespace ds1928 {
@@ -204,6 +205,19 @@ void CanioService::on_node_event(const canio::CanioNodeEvent& e, std::vector<Bus
                         control::LogEvent::BusState, -1, -1, why});
       return;
   }
+}
+
+NodePhase CanioService::node_phase(std::size_t axis) const {
+  if (axis >= bus_->options().axes.size()) return NodePhase::Unknown;
+  const uint8_t node = bus_->options().axes[axis].node;
+  const bool silent = bus_->axis_counters(axis).state.load() == canio::CanioAxisState::Silent;
+  for (std::size_t k = 0; k < bus_->node_count(); ++k) {
+    const canio::CanioNodeCounters& nc = bus_->node_counters(k);
+    if (nc.node == node)
+      return canio::node_phase(nc.nmt_state.load(std::memory_order_relaxed), silent,
+                               nc.heartbeat_watched.load(std::memory_order_relaxed));
+  }
+  return NodePhase::Unknown;
 }
 
 std::string CanioService::axis_cause(std::size_t axis) const {

@@ -25,6 +25,8 @@ class CanioService final : public BusService {
   // "no_nodes" while none does, the nodes' last errors as the cause.
   [[nodiscard]] Reported reported_state() const override;
   [[nodiscard]] std::string axis_cause(std::size_t axis) const override;
+  // The axis' node: the NMT state of its last boot-up or heartbeat (canio/module_phase).
+  [[nodiscard]] NodePhase node_phase(std::size_t axis) const override;
   void watch(std::vector<BusEvent>& events, bool first,
              std::chrono::steady_clock::time_point now) override;
   void append_metrics(metrics::Exposition& out) const override;  // canio_metrics.cpp

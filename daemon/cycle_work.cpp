@@ -82,6 +82,7 @@ void CycleWork::run_cycle(const CycleContext& ctx) noexcept {
   frames_lost_.store(frames_lost_.load(std::memory_order_relaxed) + result.frames_lost,
                      std::memory_order_relaxed);
   bus_up_.store(result.bus_up, std::memory_order_relaxed);
+  last_cycle_ns_.store(ctx.start_ns, std::memory_order_relaxed);
 
   bool any_fresh = false;
   for (std::size_t i = 0; i < io_.size(); ++i) {
@@ -104,6 +105,8 @@ void CycleWork::run_cycle(const CycleContext& ctx) noexcept {
     if (sample.held) bump(c.held);
     c.error_info.store(sample.error_info, std::memory_order_relaxed);
     any_fresh |= sample.fresh;
+    if (io_[i].inputs_fresh && io_[i].axis_up && result.bus_up)
+      c.last_input_ns.store(ctx.start_ns, std::memory_order_relaxed);
 
     shm::AxisStatus& st = status_[i];
     // Each fresh input is one read of all four channels, unless the bus reads them apart.

@@ -109,6 +109,10 @@ struct AxisCounters {
   std::array<std::atomic<int32_t>, kInfoChannels> info_value{};
   std::array<std::atomic<int64_t>, kInfoChannels> info_read_ns{};  // 0: never valid
   std::atomic<uint8_t> info_valid{0};
+  // Cycle start (CLOCK_MONOTONIC) of the last cycle whose exchange brought the module's inputs
+  // (new or repeated) with the axis' part of the bus up; 0: never. The module state
+  // (module_leds.hpp) reads it.
+  std::atomic<int64_t> last_input_ns{0};
 };
 
 class CycleWork final : public CycleTask {
@@ -148,6 +152,10 @@ class CycleWork final : public CycleTask {
     return frames_lost_.load(std::memory_order_relaxed);
   }
   [[nodiscard]] bool bus_up() const noexcept { return bus_up_.load(std::memory_order_relaxed); }
+  // Start (CLOCK_MONOTONIC) of the last cycle run; 0 before the first.
+  [[nodiscard]] int64_t last_cycle_ns() const noexcept {
+    return last_cycle_ns_.load(std::memory_order_relaxed);
+  }
 
   // Normal thread, before the cycle thread starts: where the cycle work raises its incidents (an
   // axis going to module_error or bus_down, a burst of overruns). nullptr: none.
@@ -183,6 +191,7 @@ class CycleWork final : public CycleTask {
   std::atomic<uint64_t> data_exchanges_{0};
   std::atomic<uint64_t> frames_lost_{0};
   std::atomic<bool> bus_up_{false};
+  std::atomic<int64_t> last_cycle_ns_{0};
   // Incidents (flight recorder): the last validity per axis, overruns in the current second.
   IncidentSink* incidents_ = nullptr;
   // Per axis: the axis is up only once its encoder is confirmed (expected_encoder set and

@@ -13,6 +13,7 @@
 #include "control/socket_path.hpp"
 #include "endat_service.hpp"
 #include "host_checks.hpp"
+#include "module_leds.hpp"
 #include "service/journal.hpp"
 #include "shm/shm_error.hpp"
 
@@ -306,6 +307,7 @@ json Daemon::axis_json(std::size_t i, bool with_sample) const {
          {"endat_error", c.endat_error.load(std::memory_order_relaxed)},
          {"endat_warning", c.endat_warning.load(std::memory_order_relaxed)},
          {"errors", error_bits_json(error_words(c), a.error_policy())}};
+  add_module_leds(j, module_leds(*bus_, *work_, config_, i));
   const auto identity = static_cast<IdentityState>(c.identity.load(std::memory_order_relaxed));
   if (identity != IdentityState::Unchecked) {
     j["identity"] = std::string(to_string(identity));
@@ -421,7 +423,10 @@ void Daemon::register_commands() {
   incidents_->register_commands(*server_);
   server_->add_command("topology", [this](const Request&, Reply reply) {
     if (!topology_) return reply.error("starting", "the daemon is still starting");
-    reply.ok(topology_->topology_json(endat_.get(), bus_->status_json()));
+    json t = topology_->topology_json(endat_.get(), bus_->status_json());
+    for (std::size_t i = 0; i < config_.axes.size() && i < t["axes"].size(); ++i)
+      add_module_leds(t["axes"][i], module_leds(*bus_, *work_, config_, i));
+    reply.ok(std::move(t));
   });
   server_->add_command("axes", [this](const Request&, Reply reply) { reply.ok(axes_json()); });
   server_->add_command("stats", [this](const Request&, Reply reply) { reply.ok(stats_json()); });

@@ -12,6 +12,7 @@
 
 #include "core/clock.hpp"
 #include "daemon.hpp"
+#include "module_leds.hpp"
 
 namespace ds1928 {
 namespace {
@@ -175,8 +176,8 @@ std::string Daemon::metrics_text(metrics::Format format) const {
              "current state.");
   const std::string reported = bus_->reported_state().state;
   constexpr std::array<std::string_view, 8> kStates{
-      "down",     "booting",          "operational", "error", "degraded",
-      "no_nodes", "waiting_for_link", "another_mn"};
+      "down",     "booting",  "operational",      "error",
+      "degraded", "no_nodes", "waiting_for_link", "another_mn"};
   bool known = false;
   for (std::string_view st : kStates) {
     known = known || st == reported;
@@ -190,6 +191,7 @@ std::string Daemon::metrics_text(metrics::Format format) const {
   bus_->append_metrics(out);
   incidents_->append_metrics(out);
   if (topology_) topology_->append_metrics(out);
+  append_module_metrics(out, *bus_, *work_, config_);
 
   // Per axis: what was published to shared memory, and the EnDat commands through Flatstream.
   const std::size_t axes = config_.axes.size();

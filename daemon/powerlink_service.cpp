@@ -8,6 +8,7 @@
 
 #include "capture/capturing_link.hpp"
 #include "powerlink/interface_check.hpp"
+#include "powerlink/module_phase.hpp"
 #include "powerlink/raw_link.hpp"
 #include "powerlink/rx_wait.hpp"
 #include "powerlink_commands.hpp"
@@ -158,6 +159,21 @@ BusService::Reported PowerlinkService::reported_state() const {
   }
   return {"booting",
           waiting.empty() ? "the CNs are being started" : "not yet operational: " + waiting};
+}
+
+NodePhase PowerlinkService::node_phase(std::size_t axis) const {
+  const auto& axes = bus_.config().axes;
+  if (axis >= axes.size()) return NodePhase::Unknown;
+  const auto st = bus_.status();
+  for (std::size_t i = 0; i < st.node_count; ++i) {
+    const powerlink::CnStatus& n = st.nodes[i];
+    if (n.node != axes[axis].node) continue;
+    // Refused for its identity, the CN answered all the same.
+    const bool heard =
+        n.identified || n.last_error == make_error_code(powerlink::MnError::kIdentMismatch);
+    return powerlink::node_phase(n.boot, n.nmt, heard);
+  }
+  return NodePhase::Unknown;
 }
 
 void PowerlinkService::status_extra(nlohmann::json& j) const {

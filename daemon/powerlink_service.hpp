@@ -24,6 +24,8 @@ class PowerlinkService final : public BusService {
   // "waiting_for_link" while the interface has no carrier (named, with the fix); "booting" with
   // the CNs not yet operational.
   [[nodiscard]] Reported reported_state() const override;
+  // The axis' CN: the MN's boot step and the NMT state the CN reported (powerlink/module_phase).
+  [[nodiscard]] NodePhase node_phase(std::size_t axis) const override;
   // The interface's name, for the causes (set by the factory).
   void set_interface(std::string name) { interface_ = std::move(name); }
   // The configuration's cycle budget (nominal and worst case), shown in status and metrics.

@@ -198,6 +198,8 @@ void CanioBus::step_nmt(int64_t now) noexcept {
       // Heartbeat consumer timeout: the node is gone or hangs. Its axes go down until a check
       // (or a boot-up) proves the configuration again.
       single_writer_add(nc.heartbeat_misses);
+      // Its state is no longer known (status, the module state): none until it is heard again.
+      nc.nmt_state.store(0xFF, std::memory_order_relaxed);
       push_event({CanioNodeEventKind::HeartbeatMissed,
                   t.node,
                   now,

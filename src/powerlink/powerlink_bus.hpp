@@ -77,6 +77,7 @@ class PowerlinkBus final : public BusDriver, private RegisterTarget {
   [[nodiscard]] BusState state() const noexcept override {
     return state_.load(std::memory_order_relaxed);
   }
+  [[nodiscard]] const MnConfig& config() const noexcept { return config_; }
 
   // Normal thread (one thread: status(), pres_snapshot() and set_preq() share the reading side
   // of the snapshot): the latest status published by the cycle thread (at most one cycle old).

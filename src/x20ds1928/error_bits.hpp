@@ -21,6 +21,12 @@ inline constexpr std::size_t kErrorRegisters = 3;
 // state without a defect.
 enum class ErrorClass : uint8_t { Fault, Warning, Information };
 
+// The module's red e-LED (datasheet §4 "Status-LEDs") groups the ErrorInfo bits by what it
+// flashes: on for the encoder supply, single flash for an I/O error (the sin/cos track: wire break,
+// position, reference), double flash for a system error (EnDat communication, position,
+// parameters). The encoder's own words (EnDatError, EnDatWarning) light nothing of their own.
+enum class ErrorLed : uint8_t { None, Supply, Io, System };
+
 // What a set bit does to the published position.
 enum class ErrorEffect : uint8_t {
   Flag,        // flagged (status, pins, metrics); the position stays valid
@@ -38,6 +44,7 @@ struct ErrorBit {
   std::string_view remedy;
   bool remedy_from_datasheet;  // false: the datasheet states none, the remedy is the project's
   std::string_view section;    // datasheet section
+  ErrorLed led;                // what the e-LED flashes while it is set
 
   // The datasheet's class as an effect: faults invalidate (analogue ones hold), warnings and
   // information are flagged only.

@@ -223,12 +223,14 @@ TEST_CASE(
   CHECK(down_after >= 50 * kMs);  // not before a heartbeat could have been missed
   CHECK(nc.heartbeat_misses.load() == 1);
   CHECK(has_event(events(*rig.canio), canio::CanioNodeEventKind::HeartbeatMissed));
+  CHECK(nc.nmt_state.load() == 0xFF);  // its state unknown since (status, the module state)
 
   rig.nodes[0]->set_silent(false);
   const uint64_t fresh_before = run.fresh;
   REQUIRE(run.until([&] { return run.fresh >= fresh_before + 50; }));
   CHECK(run.wrong == 0);
   CHECK(nc.heartbeat_misses.load() == 1);
+  CHECK(nc.nmt_state.load() == static_cast<uint8_t>(canio::NmtState::Operational));
 }
 
 TEST_CASE("CAN-I/O EMCY: decoded, counted, queued as an event, the cycle goes on",

@@ -4,7 +4,8 @@
 # and each axis' sampling (samples counting, missing, late), no POWERLINK fields; `status --check`
 # exits 0 when every axis of its reply is valid, else 5 (also once the node is gone). The node's
 # first samples are logged as its first contact, not as a return or a reset; when the node comes
-# back after it was gone, "answering again".
+# back after it was gone, "answering again". The module state like its r-LED follows: run while
+# the node delivers, off once it is gone (no heartbeat watched: its samples stopped), run again.
 #
 # Usage: ctl_canio_status_test.sh BUILD_DIR SOURCE_DIR     (root: SCHED_FIFO daemon; 77 = skipped)
 set -u
@@ -59,6 +60,9 @@ grep -Eq "^    node 1: NMT [a-z_-]+, (heartbeats [0-9]+ \([0-9]+ missed\)|heartb
 samples=$(sed -n 's/^      axis 0: .*, samples \([0-9]*\), missing [0-9]*, late [0-9]*$/\1/p' "$work/status.txt")
 [ -n "$samples" ] && [ "$samples" -gt 0 ] || fail "no axis line with samples"
 grep -q "PRes\|NMT ?" "$work/status.txt" && fail "POWERLINK fields on a CAN-I/O bus"
+[ "$(jq -r '.axes[0].module_state' "$work/check.json")" = run ] ||
+  fail "a valid axis whose module is not run: $(jq -c '.axes[0]' "$work/check.json")"
+grep -Eq "^    0   axis0 +valid +module run " "$work/status.txt" || fail "no module state in the axis line"
 # The node's first contact is no reset and no return: "answering (first samples)" only.
 grep -q "canio node 1: axis 'axis0' answering (first samples)" "$work/daemon.log" ||
   fail "no first-contact line: $(grep 'canio node' "$work/daemon.log")"
@@ -71,12 +75,24 @@ rc=0
 for _ in $(seq 200); do rc=0; "$ctl" status --check >"$work/check.txt" 2>&1 || rc=$?; [ $rc = 5 ] && break; sleep 0.05; done
 [ $rc = 5 ] || fail "status --check exit $rc after the node went away: $(cat "$work/check.txt")"
 echo "ok:   status --check exits 5 once the node is gone: $(grep 'not valid' "$work/check.txt")"
+module=""
+for _ in $(seq 200); do
+  module=$("$ctl" --json status | jq -r '.axes[0].module_state + " " + .axes[0].module.node_phase')
+  [ "$module" = "off unknown" ] && break; sleep 0.05
+done
+[ "$module" = "off unknown" ] || fail "the module of a node gone is '$module', not off"
+echo "ok:   the module of the node gone: $module"
 # The node comes back (a power cycle): now it is a reset and a return, and logged as such.
 "$sim" canio --virtual "$vbus" --config "$work/daemon.yaml" >"$work/sim2.log" 2>&1 &
 spid=$!
 rc=5
 for _ in $(seq 400); do rc=0; "$ctl" status --check >/dev/null 2>&1 || rc=$?; [ $rc = 0 ] && break; sleep 0.05; done
 [ $rc = 0 ] || fail "the axis did not become valid again after the node came back"
+for _ in $(seq 100); do
+  module=$("$ctl" --json status | jq -r '.axes[0].module_state'); [ "$module" = run ] && break
+  sleep 0.05
+done
+[ "$module" = run ] || fail "the module of the node back is '$module', not run"
 # The log line follows the axis' validity (the service logs node events every 10 ms, the
 # journal is written off the cycle): waited for, not read at once.
 for _ in $(seq 100); do grep -q "canio node 1: axis 'axis0' answering again" "$work/daemon.log" && break; sleep 0.05; done

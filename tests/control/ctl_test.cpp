@@ -425,6 +425,9 @@ TEST_CASE("incident mark prints the daemon's note on where the file goes") {
 
 TEST_CASE("status prints each bus's own node fields and the bus state's cause") {
   json reply = status_reply("bus_down", "/ds1928d-none");
+  reply["axes"][0]["module_state"] = "preop";
+  reply["axes"][0]["module_error_class"] = "system";
+  reply["axes"][0]["module"] = {{"r_led", "blinking"}, {"e_led", "double_flash"}};
   reply["bus"] = {
       {"kind", "canio"},
       {"state", "no_nodes"},
@@ -465,6 +468,9 @@ TEST_CASE("status prints each bus's own node fields and the bus state's cause") 
                                     "boot-ups 1, EMCY 0"));
   CHECK_THAT(r.out, Catch::Contains("axis 0: configured, samples 1234, missing 5, late 6"));
   CHECK_THAT(r.out, Catch::Contains("last error: SDO abort 0x06020000"));
+  // The module's state like its r-LED, the e-LED's class when one is lit.
+  CHECK_THAT(r.out, Catch::Contains("x            bus_down      module preop  ErrorInfo"));
+  CHECK_THAT(r.out, Catch::Contains("module e-LED double_flash: system"));
   CHECK_THAT(r.out, !Catch::Contains("PRes") && !Catch::Contains("NMT ?"));
   // The engine's text is not repeated after yes/no.
   CHECK_THAT(r.out, Catch::Contains("real-time: yes (SCHED_FIFO 80, CPU 1, memory locked)"));

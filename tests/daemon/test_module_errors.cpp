@@ -14,6 +14,7 @@
 #include "ds1928/shm.hpp"
 #include "metrics/exposition.hpp"
 #include "module_errors.hpp"
+#include "module_leds.hpp"
 #include "sim/simulated_bus.hpp"
 #include "x20ds1928/object_dictionary.hpp"
 
@@ -87,6 +88,21 @@ class Bench {
   int64_t t0_ = 1'000'000'000;
 };
 
+// The simulated bus as the daemon's services see it (the default node phase: the driver's state).
+struct SimView final : BusService {
+  explicit SimView(BusDriver& d) : bus(d) {}
+  BusDriver& driver() noexcept override { return bus; }
+  BusDriver& bus;
+};
+
+// The error class the module's e-LED would flash, as `status` says it.
+std::string e_class(Bench& b) {
+  SimView view(*b.bus);
+  const ModuleLeds m = module_leds(view, *b.work, b.config, 0);
+  CHECK(m.state == ModuleState::Run);
+  return std::string(to_string(m.error_class));
+}
+
 std::string metrics_of(Bench& b) {
   metrics::Exposition out(metrics::Format::Prometheus);
   append_module_error_metrics(out, b.config, *b.work);
@@ -103,6 +119,7 @@ TEST_CASE(
   ds1928_axis_data d = b.run(300);
   REQUIRE(d.validity == DS1928_AXIS_VALID);
   CHECK((d.flags & (DS1928_AXIS_FAULT | DS1928_AXIS_WARNING | DS1928_AXIS_HELD)) == 0);
+  CHECK(e_class(b) == "none");
 
   // Warning: EnDatRefWarning. Flagged, the position moves on and stays valid.
   b.module().inject_error(error_info::kEnDatRefWarning);
@@ -113,6 +130,7 @@ TEST_CASE(
   CHECK((d.flags & DS1928_AXIS_FAULT) == 0);
   CHECK(d.error_info == error_info::kEnDatRefWarning);
   CHECK(d.position_raw != before.position_raw);
+  CHECK(e_class(b) == "io");  // reference: single flash
   const nlohmann::json bits =
       error_bits_json(error_words(b.work->counters(0)), b.config.axes[0].error_policy());
   REQUIRE(bits.size() == 1);
@@ -142,6 +160,7 @@ TEST_CASE(
   CHECK((d.error_info & error_info::kVssCheckError) != 0);
   CHECK(d.position_raw == good.position_raw);
   CHECK(b.work->counters(0).held.load() > 0);
+  CHECK(e_class(b) == "io");  // sin/cos amplitude (wire break): single flash
   // Amplitude good again, acknowledged: after SinCosQuitTime (100 ms) positions flow again.
   b.module().set_vss_mv(1000);
   REQUIRE(b.work->post({AxisCommand::Kind::AckErrors, 0, error_info::kVssCheckError}));
@@ -155,9 +174,11 @@ TEST_CASE(
   d = b.run(5);
   CHECK(d.validity == DS1928_AXIS_MODULE_ERROR);
   CHECK((d.flags & DS1928_AXIS_FAULT) != 0);
+  CHECK(e_class(b) == "system");  // EnDat communication: double flash
   REQUIRE(b.work->post({AxisCommand::Kind::AckErrors, 0, error_info::kEnDatComError}));
   d = b.run(20);
   CHECK(d.validity == DS1928_AXIS_VALID);
+  CHECK(e_class(b) == "none");
 
   // The encoder's words (read acyclically by the EnDat service into the counters): an EnDatWarning
   // bit is a warning, an EnDatError bit a fault.
@@ -174,6 +195,8 @@ TEST_CASE(
         std::string::npos);
   CHECK(text.find("register=\"EnDatWarning\",bit=\"Temperature\",class=\"warning\"} 1") !=
         std::string::npos);
+  // The encoder's own words light nothing on the module (its ErrorInfo is clear).
+  CHECK(e_class(b) == "none");
 }
 
 TEST_CASE(

@@ -89,6 +89,14 @@ TEST_CASE("topology: a wrong encoder serial keeps exactly that axis down with th
   CHECK(st["axes"][1]["identity_reason"] ==
         "serial_number: expected 'S99999999', found 'S36845217'");
   CHECK_FALSE(st["axes"][0].contains("identity_reason"));
+  // The module state like the r-LED: both modules run (the daemon, not the module, holds axis 1
+  // down); no ErrorInfo bit, the e-LED is dark.
+  CHECK(st["axes"][0]["module_state"] == "run");
+  CHECK(st["axes"][1]["module_state"] == "run");
+  CHECK(st["axes"][0]["module_error_class"] == "none");
+  CHECK(st["axes"][0]["module"]["r_led"] == "on");
+  CHECK(st["axes"][0]["module"]["e_led"] == "off");
+  CHECK(st["axes"][0]["module"]["data_arrives"] == true);
   CHECK(d.daemon->cycle_work()
             .counters(1)
             .published[static_cast<std::size_t>(shm::AxisValidity::Valid)]
@@ -103,11 +111,17 @@ TEST_CASE("topology: a wrong encoder serial keeps exactly that axis down with th
   CHECK(t["axes"][1]["expected"]["serial_number"] == "S99999999");
   CHECK(t["axes"][1]["held_down"] == true);
   CHECK(t["axes"][1]["difference"].get<std::string>().find("serial_number") != std::string::npos);
+  CHECK(t["axes"][0]["module_state"] == "run");
+  CHECK(t["axes"][1]["module_error_class"] == "none");
 
   const std::string metrics = d.daemon->metrics_text(metrics::Format::Prometheus);
   CHECK(metrics.find("ds1928_axis_identity_mismatch{axis=\"1\",name=\"y\"} 1") !=
         std::string::npos);
   CHECK(metrics.find("ds1928_axis_identity_mismatch{axis=\"0\",name=\"x\"} 0") !=
+        std::string::npos);
+  CHECK(metrics.find("ds1928_axis_module_state{axis=\"1\",name=\"y\",state=\"run\"} 1") !=
+        std::string::npos);
+  CHECK(metrics.find("ds1928_axis_module_state{axis=\"1\",name=\"y\",state=\"off\"} 0") !=
         std::string::npos);
 }
 

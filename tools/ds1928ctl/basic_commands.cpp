@@ -71,15 +71,22 @@ void print_cycle(const json& c) {
 }
 
 void print_axis_line(const json& a) {
-  std::printf("    %-3" PRIu64 " %-12s %-13s ErrorInfo %s  EnDat error %s  warning %s\n",
-              get<uint64_t>(a, "axis", 0), get<std::string>(a, "name", "").c_str(),
-              get<std::string>(a, "state", "?").c_str(),
-              hex(get<uint64_t>(a, "error_info", 0), 2).c_str(),
-              hex(get<uint64_t>(a, "endat_error", 0), 4).c_str(),
-              hex(get<uint64_t>(a, "endat_warning", 0), 4).c_str());
+  std::printf(
+      "    %-3" PRIu64 " %-12s %-13s module %-6s ErrorInfo %s  EnDat error %s  warning %s\n",
+      get<uint64_t>(a, "axis", 0), get<std::string>(a, "name", "").c_str(),
+      get<std::string>(a, "state", "?").c_str(), get<std::string>(a, "module_state", "?").c_str(),
+      hex(get<uint64_t>(a, "error_info", 0), 2).c_str(),
+      hex(get<uint64_t>(a, "endat_error", 0), 4).c_str(),
+      hex(get<uint64_t>(a, "endat_warning", 0), 4).c_str());
   if (a.contains("identity_reason"))
     std::printf("        encoder %s: %s\n", get<std::string>(a, "identity", "").c_str(),
                 get<std::string>(a, "identity_reason", "").c_str());
+  // What the module's red e-LED would flash (its ErrorInfo bits by the datasheet's LED table).
+  if (const auto e = get<std::string>(a, "module_error_class", "none"); e != "none") {
+    const json m = a.value("module", json::object());
+    std::printf("        module e-LED %s: %s\n", get<std::string>(m, "e_led", "?").c_str(),
+                e.c_str());
+  }
   print_error_bits(a.value("errors", json::array()));
 }
 

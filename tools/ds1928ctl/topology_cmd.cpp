@@ -20,22 +20,24 @@ std::string field(const json& j, const char* key) {
 void print_topology(const json& r) {
   std::cout << "bus " << r.value("bus", std::string()) << ", on_mismatch "
             << r.value("on_mismatch", std::string()) << "  ('!' marks a difference)\n";
-  std::printf("  %-3s %-12s %-4s %-4s  %-13s %-13s  %-13s %-13s  %s\n", "#", "axis", "node", "slot",
-              "expected ID", "found ID", "expected SN", "found SN", "state");
+  std::printf("  %-3s %-12s %-4s %-4s %-6s  %-13s %-13s  %-13s %-13s  %s\n", "#", "axis", "node",
+              "slot", "module", "expected ID", "found ID", "expected SN", "found SN", "state");
   for (const json& a : r.value("axes", json::array())) {
     const json& e = a.value("expected", json());
     const json& f = a.value("found", json());
     const bool diff = !a.value("difference", json()).is_null();
-    std::printf("%s %-3llu %-12s %-4llu %-4llu  %-13s %-13s  %-13s %-13s  %s%s\n", diff ? "!" : " ",
-                static_cast<unsigned long long>(a.value("axis", 0ULL)),
+    std::printf("%s %-3llu %-12s %-4llu %-4llu %-6s  %-13s %-13s  %-13s %-13s  %s%s\n",
+                diff ? "!" : " ", static_cast<unsigned long long>(a.value("axis", 0ULL)),
                 a.value("name", std::string()).c_str(),
                 static_cast<unsigned long long>(a.value("node", 0ULL)),
                 static_cast<unsigned long long>(a.value("slot", 0ULL)),
-                field(e, "id_number").c_str(), field(f, "id_number").c_str(),
-                field(e, "serial_number").c_str(), field(f, "serial_number").c_str(),
-                a.value("state", std::string()).c_str(),
+                a.value("module_state", std::string("-")).c_str(), field(e, "id_number").c_str(),
+                field(f, "id_number").c_str(), field(e, "serial_number").c_str(),
+                field(f, "serial_number").c_str(), a.value("state", std::string()).c_str(),
                 a.value("held_down", false) ? " (held bus_down)" : "");
     if (diff) std::cout << "      " << a["difference"].get<std::string>() << "\n";
+    if (const std::string e = a.value("module_error_class", std::string("none")); e != "none")
+      std::cout << "      module e-LED: " << e << "\n";
   }
   const json& nodes = r.value("nodes", json::array());
   if (nodes.empty()) return;
