@@ -9,23 +9,16 @@
 #include <string>
 
 #include "config/config_loader.hpp"
+#include "config_test_util.hpp"
 #include "powerlink/concise_dcf.hpp"
 
 namespace {
 
 using namespace ds1928;
 using powerlink::CdcEntry;
-
-ConfigResult from(std::string_view text, const std::string& name = "test.yaml") {
-  return load_config_from_string(text, name);
-}
-
-std::string one_error(std::string_view text, const std::string& name = "test.yaml") {
-  const ConfigResult r = from(text, name);
-  INFO(r.error_report());
-  REQUIRE(r.errors().size() == 1);
-  return r.errors().front().to_string();
-}
+using test::from;
+using test::le;
+using test::one_error;
 
 // A private directory for CDC files, removed at the end.
 struct TempDir {
@@ -46,12 +39,6 @@ struct TempDir {
     return (path / name).string();
   }
 };
-
-std::vector<uint8_t> le(uint64_t v, int n) {
-  std::vector<uint8_t> d;
-  for (int i = 0; i < n; ++i) d.push_back(static_cast<uint8_t>(v >> (8 * i)));
-  return d;
-}
 
 const std::string kHead = "bus: powerlink\npowerlink:\n  interface: veth0\n  nodes:\n";
 

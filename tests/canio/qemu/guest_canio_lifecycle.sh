@@ -122,12 +122,15 @@ positions_fresh() {
   done
   return 0
 }
-# frames_between FIRST SECOND ID: input objects with ID on the wire between the n-th boot-up and
-# the n-th NMT Start (awk over the candump log); prints "boot-ups starts inputs-between".
+# wire_order N: the input objects on the wire between the N-th boot-up and the first NMT Start
+# after it, and whether such a Start came (awk over the candump log); prints "boot-ups starts
+# inputs-between closed". The first Start after the boot-up, not the N-th Start: the daemon
+# repeats a Start with back-off while no process data comes (a loaded machine), so earlier
+# boots may have taken several.
 wire_order() {
   awk -v n="$1" '
     / can0 701#00$/ { b++; if (b == n) open = 1 }
-    / can0 000#0101$/ { s++; if (s == n && open) { open = 0; closed = 1 } }
+    / can0 000#0101$/ { s++; if (open) { open = 0; closed = 1 } }
     / can0 (281|381)#/ { if (open) early++ }
     END { printf "%d %d %d %d\n", b, s, early + 0, closed + 0 }' "$tmp/bus.log"
 }
